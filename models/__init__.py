@@ -1,0 +1,1 @@
+"""Built-in Python co-simulation units (Panda arm, trajectory, dynamics, planner)."""
