@@ -1,0 +1,169 @@
+/* The FMI-version independent part of the framework (see framework.h). */
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "framework.h"
+
+static void vlog(ModelInstance *comp, Status status, const char *category, const char *fmt, va_list args) {
+    char message[1024];
+    if (!comp || !comp->log) return;
+    vsnprintf(message, sizeof message, fmt, args);
+    comp->log(comp, status, category, message);
+}
+
+void logError(ModelInstance *comp, const char *fmt, ...) {
+    va_list args;
+    va_start(args, fmt);
+    vlog(comp, Error, "logStatusError", fmt, args);
+    va_end(args);
+}
+
+void logInfo(ModelInstance *comp, const char *fmt, ...) {
+    va_list args;
+    if (!comp || !comp->loggingOn) return;
+    va_start(args, fmt);
+    vlog(comp, OK, "logEvents", fmt, args);
+    va_end(args);
+}
+
+ModelInstance *framework_instantiate(const char *instanceName, const char *token, void *environment,
+                                     void *logger, LogFunction log, bool loggingOn) {
+    ModelInstance *comp = calloc(1, sizeof(ModelInstance));
+    if (!comp) return NULL;
+    comp->environment = environment;
+    comp->logger = logger;
+    comp->log = log;
+    comp->loggingOn = loggingOn;
+    comp->instanceName = strdup(instanceName ? instanceName : "instance");
+    if (!comp->instanceName) {
+        free(comp);
+        return NULL;
+    }
+    /* A token from another build means another modelDescription: refuse. */
+    if (!token || strcmp(token, INSTANTIATION_TOKEN) != 0) {
+        logError(comp, "instantiation token/GUID '%s' does not match this binary's '%s'",
+                 token ? token : "(null)", INSTANTIATION_TOKEN);
+        framework_free(comp);
+        return NULL;
+    }
+    framework_reset(comp);
+    logInfo(comp, "instantiated %s", MODEL_IDENTIFIER);
+    return comp;
+}
+
+void framework_free(ModelInstance *comp) {
+    if (!comp) return;
+    free(comp->instanceName);
+    free(comp);
+}
+
+void framework_reset(ModelInstance *comp) {
+    memset(&comp->d, 0, sizeof comp->d);
+    setStartValues(&comp->d);
+    comp->time = 0.0;
+    comp->startTime = 0.0;
+    comp->state = STATE_INSTANTIATED;
+    comp->isDirty = true;
+}
+
+Status framework_enter_initialization(ModelInstance *comp, double startTime) {
+    if (comp->state != STATE_INSTANTIATED) {
+        logError(comp, "enterInitializationMode is only allowed right after instantiation or reset");
+        return Error;
+    }
+    comp->startTime = startTime;
+    comp->time = startTime;
+    comp->state = STATE_INITIALIZATION;
+    comp->isDirty = true;
+    return OK;
+}
+
+Status framework_exit_initialization(ModelInstance *comp) {
+    Status status;
+    if (comp->state != STATE_INITIALIZATION) {
+        logError(comp, "exitInitializationMode called outside initialization mode");
+        return Error;
+    }
+    status = model_validate(comp);
+    if (status > Warning) {
+        comp->state = STATE_ERROR;
+        return status;
+    }
+    model_initialize(comp);
+    comp->state = STATE_STEP;
+    comp->isDirty = true;
+    return status;
+}
+
+Status framework_update(ModelInstance *comp) {
+    Status status;
+    if (!comp->isDirty || (comp->state != STATE_INITIALIZATION && comp->state != STATE_STEP)) return OK;
+    status = model_calculate(comp);
+    if (status <= Warning) comp->isDirty = false;
+    return status;
+}
+
+Status framework_do_step(ModelInstance *comp, double t, double h) {
+    Status status;
+    if (comp->state != STATE_STEP) {
+        logError(comp, "doStep is only allowed after exitInitializationMode (and not after an error)");
+        return Error;
+    }
+    if (!(h >= 0.0) || !isfinite(t) || !isfinite(h)) {
+        logError(comp, "doStep: bad communication step t=%g h=%g", t, h);
+        return Error;
+    }
+    status = model_do_step(comp, t, h);
+    comp->isDirty = true;
+    if (status > Warning) return status;
+    comp->time = t + h;
+    return status;
+}
+
+Status framework_terminate(ModelInstance *comp) {
+    comp->state = STATE_TERMINATED;
+    logInfo(comp, "terminated at t=%g", comp->time);
+    return OK;
+}
+
+void *framework_address(ModelInstance *comp, size_t index, size_t element) {
+    const VariableInfo *v = &VARIABLES[index];
+    size_t width = v->type == VT_REAL ? sizeof(double) : v->type == VT_INTEGER ? sizeof(int32_t) : sizeof(bool);
+    if (v->causality == CAUS_INDEPENDENT) return NULL;
+    return (char *)&comp->d + v->offset + element * width;
+}
+
+Status framework_check_type(ModelInstance *comp, size_t index, VariableType type, const char *function) {
+    if (index >= N_VARIABLES || VARIABLES[index].type != type) {
+        logError(comp, "%s: value reference does not name a variable of this type", function);
+        return Error;
+    }
+    return OK;
+}
+
+Status framework_check_set(ModelInstance *comp, size_t index, VariableType type) {
+    const VariableInfo *v;
+    if (framework_check_type(comp, index, type, "set") > Warning) return Error;
+    v = &VARIABLES[index];
+    if (v->causality == CAUS_PARAMETER && comp->state != STATE_INSTANTIATED && comp->state != STATE_INITIALIZATION) {
+        logError(comp, "parameter '%s' can only be set before exitInitializationMode", v->name);
+        return Error;
+    }
+    if (v->causality != CAUS_PARAMETER && v->causality != CAUS_INPUT) {
+        logError(comp, "'%s' is not a parameter or input and cannot be set", v->name);
+        return Error;
+    }
+    return OK;
+}
+
+Status check_finite(ModelInstance *comp, const char *name, size_t element, double value) {
+    if (isfinite(value)) return OK;
+    if (element == SCALAR)
+        logError(comp, "%s = %g at t=%g is not a finite number", name, value, comp->time);
+    else
+        logError(comp, "%s[%zu] = %g at t=%g is not a finite number", name, element + 1, value, comp->time);
+    return Error;
+}
