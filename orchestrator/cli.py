@@ -1,0 +1,207 @@
+"""The ``cosim`` command line: one function per subcommand.
+
+Exit codes follow the kind of outcome: 0 everything ran, 1 a run failed,
+2 a bad spec, file or usage (the user's to fix), 70 an internal error (ours).
+A user's mistake never shows a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import traceback
+from pathlib import Path
+from typing import Any, Sequence
+
+EXIT_OK, EXIT_RUN_FAILED, EXIT_USAGE, EXIT_INTERNAL = 0, 1, 2, 70
+
+
+class UsageError(Exception):
+    """A mistake in the command line itself."""
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``cosim`` console script; returns the exit code."""
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "handler", None):
+        parser.print_help()
+        return EXIT_USAGE
+    from .problems import SpecError
+
+    try:
+        return args.handler(args)
+    except SpecError as exc:
+        _print_problems(exc.problems)
+        return EXIT_USAGE
+    except UsageError as exc:
+        print(f"cosim: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("cosim: interrupted", file=sys.stderr)
+        return 130
+    except Exception:
+        print("cosim: internal error (please report it with the text below)", file=sys.stderr)
+        traceback.print_exc()
+        return EXIT_INTERNAL
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="cosim", description="FMI co-simulation orchestrator.")
+    sub = parser.add_subparsers(title="commands")
+
+    p = sub.add_parser("validate", help="check a spec and report every problem at once")
+    p.add_argument("spec", help="path to spec.json")
+    p.set_defaults(handler=cmd_validate)
+
+    p = sub.add_parser("run", help="run one point of a spec and print its objectives")
+    p.add_argument("spec", help="path to spec.json")
+    p.add_argument("--set", dest="sets", action="append", default=[], metavar="UNIT.PARAM=VALUE",
+                   help="set a parameter (VALUE as JSON: 2.5, true, [1,2,3]); repeatable")
+    p.add_argument("--out", help="write the recorded signals to this .parquet or .csv file")
+    p.set_defaults(handler=cmd_run)
+
+    p = sub.add_parser("inspect", help="list an FMU's variables, or a spec's units, connections and order")
+    p.add_argument("target", help="an .fmu file or a spec.json")
+    p.set_defaults(handler=cmd_inspect)
+    return parser
+
+
+def _print_problems(problems: Sequence[Any]) -> None:
+    count = len(problems)
+    print(f"{count} problem{'s' if count != 1 else ''} found:", file=sys.stderr)
+    for problem in problems:
+        print(f"- {problem}", file=sys.stderr)
+
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    """``cosim validate spec.json``: 0 when the spec is usable, 2 with every problem otherwise."""
+    from .spec import load_spec
+    from .system import build_system
+
+    system = build_system(load_spec(args.spec))
+    spec = system.spec
+    print(f"{args.spec}: ok: {len(spec.units)} unit(s), {len(spec.connections)} connection(s), "
+          f"{len(spec.objectives)} objective(s); {spec.experiment.algorithm}, step {spec.experiment.step:g} s, "
+          f"order: {' -> '.join(system.order)}")
+    return EXIT_OK
+
+
+def parse_assignment(text: str) -> tuple[str, Any]:
+    """'unit.param=VALUE' -> ('unit.param', value); VALUE is read as JSON, else as a string.
+
+    Raises UsageError when there is no '='.
+    """
+    target, sep, value = text.partition("=")
+    if not sep or "." not in target:
+        raise UsageError(f"--set '{text}': write UNIT.PARAM=VALUE, e.g. --set motor.k_m=0.15")
+    try:
+        return target.strip(), json.loads(value)
+    except json.JSONDecodeError:
+        return target.strip(), value
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    """``cosim run spec.json``: run one point, print objectives, optionally write traces."""
+    from .execution import Execution
+    from .spec import load_spec
+    from .system import build_system
+
+    out = Path(args.out) if args.out else None
+    if out is not None and out.suffix.lower() not in (".parquet", ".csv"):
+        raise UsageError(f"--out {out}: use a .parquet or .csv file name")
+    system = build_system(load_spec(args.spec))
+    overrides = []
+    from .problems import SpecError
+
+    problems = []
+    for text in args.sets:
+        target, value = parse_assignment(text)
+        try:
+            overrides.append(system.assignment_for(target, value))
+        except SpecError as exc:
+            problems.extend(exc.problems)
+    if problems:
+        raise SpecError(problems)
+    result = Execution(system, overrides, record=out is not None).run()
+    units = {o.name: o.unit or "" for o in system.spec.objectives}
+    if result.objectives:
+        width = max(len(k) for k in result.objectives)
+        print(f"{'objective':<{width}}  {'value':>14}  unit")
+        for name, value in result.objectives.items():
+            print(f"{name:<{width}}  {value:>14.6g}  {units.get(name.split('[')[0], '')}")
+    print(f"status: {result.status}; {result.steps} steps to t={result.end_time:g} s in {result.elapsed:.3f} s")
+    if result.message:
+        print(f"message: {result.message}", file=sys.stderr)
+    if out is not None and result.traces is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        if out.suffix.lower() == ".csv":
+            result.traces.to_csv(out, index=False)
+        else:
+            result.traces.to_parquet(out, index=False)
+        print(f"traces: {out} ({len(result.traces)} rows, {len(result.traces.columns) - 1} signals)")
+    return EXIT_OK if result.ok else EXIT_RUN_FAILED
+
+
+def cmd_inspect(args: argparse.Namespace) -> int:
+    """``cosim inspect file.fmu|spec.json``: variables of an FMU, or the structure of a spec."""
+    target = Path(args.target)
+    if target.suffix.lower() == ".fmu" or args.target.startswith("builtin:"):
+        return _inspect_fmu(args.target)
+    from .spec import load_spec
+    from .system import build_system
+
+    system = build_system(load_spec(target))
+    print(f"spec {target}: {system.spec.name}")
+    print("units:")
+    for name, unit in system.units.items():
+        d = unit.description
+        kind = f"FMI {d.fmi_version}" if d.kind == "fmu" else d.kind
+        print(f"  {name}: {kind} {unit.spec.source} ({len(d.inputs())} inputs, {len(d.outputs())} outputs)")
+    print("connections:")
+    for c in system.connections:
+        print(f"  {c.source.text} -> {c.target.text}")
+    exp = system.spec.experiment
+    print(f"experiment: {exp.start:g} .. {exp.stop:g} s, step {exp.step:g} s, {exp.algorithm}")
+    print(f"stepping order: {' -> '.join(system.order)}")
+    return EXIT_OK
+
+
+def _inspect_fmu(reference: str) -> int:
+    from .units.fmu import FmuProblems, FmuUnitType, resolve_fmu_path
+
+    try:
+        unit_type = FmuUnitType(resolve_fmu_path(reference), reference)
+        d = unit_type.describe()
+    except FmuProblems as exc:
+        raise UsageError(f"{reference}: " + "; ".join(exc.problems)) from None
+    except FileNotFoundError as exc:
+        raise UsageError(str(exc)) from None
+    print(f"{reference}: {d.name}, FMI {d.fmi_version} co-simulation"
+          + (f", default step {d.default_step:g} s" if d.default_step else ""))
+    if d.description:
+        print(f"  {d.description}")
+    rows = [("name", "causality", "type", "unit", "start", "range", "description")]
+    for v in d.variables:
+        if v.causality == "local":
+            continue
+        shape = f"[{','.join(map(str, v.shape))}]" if v.shape else ""
+        rng = "" if v.min is None and v.max is None else f"[{_fmt(v.min)}, {_fmt(v.max)}]"
+        rows.append((v.name + shape, v.causality, v.type, v.unit or "", _fmt(v.start), rng, v.description[:50]))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    for row in rows:
+        print("  " + "  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip())
+    return EXIT_OK
+
+
+def _fmt(value: Any) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, tuple):
+        return "(" + ", ".join(_fmt(v) for v in value[:4]) + (", ..." if len(value) > 4 else "") + ")"
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

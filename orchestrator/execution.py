@@ -1,0 +1,183 @@
+"""One run of one design point: the co-simulation loop.
+
+:class:`Execution` instantiates (or reuses) the units of a
+:class:`~orchestrator.system.System`, sets parameters, initializes, steps with
+the master algorithm and feeds observers.  It does no file or network I/O.
+Whatever goes wrong inside a run becomes data: the returned :class:`RunResult`
+carries the status and a message naming the unit, the time and the cause.
+Units it created are always terminated, also after a failure.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from .algorithms import group_transfers, make_algorithm
+from .observers import ObjectiveReducer, Observer, TraceRecorder, evaluate_expressions, flatten_objectives
+from .system import Assignment, System
+from .unit import Unit, UnitError
+
+OK, FAILED = "ok", "failed"
+
+
+@dataclass
+class RunResult:
+    """What one run produced.
+
+    ``objectives`` is flat (array objectives as ``name[i]``); ``traces`` is a
+    pandas DataFrame when recording was asked for, else None.
+    """
+
+    status: str
+    message: str = ""
+    objectives: dict[str, float] = field(default_factory=dict)
+    traces: Any = None
+    elapsed: float = 0.0
+    steps: int = 0
+    end_time: float = math.nan
+
+    @property
+    def ok(self) -> bool:
+        return self.status == OK
+
+
+def step_count(start: float, stop: float, h: float) -> int:
+    """Number of communication steps from start to stop; the last may be shorter.
+
+    A ratio within 1e-9 of a whole number counts as that number, so 1.0/0.1
+    gives 10 steps, not 11.
+    """
+    ratio = (stop - start) / h
+    nearest = round(ratio)
+    if abs(ratio - nearest) <= 1e-9 * max(1.0, abs(ratio)):
+        return int(nearest)
+    return int(math.ceil(ratio))
+
+
+class Probe:
+    """Reads every probed signal of the system into one float vector."""
+
+    def __init__(self, system: System, units: Mapping[str, Unit]):
+        self.columns: list[str] = []
+        per_unit: dict[str, list] = {}
+        positions: dict[str, list[int]] = {}
+        for signal in system.probes:
+            for ref, column in zip(signal.refs, signal.columns):
+                if column in self.columns:
+                    continue
+                positions.setdefault(signal.unit, []).append(len(self.columns))
+                per_unit.setdefault(signal.unit, []).append(ref)
+                self.columns.append(column)
+        self._reads = [(units[name], units[name].select(refs), np.array(positions[name], dtype=int))
+                       for name, refs in per_unit.items()]
+        self.values = np.zeros(len(self.columns))
+
+    def read(self) -> np.ndarray:
+        for unit, selection, where in self._reads:
+            self.values[where] = unit.get(selection)
+        return self.values
+
+
+class Execution:
+    """Runs one point of a system.
+
+    ``overrides`` are applied after the spec's own parameters (design-point
+    values). ``units``: live instances to reuse (the caller owns them and must
+    pass them freshly instantiated or reset); when None, the execution
+    instantiates its own and terminates them at the end. ``record`` keeps the
+    full traces of the recorded signals.
+    """
+
+    def __init__(self, system: System, overrides: Sequence[Assignment] = (), record: bool = False,
+                 units: Mapping[str, Unit] | None = None, observers: Sequence[Observer] = ()):
+        self.system = system
+        self.overrides = tuple(overrides)
+        self.record = record
+        self._given_units = units
+        self.extra_observers = list(observers)
+
+    def run(self) -> RunResult:
+        """Run to the stop time (or until ``stop_when`` is true); never raises for a unit's failure."""
+        started = time.perf_counter()
+        exp = self.system.spec.experiment
+        units: dict[str, Unit] = dict(self._given_units or {})
+        owned = self._given_units is None
+        t = exp.start
+        steps = 0
+        try:
+            if owned:
+                for name, system_unit in self.system.units.items():
+                    units[name] = system_unit.unit_type.instantiate(name)
+            n_steps = step_count(exp.start, exp.stop, exp.step)
+            self._initialize(units)
+            probe = Probe(self.system, units)
+            recorder = TraceRecorder(probe.columns, self.system.recorded, n_steps + 1) if self.record else None
+            reducer = ObjectiveReducer(probe.columns, [(o, self._columns_of(o.signal)) for o in
+                                                       self.system.spec.objectives if o.signal])
+            observers = [o for o in (recorder, reducer) if o is not None] + self.extra_observers
+            stop_column = probe.columns.index(exp.stop_when) if exp.stop_when else None
+
+            algorithm = make_algorithm(exp.algorithm)
+            algorithm.bind(units, self.system.order, self.system.connections)
+            values = probe.read()
+            for observer in observers:
+                observer.initialized(t, values)
+            for k in range(n_steps):
+                t = exp.start + k * exp.step
+                t_next = exp.stop if k == n_steps - 1 else exp.start + (k + 1) * exp.step
+                algorithm.step(t, t_next - t)
+                t = t_next
+                steps += 1
+                values = probe.read()
+                for observer in observers:
+                    observer.step(t, values)
+                if stop_column is not None and values[stop_column]:
+                    break
+            for observer in observers:
+                observer.finished(t)
+            objectives = evaluate_expressions(self.system.spec.objectives, reducer.results())
+            flat = flatten_objectives(objectives)
+            nan = [name for name, v in flat.items() if not math.isfinite(v)]
+            status, message = (FAILED, f"objective(s) not finite: {', '.join(nan)}") if nan else (OK, "")
+            return RunResult(status, message, flat, recorder.frame() if recorder else None,
+                             time.perf_counter() - started, steps, t)
+        except UnitError as exc:
+            return RunResult(FAILED, str(exc), elapsed=time.perf_counter() - started, steps=steps, end_time=t)
+        except Exception as exc:  # an orchestrator bug must still become a row, not a lost point
+            return RunResult(FAILED, f"internal error at t={t:g}: {type(exc).__name__}: {exc}",
+                             elapsed=time.perf_counter() - started, steps=steps, end_time=t)
+        finally:
+            if owned:
+                for unit in units.values():
+                    try:
+                        unit.terminate()
+                    except Exception:
+                        pass  # terminating every unit matters more than one unit's complaint
+
+    def _columns_of(self, signal: str | None) -> list[str]:
+        for s in self.system.probes:
+            if s.text == signal:
+                return list(s.columns)
+        raise KeyError(signal)
+
+    def _initialize(self, units: Mapping[str, Unit]) -> None:
+        exp = self.system.spec.experiment
+        for unit in units.values():
+            unit.setup(exp.start, exp.stop)
+        for assignment in self.system.assignments + self.overrides:
+            unit = units[assignment.unit]
+            unit.set(unit.select(assignment.refs), list(assignment.values))
+        for unit in units.values():
+            unit.enter_initialization()
+        transfers = group_transfers(units, self.system.init_order)
+        for transfer in transfers:
+            transfer.run()
+        for unit in units.values():
+            unit.exit_initialization()
+        for transfer in transfers:  # outputs may change when initialization ends
+            transfer.run()

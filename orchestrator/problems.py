@@ -1,0 +1,50 @@
+"""User-facing problems: what is wrong, where (file and JSON path), and the fix.
+
+Every check in cosim collects :class:`Problem` objects instead of stopping at
+the first one, and raises :class:`SpecError` with all of them at the end, so a
+user sees every mistake of a spec in one go.
+"""
+
+from __future__ import annotations
+
+import difflib
+from dataclasses import dataclass
+from typing import Iterable, Sequence
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One mistake: the file, the JSON path inside it, what is wrong, how to fix it."""
+
+    file: str
+    path: str
+    message: str
+    fix: str = ""
+
+    def __str__(self) -> str:
+        text = f"{self.file}: {self.path}: {self.message}"
+        if self.fix:
+            text += f"\n    fix: {self.fix}"
+        return text
+
+
+class SpecError(Exception):
+    """A spec cannot be used; ``problems`` lists every reason found."""
+
+    def __init__(self, problems: Sequence[Problem]):
+        self.problems = list(problems)
+        super().__init__("\n".join(str(p) for p in self.problems))
+
+
+def did_you_mean(name: str, candidates: Iterable[str]) -> str:
+    """' Did you mean 'x'?' for the closest candidate, or '' when none is close."""
+    close = difflib.get_close_matches(name, list(candidates), n=1, cutoff=0.6)
+    return f" Did you mean '{close[0]}'?" if close else ""
+
+
+def json_path(parts: Iterable[object]) -> str:
+    """``$.units.a.parameters[0]`` from a sequence of keys and indices."""
+    text = "$"
+    for part in parts:
+        text += f"[{part}]" if isinstance(part, int) else f".{part}"
+    return text

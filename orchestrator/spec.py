@@ -1,0 +1,286 @@
+"""spec.json: read, check against the JSON Schema, and turn into frozen dataclasses.
+
+:func:`load_spec` checks the *form* of a spec (JSON syntax, fields, types) and
+reports every problem at once as a :class:`~orchestrator.problems.SpecError`.
+Whether the units, ports and connections *fit together* needs the units
+themselves and is checked by :func:`orchestrator.system.build_system`.
+Relative paths in a spec are relative to the spec's folder.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import jsonschema
+
+from .problems import Problem, SpecError, did_you_mean, json_path
+
+SCHEMA_PATH = Path(__file__).resolve().parent.parent / "specs" / "spec.schema.json"
+REDUCTIONS = ("final", "initial", "min", "max", "mean", "integral", "integral_abs", "rms",
+              "time_of_max", "time_of_min")
+ALGORITHMS = ("gauss-seidel", "jacobi")
+
+
+@dataclass(frozen=True)
+class UnitSpec:
+    """One unit of the system as the spec declares it."""
+
+    name: str
+    kind: str  # "fmu" | "python" | "player"
+    source: str
+    parameters: Mapping[str, Any] = field(default_factory=dict)
+    start: Mapping[str, Any] = field(default_factory=dict)
+    ports: Mapping[str, str] = field(default_factory=dict)
+    options: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class ConnectionSpec:
+    """``source`` ("unit.port") feeds ``target``; ``index`` is its place in the list."""
+
+    source: str
+    target: str
+    index: int
+
+
+@dataclass(frozen=True)
+class ExperimentSpec:
+    start: float
+    stop: float
+    step: float
+    algorithm: str = "gauss-seidel"
+    stop_when: str | None = None
+
+
+@dataclass(frozen=True)
+class ObjectiveSpec:
+    """A reduction of a signal, or an expression of other objectives."""
+
+    name: str
+    signal: str | None = None
+    reduce: str | None = None
+    expr: str | None = None
+    unit: str | None = None
+    sense: str | None = None
+    description: str = ""
+
+
+@dataclass(frozen=True)
+class DesignParameterSpec:
+    """How one parameter varies over the design space."""
+
+    target: str
+    min: Any = None
+    max: Any = None
+    step: Any = None
+    values: tuple[Any, ...] | None = None
+    is_bool: bool = False
+    unit: str | None = None
+
+
+@dataclass(frozen=True)
+class DesignSpec:
+    parameters: tuple[DesignParameterSpec, ...] = ()
+    method: str = "grid"
+    samples: int | None = None
+    seed: int | None = None
+    constraint: str | None = None
+
+
+@dataclass(frozen=True)
+class Spec:
+    """A whole study; ``folder`` resolves relative paths, ``digest`` identifies it."""
+
+    path: str
+    folder: str
+    name: str
+    description: str
+    units: tuple[UnitSpec, ...]
+    connections: tuple[ConnectionSpec, ...]
+    experiment: ExperimentSpec
+    record: tuple[str, ...]
+    objectives: tuple[ObjectiveSpec, ...]
+    design: DesignSpec
+    digest: str
+    raw: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
+
+    def unit(self, name: str) -> UnitSpec:
+        for u in self.units:
+            if u.name == name:
+                return u
+        raise KeyError(name)
+
+
+def load_spec(path: str | Path) -> Spec:
+    """Read and check a spec file.
+
+    Raises SpecError listing every problem of form found: unreadable file,
+    malformed JSON (with line and column), missing or unknown fields, wrong
+    types, bad reduction or algorithm names.
+    """
+    path = Path(path)
+    name = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SpecError([Problem(name, "$", "file not found", "check the path of the spec file")]) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SpecError([Problem(name, "$", f"cannot read the file: {exc}", "save it as UTF-8 text")]) from None
+    try:
+        raw = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise SpecError([Problem(name, "$", f"malformed JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}",
+                                 "fix the JSON syntax there (a missing comma or quote is the usual cause)")]) from None
+    return spec_from_dict(raw, path)
+
+
+def spec_from_dict(raw: Any, path: str | Path = "spec.json") -> Spec:
+    """Check a parsed spec and build the Spec; relative paths resolve against ``path``'s folder.
+
+    Raises SpecError with every problem of form found.
+    """
+    path = Path(path)
+    problems = schema_problems(raw, str(path))
+    if problems:
+        raise SpecError(problems)
+    return _build(raw, path)
+
+
+def _schema() -> dict:
+    return json.loads(SCHEMA_PATH.read_text(encoding="utf-8"))
+
+
+def schema_problems(raw: Any, file: str) -> list[Problem]:
+    """Every way ``raw`` breaks the JSON Schema or the field-level rules, as problems."""
+    schema = _schema()
+    validator = jsonschema.Draft202012Validator(schema)
+    problems: list[Problem] = []
+    seen: set[tuple[str, str]] = set()
+    for error in sorted(validator.iter_errors(raw), key=lambda e: [str(p) for p in e.absolute_path]):
+        for problem in _explain(error, schema, file):
+            key = (problem.path, problem.message)
+            if key not in seen:
+                seen.add(key)
+                problems.append(problem)
+    if isinstance(raw, dict):
+        problems.extend(_value_problems(raw, file, seen))
+    return problems
+
+
+def _value_problems(raw: dict, file: str, seen: set[tuple[str, str]]) -> list[Problem]:
+    """Rules the schema does not express well: reductions, experiment times."""
+    problems = []
+    objectives = raw.get("objectives")
+    if isinstance(objectives, dict):
+        for name, objective in objectives.items():
+            if isinstance(objective, dict) and isinstance(objective.get("reduce"), str):
+                reduce = objective["reduce"]
+                if reduce not in REDUCTIONS:
+                    problems.append(Problem(file, json_path(["objectives", name, "reduce"]),
+                                            f"unknown reduction '{reduce}'.{did_you_mean(reduce, REDUCTIONS)}",
+                                            "use one of: " + ", ".join(REDUCTIONS)))
+    experiment = raw.get("experiment")
+    if isinstance(experiment, dict):
+        start, stop = experiment.get("start", 0), experiment.get("stop")
+        if isinstance(start, (int, float)) and isinstance(stop, (int, float)) and stop <= start:
+            problems.append(Problem(file, "$.experiment.stop", f"stop ({stop}) must be after start ({start})",
+                                    "make 'stop' larger than 'start'"))
+    return [p for p in problems if (p.path, p.message) not in seen]
+
+
+_ONE_OF_HINTS = {
+    "unit": ("a unit needs exactly one of 'fmu', 'python' or 'player'",
+             "give one: \"fmu\": \"model.fmu\", \"python\": \"module:Class\" or \"player\": \"traces.parquet\""),
+    "objective": ("an objective needs either 'signal' and 'reduce', or 'expr'",
+                  "e.g. {\"signal\": \"energy.e_total\", \"reduce\": \"final\"} or {\"expr\": \"a / b\"}"),
+    "design_parameter": ("a design parameter needs 'min' and 'max' (with 'step' for a grid), or 'values', "
+                         "or 'bool'", "e.g. {\"min\": 0, \"max\": 1, \"step\": 0.1} or {\"values\": [1, 2]}"),
+}
+
+
+def _explain(error: jsonschema.ValidationError, schema: dict, file: str) -> list[Problem]:
+    path = json_path(error.absolute_path)
+    validator = error.validator
+    if validator == "additionalProperties":
+        allowed = sorted(error.schema.get("properties", {}))
+        extra = [k for k in error.instance if k not in error.schema.get("properties", {})]
+        return [Problem(file, json_path([*error.absolute_path, k]),
+                        f"unknown field '{k}'.{did_you_mean(k, allowed)}",
+                        "remove it; allowed here: " + ", ".join(allowed)) for k in extra]
+    if validator == "required":
+        missing = error.message.split("'")[1] if "'" in error.message else error.message
+        return [Problem(file, path, f"missing field '{missing}'", f"add '{missing}'")]
+    if validator == "oneOf":
+        kind = _def_name(error.schema, schema)
+        message, fix = _ONE_OF_HINTS.get(kind, (error.message, ""))
+        return [Problem(file, path, message, fix)]
+    if validator == "type":
+        expected = error.validator_value
+        expected = " or ".join(expected) if isinstance(expected, list) else expected
+        return [Problem(file, path, f"expected {expected}, got {type(error.instance).__name__} "
+                                    f"{json.dumps(error.instance)[:60]}", f"write a {expected} here")]
+    if validator == "enum":
+        options = [str(o) for o in error.validator_value]
+        return [Problem(file, path, f"'{error.instance}' is not allowed.{did_you_mean(str(error.instance), options)}",
+                        "use one of: " + ", ".join(options))]
+    if validator == "pattern":
+        return [Problem(file, path, f"'{error.instance}' is not a valid name here",
+                        _pattern_fix(error.absolute_path))]
+    if validator == "propertyNames":
+        return [Problem(file, path, f"'{error.instance}' is not a valid name",
+                        "names start with a letter or '_' and contain only letters, digits and '_'")]
+    if validator == "minProperties":
+        return [Problem(file, path, "must not be empty", "add at least one entry")]
+    return [Problem(file, path, error.message, "")]
+
+
+def _pattern_fix(parts: Any) -> str:
+    parts = [str(p) for p in parts]
+    if parts and parts[0] in ("connections", "record", "objectives", "experiment", "design"):
+        return "write 'unit.port' or 'unit.port[i]' (i counts from 1)"
+    if parts and parts[0] == "units":
+        return "write 'package.module:Class' or 'file.py:Class'"
+    return "see specs/README.md"
+
+
+def _def_name(sub_schema: dict, schema: dict) -> str:
+    for name, definition in schema.get("$defs", {}).items():
+        if definition is sub_schema or definition == sub_schema:
+            return name
+    return ""
+
+
+def _build(raw: dict, path: Path) -> Spec:
+    folder = str(path.resolve().parent)
+    units = []
+    for name, u in raw["units"].items():
+        kind = next(k for k in ("fmu", "python", "player") if k in u)
+        options = {k: u[k] for k in ("columns", "interpolation", "extrapolation") if k in u}
+        units.append(UnitSpec(name=name, kind=kind, source=u[kind], parameters=dict(u.get("parameters", {})),
+                              start=dict(u.get("start", {})), ports=dict(u.get("ports", {})), options=options))
+    connections = tuple(ConnectionSpec(c["from"], c["to"], i) for i, c in enumerate(raw.get("connections", [])))
+    e = raw["experiment"]
+    experiment = ExperimentSpec(start=float(e.get("start", 0.0)), stop=float(e["stop"]), step=float(e["step"]),
+                                algorithm=e.get("algorithm", "gauss-seidel"), stop_when=e.get("stop_when"))
+    objectives = tuple(
+        ObjectiveSpec(name=n, signal=o.get("signal"), reduce=o.get("reduce"), expr=o.get("expr"),
+                      unit=o.get("unit"), sense=o.get("sense"), description=o.get("description", ""))
+        for n, o in raw.get("objectives", {}).items())
+    d = raw.get("design", {})
+    design = DesignSpec(
+        parameters=tuple(
+            DesignParameterSpec(target=t, min=p.get("min"), max=p.get("max"), step=p.get("step"),
+                                values=tuple(p["values"]) if "values" in p else None,
+                                is_bool=bool(p.get("bool", False)), unit=p.get("unit"))
+            for t, p in d.get("parameters", {}).items()),
+        method=d.get("method", "grid"), samples=d.get("samples"), seed=d.get("seed"),
+        constraint=d.get("constraint"))
+    canonical = json.dumps(raw, sort_keys=True, separators=(",", ":"))
+    return Spec(path=str(path), folder=folder, name=raw.get("name", path.stem),
+                description=raw.get("description", ""), units=tuple(units), connections=connections,
+                experiment=experiment, record=tuple(raw.get("record", [])), objectives=objectives,
+                design=design, digest=hashlib.sha256(canonical.encode()).hexdigest(), raw=raw)

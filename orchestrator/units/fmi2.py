@@ -1,0 +1,92 @@
+"""FMI 2.0 co-simulation instances (through fmpy's FMU2Slave)."""
+
+from __future__ import annotations
+
+import ctypes
+from typing import Any
+
+from fmpy.fmi2 import (
+    FMU2Slave,
+    fmi2CallbackAllocateMemoryTYPE,
+    fmi2CallbackFreeMemoryTYPE,
+    fmi2CallbackFunctions,
+    fmi2CallbackLoggerTYPE,
+    fmi2StepFinishedTYPE,
+)
+from fmpy.fmi2 import calloc, free  # the C allocator fmpy hands to FMUs
+
+from .fmi_instance import FmiInstance, _TypeGroup
+
+
+class Fmi2Unit(FmiInstance):
+    """A live FMI 2.0 co-simulation instance.
+
+    Each instance has its own FMU2Slave object: fmpy's ``freeInstance`` also
+    unloads the shared library, so a slave object is never reused after it.
+    """
+
+    _c_types = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Enumeration": ctypes.c_int,
+                "Boolean": ctypes.c_int, "String": ctypes.c_char_p}
+    _vr_type = ctypes.c_uint
+
+    def __init__(self, name: str, unit_type: Any):
+        super().__init__(name, unit_type)
+        md = unit_type.model_description()
+        self._slave = FMU2Slave(guid=md.guid, unzipDirectory=unit_type.extracted_folder(),
+                                modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
+        self._callbacks = fmi2CallbackFunctions()
+        self._callbacks.logger = fmi2CallbackLoggerTYPE(
+            lambda env, instance, status, category, message: self._record_log(status, category, message))
+        self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        self._callbacks.stepFinished = fmi2StepFinishedTYPE()
+        self._guard("fmi2Instantiate", lambda: self._slave.instantiate(callbacks=self._callbacks, loggingOn=False))
+        self._component = self._slave.component
+        self._alive = True
+        s = self._slave
+        self._calls = {
+            "Real": (s.fmi2GetReal, s.fmi2SetReal),
+            "Integer": (s.fmi2GetInteger, s.fmi2SetInteger),
+            "Enumeration": (s.fmi2GetInteger, s.fmi2SetInteger),
+            "Boolean": (s.fmi2GetBoolean, s.fmi2SetBoolean),
+            "String": (s.fmi2GetString, s.fmi2SetString),
+        }
+        self._do_step = s.fmi2DoStep
+
+    def _get_call(self, group: _TypeGroup) -> None:
+        self._calls[group.fmi_type][0](self._component, group.vrs, group.n_vrs, group.values)
+
+    def _set_call(self, group: _TypeGroup) -> None:
+        self._calls[group.fmi_type][1](self._component, group.vrs, group.n_vrs, group.values)
+
+    def setup(self, start_time: float, stop_time: float | None) -> None:
+        self.time = start_time
+        self._guard("fmi2SetupExperiment",
+                    lambda: self._slave.setupExperiment(startTime=start_time, stopTime=stop_time))
+
+    def enter_initialization(self) -> None:
+        self._guard("fmi2EnterInitializationMode", self._slave.enterInitializationMode)
+
+    def exit_initialization(self) -> None:
+        self._guard("fmi2ExitInitializationMode", self._slave.exitInitializationMode)
+
+    def do_step(self, t: float, h: float) -> None:
+        self.time = t
+        try:
+            self._do_step(self._component, t, h, 1)
+        except Exception as exc:
+            raise self.fail("fmi2DoStep", exc) from None
+
+    def reset(self) -> None:
+        self._guard("fmi2Reset", self._slave.reset)
+
+    def terminate(self) -> None:
+        if not self._alive:
+            return
+        self._alive = False
+        try:
+            self._slave.terminate()
+        except Exception:
+            pass  # an FMU in error state may refuse terminate; freeing it still matters
+        finally:
+            self._slave.freeInstance()

@@ -1,0 +1,144 @@
+"""What FMI 2.0 and FMI 3.0 instances share: buffers, logging, error reports.
+
+A :class:`FmiSelection` groups the requested scalar elements by FMI type and
+pre-builds the ctypes arrays of value references and values once, so that a
+``get``/``set`` in the stepping loop is one FMI call per type and no allocation.
+"""
+
+from __future__ import annotations
+
+import ctypes
+from collections import deque
+from typing import Any, Callable, Sequence
+
+from ..unit import ElementRef, Selection, Unit, UnitError
+
+STATUS_LABELS = ["OK", "Warning", "Discard", "Error", "Fatal", "Pending"]
+
+
+class _TypeGroup:
+    """All requested elements of one FMI type: one get/set call reads them all."""
+
+    def __init__(self, fmi_type: str, c_type: Any, vr_c_type: Any, vrs: list[int], sizes: list[int]):
+        self.fmi_type = fmi_type
+        self.vrs = (vr_c_type * len(vrs))(*vrs)
+        self.n_vrs = len(vrs)
+        self.n_values = sum(sizes)
+        self.values = (c_type * self.n_values)()
+
+
+class FmiSelection(Selection):
+    """Elements resolved to (type group, position in that group's value buffer)."""
+
+    def __init__(self, refs: Sequence[ElementRef], groups: list[_TypeGroup], positions: list[tuple[int, int]],
+                 partial_arrays: bool):
+        self.refs = tuple(refs)
+        self.groups = groups
+        self.positions = positions
+        # Setting one element of an FMI 3.0 array means writing the whole
+        # array, so the others are read first (read-modify-write).
+        self.partial_arrays = partial_arrays
+
+
+class FmiInstance(Unit):
+    """Common part of :class:`Fmi2Unit` and :class:`Fmi3Unit`.
+
+    Subclasses provide ``_c_types`` (FMI type -> ctypes type), ``_vr_type``,
+    ``_get_call(group)`` / ``_set_call(group)`` and the lifecycle calls.
+    """
+
+    _c_types: dict[str, Any] = {}
+    _vr_type: Any = ctypes.c_uint
+
+    def __init__(self, name: str, unit_type: Any):
+        self.name = name
+        self.unit_type = unit_type
+        self.description = unit_type.describe()
+        self.elements = unit_type.elements()
+        self.log: deque[str] = deque(maxlen=20)
+        self.time: float | None = None
+        self._alive = False
+
+    # Logging and errors ---------------------------------------------------
+
+    def _record_log(self, status: int, category: bytes | None, message: bytes | None) -> None:
+        label = STATUS_LABELS[status] if 0 <= status < len(STATUS_LABELS) else str(status)
+        text = (message or b"").decode("utf-8", "replace")
+        self.log.append(f"[{label}] {text}")
+
+    def fail(self, call: str, exc: BaseException) -> UnitError:
+        """A UnitError for a failed FMI call, with its status and the FMU's last log lines."""
+        status = getattr(exc, "status", None)
+        label = STATUS_LABELS[status] if isinstance(status, int) and 0 <= status < len(STATUS_LABELS) else None
+        text = f"{call} returned {label}" if label else f"{call} failed: {exc}"
+        if self.log:
+            text += "; FMU log: " + " | ".join(self.log)
+        return UnitError(self.name, text, self.time)
+
+    def _guard(self, call: str, fn: Callable[[], Any]) -> Any:
+        try:
+            return fn()
+        except UnitError:
+            raise
+        except Exception as exc:
+            raise self.fail(call, exc) from None
+
+    # Selections -------------------------------------------------------------
+
+    def select(self, refs: Sequence[ElementRef]) -> FmiSelection:
+        by_type: dict[str, dict[int, int]] = {}  # type -> vr -> size, in first-seen order
+        for ref in refs:
+            element = self.elements[ref.variable][ref.offset]
+            by_type.setdefault(element.fmi_type, {})[element.value_reference] = element.size
+        groups: list[_TypeGroup] = []
+        offsets: dict[tuple[str, int], tuple[int, int]] = {}
+        for g, (fmi_type, sizes) in enumerate(by_type.items()):
+            start = 0
+            for vr, size in sizes.items():
+                offsets[(fmi_type, vr)] = (g, start)
+                start += size
+            groups.append(_TypeGroup(fmi_type, self._c_types[fmi_type], self._vr_type,
+                                     list(sizes), list(sizes.values())))
+        positions = []
+        covered: dict[tuple[str, int], set[int]] = {}
+        for ref in refs:
+            element = self.elements[ref.variable][ref.offset]
+            g, start = offsets[(element.fmi_type, element.value_reference)]
+            positions.append((g, start + element.index))
+            covered.setdefault((element.fmi_type, element.value_reference), set()).add(element.index)
+        partial = any(len(covered[(e.fmi_type, e.value_reference)]) < e.size
+                      for ref in refs for e in [self.elements[ref.variable][ref.offset]])
+        return FmiSelection(refs, groups, positions, partial)
+
+    def get(self, selection: Selection) -> list[Any]:
+        sel: FmiSelection = selection  # type: ignore[assignment]
+        for group in sel.groups:
+            self._guard(f"get{group.fmi_type}", lambda group=group: self._get_call(group))
+        return [self._convert(sel.groups[g], sel.groups[g].values[i]) for g, i in sel.positions]
+
+    def set(self, selection: Selection, values: Sequence[Any]) -> None:
+        sel: FmiSelection = selection  # type: ignore[assignment]
+        if sel.partial_arrays:
+            for group in sel.groups:
+                self._guard(f"get{group.fmi_type}", lambda group=group: self._get_call(group))
+        for (g, i), value in zip(sel.positions, values):
+            group = sel.groups[g]
+            group.values[i] = value.encode("utf-8") if group.fmi_type == "String" else value
+        for group in sel.groups:
+            self._guard(f"set{group.fmi_type}", lambda group=group: self._set_call(group))
+
+    @staticmethod
+    def _convert(group: _TypeGroup, value: Any) -> Any:
+        if group.fmi_type == "Boolean":
+            return bool(value)
+        if group.fmi_type == "String":
+            return value.decode("utf-8") if value is not None else ""
+        return value
+
+    # Implemented per FMI version -------------------------------------------
+
+    def _get_call(self, group: _TypeGroup) -> None:
+        raise NotImplementedError
+
+    def _set_call(self, group: _TypeGroup) -> None:
+        raise NotImplementedError

@@ -1,0 +1,355 @@
+"""FMU units: reading, checking and extracting an FMU, for FMI 2.0 and 3.0.
+
+:class:`FmuUnitType` is the picklable blueprint.  It reads the
+modelDescription.xml once (through fmpy), reports *every* reason the FMU cannot
+be used at once (:class:`FmuProblems`), describes its variables in the common
+:mod:`orchestrator.unit` terms and extracts the archive once per process.  The
+live instances are in :mod:`.fmi2` and :mod:`.fmi3`, one module per FMI version.
+
+FMI 2.0 has no arrays; tools export an array ``x`` as scalars ``x[1]`` ..
+``x[n]``.  Such a contiguous run of indexed scalars (same causality and type)
+is *also* offered as an array variable ``x`` so that an FMI 2.0 FMU and an
+FMI 3.0 FMU (or a Python unit) with an array port ``x`` are interchangeable.
+"""
+
+from __future__ import annotations
+
+import atexit
+import hashlib
+import os
+import platform
+import re
+import shutil
+import tempfile
+import threading
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ..unit import Unit, UnitDescription, UnitType, Variable
+
+BUILTIN_PREFIX = "builtin:"
+
+_INDEXED = re.compile(r"^(?P<base>[^\[\]]+)\[(?P<index>\d+)\]$")
+
+_FMI3_TYPE = {
+    "Float64": "Real", "Float32": "Real",
+    "Int8": "Integer", "UInt8": "Integer", "Int16": "Integer", "UInt16": "Integer",
+    "Int32": "Integer", "UInt32": "Integer", "Int64": "Integer", "UInt64": "Integer",
+    "Enumeration": "Integer", "Boolean": "Boolean", "String": "String",
+    "Real": "Real", "Integer": "Integer",
+}
+
+
+class FmuProblems(Exception):
+    """An FMU cannot be used; ``problems`` lists every reason (with fixes)."""
+
+    def __init__(self, path: str, problems: list[str]):
+        self.path = path
+        self.problems = problems
+        super().__init__(f"{path}: " + "; ".join(problems))
+
+
+@dataclass(frozen=True)
+class FmiElement:
+    """Where one scalar element lives in the FMU: FMI type and value reference.
+
+    For FMI 3.0 arrays, ``index`` is the element's offset in the array
+    (the array is read whole); for scalars it is 0 and ``size`` is 1.
+    """
+
+    fmi_type: str
+    value_reference: int
+    index: int = 0
+    size: int = 1
+
+
+def platform_folders() -> tuple[str, str]:
+    """The FMI 2.0 and FMI 3.0 binaries folder names of this machine."""
+    system = {"Linux": "linux", "Darwin": "darwin", "Windows": "win"}.get(platform.system(), "linux")
+    machine = platform.machine().lower()
+    bits = "64" if machine in ("x86_64", "amd64", "aarch64", "arm64") else "32"
+    arch = {"amd64": "x86_64", "arm64": "aarch64"}.get(machine, machine)
+    return f"{system}{bits}", f"{arch}-{system}"
+
+
+def shared_library_suffix() -> str:
+    return {"Linux": ".so", "Darwin": ".dylib", "Windows": ".dll"}.get(platform.system(), ".so")
+
+
+def safe_extract(archive: str | Path, target: str | Path) -> None:
+    """Extract a zip archive, refusing members that would land outside ``target``.
+
+    Raises FmuProblems when a member's path escapes (absolute paths, ``..``).
+    """
+    target = Path(target).resolve()
+    with zipfile.ZipFile(archive) as zf:
+        for member in zf.infolist():
+            destination = (target / member.filename).resolve()
+            if destination != target and target not in destination.parents:
+                raise FmuProblems(str(archive), [f"archive member '{member.filename}' escapes the extraction "
+                                                 "folder; refusing to extract this FMU"])
+        zf.extractall(target)
+
+
+class _ExtractionCache:
+    """One extracted copy of each FMU per process, removed when the process exits."""
+
+    def __init__(self) -> None:
+        self._folders: dict[str, str] = {}
+        self._lock = threading.Lock()
+        atexit.register(self.clear)
+
+    def folder(self, path: str, digest: str) -> str:
+        key = f"{path}:{digest}"
+        with self._lock:
+            if key not in self._folders:
+                folder = tempfile.mkdtemp(prefix="cosim_fmu_")
+                try:
+                    safe_extract(path, folder)
+                except BaseException:
+                    shutil.rmtree(folder, ignore_errors=True)
+                    raise
+                self._folders[key] = folder
+            return self._folders[key]
+
+    def clear(self) -> None:
+        with self._lock:
+            for folder in self._folders.values():
+                shutil.rmtree(folder, ignore_errors=True)
+            self._folders.clear()
+
+
+EXTRACTED = _ExtractionCache()
+
+
+def file_digest(path: str | Path) -> str:
+    """SHA-256 of a file's bytes (hex)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def resolve_fmu_path(reference: str, base_dir: str | Path | None = None) -> Path:
+    """The file an FMU reference in a spec points to.
+
+    ``builtin:NAME_fmiN`` names an FMU we ship as C source (built on first use,
+    see :mod:`fmus.build`); anything else is a path, relative to ``base_dir``.
+    Raises FileNotFoundError for an unknown builtin name.
+    """
+    if reference.startswith(BUILTIN_PREFIX):
+        from fmus.build import ensure_built, known_fmus  # local: compiling only when asked
+
+        stem = reference[len(BUILTIN_PREFIX):]
+        m = re.match(r"^(?P<name>.+)_fmi(?P<version>[23])$", stem)
+        if not m or m.group("name") not in known_fmus():
+            names = ", ".join(f"builtin:{n}_fmi3" for n in sorted(known_fmus()))
+            raise FileNotFoundError(f"no built-in FMU '{stem}'; available: {names} (or _fmi2)")
+        return Path(ensure_built(m.group("name"), int(m.group("version"))))
+    path = Path(reference)
+    if not path.is_absolute() and base_dir is not None:
+        path = Path(base_dir) / path
+    return path
+
+
+class FmuUnitType(UnitType):
+    """Blueprint of an FMU unit (FMI 2.0 or 3.0 co-simulation).
+
+    Pickles as its path, digest and (optionally) the FMU's bytes, so a Dask
+    worker on another machine can use it without a shared filesystem.
+    """
+
+    def __init__(self, path: str | Path, reference: str | None = None):
+        self.path = str(path)
+        self.reference = reference or self.path
+        self._md: Any = None
+        self._description: UnitDescription | None = None
+        self._elements: dict[str, list[FmiElement]] = {}
+        self._digest: str | None = None
+
+    def __getstate__(self) -> dict:
+        return {"path": self.path, "reference": self.reference, "_md": None, "_description": None,
+                "_elements": {}, "_digest": self._digest}
+
+    @property
+    def digest(self) -> str:
+        if self._digest is None:
+            self._digest = file_digest(self.path)
+        return self._digest
+
+    def model_description(self) -> Any:
+        """fmpy's ModelDescription, after checking the FMU can run here.
+
+        Raises FmuProblems listing every problem found (missing file, not a
+        zip, no co-simulation, no binary for this platform, unsupported version).
+        """
+        if self._md is not None:
+            return self._md
+        from fmpy import read_model_description
+
+        if not os.path.isfile(self.path):
+            raise FmuProblems(self.path, [f"file not found: {self.path}; check the path (relative paths "
+                                          "are relative to the spec's folder)"])
+        if not zipfile.is_zipfile(self.path):
+            raise FmuProblems(self.path, ["not a zip archive, so not an FMU; rebuild or re-export it"])
+        try:
+            md = read_model_description(self.path, validate=False)
+        except Exception as exc:  # fmpy raises many kinds for a broken XML
+            raise FmuProblems(self.path, [f"cannot read modelDescription.xml: {exc}"]) from None
+        problems = []
+        if md.fmiVersion not in ("2.0", "3.0"):
+            problems.append(f"FMI version {md.fmiVersion} is not supported; export the FMU as FMI 2.0 or 3.0")
+        if md.coSimulation is None:
+            problems.append("the FMU does not support co-simulation (model exchange only); export it "
+                            "for co-simulation, or wrap it, e.g. with fmpy's 'add cswrapper'")
+        else:
+            folder2, folder3 = platform_folders()
+            folder = folder3 if md.fmiVersion == "3.0" else folder2
+            library = f"binaries/{folder}/{md.coSimulation.modelIdentifier}{shared_library_suffix()}"
+            with zipfile.ZipFile(self.path) as zf:
+                if library not in zf.namelist():
+                    present = sorted({n.split("/")[1] for n in zf.namelist()
+                                      if n.startswith("binaries/") and n.count("/") >= 2})
+                    problems.append(f"no binary for this platform ({library}); the FMU has binaries for "
+                                    f"{present or 'no platform'}; rebuild it for {folder}")
+        if problems:
+            raise FmuProblems(self.path, problems)
+        self._md = md
+        return md
+
+    def describe(self) -> UnitDescription:
+        if self._description is None:
+            self._description, self._elements = _describe(self.model_description(), self.reference)
+        return self._description
+
+    def elements(self) -> dict[str, list[FmiElement]]:
+        """Per variable name, where each of its scalar elements lives."""
+        self.describe()
+        return self._elements
+
+    def extracted_folder(self) -> str:
+        """The folder this process extracted the FMU into (extracting once)."""
+        return EXTRACTED.folder(self.path, self.digest)
+
+    def instantiate(self, name: str) -> Unit:
+        md = self.model_description()
+        if md.fmiVersion == "2.0":
+            from .fmi2 import Fmi2Unit
+
+            return Fmi2Unit(name, self)
+        from .fmi3 import Fmi3Unit
+
+        return Fmi3Unit(name, self)
+
+
+def _number(text: Any, kind: str) -> Any:
+    if text is None:
+        return None
+    if isinstance(text, (int, float, bool)):
+        return text
+    text = str(text).strip()
+    if kind == "Real":
+        values = [float(t) for t in text.split()]
+    elif kind == "Integer":
+        values = [int(float(t)) for t in text.split()]
+    elif kind == "Boolean":
+        values = [t in ("true", "1") for t in text.split()]
+    else:
+        return text
+    return values[0] if len(values) == 1 else tuple(values)
+
+
+def _unit_of(v: Any) -> str | None:
+    if v.unit:
+        return v.unit
+    declared = getattr(v, "declaredType", None)
+    return getattr(declared, "unit", None) if declared is not None else None
+
+
+def _describe(md: Any, reference: str) -> tuple[UnitDescription, dict[str, list[FmiElement]]]:
+    """Translate fmpy's model description into ours (grouping FMI 2.0 indexed scalars)."""
+    fmi3 = md.fmiVersion == "3.0"
+    variables: list[Variable] = []
+    elements: dict[str, list[FmiElement]] = {}
+    for v in md.modelVariables:
+        kind = _FMI3_TYPE.get(v.type, "Real")
+        shape: tuple[int, ...] = ()
+        if fmi3 and v.dimensions:
+            shape = tuple(int(d.start) if d.start is not None else 0 for d in v.dimensions)
+        size = 1
+        for n in shape:
+            size *= n
+        variables.append(Variable(
+            name=v.name, causality=v.causality or "local", type=kind, unit=_unit_of(v),
+            start=_number(v.start, kind), description=v.description or "", shape=shape,
+            min=_number(v.min, "Real") if v.min is not None else None,
+            max=_number(v.max, "Real") if v.max is not None else None,
+            variability=v.variability or "continuous",
+        ))
+        elements[v.name] = [FmiElement(v.type, v.valueReference, i, size) for i in range(size)] if shape \
+            else [FmiElement(v.type, v.valueReference)]
+    if not fmi3:
+        variables, elements = _group_indexed(variables, elements)
+    feedthrough = {}
+    for unknown in md.outputs:
+        name = unknown.variable.name
+        if unknown.dependencies is not None:
+            feedthrough[name] = tuple(d.name for d in unknown.dependencies if d.causality == "input")
+    if not fmi3:
+        feedthrough = _group_feedthrough(feedthrough, variables)
+    default_step = None
+    if md.defaultExperiment is not None and md.defaultExperiment.stepSize:
+        default_step = float(md.defaultExperiment.stepSize)
+    description = UnitDescription(
+        name=md.modelName, variables=tuple(variables), kind="fmu", fmi_version=md.fmiVersion,
+        can_reset=True, feedthrough=feedthrough, default_step=default_step,
+        description=md.description or "", source=reference,
+    )
+    return description, elements
+
+
+def _group_indexed(variables: list[Variable], elements: dict[str, list[FmiElement]]):
+    """Offer runs ``x[1]..x[n]`` of FMI 2.0 scalars also as an array ``x``."""
+    groups: dict[str, dict[int, Variable]] = {}
+    names = {v.name for v in variables}
+    for v in variables:
+        m = _INDEXED.match(v.name)
+        if m:
+            groups.setdefault(m.group("base"), {})[int(m.group("index"))] = v
+    extra = []
+    for base, members in groups.items():
+        n = len(members)
+        if base in names or sorted(members) != list(range(1, n + 1)):
+            continue
+        first = members[1]
+        if any(m.causality != first.causality or m.type != first.type for m in members.values()):
+            continue
+        ordered = [members[i] for i in range(1, n + 1)]
+        starts = [m.start for m in ordered]
+        extra.append(Variable(
+            name=base, causality=first.causality, type=first.type, unit=first.unit,
+            start=None if all(s is None for s in starts) else tuple(starts),
+            description=first.description, shape=(n,), min=first.min, max=first.max,
+            variability=first.variability,
+        ))
+        elements[base] = [elements[m.name][0] for m in ordered]
+    return variables + extra, elements
+
+
+def _group_feedthrough(feedthrough: dict[str, tuple[str, ...]], variables: list[Variable]):
+    """Add feed-through entries for grouped arrays (union over their elements)."""
+    arrays = {v.name for v in variables if v.is_array}
+    result = dict(feedthrough)
+    for base in arrays:
+        members = [k for k in feedthrough if _INDEXED.match(k) and _INDEXED.match(k).group("base") == base]
+        if members:
+            deps: set[str] = set()
+            for k in members:
+                deps.update(feedthrough[k])
+            deps.update({_INDEXED.match(d).group("base") for d in list(deps)
+                         if _INDEXED.match(d) and _INDEXED.match(d).group("base") in arrays})
+            result[base] = tuple(sorted(deps))
+    return result

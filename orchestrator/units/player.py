@@ -1,0 +1,170 @@
+"""The signal player: plays a recorded table as outputs.
+
+It reads what ``cosim run --out`` writes (Parquet or CSV, a ``time`` column
+and one column per signal, e.g. ``robot.tau[3]``) and offers every column as a
+Real output of the same name.  Columns ``x[1]`` .. ``x[n]`` are also offered
+as one array output ``x``, so a recorded ``robot.tau`` feeds an FMU's array
+input ``tau`` in one connection.  With it, any unit can be run alone against
+signals recorded in the whole system.
+
+Interpolation between samples: ``linear`` (default), ``hold`` (the last
+sample at or before t) or ``nearest``.  Beyond the recorded range:
+``hold`` the end values (default) or ``error``.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from ..unit import ElementRef, Selection, Unit, UnitDescription, UnitError, UnitType, Variable
+
+_INDEXED = re.compile(r"^(?P<base>.+)\[(?P<index>\d+)\]$")
+INTERPOLATIONS = ("linear", "hold", "nearest")
+
+
+def read_table(path: str | Path) -> Any:
+    """A recorded table as a pandas DataFrame (Parquet or CSV by extension).
+
+    Raises FileNotFoundError for a missing file and ValueError when the table
+    has no numeric 'time' column or time does not increase.
+    """
+    import pandas as pd
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no such file: {path}")
+    frame = pd.read_csv(path) if path.suffix.lower() == ".csv" else pd.read_parquet(path)
+    if "time" not in frame.columns:
+        raise ValueError(f"{path} has no 'time' column; columns: {', '.join(map(str, frame.columns[:8]))}")
+    time = frame["time"].to_numpy(dtype=float)
+    if len(time) == 0 or np.any(np.diff(time) < 0):
+        raise ValueError(f"{path}: 'time' must be non-empty and non-decreasing")
+    return frame
+
+
+class _IndexSelection(Selection):
+    def __init__(self, refs: Sequence[ElementRef], columns: np.ndarray):
+        self.refs = tuple(refs)
+        self.columns = columns
+
+
+class PlayerUnitType(UnitType):
+    """Blueprint of a signal player over the table at ``path``."""
+
+    def __init__(self, path: str | Path, columns: Sequence[str] | None = None, interpolation: str = "linear",
+                 extrapolation: str = "hold"):
+        if interpolation not in INTERPOLATIONS:
+            raise ValueError(f"interpolation '{interpolation}' is not one of {', '.join(INTERPOLATIONS)}")
+        self.path = str(path)
+        self.columns = list(columns) if columns else None
+        self.interpolation = interpolation
+        self.extrapolation = extrapolation
+        self._table: tuple[np.ndarray, np.ndarray, list[str]] | None = None
+
+    def __getstate__(self) -> dict:
+        state = dict(self.__dict__)
+        state["_table"] = None
+        return state
+
+    def table(self) -> tuple[np.ndarray, np.ndarray, list[str]]:
+        """(time, values[samples, columns], column names); raises as :func:`read_table`."""
+        if self._table is None:
+            frame = read_table(self.path)
+            names = self.columns or [str(c) for c in frame.columns if c != "time"]
+            missing = [c for c in names if c not in frame.columns]
+            if missing:
+                raise ValueError(f"{self.path} has no column(s) {', '.join(missing)}")
+            self._table = (frame["time"].to_numpy(dtype=float), frame[names].to_numpy(dtype=float), names)
+        return self._table
+
+    def describe(self) -> UnitDescription:
+        _, values, names = self.table()
+        variables = [Variable(n, "output", "Real", start=float(values[0, i]), description=f"played from {self.path}")
+                     for i, n in enumerate(names)]
+        groups: dict[str, dict[int, int]] = {}
+        for i, n in enumerate(names):
+            m = _INDEXED.match(n)
+            if m:
+                groups.setdefault(m.group("base"), {})[int(m.group("index"))] = i
+        for base, members in groups.items():
+            if base not in names and sorted(members) == list(range(1, len(members) + 1)):
+                variables.append(Variable(base, "output", "Real", shape=(len(members),),
+                                          description=f"array of {base}[1..{len(members)}] played from {self.path}"))
+        return UnitDescription(name=Path(self.path).name, variables=tuple(variables), kind="player",
+                               feedthrough={v.name: () for v in variables}, source=self.path)
+
+    def column_index(self, ref: ElementRef) -> int:
+        _, _, names = self.table()
+        if ref.variable in names:
+            return names.index(ref.variable)
+        return names.index(f"{ref.variable}[{ref.offset + 1}]")
+
+    def instantiate(self, name: str) -> Unit:
+        return PlayerUnit(name, self)
+
+
+class PlayerUnit(Unit):
+    """A live player: outputs follow the table at the current time."""
+
+    def __init__(self, name: str, unit_type: PlayerUnitType):
+        self.name = name
+        self.unit_type = unit_type
+        self.description = unit_type.describe()
+        self.time_points, self.values, _ = unit_type.table()
+        self.current = self.values[0].copy()
+        self.t = float(self.time_points[0])
+
+    def select(self, refs: Sequence[ElementRef]) -> Selection:
+        return _IndexSelection(refs, np.array([self.unit_type.column_index(r) for r in refs], dtype=int))
+
+    def get(self, selection: Selection) -> list[Any]:
+        return self.current[selection.columns].tolist()  # type: ignore[attr-defined]
+
+    def set(self, selection: Selection, values: Sequence[Any]) -> None:
+        raise UnitError(self.name, "a signal player has only outputs; nothing can be set", self.t)
+
+    def setup(self, start_time: float, stop_time: float | None) -> None:
+        self.t = start_time
+        first, last = self.time_points[0], self.time_points[-1]
+        if self.unit_type.extrapolation == "error" and (start_time < first or (stop_time or first) > last):
+            raise UnitError(self.name, f"the run [{start_time:g}, {stop_time}] leaves the recorded time range "
+                                       f"[{first:g}, {last:g}] of {self.unit_type.path}", start_time)
+        self.current = self._at(start_time)
+
+    def enter_initialization(self) -> None:
+        pass
+
+    def exit_initialization(self) -> None:
+        pass
+
+    def do_step(self, t: float, h: float) -> None:
+        self.t = t + h
+        self.current = self._at(self.t)
+
+    def reset(self) -> None:
+        self.current = self.values[0].copy()
+
+    def terminate(self) -> None:
+        pass
+
+    def _at(self, t: float) -> np.ndarray:
+        times, values = self.time_points, self.values
+        mode = self.unit_type.interpolation
+        if len(times) == 1 or t <= times[0]:
+            return values[0].copy()
+        if t >= times[-1]:
+            return values[-1].copy()
+        # searchsorted 'right' so that at a sample time with repeated times
+        # (an event) we take the value after the event.
+        i = int(np.searchsorted(times, t, side="right")) - 1
+        if mode == "hold":
+            return values[i].copy()
+        t0, t1 = times[i], times[i + 1]
+        if mode == "nearest":
+            return values[i if t - t0 <= t1 - t else i + 1].copy()
+        w = (t - t0) / (t1 - t0)
+        return (1.0 - w) * values[i] + w * values[i + 1]

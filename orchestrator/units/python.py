@@ -1,0 +1,222 @@
+"""Units written in Python.
+
+Write a unit by subclassing :class:`PythonUnit`, listing its ``variables`` and
+implementing ``do_step``.  Every variable becomes an attribute of the instance
+holding its current value (a float, int, bool or str for scalars, a numpy array
+for arrays), so a step reads ``self.tau`` and writes ``self.power``::
+
+    class Gain(PythonUnit):
+        variables = (
+            Variable("k", "parameter", start=2.0),
+            Variable("u", "input", start=0.0),
+            Variable("y", "output", start=0.0),
+        )
+        def do_step(self, t, h):
+            self.y = self.k * self.u
+
+A spec names such a class as ``"python": "package.module:Gain"`` or
+``"python": "file.py:Gain"`` (relative to the spec's folder).
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import sys
+from pathlib import Path
+from typing import Any, ClassVar, Mapping, Sequence
+
+import numpy as np
+
+from ..unit import ElementRef, Selection, Unit, UnitDescription, UnitError, UnitType, Variable
+
+
+class _AttributeSelection(Selection):
+    def __init__(self, refs: Sequence[ElementRef], array_names: set[str]):
+        self.refs = tuple(refs)
+        self.items = tuple((r.variable, r.offset if r.variable in array_names else None) for r in refs)
+
+
+class PythonUnit(Unit):
+    """Base class of units written in Python (see the module docstring).
+
+    Subclasses set ``variables`` and may set ``feedthrough`` (output name to
+    the inputs it reads directly, see :class:`UnitDescription`; default: no
+    direct feed-through) and ``can_reset``.  Hooks a subclass may override:
+    ``initialize()`` (parameters and start values are set, runs once before the
+    first step), ``do_step(t, h)``, ``compute_outputs()`` (only for units with
+    direct feed-through: recompute outputs from the current inputs) and
+    ``close()`` (free resources).
+    """
+
+    variables: ClassVar[Sequence[Variable]] = ()
+    feedthrough: ClassVar[Mapping[str, Sequence[str]]] = {}
+    can_reset: ClassVar[bool] = True
+    unit_description: ClassVar[str] = ""
+
+    def __init__(self, name: str = "unit"):
+        self.name = name
+        self.description = self.describe_class()
+        self._arrays = {v.name for v in self.description.variables if v.is_array}
+        self._has_feedthrough = any(self.description.feedthrough.get(o.name) for o in self.description.outputs())
+        self._outputs_stale = False
+        self.start_time = 0.0
+        self.stop_time: float | None = None
+        self._apply_start_values()
+
+    @classmethod
+    def describe_class(cls) -> UnitDescription:
+        """The description of this class's variables and capabilities."""
+        declared = {k: tuple(v) for k, v in cls.feedthrough.items()}
+        feedthrough = {v.name: declared.get(v.name, ()) for v in cls.variables if v.causality == "output"}
+        return UnitDescription(
+            name=cls.__name__,
+            variables=tuple(cls.variables),
+            kind="python",
+            can_reset=cls.can_reset,
+            feedthrough=feedthrough,
+            description=cls.unit_description or (cls.__doc__ or "").strip().split("\n")[0],
+            source=f"{cls.__module__}:{cls.__qualname__}",
+        )
+
+    def _apply_start_values(self) -> None:
+        for v in self.description.variables:
+            if v.is_array:
+                dtype = {"Real": float, "Integer": np.int64, "Boolean": bool}.get(v.type, object)
+                start = v.start if v.start is not None else 0
+                value = np.array(start, dtype=dtype).reshape(-1) if np.ndim(start) else np.full(v.size, start, dtype=dtype)
+                if value.size != v.size:
+                    raise UnitError(self.name, f"start value of '{v.name}' has {value.size} elements, expected {v.size}")
+                setattr(self, v.name, value.copy())
+            else:
+                default = {"Real": 0.0, "Integer": 0, "Boolean": False, "String": ""}[v.type]
+                setattr(self, v.name, v.start if v.start is not None else default)
+
+    # Protocol ------------------------------------------------------------
+
+    def select(self, refs: Sequence[ElementRef]) -> Selection:
+        return _AttributeSelection(refs, self._arrays)
+
+    def get(self, selection: Selection) -> list[Any]:
+        if self._outputs_stale:
+            self._outputs_stale = False
+            self._call("compute_outputs", None)
+        out = []
+        for name, offset in selection.items:  # type: ignore[attr-defined]
+            value = getattr(self, name)
+            out.append(value.flat[offset].item() if offset is not None else value)
+        return out
+
+    def set(self, selection: Selection, values: Sequence[Any]) -> None:
+        for (name, offset), value in zip(selection.items, values):  # type: ignore[attr-defined]
+            if offset is None:
+                setattr(self, name, value)
+            else:
+                getattr(self, name).flat[offset] = value
+        if self._has_feedthrough:
+            self._outputs_stale = True
+
+    def setup(self, start_time: float, stop_time: float | None) -> None:
+        self.start_time = start_time
+        self.stop_time = stop_time
+
+    def enter_initialization(self) -> None:
+        pass
+
+    def exit_initialization(self) -> None:
+        self._call("initialize", self.start_time)
+        self._outputs_stale = self._has_feedthrough
+
+    def reset(self) -> None:
+        self._call("close", None)
+        self._apply_start_values()
+        self._outputs_stale = False
+
+    def terminate(self) -> None:
+        self._call("close", None)
+
+    # Hooks for subclasses -------------------------------------------------
+
+    def initialize(self) -> None:
+        """Called once parameters and start values are set, before stepping."""
+
+    def compute_outputs(self) -> None:
+        """Recompute outputs from inputs (units with direct feed-through)."""
+
+    def close(self) -> None:
+        """Free resources held by the instance."""
+
+    def _call(self, hook: str, t: float | None) -> None:
+        try:
+            getattr(self, hook)()
+        except UnitError:
+            raise
+        except Exception as exc:  # a unit's own bug becomes a named unit error
+            raise UnitError(self.name, f"{hook}() raised {type(exc).__name__}: {exc}", t) from exc
+
+
+class PythonUnitType(UnitType):
+    """Blueprint of a Python unit named ``"module:Class"`` or ``"file.py:Class"``.
+
+    Only the target string and base folder are pickled; the class is imported
+    where the unit is used, so a Dask worker imports it itself.
+    """
+
+    def __init__(self, target: str, base_dir: str | Path | None = None):
+        self.target = target
+        self.base_dir = str(base_dir) if base_dir is not None else None
+        self._cls: type[PythonUnit] | None = None
+
+    def __getstate__(self) -> dict:
+        return {"target": self.target, "base_dir": self.base_dir, "_cls": None}
+
+    def load_class(self) -> type[PythonUnit]:
+        """Import and return the class.
+
+        Raises ValueError for a malformed target, ImportError for a module or
+        file that cannot be imported and TypeError when the class is not a
+        :class:`PythonUnit`.
+        """
+        if self._cls is not None:
+            return self._cls
+        module_name, sep, class_name = self.target.rpartition(":")
+        if not sep or not module_name or not class_name:
+            raise ValueError(f"'{self.target}' is not of the form 'module:Class' or 'file.py:Class'")
+        if module_name.endswith(".py"):
+            path = Path(module_name)
+            if not path.is_absolute() and self.base_dir:
+                path = Path(self.base_dir) / path
+            if not path.is_file():
+                raise ImportError(f"no such file: {path}")
+            key = f"cosim_user_{abs(hash(str(path.resolve())))}"
+            module = sys.modules.get(key)
+            if module is None:
+                spec = importlib.util.spec_from_file_location(key, path)
+                module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+                sys.modules[key] = module
+                spec.loader.exec_module(module)  # type: ignore[union-attr]
+        else:
+            module = self._import_module(module_name)
+        cls = getattr(module, class_name, None)
+        if cls is None:
+            raise ImportError(f"module '{module_name}' has no class '{class_name}'")
+        if not (isinstance(cls, type) and issubclass(cls, PythonUnit)):
+            raise TypeError(f"'{self.target}' is not a subclass of orchestrator.PythonUnit")
+        self._cls = cls
+        return cls
+
+    def _import_module(self, module_name: str):
+        """Import ``module_name``, also looking in the spec's folder (for modules beside the spec)."""
+        if self.base_dir and self.base_dir not in sys.path:
+            sys.path.insert(0, self.base_dir)
+            try:
+                return importlib.import_module(module_name)
+            finally:
+                sys.path.remove(self.base_dir)
+        return importlib.import_module(module_name)
+
+    def describe(self) -> UnitDescription:
+        return self.load_class().describe_class()
+
+    def instantiate(self, name: str) -> Unit:
+        return self.load_class()(name)
