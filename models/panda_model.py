@@ -180,3 +180,46 @@ def ee_position(model: pin.Model, data: pin.Data, q) -> np.ndarray:
     """End-effector (TCP) position in the base frame (m) at joint angles ``q`` (rad)."""
     pin.framesForwardKinematics(model, data, np.asarray(q, dtype=float))
     return data.oMf[ee_frame_id(model)].translation.copy()
+
+
+def robot_variables():
+    """The ports every robot unit shares, so units are interchangeable in a spec.
+
+    Parameters: joint limits (default :data:`FRANKA_DOC_LIMITS`) and a rigid
+    payload fixed to the hand (default none).  Inputs: the reference
+    ``q_ref``, ``qd_ref``, ``qdd_ref``.  Outputs: the motion ``q``, ``qd``,
+    ``qdd``, the joint torques ``tau`` actually applied, ``ee_pos`` (TCP in the
+    base frame), ``tracking_error`` (max over joints of ``|q - q_ref|``),
+    ``tau_ratio`` (``|tau| / tau_max`` per joint) and ``limit_violated`` (a
+    position, velocity or torque limit is exceeded at this instant).
+    """
+    from orchestrator.unit import Variable
+
+    L = FRANKA_DOC_LIMITS
+    src = " (Franka documentation)"
+    arr = dict(shape=(N_JOINTS,))
+    return (
+        Variable("q_min", "parameter", unit="rad", start=tuple(L.q_min), description="lower position limits" + src, variability="fixed", **arr),
+        Variable("q_max", "parameter", unit="rad", start=tuple(L.q_max), description="upper position limits" + src, variability="fixed", **arr),
+        Variable("qd_max", "parameter", unit="rad/s", start=tuple(L.qd_max), description="velocity limits" + src, variability="fixed", **arr),
+        Variable("tau_max", "parameter", unit="N.m", start=tuple(L.tau_max), description="torque limits" + src, variability="fixed", **arr),
+        Variable("payload_mass", "parameter", unit="kg", start=0.0, min=0.0, description="rigid payload fixed to the hand", variability="fixed"),
+        Variable("payload_com", "parameter", unit="m", start=0.0, shape=(3,), description="payload centre of mass in the panda_hand_tcp frame", variability="fixed"),
+        Variable("payload_inertia", "parameter", unit="kg.m2", start=0.0, shape=(6,), description="payload Ixx Iyy Izz Ixy Ixz Iyz about its COM, TCP axes", variability="fixed"),
+        Variable("q_ref", "input", unit="rad", start=tuple(0.5 * (L.q_min + L.q_max)), description="reference joint angles", **arr),
+        Variable("qd_ref", "input", unit="rad/s", start=0.0, description="reference joint velocities", **arr),
+        Variable("qdd_ref", "input", unit="rad/s2", start=0.0, description="reference joint accelerations", **arr),
+        Variable("q", "output", unit="rad", start=0.0, description="joint angles", **arr),
+        Variable("qd", "output", unit="rad/s", start=0.0, description="joint velocities", **arr),
+        Variable("qdd", "output", unit="rad/s2", start=0.0, description="joint accelerations", **arr),
+        Variable("tau", "output", unit="N.m", start=0.0, description="joint torques applied", **arr),
+        Variable("ee_pos", "output", unit="m", start=0.0, shape=(3,), description="TCP position in the base frame"),
+        Variable("tracking_error", "output", unit="rad", start=0.0, description="max over joints of |q - q_ref|"),
+        Variable("tau_ratio", "output", start=0.0, description="|tau| / tau_max per joint", **arr),
+        Variable("limit_violated", "output", type="Boolean", start=False, description="a position, velocity or torque limit is exceeded now"),
+    )
+
+
+def payload_key(mass, com, inertia) -> tuple:
+    """Hashable key of payload parameters, for :func:`cached_model`."""
+    return (float(mass), tuple(float(x) for x in np.ravel(com)), tuple(float(x) for x in np.ravel(inertia)))

@@ -1,0 +1,191 @@
+"""The Panda as a multibody system in Exudyn, with its joint servo inside.
+
+Plant
+    An Exudyn ``ObjectKinematicTree`` (minimal coordinates, 7 revolute joints)
+    built from the pinocchio model's joint placements and link inertias (see
+    :mod:`models.panda_model`), so its forward dynamics equal pinocchio's ABA
+    to round-off (checked in ``tests/test_panda_units.py``).  The
+    ``exudyn.robotics`` Panda model is not used: it does not match the URDF.
+    A rigid payload (parameters ``payload_*``) is part of link 7's inertia.
+
+Servo
+    Runs inside this unit, at every internal solver step, because a joint PD
+    outside the physics unit with torques held over a 1 ms communication step
+    went unstable with realistic gains (DESIGN.md).  Per joint::
+
+        tau = tau_ff + kp * (q_r - q) + kd * (qd_r - qd),
+        tau_ff = RNEA(q_r, qd_r, qdd_r)          (pinocchio, same model as the plant)
+
+    The PD part is Exudyn's built-in kinematic-tree joint control
+    (``jointPControlVector``/``jointDControlVector`` with position and velocity
+    offsets), which enters the solver's Jacobian and is evaluated in C++; the
+    feed-forward torque is ``jointForceVector``.  The reference within a
+    communication step ``[t, t+h]`` is extrapolated from the inputs sampled at
+    ``t`` (exact inside a parabolic-blend phase) and evaluated at
+    ``t_k + ref_phase * dt`` of each internal step ``[t_k, t_k + dt]``; the default
+    0.5 is the middle of the step as DESIGN.md prescribes.
+
+Stepping
+    ``MainSolverImplicitSecondOrder`` (generalized-alpha), initialised once per
+    run; every internal step sets both ``solver.it.startTime`` and
+    ``solver.it.endTime`` and calls ``SolveSteps`` (setting only one of them
+    silently re-integrates from the start).  The generalized-alpha method
+    satisfies the equations of motion at the end of each step, so the output
+    ``tau`` (the servo law at the end-of-step state) equals
+    ``RNEA(q, qd, qdd)`` of the outputs to the Newton tolerance.
+
+The Exudyn system is built once per instance and rebuilt only when the payload
+changes; ``initialize()`` after ``reset()`` just re-applies gains and the
+initial state (about 0.2 ms).
+"""
+
+from __future__ import annotations
+
+import math
+
+import exudyn as exu
+import numpy as np
+import pinocchio as pin
+from exudyn.itemInterface import NodeGenericODE2, ObjectKinematicTree
+
+from orchestrator.unit import Variable
+from orchestrator.units.python import PythonUnit
+
+from .panda_model import GRAVITY, N_JOINTS, cached_model, ee_frame_id, payload_key, robot_variables
+
+# libfranka example joint_impedance_control.cpp: k_gains and d_gains.
+DEFAULT_KP = (600.0, 600.0, 600.0, 600.0, 250.0, 150.0, 50.0)  # N.m/rad
+DEFAULT_KD = (50.0, 50.0, 50.0, 50.0, 30.0, 25.0, 15.0)  # N.m.s/rad
+
+
+def build_kinematic_tree(model: pin.Model, q0, qd0, gravity=GRAVITY):
+    """An Exudyn system of the serial revolute chain in pinocchio ``model``.
+
+    Returns ``(system_container, mbs, node, tree)``; the system is assembled.
+    Joint ``i``'s placement in its parent (rotation ``R``, translation ``p``)
+    maps to ``jointTransformations[i] = R`` and ``jointOffsets[i] = p``; link
+    inertias are given about the centre of mass in joint coordinates, as both
+    libraries store them.  Raises ValueError for a model that is not a chain of
+    revolute-z joints.
+    """
+    n = model.nv
+    for i in range(1, model.njoints):
+        if model.joints[i].shortname() != "JointModelRZ" or model.parents[i] != i - 1:
+            raise ValueError("only serial chains of revolute-z joints are supported")
+    rots, offsets = exu.Matrix3DList(), exu.Vector3DList()
+    inertias, coms, masses = exu.Matrix3DList(), exu.Vector3DList(), []
+    for i in range(1, model.njoints):
+        placement, inertia = model.jointPlacements[i], model.inertias[i]
+        rots.Append(placement.rotation)
+        offsets.Append(placement.translation)
+        inertias.Append(inertia.inertia)  # about the COM, joint axes
+        coms.Append(inertia.lever)
+        masses.append(inertia.mass)
+    sc = exu.SystemContainer()
+    mbs = sc.AddSystem()
+    node = mbs.AddNode(NodeGenericODE2(referenceCoordinates=[0.0] * n, initialCoordinates=list(q0),
+                                       initialCoordinates_t=list(qd0), numberOfODE2Coordinates=n))
+    zeros = [0.0] * n
+    tree = mbs.AddObject(ObjectKinematicTree(
+        nodeNumber=node, jointTypes=[exu.JointType.RevoluteZ] * n, linkParents=list(range(-1, n - 1)),
+        jointTransformations=rots, jointOffsets=offsets, linkInertiasCOM=inertias, linkCOMs=coms,
+        linkMasses=masses, gravity=list(gravity), jointForceVector=zeros, jointPositionOffsetVector=zeros,
+        jointVelocityOffsetVector=zeros, jointPControlVector=zeros, jointDControlVector=zeros,
+    ))
+    mbs.Assemble()
+    return sc, mbs, node, tree
+
+
+class PandaExudyn(PythonUnit):
+    """Panda arm simulated in Exudyn with a PD + inverse-dynamics feed-forward joint servo."""
+
+    variables = robot_variables() + (
+        Variable("kp", "parameter", unit="N.m/rad", start=DEFAULT_KP, shape=(N_JOINTS,),
+                 description="servo position gains (libfranka example)", variability="fixed"),
+        Variable("kd", "parameter", unit="N.m.s/rad", start=DEFAULT_KD, shape=(N_JOINTS,),
+                 description="servo velocity gains (libfranka example)", variability="fixed"),
+        Variable("substep", "parameter", unit="s", start=1e-3, min=0.0,
+                 description="largest internal solver step; a communication step is split evenly", variability="fixed"),
+        Variable("ref_phase", "parameter", start=0.5, min=0.0, max=1.0,
+                 description="where in each internal step the reference is evaluated (0 start, 0.5 middle, 1 end)",
+                 variability="fixed"),
+    )
+
+    def initialize(self) -> None:
+        if not self.substep > 0:
+            raise ValueError(f"substep must be > 0, got {self.substep}")
+        key = payload_key(self.payload_mass, self.payload_com, self.payload_inertia)
+        q0 = np.array(self.q_ref, dtype=float)  # the run starts on the reference
+        qd0 = np.array(self.qd_ref, dtype=float)
+        if getattr(self, "_key", None) != key:
+            self._build(key, q0, qd0)
+        sd = self._mbs.systemData
+        sd.SetODE2Coordinates(q0, configuration=exu.ConfigurationType.Initial)
+        sd.SetODE2Coordinates_t(qd0, configuration=exu.ConfigurationType.Initial)
+        self._kp = np.array(self.kp, dtype=float)
+        self._kd = np.array(self.kd, dtype=float)
+        self._mbs.SetObjectParameter(self._tree, "jointPControlVector", self._kp)
+        self._mbs.SetObjectParameter(self._tree, "jointDControlVector", self._kd)
+        self._set_servo(q0, qd0, np.array(self.qdd_ref, dtype=float))
+        st = self._settings.timeIntegration
+        st.startTime = self.start_time
+        st.endTime = self.start_time + self.substep
+        self._solver.InitializeSolver(self._mbs, self._settings)  # also computes initial accelerations
+        self._read_outputs(q0)
+
+    def _build(self, key, q0, qd0) -> None:
+        self._model = cached_model(*key)
+        self._data = self._model.createData()
+        self._ee = ee_frame_id(self._model)
+        self._sc, self._mbs, self._node, self._tree = build_kinematic_tree(self._model, q0, qd0)
+        s = exu.SimulationSettings()
+        s.timeIntegration.numberOfSteps = 1  # SolveSteps runs one internal step per call
+        s.timeIntegration.verboseMode = 0
+        s.solution.file.write = False  # default: a solution/ folder in the working directory
+        s.solution.sensors.active = False
+        s.timeIntegration.newton.relativeTolerance = 1e-10  # tau output exact to ~1e-9 N.m
+        self._settings = s
+        self._solver = exu.MainSolverImplicitSecondOrder()
+        self._key = key
+
+    def _set_servo(self, q_r, qd_r, qdd_r) -> None:
+        self._q_r, self._qd_r = q_r, qd_r
+        self._tau_ff = pin.rnea(self._model, self._data, q_r, qd_r, qdd_r)
+        mbs, tree = self._mbs, self._tree
+        mbs.SetObjectParameter(tree, "jointForceVector", self._tau_ff)
+        mbs.SetObjectParameter(tree, "jointPositionOffsetVector", q_r)
+        mbs.SetObjectParameter(tree, "jointVelocityOffsetVector", qd_r)
+
+    def do_step(self, t: float, h: float) -> None:
+        n_sub = max(1, math.ceil(h / self.substep - 1e-9))
+        dt = h / n_sub
+        q_ref, qd_ref, qdd_ref = (np.array(x, dtype=float) for x in (self.q_ref, self.qd_ref, self.qdd_ref))
+        solver, it = self._solver, self._solver.it
+        for k in range(n_sub):
+            tau_k = (k + self.ref_phase) * dt  # reference time, relative to the input sample at t
+            self._set_servo(q_ref + qd_ref * tau_k + 0.5 * qdd_ref * tau_k * tau_k, qd_ref + qdd_ref * tau_k, qdd_ref)
+            it.startTime = t + k * dt
+            it.endTime = t + (k + 1) * dt
+            if not solver.SolveSteps(self._mbs, self._settings):
+                raise RuntimeError(f"Exudyn solver failed in [{it.startTime:g}, {it.endTime:g}] s: {solver.GetErrorString()}")
+        self._read_outputs(q_ref + qd_ref * h + 0.5 * qdd_ref * h * h)
+
+    def _read_outputs(self, q_ref_now: np.ndarray) -> None:
+        sd = self._mbs.systemData
+        self.q[:] = sd.GetODE2Coordinates()
+        self.qd[:] = sd.GetODE2Coordinates_t()
+        self.qdd[:] = sd.GetODE2Coordinates_tt()
+        # the servo law at the end-of-step state: what the solver applied there
+        self.tau[:] = self._tau_ff + self._kp * (self._q_r - self.q) + self._kd * (self._qd_r - self.qd)
+        pin.framesForwardKinematics(self._model, self._data, self.q)
+        self.ee_pos[:] = self._data.oMf[self._ee].translation
+        self.tracking_error = float(np.max(np.abs(self.q - q_ref_now)))
+        np.divide(np.abs(self.tau), self.tau_max, out=self.tau_ratio)
+        self.limit_violated = bool(
+            np.any(self.tau_ratio > 1.0)
+            or np.any(self.q < self.q_min)
+            or np.any(self.q > self.q_max)
+            or np.any(np.abs(self.qd) > self.qd_max)
+        )
+        if not np.all(np.isfinite(self.q)):
+            raise RuntimeError("the simulation diverged (non-finite joint angles)")

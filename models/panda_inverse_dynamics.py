@@ -1,0 +1,64 @@
+"""The fast fidelity level of the Panda: perfect tracking, torques by inverse dynamics.
+
+The robot follows its reference exactly (``q = q_ref``, ``qd = qd_ref``,
+``qdd = qdd_ref``) and the joint torques are those the rigid-body model needs
+for that motion, ``tau = RNEA(q_ref, qd_ref, qdd_ref)`` (pinocchio; thesis
+eq. 7-8, which the thesis evaluated the same way).  No servo, no dynamics of
+its own: outputs follow the inputs directly (declared as feed-through), so a
+master that orders units by feed-through sees this instant's torques.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from orchestrator.units.python import PythonUnit
+
+from .panda_model import cached_model, ee_frame_id, payload_key, robot_variables
+
+
+class PandaInverseDynamics(PythonUnit):
+    """Panda arm, ideal tracking, torques from pinocchio's RNEA (ports: models.panda_model.robot_variables)."""
+
+    variables = robot_variables()
+    _refs = ("q_ref", "qd_ref", "qdd_ref")
+    feedthrough = {
+        "q": ("q_ref",),
+        "qd": ("qd_ref",),
+        "qdd": ("qdd_ref",),
+        "tau": _refs,
+        "ee_pos": ("q_ref",),
+        "tracking_error": (),
+        "tau_ratio": _refs,
+        "limit_violated": _refs,
+    }
+
+    def initialize(self) -> None:
+        key = payload_key(self.payload_mass, self.payload_com, self.payload_inertia)
+        if getattr(self, "_key", None) != key:  # the model is rebuilt only when the payload changes
+            self._model = cached_model(*key)
+            self._data = self._model.createData()
+            self._ee = ee_frame_id(self._model)
+            self._key = key
+        self.compute_outputs()
+
+    def compute_outputs(self) -> None:
+        m, d = self._model, self._data
+        self.q[:] = self.q_ref
+        self.qd[:] = self.qd_ref
+        self.qdd[:] = self.qdd_ref
+        self.tau[:] = pin.rnea(m, d, self.q, self.qd, self.qdd)
+        pin.framesForwardKinematics(m, d, self.q)  # rnea already placed the joints; this adds frames
+        self.ee_pos[:] = d.oMf[self._ee].translation
+        self.tracking_error = 0.0
+        np.divide(np.abs(self.tau), self.tau_max, out=self.tau_ratio)
+        self.limit_violated = bool(
+            np.any(self.tau_ratio > 1.0)
+            or np.any(self.q < self.q_min)
+            or np.any(self.q > self.q_max)
+            or np.any(np.abs(self.qd) > self.qd_max)
+        )
+
+    def do_step(self, t: float, h: float) -> None:
+        """Nothing to integrate: PythonUnit recomputes outputs whenever inputs change."""
