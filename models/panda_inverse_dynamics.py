@@ -15,7 +15,7 @@ import pinocchio as pin
 
 from orchestrator.units.python import PythonUnit
 
-from .panda_model import cached_model, ee_frame_id, payload_key, robot_variables
+from .panda_model import cached_model, ee_frame_id, limits_exceeded, payload_key, robot_variables
 
 
 class PandaInverseDynamics(PythonUnit):
@@ -49,16 +49,11 @@ class PandaInverseDynamics(PythonUnit):
         self.qd[:] = self.qd_ref
         self.qdd[:] = self.qdd_ref
         self.tau[:] = pin.rnea(m, d, self.q, self.qd, self.qdd)
-        pin.framesForwardKinematics(m, d, self.q)  # rnea already placed the joints; this adds frames
-        self.ee_pos[:] = d.oMf[self._ee].translation
+        pin.forwardKinematics(m, d, self.q)  # rnea does not leave world placements in data
+        self.ee_pos[:] = pin.updateFramePlacement(m, d, self._ee).translation
         self.tracking_error = 0.0
         np.divide(np.abs(self.tau), self.tau_max, out=self.tau_ratio)
-        self.limit_violated = bool(
-            np.any(self.tau_ratio > 1.0)
-            or np.any(self.q < self.q_min)
-            or np.any(self.q > self.q_max)
-            or np.any(np.abs(self.qd) > self.qd_max)
-        )
+        self.limit_violated = limits_exceeded(self.q, self.qd, self.tau_ratio, self.q_min, self.q_max, self.qd_max)
 
     def do_step(self, t: float, h: float) -> None:
         """Nothing to integrate: PythonUnit recomputes outputs whenever inputs change."""

@@ -220,6 +220,13 @@ def robot_variables():
     )
 
 
+def limits_exceeded(q, qd, tau_ratio, q_min, q_max, qd_max) -> bool:
+    """True if a position, velocity or torque limit is exceeded (ndarray methods: this runs every step)."""
+    return bool(
+        tau_ratio.max() > 1.0 or (q - q_min).min() < 0.0 or (q_max - q).min() < 0.0 or (abs(qd) - qd_max).max() > 0.0
+    )
+
+
 def payload_key(mass, com, inertia) -> tuple:
     """Hashable key of payload parameters, for :func:`cached_model`."""
     return (float(mass), tuple(float(x) for x in np.ravel(com)), tuple(float(x) for x in np.ravel(inertia)))
