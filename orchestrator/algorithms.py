@@ -12,7 +12,17 @@ from __future__ import annotations
 from typing import Mapping, Sequence
 
 from .system import Connection
-from .unit import Unit
+from .unit import Unit, UnitError
+
+
+def step_unit(unit: Unit, t: float, h: float) -> None:
+    """``unit.do_step(t, h)``; any exception becomes a UnitError naming the unit and time."""
+    try:
+        unit.do_step(t, h)
+    except UnitError:
+        raise
+    except Exception as exc:  # a Python unit's own bug, reported like an FMU's error status
+        raise UnitError(unit.name, f"do_step raised {type(exc).__name__}: {exc}", t) from exc
 
 
 class Transfer:
@@ -73,7 +83,7 @@ class GaussSeidel(MasterAlgorithm):
         for unit, transfers in self._plan:
             for transfer in transfers:
                 transfer.run()
-            unit.do_step(t, h)
+            step_unit(unit, t, h)
 
 
 class Jacobi(MasterAlgorithm):
@@ -91,7 +101,7 @@ class Jacobi(MasterAlgorithm):
         for transfer, v in zip(self._transfers, values):
             transfer.write(v)
         for unit in self._units:
-            unit.do_step(t, h)
+            step_unit(unit, t, h)
 
 
 ALGORITHMS = {GaussSeidel.name: GaussSeidel, Jacobi.name: Jacobi}

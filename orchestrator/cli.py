@@ -77,10 +77,9 @@ def _print_problems(problems: Sequence[Any]) -> None:
 
 def cmd_validate(args: argparse.Namespace) -> int:
     """``cosim validate spec.json``: 0 when the spec is usable, 2 with every problem otherwise."""
-    from .spec import load_spec
-    from .system import build_system
+    from .validate import check_spec
 
-    system = build_system(load_spec(args.spec))
+    system = check_spec(args.spec)
     spec = system.spec
     print(f"{args.spec}: ok: {len(spec.units)} unit(s), {len(spec.connections)} connection(s), "
           f"{len(spec.objectives)} objective(s); {spec.experiment.algorithm}, step {spec.experiment.step:g} s, "
@@ -105,13 +104,12 @@ def parse_assignment(text: str) -> tuple[str, Any]:
 def cmd_run(args: argparse.Namespace) -> int:
     """``cosim run spec.json``: run one point, print objectives, optionally write traces."""
     from .execution import Execution
-    from .spec import load_spec
-    from .system import build_system
+    from .validate import check_spec
 
     out = Path(args.out) if args.out else None
     if out is not None and out.suffix.lower() not in (".parquet", ".csv"):
         raise UsageError(f"--out {out}: use a .parquet or .csv file name")
-    system = build_system(load_spec(args.spec))
+    system = check_spec(args.spec)
     overrides = []
     from .problems import SpecError
 
@@ -149,10 +147,9 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     target = Path(args.target)
     if target.suffix.lower() == ".fmu" or args.target.startswith("builtin:"):
         return _inspect_fmu(args.target)
-    from .spec import load_spec
-    from .system import build_system
+    from .validate import check_spec
 
-    system = build_system(load_spec(target))
+    system = check_spec(target)
     print(f"spec {target}: {system.spec.name}")
     print("units:")
     for name, unit in system.units.items():
@@ -183,9 +180,10 @@ def _inspect_fmu(reference: str) -> int:
     if d.description:
         print(f"  {d.description}")
     rows = [("name", "causality", "type", "unit", "start", "range", "description")]
+    arrays = {v.name for v in d.variables if v.is_array}
     for v in d.variables:
-        if v.causality == "local":
-            continue
+        if v.causality == "local" or (d.fmi_version == "2.0" and v.name.split("[")[0] in arrays and not v.is_array):
+            continue  # FMI 2.0 scalars x[1]..x[n] are listed once, as their array x[n]
         shape = f"[{','.join(map(str, v.shape))}]" if v.shape else ""
         rng = "" if v.min is None and v.max is None else f"[{_fmt(v.min)}, {_fmt(v.max)}]"
         rows.append((v.name + shape, v.causality, v.type, v.unit or "", _fmt(v.start), rng, v.description[:50]))

@@ -262,7 +262,9 @@ def _build(raw: dict, path: Path) -> Spec:
         options = {k: u[k] for k in ("columns", "interpolation", "extrapolation") if k in u}
         units.append(UnitSpec(name=name, kind=kind, source=u[kind], parameters=dict(u.get("parameters", {})),
                               start=dict(u.get("start", {})), ports=dict(u.get("ports", {})), options=options))
-    connections = tuple(ConnectionSpec(c["from"], c["to"], i) for i, c in enumerate(raw.get("connections", [])))
+    # None marks an entry set aside by orchestrator.validate; indices stay those of the file
+    connections = tuple(ConnectionSpec(c["from"], c["to"], i)
+                        for i, c in enumerate(raw.get("connections", [])) if c is not None)
     e = raw["experiment"]
     experiment = ExperimentSpec(start=float(e.get("start", 0.0)), stop=float(e["stop"]), step=float(e["step"]),
                                 algorithm=e.get("algorithm", "gauss-seidel"), stop_when=e.get("stop_when"))
@@ -282,5 +284,5 @@ def _build(raw: dict, path: Path) -> Spec:
     canonical = json.dumps(raw, sort_keys=True, separators=(",", ":"))
     return Spec(path=str(path), folder=folder, name=raw.get("name", path.stem),
                 description=raw.get("description", ""), units=tuple(units), connections=connections,
-                experiment=experiment, record=tuple(raw.get("record", [])), objectives=objectives,
+                experiment=experiment, record=tuple(r for r in raw.get("record", []) if r is not None), objectives=objectives,
                 design=design, digest=hashlib.sha256(canonical.encode()).hexdigest(), raw=raw)

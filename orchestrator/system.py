@@ -125,14 +125,17 @@ def make_unit_type(spec: UnitSpec, folder: str) -> UnitType:
                           spec.options.get("extrapolation", "hold"))
 
 
-def build_system(spec: Spec) -> System:
+def build_system(spec: Spec, broken_units: frozenset[str] = frozenset()) -> System:
     """Check that the spec's units, ports and connections fit, and build the System.
 
+    ``broken_units`` names units already reported as broken elsewhere (by the
+    schema check); references to them are not reported a second time.
     Raises SpecError listing every problem found.
     """
     file = spec.path
     problems: list[Problem] = []
     units = _LoadedUnits()
+    units.failed.update(broken_units)
     for u in spec.units:
         system_unit = _load_unit(u, spec.folder, file, problems)
         if system_unit is not None:
@@ -225,7 +228,11 @@ def _load_unit(u: UnitSpec, folder: str, file: str, problems: list[Problem]) -> 
 def _fmu_fix(problem: str) -> str:
     if "not found" in problem:
         return "check the path; relative paths start at the spec's folder"
-    return ""
+    if "no binary" in problem:
+        return "re-export the FMU with a binary for this platform, or run it where it has one"
+    if "co-simulation" in problem:
+        return "export the FMU for co-simulation (FMI 2.0 or 3.0)"
+    return "re-export the FMU from its tool"
 
 
 def _port_names(unit: SystemUnit) -> list[str]:

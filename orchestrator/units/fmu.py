@@ -141,12 +141,12 @@ def resolve_fmu_path(reference: str, base_dir: str | Path | None = None) -> Path
     Raises FileNotFoundError for an unknown builtin name.
     """
     if reference.startswith(BUILTIN_PREFIX):
-        from fmus.build import ensure_built, known_fmus  # local: compiling only when asked
+        from fmus.build import available_models, ensure_built  # local: compiling only when asked
 
         stem = reference[len(BUILTIN_PREFIX):]
         m = re.match(r"^(?P<name>.+)_fmi(?P<version>[23])$", stem)
-        if not m or m.group("name") not in known_fmus():
-            names = ", ".join(f"builtin:{n}_fmi3" for n in sorted(known_fmus()))
+        if not m or m.group("name") not in available_models():
+            names = ", ".join(f"builtin:{n}_fmi3" for n in sorted(available_models()))
             raise FileNotFoundError(f"no built-in FMU '{stem}'; available: {names} (or _fmi2)")
         return Path(ensure_built(m.group("name"), int(m.group("version"))))
     path = Path(reference)
@@ -203,8 +203,7 @@ class FmuUnitType(UnitType):
         if md.fmiVersion not in ("2.0", "3.0"):
             problems.append(f"FMI version {md.fmiVersion} is not supported; export the FMU as FMI 2.0 or 3.0")
         if md.coSimulation is None:
-            problems.append("the FMU does not support co-simulation (model exchange only); export it "
-                            "for co-simulation, or wrap it, e.g. with fmpy's 'add cswrapper'")
+            problems.append("the FMU does not support co-simulation (model exchange only)")
         else:
             folder2, folder3 = platform_folders()
             folder = folder3 if md.fmiVersion == "3.0" else folder2
@@ -214,7 +213,7 @@ class FmuUnitType(UnitType):
                     present = sorted({n.split("/")[1] for n in zf.namelist()
                                       if n.startswith("binaries/") and n.count("/") >= 2})
                     problems.append(f"no binary for this platform ({library}); the FMU has binaries for "
-                                    f"{present or 'no platform'}; rebuild it for {folder}")
+                                    f"{', '.join(present) or 'no platform'}")
         if problems:
             raise FmuProblems(self.path, problems)
         self._md = md

@@ -1,0 +1,35 @@
+"""Shared fixtures: real FMUs built from the project's C sources, spec writers."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+TESTS = Path(__file__).resolve().parent
+
+
+@pytest.fixture(scope="session")
+def built_fmu():
+    """A function (name, fmi_version) -> path of the FMU built from fmus/<name> (cached)."""
+    from fmus.build import ensure_built
+
+    return lambda name, version: Path(ensure_built(name, version))
+
+
+@pytest.fixture
+def write_spec(tmp_path):
+    """A function (dict, name='spec.json') -> path of the spec written into a fresh folder."""
+
+    def write(content: dict, name: str = "spec.json") -> Path:
+        path = tmp_path / name
+        path.write_text(json.dumps(content, indent=2))
+        return path
+
+    return write
+
+
+def python_unit(cls: str) -> str:
+    """The spec reference of a test unit in tests/units_for_tests.py."""
+    return f"{TESTS / 'units_for_tests.py'}:{cls}"
