@@ -118,7 +118,11 @@ def test_exudyn_applied_torque_equals_inverse_dynamics_of_actual_motion(exudyn_r
     smooth = np.min(np.abs(t_end[:, None] - switches[None, :]), axis=1) > 2.5 * H
     assert smooth.mean() > 0.95  # almost every sample is checked
     torque_range = np.ptp(tau, axis=0).max()
-    assert np.max(np.abs(numeric - tau[1:-1])[smooth]) < 0.02 * torque_range
+    error = np.max(np.abs(numeric - tau[1:-1])[smooth])
+    assert error < 0.02 * torque_range  # what the project asks for
+    # much tighter in fact (measured 0.03 N.m of ~108); the feed-forward torque of the
+    # reference alone would miss this by ~0.8 N.m, so the check sees the PD part too
+    assert error < 0.0025 * torque_range
 
 
 def test_exudyn_unit_reset_gives_the_same_run_and_gains_matter(exudyn_run):
