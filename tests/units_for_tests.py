@@ -74,3 +74,25 @@ class Failing(PythonUnit):
         if t >= self.fail_at:
             raise RuntimeError("boom")
         self.y = t
+
+
+class DriveProfile(PythonUnit):
+    """Joint torques and speeds of 7 joints: sine profiles with motoring and braking phases."""
+
+    variables = (
+        Variable("tau", "output", shape=(7,), unit="N.m", start=(0.0,) * 7),
+        Variable("omega", "output", shape=(7,), unit="rad/s", start=(0.0,) * 7),
+    )
+
+    def initialize(self):
+        self._set(self.start_time)
+
+    def do_step(self, t, h):
+        self._set(t + h)
+
+    def _set(self, t):
+        import numpy as np
+
+        j = np.arange(1, 8)
+        self.omega[:] = 1.5 * np.sin(2.0 * t + j) / j
+        self.tau[:] = 40.0 * np.cos(1.3 * t + 0.5 * j) / j + 5.0

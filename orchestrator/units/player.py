@@ -4,7 +4,9 @@ It reads what ``cosim run --out`` writes (Parquet or CSV, a ``time`` column
 and one column per signal, e.g. ``robot.tau[3]``) and offers every column as a
 Real output of the same name.  Columns ``x[1]`` .. ``x[n]`` are also offered
 as one array output ``x``, so a recorded ``robot.tau`` feeds an FMU's array
-input ``tau`` in one connection.  With it, any unit can be run alone against
+input ``tau`` in one connection.  A column recorded as ``unit.port`` is also
+offered as plain ``port`` when no other column ends the same way, so a player
+named like the recorded unit replaces it by changing one line of a spec.  With it, any unit can be run alone against
 signals recorded in the whole system.
 
 Interpolation between samples: ``linear`` (default), ``hold`` (the last
@@ -81,10 +83,22 @@ class PlayerUnitType(UnitType):
             self._table = (frame["time"].to_numpy(dtype=float), frame[names].to_numpy(dtype=float), names)
         return self._table
 
+    def aliases(self) -> dict[str, str]:
+        """Short port name -> recorded column, for columns 'unit.port' whose 'port' is unique."""
+        _, _, names = self.table()
+        short: dict[str, list[str]] = {}
+        for n in names:
+            if "." in n:
+                short.setdefault(n.split(".", 1)[1], []).append(n)
+        return {k: v[0] for k, v in short.items() if len(v) == 1 and k not in names}
+
     def describe(self) -> UnitDescription:
-        _, values, names = self.table()
-        variables = [Variable(n, "output", "Real", start=float(values[0, i]), description=f"played from {self.path}")
-                     for i, n in enumerate(names)]
+        _, values, columns = self.table()
+        aliases = self.aliases()
+        names = columns + list(aliases)
+        index = {n: i for i, n in enumerate(columns)} | {a: columns.index(c) for a, c in aliases.items()}
+        variables = [Variable(n, "output", "Real", start=float(values[0, index[n]]),
+                              description=f"played from {self.path}") for n in names]
         groups: dict[str, dict[int, int]] = {}
         for i, n in enumerate(names):
             m = _INDEXED.match(n)
@@ -98,10 +112,13 @@ class PlayerUnitType(UnitType):
                                feedthrough={v.name: () for v in variables}, source=self.path)
 
     def column_index(self, ref: ElementRef) -> int:
+        """The table column of one element (scalar column, alias, or array element)."""
         _, _, names = self.table()
-        if ref.variable in names:
-            return names.index(ref.variable)
-        return names.index(f"{ref.variable}[{ref.offset + 1}]")
+        aliases = self.aliases()
+        name = ref.variable
+        if name not in names and name not in aliases:
+            name = f"{ref.variable}[{ref.offset + 1}]"
+        return names.index(aliases.get(name, name))
 
     def instantiate(self, name: str) -> Unit:
         return PlayerUnit(name, self)
