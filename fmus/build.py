@@ -37,7 +37,7 @@ from .model_description import (ModelJsonError, fmi2_model_description, fmi3_mod
 
 FMUS_DIR = Path(__file__).resolve().parent
 COMMON_DIR = FMUS_DIR / "common"
-CFLAGS = ("-shared", "-fPIC", "-O2", "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-fvisibility=hidden", "-Wall")
+CFLAGS = ("-shared", "-fPIC", "-O2", "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-fvisibility=hidden", "-Wall", "-Wextra")
 FMI_VERSIONS = (2, 3)
 
 

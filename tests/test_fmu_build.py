@@ -257,3 +257,26 @@ def test_wrong_instantiation_token_is_refused(tmp_path):
         with pytest.raises(Exception, match="Failed to instantiate"):
             other.instantiate(logMessage=lambda env, status, cat, msg: messages.append(msg.decode()))
         assert any("does not match" in m for m in messages)
+
+
+@pytest.mark.parametrize("mode", [1, 2])
+def test_fault_modes_1_and_2_crash_or_hang_a_separate_process(mode, tmp_path):
+    """Run in a child process: mode 1 dies of SIGSEGV, mode 2 never returns from doStep."""
+    code = (f"from fmus.testing import FmuInstance\n"
+            f"f = FmuInstance({str(ensure_built('fault', 3))!r}, unzip_parent={str(tmp_path)!r})\n"
+            f"f.instantiate(); f.initialize(mode={mode}, trigger_time=0.1)\n"
+            f"f.step(0.0, 0.1); print('stepped', flush=True); f.step(0.1, 0.1); print('survived', flush=True)\n")
+    proc = subprocess.Popen([sys.executable, "-c", code], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        out, _ = proc.communicate(timeout=1.5 if mode == 2 else 60)
+        hung = False
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, _ = proc.communicate()
+        hung = True
+    assert "stepped" in out and "survived" not in out
+    if mode == 1:
+        assert proc.returncode == -11  # SIGSEGV
+    else:
+        assert hung

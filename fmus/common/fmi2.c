@@ -13,7 +13,7 @@
         return fmi2Error;                                              \
     } while (0)
 
-static void log2(ModelInstance *comp, Status status, const char *category, const char *message) {
+static void forward_log(ModelInstance *comp, Status status, const char *category, const char *message) {
     fmi2CallbackLogger logger = (fmi2CallbackLogger)comp->logger;
     /* The FMI 2.0 logger takes a printf format: double every '%' of the
      * already formatted message so that it is printed as it is. */
@@ -50,7 +50,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         return NULL;
     }
     comp = framework_instantiate(instanceName, fmuGUID, functions->componentEnvironment,
-                                 (void *)functions->logger, log2, loggingOn ? true : false);
+                                 (AnyFunction)functions->logger, forward_log, loggingOn ? true : false);
     return comp;
 }
 

@@ -13,7 +13,7 @@
         return fmi3Error;                                                          \
     } while (0)
 
-static void log3(ModelInstance *comp, Status status, const char *category, const char *message) {
+static void forward_log(ModelInstance *comp, Status status, const char *category, const char *message) {
     fmi3LogMessageCallback logger = (fmi3LogMessageCallback)comp->logger;
     if (logger) logger(comp->environment, (fmi3Status)status, category, message);
 }
@@ -42,7 +42,7 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
         if (logMessage) logMessage(instanceEnvironment, fmi3Error, "logStatusError", "event mode is not supported");
         return NULL;
     }
-    return framework_instantiate(instanceName, instantiationToken, instanceEnvironment, (void *)logMessage, log3,
+    return framework_instantiate(instanceName, instantiationToken, instanceEnvironment, (AnyFunction)logMessage, forward_log,
                                  loggingOn);
 }
 

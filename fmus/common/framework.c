@@ -30,7 +30,7 @@ void logInfo(ModelInstance *comp, const char *fmt, ...) {
 }
 
 ModelInstance *framework_instantiate(const char *instanceName, const char *token, void *environment,
-                                     void *logger, LogFunction log, bool loggingOn) {
+                                     AnyFunction logger, LogFunction log, bool loggingOn) {
     ModelInstance *comp = calloc(1, sizeof(ModelInstance));
     if (!comp) return NULL;
     comp->environment = environment;

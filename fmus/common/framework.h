@@ -58,6 +58,9 @@ typedef enum {
 } ModelState;
 
 struct ModelInstance;
+/* Any function pointer: the FMI version's logger callback is stored as this
+ * (function pointers convert to each other in ISO C, not to void *). */
+typedef void (*AnyFunction)(void);
 /* Forwards one formatted message to the FMI version's logger callback. */
 typedef void (*LogFunction)(struct ModelInstance *comp, Status status, const char *category, const char *message);
 
@@ -69,7 +72,7 @@ typedef struct ModelInstance {
     bool loggingOn;
     bool isDirty;       /* inputs or states changed since outputs were computed */
     void *environment;  /* fmi2 componentEnvironment / fmi3 instanceEnvironment */
-    void *logger;       /* the FMI version's callback, called through log */
+    AnyFunction logger; /* the FMI version's callback, called through log */
     LogFunction log;
     ModelData d;
 } ModelInstance;
@@ -86,7 +89,7 @@ void logInfo(ModelInstance *comp, const char *fmt, ...);
 
 /* Framework core shared by fmi2.c and fmi3.c. */
 ModelInstance *framework_instantiate(const char *instanceName, const char *token, void *environment,
-                                     void *logger, LogFunction log, bool loggingOn);
+                                     AnyFunction logger, LogFunction log, bool loggingOn);
 void framework_free(ModelInstance *comp);
 void framework_reset(ModelInstance *comp);
 Status framework_enter_initialization(ModelInstance *comp, double startTime);
