@@ -6,7 +6,13 @@ Plant
     :mod:`models.panda_model`), so its forward dynamics equal pinocchio's ABA
     to round-off (checked in ``tests/test_panda_units.py``).  The
     ``exudyn.robotics`` Panda model is not used: it does not match the URDF.
-    A rigid payload (parameters ``payload_*``) is part of link 7's inertia.
+    A rigid payload (parameters ``payload_*``) is part of link 7's inertia
+    (the servo's feed-forward knows it).  A freely swinging pendulum
+    (parameters ``pendulum_*``, the thesis's bin-picking load: 250 g bob,
+    20 g rod) hangs from the TCP by a spherical joint as a separate rigid body;
+    the servo does *not* know it (the PD part takes its load), so with a
+    pendulum ``tau`` differs from RNEA of the arm alone by the pendulum's
+    reaction.
 
 Servo
     Runs inside this unit, at every internal solver step, because a joint PD
@@ -35,8 +41,9 @@ Stepping
     ``RNEA(q, qd, qdd)`` of the outputs to the Newton tolerance.
 
 The Exudyn system is built once per instance and rebuilt only when the payload
-changes; ``initialize()`` after ``reset()`` just re-applies gains and the
-initial state (about 0.2 ms).
+changes (or, with a pendulum, every run: its initial pose follows the arm's);
+``initialize()`` after ``reset()`` otherwise just re-applies gains and the
+initial state (about 0.05 ms).
 """
 
 from __future__ import annotations
@@ -46,12 +53,19 @@ import math
 import exudyn as exu
 import numpy as np
 import pinocchio as pin
-from exudyn.itemInterface import NodeGenericODE2, ObjectKinematicTree
+from exudyn.itemInterface import (
+    MarkerBodyRigid,
+    MarkerKinematicTreeRigid,
+    NodeGenericODE2,
+    ObjectJointSpherical,
+    ObjectKinematicTree,
+)
+from exudyn.utilities import RigidBodyInertia
 
 from orchestrator.unit import Variable
 from orchestrator.units.python import PythonUnit
 
-from .panda_model import GRAVITY, N_JOINTS, cached_model, ee_frame_id, limits_exceeded, payload_key, robot_variables
+from .panda_model import EE_FRAME, GRAVITY, N_JOINTS, cached_model, ee_frame_id, limits_exceeded, payload_key, robot_variables
 
 # libfranka example joint_impedance_control.cpp: k_gains and d_gains.
 DEFAULT_KP = (600.0, 600.0, 600.0, 600.0, 250.0, 150.0, 50.0)  # N.m/rad
@@ -96,6 +110,43 @@ def build_kinematic_tree(model: pin.Model, q0, qd0, gravity=GRAVITY):
     return sc, mbs, node, tree
 
 
+# Shape assumptions of the pendulum (the thesis gives only its masses): a thin rod
+# and a spherical bob; the radii only keep the inertia about the rod axis non-zero.
+ROD_RADIUS = 0.005  # m
+BOB_RADIUS = 0.03  # m
+
+
+def add_pendulum(mbs, tree, model: pin.Model, q0, qd0, bob_mass: float, rod_mass: float, length: float,
+                 gravity=GRAVITY) -> int:
+    """Hang a rod-and-bob pendulum from the TCP of the kinematic tree by a spherical joint.
+
+    It starts hanging straight down, moving with the TCP.  Returns the body's
+    object number.  The body frame has its origin at the centre of mass and z
+    pointing from the bob to the anchor.
+    """
+    m = bob_mass + rod_mass
+    d = (rod_mass * length / 2 + bob_mass * length) / m  # COM below the anchor
+    z_rod, z_bob = d - length / 2, d - length  # rod centre and bob in body coordinates
+    ixx = rod_mass * (length**2 / 12 + z_rod**2) + bob_mass * (0.4 * BOB_RADIUS**2 + z_bob**2)
+    izz = 0.5 * rod_mass * ROD_RADIUS**2 + 0.4 * bob_mass * BOB_RADIUS**2
+    inertia = RigidBodyInertia(mass=m, inertiaTensor=np.diag([ixx, ixx, izz]))
+    data = model.createData()
+    frame = model.getFrameId(EE_FRAME)
+    pin.forwardKinematics(model, data, np.asarray(q0, float), np.asarray(qd0, float))
+    anchor = pin.updateFramePlacement(model, data, frame).translation.copy()
+    v_anchor = pin.getFrameVelocity(model, data, frame, pin.LOCAL_WORLD_ALIGNED).linear.copy()
+    body = mbs.CreateRigidBody(inertia=inertia, referencePosition=anchor - np.array([0.0, 0.0, d]),
+                               initialVelocity=v_anchor, gravity=list(gravity),
+                               nodeType=exu.NodeType.RotationEulerParameters)
+    tcp = model.frames[frame]
+    m_tree = mbs.AddMarker(MarkerKinematicTreeRigid(objectNumber=tree, linkNumber=tcp.parentJoint - 1,
+                                                    localPosition=tcp.placement.translation))
+    m_body = mbs.AddMarker(MarkerBodyRigid(bodyNumber=body, localPosition=[0.0, 0.0, d]))
+    mbs.AddObject(ObjectJointSpherical(markerNumbers=[m_tree, m_body]))
+    mbs.Assemble()
+    return body
+
+
 class PandaExudyn(PythonUnit):
     """Panda arm simulated in Exudyn with a PD + inverse-dynamics feed-forward joint servo."""
 
@@ -109,6 +160,15 @@ class PandaExudyn(PythonUnit):
         Variable("ref_phase", "parameter", start=0.5, min=0.0, max=1.0,
                  description="where in each internal step the reference is evaluated (0 start, 0.5 middle, 1 end)",
                  variability="fixed"),
+        Variable("pendulum_bob_mass", "parameter", unit="kg", start=0.0, min=0.0,
+                 description="bob of a pendulum swinging from the TCP (bin picking: 0.25); 0 and no rod: none",
+                 variability="fixed"),
+        Variable("pendulum_rod_mass", "parameter", unit="kg", start=0.0, min=0.0,
+                 description="rod of the pendulum (bin picking: 0.02)", variability="fixed"),
+        Variable("pendulum_length", "parameter", unit="m", start=0.2, min=0.0,
+                 description="anchor to bob centre (not given in the thesis; an assumption)", variability="fixed"),
+        Variable("pendulum_angle", "output", unit="rad", start=0.0,
+                 description="angle of the pendulum from the downward vertical (0 without a pendulum)"),
     )
 
     def initialize(self) -> None:
@@ -117,11 +177,18 @@ class PandaExudyn(PythonUnit):
         key = payload_key(self.payload_mass, self.payload_com, self.payload_inertia)
         q0 = np.array(self.q_ref, dtype=float)  # the run starts on the reference
         qd0 = np.array(self.qd_ref, dtype=float)
-        if getattr(self, "_key", None) != key:
+        pendulum = self.pendulum_bob_mass + self.pendulum_rod_mass > 0 and self.pendulum_length > 0
+        if pendulum or getattr(self, "_key", None) != key:
             self._build(key, q0, qd0)
-        sd = self._mbs.systemData
-        sd.SetODE2Coordinates(q0, configuration=exu.ConfigurationType.Initial)
-        sd.SetODE2Coordinates_t(qd0, configuration=exu.ConfigurationType.Initial)
+        self._body = None
+        if pendulum:  # starts hanging below the TCP wherever the arm starts: a fresh system
+            self._body = add_pendulum(self._mbs, self._tree, self._model, q0, qd0, float(self.pendulum_bob_mass),
+                                      float(self.pendulum_rod_mass), float(self.pendulum_length))
+            self._key = None  # the next run rebuilds
+        else:
+            sd = self._mbs.systemData
+            sd.SetODE2Coordinates(q0, configuration=exu.ConfigurationType.Initial)
+            sd.SetODE2Coordinates_t(qd0, configuration=exu.ConfigurationType.Initial)
         self._kp = np.array(self.kp, dtype=float)
         self._kd = np.array(self.kd, dtype=float)
         self._mbs.SetObjectParameter(self._tree, "jointPControlVector", self._kp)
@@ -174,14 +241,18 @@ class PandaExudyn(PythonUnit):
 
     def _read_outputs(self, q_ref_now: np.ndarray) -> None:
         sd = self._mbs.systemData
-        self.q[:] = sd.GetODE2Coordinates()
-        self.qd[:] = sd.GetODE2Coordinates_t()
-        self.qdd[:] = sd.GetODE2Coordinates_tt()
+        # the tree's node was added first: its 7 coordinates lead the system's ODE2 vector
+        self.q[:] = sd.GetODE2Coordinates()[:N_JOINTS]
+        self.qd[:] = sd.GetODE2Coordinates_t()[:N_JOINTS]
+        self.qdd[:] = sd.GetODE2Coordinates_tt()[:N_JOINTS]
         # the servo law at the end-of-step state: what the solver applied there
         self.tau[:] = self._tau_ff + self._kp * (self._q_r - self.q) + self._kd * (self._qd_r - self.qd)
         pin.forwardKinematics(self._model, self._data, self.q)
         self.ee_pos[:] = pin.updateFramePlacement(self._model, self._data, self._ee).translation
         self.tracking_error = float(np.max(np.abs(self.q - q_ref_now)))
+        if self._body is not None:
+            axis = self._mbs.GetObjectOutputBody(self._body, exu.OutputVariableType.RotationMatrix).reshape(3, 3)[:, 2]
+            self.pendulum_angle = float(np.arccos(np.clip(axis[2], -1.0, 1.0)))  # body z is world z at rest
         np.divide(np.abs(self.tau), self.tau_max, out=self.tau_ratio)
         self.limit_violated = limits_exceeded(self.q, self.qd, self.tau_ratio, self.q_min, self.q_max, self.qd_max)
         if not np.all(np.isfinite(self.q)):
