@@ -148,7 +148,14 @@ def add_pendulum(mbs, tree, model: pin.Model, q0, qd0, bob_mass: float, rod_mass
 
 
 class PandaExudyn(PythonUnit):
-    """Panda arm simulated in Exudyn with a PD + inverse-dynamics feed-forward joint servo."""
+    """Panda arm simulated in Exudyn with a PD + inverse-dynamics feed-forward joint servo.
+
+    The arm starts on the reference: ``q = q_ref``, ``qd = qd_ref`` as
+    the inputs are at initialization (or, if they differ at the first step at the
+    start time, as they are then).  Ports: :func:`models.panda_model.robot_variables`
+    plus the servo and pendulum parameters below and ``pendulum_angle``.
+    Raises (as a UnitError) when the solver fails or the motion diverges.
+    """
 
     variables = robot_variables() + (
         Variable("kp", "parameter", unit="N.m/rad", start=DEFAULT_KP, shape=(N_JOINTS,),
@@ -198,6 +205,7 @@ class PandaExudyn(PythonUnit):
         st.startTime = self.start_time
         st.endTime = self.start_time + self.substep
         self._solver.InitializeSolver(self._mbs, self._settings)  # also computes initial accelerations
+        self._start_ref = (q0, qd0)
         self._read_outputs(q0)
 
     def _build(self, key, q0, qd0) -> None:
@@ -226,6 +234,15 @@ class PandaExudyn(PythonUnit):
         mbs.SetObjectParameter(tree, "jointVelocityOffsetVector", qd_r)
 
     def do_step(self, t: float, h: float) -> None:
+        if self._start_ref is not None:
+            # The run starts on the reference.  A master may deliver the reference's
+            # start only after this unit initialized (its outputs were not ready in
+            # initialization mode): then start again from what the first step sees.
+            q0, qd0 = self._start_ref
+            self._start_ref = None
+            if t == self.start_time and not (np.array_equal(q0, self.q_ref) and np.array_equal(qd0, self.qd_ref)):
+                self.initialize()
+                self._start_ref = None
         n_sub = max(1, math.ceil(h / self.substep - 1e-9))
         dt = h / n_sub
         q_ref, qd_ref, qdd_ref = (np.array(x, dtype=float) for x in (self.q_ref, self.qd_ref, self.qdd_ref))

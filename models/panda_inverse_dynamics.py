@@ -35,15 +35,20 @@ class PandaInverseDynamics(PythonUnit):
     }
 
     def initialize(self) -> None:
+        self._ensure_model()
+        self.compute_outputs()
+
+    def _ensure_model(self) -> None:
         key = payload_key(self.payload_mass, self.payload_com, self.payload_inertia)
         if getattr(self, "_key", None) != key:  # the model is rebuilt only when the payload changes
             self._model = cached_model(*key)
             self._data = self._model.createData()
             self._ee = ee_frame_id(self._model)
             self._key = key
-        self.compute_outputs()
 
     def compute_outputs(self) -> None:
+        if not hasattr(self, "_model"):  # a master may read outputs in initialization mode
+            self._ensure_model()
         m, d = self._model, self._data
         self.q[:] = self.q_ref
         self.qd[:] = self.qd_ref

@@ -229,6 +229,14 @@ class TrajectoryGenerator(PythonUnit):
         Variable("duration", "output", unit="s", start=0.0, description="total duration t_f (eq. 7-4)"),
     )
 
+    def enter_initialization(self) -> None:
+        # Plan already here, so q_ref etc. are valid in initialization mode (as FMI
+        # allows for outputs that depend on parameters only) and a master can hand
+        # the start of the reference to the robot before the robot initializes.
+        # exit_initialization() plans again, in case parameters changed meanwhile.
+        super().enter_initialization()
+        self._call("initialize", self.start_time)
+
     def initialize(self) -> None:
         n = int(self.n_waypoints)
         if not 1 <= n <= N_MAX_WAYPOINTS:

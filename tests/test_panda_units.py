@@ -212,3 +212,16 @@ def test_exudyn_pendulum_payload_hangs_and_swings():
     plain = run(unit, pick_and_place(), extra_time=0.0)
     assert unit.get_values(["pendulum_angle"])["pendulum_angle"] == 0.0
     assert np.max(plain["tracking_error"]) < 5e-3
+
+
+def test_exudyn_unit_starts_on_the_reference_seen_at_the_first_step(exudyn_run):
+    """A master that hands over the reference only after initialization still gets a clean start."""
+    traj, unit, first = exudyn_run
+    unit.reset()
+    unit.setup(0.0, None)
+    unit.exit_initialization()  # q_ref is still the start value (mid-range), not the trajectory
+    for k in range(50):
+        q, qd, qdd = traj.sample(k * H)
+        unit.set_values({"q_ref": q, "qd_ref": qd, "qdd_ref": qdd})
+        unit.do_step(k * H, H)
+    np.testing.assert_allclose(unit.get_values(["q"])["q"], first["q"][49], atol=1e-12)

@@ -140,6 +140,16 @@ def test_unit_outputs_the_planned_trajectory_and_resets():
     assert u.get_values(["n_waypoints"])["n_waypoints"] == 2  # reset re-applied the start value
 
 
+def test_unit_outputs_are_valid_in_initialization_mode():
+    # a master hands q_ref to the robot before the robot initializes: it must be the start already
+    u = TrajectoryGenerator("traj")
+    u.set_values({"waypoints[8]": -90, "waypoints[15]": -180, "n_waypoints": 3, "convention": "thesis_deg"})
+    u.setup(0.0, None)
+    u.enter_initialization()
+    np.testing.assert_allclose(u.get_values(["q_ref"])["q_ref"], thesis_to_urdf([0] * 7))
+    assert u.get_values(["duration"])["duration"] > 1.0
+
+
 def test_unit_rejects_bad_parameters():
     from orchestrator.unit import UnitError
 
