@@ -293,3 +293,34 @@ def test_python_unit_refuses_bad_values():
     unit.set_values({"tau[4]": math.nan})
     with pytest.raises(UnitError, match=r"tau\[4\]"):
         unit.get_values(["p_el"])
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_swapping_fmu_and_python_unit_through_the_engine(version):
+    """The engine's FMU unit and the Python unit answer the same calls with the same values."""
+    from orchestrator.units.fmu import FmuUnitType
+
+    from models.motor_gear_energy import MotorGearEnergy
+
+    rng = np.random.default_rng(5)
+    units = [FmuUnitType(str(ensure_built("motor_gear_energy", version))).instantiate("e"), MotorGearEnergy("e")]
+    for unit in units:
+        unit.setup(0.0, 1.0)
+        unit.enter_initialization()
+        unit.set_values({"recuperation": False, "k_m[2]": 0.2})
+        unit.exit_initialization()
+    ports = [f"{name}[{j}]" for name in ("p_el", "tau_motor", "e_el") for j in range(1, N + 1)]
+    ports += ["p_total", "e_total", "e_total_no_recuperation"]
+    taus, omegas = random_operating_points(rng, 50, np.full(N, 100.0))
+    for k, (tau, omega) in enumerate(zip(taus, omegas)):
+        inputs = {f"tau[{j + 1}]": tau[j] for j in range(N)} | {f"omega[{j + 1}]": omega[j] for j in range(N)}
+        values = []
+        for unit in units:
+            unit.set_values(inputs)
+            unit.do_step(k * 0.01, 0.01)
+            values.append(unit.get_values(ports))
+        for port in ports:
+            assert values[0][port] == pytest.approx(values[1][port], rel=1e-12, abs=1e-9), port
+    assert values[0]["e_total"] > 0
+    for unit in units:
+        unit.terminate()
