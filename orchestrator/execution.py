@@ -174,10 +174,15 @@ class Execution:
             unit.set(unit.select(assignment.refs), list(assignment.values))
         for unit in units.values():
             unit.enter_initialization()
-        transfers = group_transfers(units, self.system.init_order)
-        for transfer in transfers:
-            transfer.run()
-        for unit in units.values():
-            unit.exit_initialization()
-        for transfer in transfers:  # outputs may change when initialization ends
+        # Units leave initialization in stepping order, each after receiving the
+        # initial outputs of its sources, so a unit's initialize() sees
+        # consistent inputs (e.g. a robot starts where its trajectory starts).
+        into: dict[str, list] = {}
+        for connection in self.system.init_order:
+            into.setdefault(connection.target.unit, []).append(connection)
+        for name in self.system.order:
+            for transfer in group_transfers(units, into.get(name, [])):
+                transfer.run()
+            units[name].exit_initialization()
+        for transfer in group_transfers(units, self.system.init_order):  # outputs may change when it ends
             transfer.run()

@@ -58,6 +58,10 @@ class TraceRecorder(Observer):
     def step(self, t: float, values: np.ndarray) -> None:
         self._append(t, values)
 
+    def data(self) -> np.ndarray:
+        """The samples so far: column 0 is time, then one column per recorded signal."""
+        return self._data[: self._n]
+
     def frame(self) -> Any:
         """The traces as a pandas DataFrame: a 'time' column and one per signal."""
         import pandas as pd
@@ -66,12 +70,16 @@ class TraceRecorder(Observer):
 
 
 class ObjectiveReducer(Observer):
-    """Computes every signal reduction of the spec's objectives while the run goes.
+    """Reduces the signals of the spec's objectives to numbers at the end of a run.
 
-    Integrals use the trapezoidal rule over the communication points; ``mean``
-    and ``rms`` are time averages (integral over duration).  ``time_of_max``
-    and ``time_of_min`` give the first time the extreme is reached.  An array
-    signal gives one value per element.
+    Only the objective signals are kept (one row per communication point), so
+    the per-step cost is one indexed copy and the memory is bounded by the
+    run's length, never by a sweep's size.  Integrals use the trapezoidal rule
+    over the communication points; ``mean`` and ``rms`` are time averages
+    (integral over duration).  ``time_of_max`` and ``time_of_min`` give the
+    first time the extreme is reached.  An array signal gives one value per
+    element; a NaN sample makes min, max and every integral NaN so it cannot
+    hide.
     """
 
     def __init__(self, all_columns: Sequence[str], objectives: Sequence[tuple[ObjectiveSpec, Sequence[str]]]):
@@ -83,56 +91,28 @@ class ObjectiveReducer(Observer):
             start = len(flat)
             flat.extend(columns.index(c) for c in cols)
             self._slices.append(slice(start, len(flat)))
-        self._index = np.array(flat, dtype=int)
-        n = len(flat)
-        self._first = np.full(n, np.nan)
-        self._last = np.full(n, np.nan)
-        self._min = np.full(n, np.inf)
-        self._max = np.full(n, -np.inf)
-        self._t_min = np.full(n, np.nan)
-        self._t_max = np.full(n, np.nan)
-        self._integral = np.zeros(n)
-        self._integral_abs = np.zeros(n)
-        self._integral_sq = np.zeros(n)
-        self._t0 = self._t_prev = None
+        self._samples = TraceRecorder(columns, [columns[i] for i in flat])
 
     def initialized(self, t: float, values: np.ndarray) -> None:
-        x = values[self._index]
-        self._first = x.copy()
-        self._t0 = t
-        self._update(t, x)
+        self._samples.initialized(t, values)
 
     def step(self, t: float, values: np.ndarray) -> None:
-        x = values[self._index]
-        dt = t - self._t_prev
-        prev = self._last
-        self._integral += 0.5 * dt * (prev + x)
-        self._integral_abs += 0.5 * dt * (np.abs(prev) + np.abs(x))
-        self._integral_sq += 0.5 * dt * (prev * prev + x * x)
-        self._update(t, x)
-
-    def _update(self, t: float, x: np.ndarray) -> None:
-        lower = x < self._min
-        self._min[lower] = x[lower]
-        self._t_min[lower] = t
-        higher = x > self._max
-        self._max[higher] = x[higher]
-        self._t_max[higher] = t
-        nan = np.isnan(x)  # a NaN sample poisons min/max so it cannot hide
-        self._min[nan] = self._max[nan] = np.nan
-        self._last = x.copy()
-        self._t_prev = t
+        self._samples.step(t, values)
 
     def results(self) -> dict[str, Any]:
         """Objective name -> value (float, or a numpy array for an array signal)."""
-        duration = (self._t_prev - self._t0) if self._t0 is not None else 0.0
+        data = self._samples.data()
+        t, x = data[:, 0], data[:, 1:]
+        duration = t[-1] - t[0]
         with np.errstate(divide="ignore", invalid="ignore"):
+            integral = np.trapezoid(x, t, axis=0) if len(t) > 1 else np.zeros(x.shape[1])
             table = {
-                "final": self._last, "initial": self._first, "min": self._min, "max": self._max,
-                "integral": self._integral, "integral_abs": self._integral_abs,
-                "mean": self._integral / duration if duration > 0 else self._last,
-                "rms": np.sqrt(self._integral_sq / duration) if duration > 0 else np.abs(self._last),
-                "time_of_max": self._t_max, "time_of_min": self._t_min,
+                "final": x[-1], "initial": x[0], "min": np.min(x, axis=0), "max": np.max(x, axis=0),
+                "integral": integral,
+                "integral_abs": np.trapezoid(np.abs(x), t, axis=0) if len(t) > 1 else integral,
+                "mean": integral / duration if duration > 0 else x[-1],
+                "rms": np.sqrt(np.trapezoid(x * x, t, axis=0) / duration) if duration > 0 else np.abs(x[-1]),
+                "time_of_max": t[np.argmax(x, axis=0)], "time_of_min": t[np.argmin(x, axis=0)],
             }
         out: dict[str, Any] = {}
         for objective, part in zip(self.objectives, self._slices):

@@ -33,24 +33,27 @@ class Fmi3Unit(FmiInstance):
         self._guard("fmi3InstantiateCoSimulation", lambda: self._slave.instantiate(logMessage=self._log_callback_py))
         self._component = self._slave.component
         self._alive = True
-        s = self._slave
-        self._calls = {t: (getattr(s, f"fmi3Get{t if t != 'Enumeration' else 'Int64'}"),
-                           getattr(s, f"fmi3Set{t if t != 'Enumeration' else 'Int64'}"))
+        # Direct library calls in the stepping loop (see Fmi2Unit for why).
+        dll = self._slave.dll
+        self._calls = {t: (getattr(dll, f"fmi3Get{t if t != 'Enumeration' else 'Int64'}"),
+                           getattr(dll, f"fmi3Set{t if t != 'Enumeration' else 'Int64'}"))
                        for t in self._c_types}
-        self._do_step = s.fmi3DoStep
+        self._do_step = dll.fmi3DoStep
         self._event = ctypes.c_bool()
         self._terminate = ctypes.c_bool()
         self._early = ctypes.c_bool()
         self._last_time = ctypes.c_double()
+        self._event_ref, self._terminate_ref = ctypes.byref(self._event), ctypes.byref(self._terminate)
+        self._early_ref, self._last_time_ref = ctypes.byref(self._early), ctypes.byref(self._last_time)
 
     def _log_callback_py(self, env: Any, status: int, category: bytes, message: bytes) -> None:
         self._record_log(status, category, message)
 
-    def _get_call(self, group: _TypeGroup) -> None:
-        self._calls[group.fmi_type][0](self._component, group.vrs, group.n_vrs, group.values, group.n_values)
+    def _get_call(self, group: _TypeGroup) -> int:
+        return self._calls[group.fmi_type][0](self._component, group.vrs, group.n_vrs, group.values, group.n_values)
 
-    def _set_call(self, group: _TypeGroup) -> None:
-        self._calls[group.fmi_type][1](self._component, group.vrs, group.n_vrs, group.values, group.n_values)
+    def _set_call(self, group: _TypeGroup) -> int:
+        return self._calls[group.fmi_type][1](self._component, group.vrs, group.n_vrs, group.values, group.n_values)
 
     def setup(self, start_time: float, stop_time: float | None) -> None:
         self.time = start_time
@@ -66,11 +69,10 @@ class Fmi3Unit(FmiInstance):
 
     def do_step(self, t: float, h: float) -> None:
         self.time = t
-        try:
-            self._do_step(self._component, t, h, True, ctypes.byref(self._event), ctypes.byref(self._terminate),
-                          ctypes.byref(self._early), ctypes.byref(self._last_time))
-        except Exception as exc:
-            raise self.fail("fmi3DoStep", exc) from None
+        status = self._do_step(self._component, t, h, True, self._event_ref, self._terminate_ref,
+                               self._early_ref, self._last_time_ref)
+        if status > 1:
+            raise self.fail_status("fmi3DoStep", status)
 
     def reset(self) -> None:
         self._guard("fmi3Reset", self._slave.reset)

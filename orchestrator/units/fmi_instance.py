@@ -38,6 +38,7 @@ class FmiSelection(Selection):
         # Setting one element of an FMI 3.0 array means writing the whole
         # array, so the others are read first (read-modify-write).
         self.partial_arrays = partial_arrays
+        self.plain = False
 
 
 class FmiInstance(Unit):
@@ -65,6 +66,14 @@ class FmiInstance(Unit):
         label = STATUS_LABELS[status] if 0 <= status < len(STATUS_LABELS) else str(status)
         text = (message or b"").decode("utf-8", "replace")
         self.log.append(f"[{label}] {text}")
+
+    def fail_status(self, call: str, status: int) -> UnitError:
+        """A UnitError for an FMI call that returned ``status``, with the FMU's last log lines."""
+        label = STATUS_LABELS[status] if 0 <= status < len(STATUS_LABELS) else f"illegal status {status}"
+        text = f"{call} returned {label}"
+        if self.log:
+            text += "; FMU log: " + " | ".join(self.log)
+        return UnitError(self.name, text, self.time)
 
     def fail(self, call: str, exc: BaseException) -> UnitError:
         """A UnitError for a failed FMI call, with its status and the FMU's last log lines."""
@@ -108,24 +117,40 @@ class FmiInstance(Unit):
             covered.setdefault((element.fmi_type, element.value_reference), set()).add(element.index)
         partial = any(len(covered[(e.fmi_type, e.value_reference)]) < e.size
                       for ref in refs for e in [self.elements[ref.variable][ref.offset]])
-        return FmiSelection(refs, groups, positions, partial)
+        selection = FmiSelection(refs, groups, positions, partial)
+        # The common case, one numeric type read in buffer order, skips the
+        # per-element bookkeeping in get/set (it is the stepping loop's hot path).
+        selection.plain = (len(groups) == 1 and not partial and groups[0].fmi_type not in ("Boolean", "String")
+                           and positions == [(0, i) for i in range(groups[0].n_values)])
+        return selection
 
     def get(self, selection: Selection) -> list[Any]:
         sel: FmiSelection = selection  # type: ignore[assignment]
         for group in sel.groups:
-            self._guard(f"get{group.fmi_type}", lambda group=group: self._get_call(group))
+            status = self._get_call(group)
+            if status > 1:  # above fmiWarning
+                raise self.fail_status(f"get{group.fmi_type}", status)
+        if sel.plain:
+            return sel.groups[0].values[:]
         return [self._convert(sel.groups[g], sel.groups[g].values[i]) for g, i in sel.positions]
 
     def set(self, selection: Selection, values: Sequence[Any]) -> None:
         sel: FmiSelection = selection  # type: ignore[assignment]
-        if sel.partial_arrays:
-            for group in sel.groups:
-                self._guard(f"get{group.fmi_type}", lambda group=group: self._get_call(group))
-        for (g, i), value in zip(sel.positions, values):
-            group = sel.groups[g]
-            group.values[i] = value.encode("utf-8") if group.fmi_type == "String" else value
+        if sel.plain:
+            sel.groups[0].values[:] = values
+        else:
+            if sel.partial_arrays:
+                for group in sel.groups:
+                    status = self._get_call(group)
+                    if status > 1:
+                        raise self.fail_status(f"get{group.fmi_type}", status)
+            for (g, i), value in zip(sel.positions, values):
+                group = sel.groups[g]
+                group.values[i] = value.encode("utf-8") if group.fmi_type == "String" else value
         for group in sel.groups:
-            self._guard(f"set{group.fmi_type}", lambda group=group: self._set_call(group))
+            status = self._set_call(group)
+            if status > 1:
+                raise self.fail_status(f"set{group.fmi_type}", status)
 
     @staticmethod
     def _convert(group: _TypeGroup, value: Any) -> Any:
@@ -137,8 +162,10 @@ class FmiInstance(Unit):
 
     # Implemented per FMI version -------------------------------------------
 
-    def _get_call(self, group: _TypeGroup) -> None:
+    def _get_call(self, group: _TypeGroup) -> int:
+        """Read the group's values from the FMU; returns the FMI status."""
         raise NotImplementedError
 
-    def _set_call(self, group: _TypeGroup) -> None:
+    def _set_call(self, group: _TypeGroup) -> int:
+        """Write the group's values into the FMU; returns the FMI status."""
         raise NotImplementedError

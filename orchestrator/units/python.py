@@ -32,9 +32,23 @@ from ..unit import ElementRef, Selection, Unit, UnitDescription, UnitError, Unit
 
 
 class _AttributeSelection(Selection):
+    """Elements compiled into runs: a scalar attribute, or a contiguous slice of an array.
+
+    Reading a whole array is one ``tolist()`` instead of one call per element.
+    """
+
     def __init__(self, refs: Sequence[ElementRef], array_names: set[str]):
         self.refs = tuple(refs)
-        self.items = tuple((r.variable, r.offset if r.variable in array_names else None) for r in refs)
+        runs: list[list] = []  # [name, first offset, last offset + 1] or [name, None, None]
+        for r in refs:
+            if r.variable not in array_names:
+                runs.append([r.variable, None, None])
+            elif runs and runs[-1][0] == r.variable and runs[-1][2] == r.offset:
+                runs[-1][2] += 1
+            else:
+                runs.append([r.variable, r.offset, r.offset + 1])
+        self.runs = tuple((name, None if a is None else slice(a, b), 0 if a is None else b - a)
+                          for name, a, b in runs)
 
 
 class PythonUnit(Unit):
@@ -101,18 +115,24 @@ class PythonUnit(Unit):
         if self._outputs_stale:
             self._outputs_stale = False
             self._call("compute_outputs", None)
-        out = []
-        for name, offset in selection.items:  # type: ignore[attr-defined]
+        out: list[Any] = []
+        for name, part, _ in selection.runs:  # type: ignore[attr-defined]
             value = getattr(self, name)
-            out.append(value.flat[offset].item() if offset is not None else value)
+            if part is None:
+                out.append(value)
+            else:
+                out.extend(value[part].tolist())
         return out
 
     def set(self, selection: Selection, values: Sequence[Any]) -> None:
-        for (name, offset), value in zip(selection.items, values):  # type: ignore[attr-defined]
-            if offset is None:
-                setattr(self, name, value)
+        i = 0
+        for name, part, n in selection.runs:  # type: ignore[attr-defined]
+            if part is None:
+                setattr(self, name, values[i])
+                i += 1
             else:
-                getattr(self, name).flat[offset] = value
+                getattr(self, name)[part] = values[i:i + n]
+                i += n
         if self._has_feedthrough:
             self._outputs_stale = True
 

@@ -1,0 +1,310 @@
+"""The design space of a spec: parameters -> points with deterministic ids.
+
+:class:`DesignSpace` turns a spec's ``design`` section into design points.
+Per parameter (``'unit.param'`` or an element ``'unit.param[i]'``):
+
+- ``{min, max, step}``: an inclusive range.  Values are computed in decimal
+  arithmetic from the numbers as written (``0.1`` steps give exactly 0.3, not
+  0.30000000000000004); the last value is ``max`` when ``max - min`` is a
+  multiple of ``step``, else the last one below it.  All-integer ranges give ints.
+- ``{values: [...]}``: those values, in order (each may itself be an array).
+- ``{bool: true}``: ``False`` then ``True``.
+- array parameters: ``min``/``max``/``step`` given as arrays make each element
+  its own range (a scalar among them applies to every element); the point's
+  value is the list of element values.
+
+Methods: ``grid`` (full factorial; the first parameter varies slowest) or the
+samplers ``lhs``, ``sobol`` and ``random`` (scipy.stats.qmc / numpy, seeded
+by ``seed``).  A sampler draws each range uniformly in ``[min, max]`` (snapped
+to ``step`` when one is given) and picks list and boolean values with equal
+chances.
+
+A ``constraint`` keeps only points where it is true.  It names parameters by
+their target with every run of characters that are not letters, digits or
+``_`` replaced by a single ``_``, trailing ones dropped: ``motor.k_m`` is
+``motor_k_m``, ``traj.q_via[2]`` is ``traj_q_via_2``.  The bare parameter name
+(``k_m``) works too when no other parameter has it.  An array parameter's
+elements are ``name[i]`` (from 1), e.g. ``traj_q_via[2]``.
+
+Point ids are the first 16 hex digits of SHA-256 over the spec digest and the
+point's values, so the same point of the same spec always has the same id.
+Points are produced lazily: a grid of 100 000 points never exists as 100 000
+Python objects at once.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import math
+import re
+import warnings
+from dataclasses import dataclass
+from decimal import Decimal
+from typing import Any, Iterator, Sequence
+
+import numpy as np
+
+from .expressions import Expression, ExpressionError
+from .problems import Problem, SpecError, json_path
+from .spec import DesignParameterSpec, Spec
+
+SAMPLERS = ("lhs", "sobol", "random")
+
+
+@dataclass(frozen=True)
+class Point:
+    """One design point: its position in the space, its id and ``{target: value}``."""
+
+    index: int
+    id: str
+    values: dict[str, Any]
+
+
+def expression_name(target: str) -> str:
+    """The name a constraint uses for ``target`` ('traj.q_via[2]' -> 'traj_q_via_2')."""
+    return re.sub(r"[^A-Za-z0-9_]+", "_", target).strip("_")
+
+
+def flat_columns(target: str, value: Any) -> dict[str, Any]:
+    """A parameter's value as table columns: scalars as ``target``, arrays as ``target[i]`` (from 1)."""
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return {f"{target}[{i}]": v for i, v in enumerate(_flatten(value), start=1)}
+    return {target: value}
+
+
+def _flatten(value: Any) -> list[Any]:
+    out: list[Any] = []
+    for v in value:
+        if isinstance(v, (list, tuple, np.ndarray)):
+            out.extend(_flatten(v))
+        else:
+            out.append(v)
+    return out
+
+
+def _decimal(x: Any) -> Decimal:
+    return Decimal(repr(x)) if isinstance(x, float) else Decimal(int(x))
+
+
+def range_values(lo: Any, hi: Any, step: Any) -> list[Any]:
+    """Inclusive ``lo, lo+step, ..., <= hi`` computed without floating-point drift.
+
+    Ints when all three are ints. Raises ValueError for a non-positive step or hi < lo.
+    """
+    if step is None or step <= 0:
+        raise ValueError(f"step must be positive, got {step}")
+    if hi < lo:
+        raise ValueError(f"max ({hi}) is below min ({lo})")
+    d_lo, d_step = _decimal(lo), _decimal(step)
+    n = int((_decimal(hi) - d_lo) // d_step)
+    if all(isinstance(x, int) and not isinstance(x, bool) for x in (lo, hi, step)):
+        return [lo + i * step for i in range(n + 1)]
+    return [float(d_lo + i * d_step) for i in range(n + 1)]
+
+
+class _Dimension:
+    """One axis of the space: a finite value list, or a continuous range for samplers."""
+
+    def __init__(self, values: list[Any] | None = None, lo: float | None = None, hi: float | None = None,
+                 step: Any = None, integer: bool = False):
+        self.values = values
+        self.lo, self.hi, self.step, self.integer = lo, hi, step, integer
+
+    def __len__(self) -> int:
+        return len(self.values) if self.values is not None else 0
+
+    def sample(self, u: float) -> Any:
+        """Map u in [0, 1) onto this dimension."""
+        if self.values is not None and self.lo is None:
+            return self.values[min(int(u * len(self.values)), len(self.values) - 1)]
+        x = self.lo + u * (self.hi - self.lo)
+        if self.step is not None:
+            # snap to the grid of the range, staying inside it
+            k = min(max(round((x - self.lo) / self.step), 0), int((self.hi - self.lo) // self.step + 1e-9))
+            x = float(_decimal(self.lo) + k * _decimal(self.step))
+        return int(round(x)) if self.integer else float(x)
+
+
+class _Parameter:
+    """One design parameter: one dimension, or one per element (array ranges)."""
+
+    def __init__(self, spec: DesignParameterSpec, sampled: bool, file: str):
+        self.target = spec.target
+        path = json_path(["design", "parameters", spec.target])
+        self.is_array = False
+        try:
+            if spec.is_bool:
+                self.dims = [_Dimension([False, True])]
+            elif spec.values is not None:
+                self.dims = [_Dimension(list(spec.values))]
+            else:
+                lo, hi, step = spec.min, spec.max, spec.step
+                arrays = [x for x in (lo, hi, step) if isinstance(x, list)]
+                if arrays:
+                    size = len(arrays[0])
+                    if any(len(a) != size for a in arrays):
+                        raise ValueError("min, max and step arrays must have the same length")
+                    self.is_array = True
+                    per = [[x[i] if isinstance(x, list) else x for x in (lo, hi, step)] for i in range(size)]
+                else:
+                    per = [[lo, hi, step]]
+                self.dims = [self._range(a, b, s, sampled) for a, b, s in per]
+        except (ValueError, TypeError) as exc:
+            raise SpecError([Problem(file, path, str(exc), "write numbers with min <= max and a positive step")])
+
+    @staticmethod
+    def _range(lo: Any, hi: Any, step: Any, sampled: bool) -> _Dimension:
+        integer = all(isinstance(x, int) and not isinstance(x, bool) for x in (lo, hi, step) if x is not None)
+        if sampled:
+            if hi < lo:
+                raise ValueError(f"max ({hi}) is below min ({lo})")
+            if step is not None and step <= 0:
+                raise ValueError(f"step must be positive, got {step}")
+            return _Dimension(None, lo, hi, step, integer)
+        if step is None:
+            raise ValueError("a grid needs a 'step' for each range")
+        return _Dimension(range_values(lo, hi, step))
+
+    def value(self, parts: Sequence[Any]) -> Any:
+        return list(parts) if self.is_array else parts[0]
+
+
+class DesignSpace:
+    """The points of a spec's design space (see the module docstring).
+
+    ``len()`` is the number of points (for a constraint it is counted once,
+    by evaluating the constraint without keeping the points).  Iterating
+    yields :class:`Point` objects lazily, in a deterministic order.
+    """
+
+    def __init__(self, spec: Spec):
+        self.spec = spec
+        design = spec.design
+        self.method = design.method
+        sampled = self.method in SAMPLERS
+        self.parameters = [_Parameter(p, sampled, spec.path) for p in design.parameters]
+        self.targets = [p.target for p in self.parameters]
+        self._dims = [d for p in self.parameters for d in p.dims]
+        self._samples: np.ndarray | None = None
+        if sampled:
+            if design.samples is None and self.parameters:
+                raise SpecError([Problem(spec.path, "$.design.samples", f"method '{self.method}' needs 'samples'",
+                                         "add e.g. \"samples\": 100")])
+            self._samples = self._draw(design.samples or 1, design.seed)
+        self.constraint, self._names = self._constraint(design.constraint)
+        self._count: int | None = None
+
+    @classmethod
+    def from_spec(cls, spec: Spec) -> "DesignSpace":
+        """The design space of ``spec``; raises SpecError for a bad range, sampler or constraint."""
+        return cls(spec)
+
+    # -- construction helpers -------------------------------------------------
+    def _draw(self, n: int, seed: int | None) -> np.ndarray:
+        d = len(self._dims)
+        if d == 0:
+            return np.zeros((1, 0))
+        if self.method == "lhs":
+            from scipy.stats import qmc
+
+            return qmc.LatinHypercube(d, rng=seed).random(n)
+        if self.method == "sobol":
+            from scipy.stats import qmc
+
+            with warnings.catch_warnings():  # scipy warns when n is not a power of two; still a valid design
+                warnings.simplefilter("ignore")
+                return qmc.Sobol(d, scramble=True, rng=seed).random(n)
+        return np.random.default_rng(seed).random((n, d))
+
+    def _constraint(self, text: str | None) -> tuple[Expression | None, dict[str, str]]:
+        names: dict[str, str] = {}
+        short: dict[str, list[str]] = {}
+        for target in self.targets:
+            names[expression_name(target)] = target
+            short.setdefault(expression_name(target.partition(".")[2]), []).append(target)
+        for name, targets in short.items():
+            if len(targets) == 1 and name not in names:
+                names[name] = targets[0]
+        if not text:
+            return None, names
+        fix = ("name parameters like motor_k_m for 'motor.k_m' (non-identifier characters become '_'); "
+               "known: " + ", ".join(sorted(names)))
+        try:
+            expression = Expression(text)
+        except ExpressionError as exc:
+            raise SpecError([Problem(self.spec.path, "$.design.constraint", str(exc), fix)]) from None
+        unknown = sorted(expression.names - set(names))
+        if unknown:
+            raise SpecError([Problem(self.spec.path, "$.design.constraint",
+                                     f"unknown name(s) in the constraint: {', '.join(unknown)}", fix)])
+        return expression, names
+
+    # -- points ---------------------------------------------------------------
+    def _raw(self) -> Iterator[tuple[Any, ...]]:
+        """Per candidate point, the flat tuple of dimension values (before the constraint)."""
+        if self._samples is not None:
+            for row in self._samples:
+                yield tuple(dim.sample(u) for dim, u in zip(self._dims, row))
+        else:
+            yield from itertools.product(*(dim.values for dim in self._dims))
+
+    def _values(self, flat: tuple[Any, ...]) -> dict[str, Any]:
+        values, i = {}, 0
+        for p in self.parameters:
+            values[p.target] = p.value(flat[i:i + len(p.dims)])
+            i += len(p.dims)
+        return values
+
+    def _accepts(self, values: dict[str, Any]) -> bool:
+        if self.constraint is None:
+            return True
+        scope = {name: values[target] for name, target in self._names.items()}
+        try:
+            return bool(self.constraint.evaluate(scope))
+        except (ExpressionError, TypeError, ValueError) as exc:
+            raise SpecError([Problem(self.spec.path, "$.design.constraint", str(exc),
+                                     "check the indices and names used in the constraint")]) from None
+
+    def point_id(self, values: dict[str, Any]) -> str:
+        """The deterministic id of a point with these values (16 hex digits)."""
+        text = json.dumps([self.spec.digest, [values[t] for t in self.targets]], default=_json_default,
+                          separators=(",", ":"))
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+    def __iter__(self) -> Iterator[Point]:
+        index = 0
+        for flat in self._raw():
+            values = self._values(flat)
+            if self._accepts(values):
+                yield Point(index, self.point_id(values), values)
+                index += 1
+
+    def __len__(self) -> int:
+        if self._count is None:
+            if self.constraint is None:
+                self._count = len(self._samples) if self._samples is not None else math.prod(
+                    len(d) for d in self._dims)
+            else:
+                self._count = sum(1 for flat in self._raw() if self._accepts(self._values(flat)))
+        return self._count
+
+    def head(self, n: int) -> list[Point]:
+        """The first ``n`` points."""
+        return list(itertools.islice(iter(self), n))
+
+    def columns(self, values: dict[str, Any]) -> dict[str, Any]:
+        """A point's values as flat table columns (arrays as ``target[i]``)."""
+        out: dict[str, Any] = {}
+        for target in self.targets:
+            out.update(flat_columns(target, values[target]))
+        return out
+
+
+def _json_default(x: Any) -> Any:
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    raise TypeError(f"not JSON serializable: {type(x).__name__}")

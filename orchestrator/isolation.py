@@ -1,0 +1,333 @@
+"""Running design points in a child process, so a point can hang or segfault safely.
+
+An FMU is native code from someone else: it may crash its process or never
+return.  :class:`IsolatedRunner` keeps one child Python process (started with
+``python -m orchestrator.isolation``) that loads the system once and runs
+points one after the other, reusing live unit instances (``reset()`` between
+points, re-instantiated after a failed point).  The parent sends a whole batch
+and reads one row per point with a watchdog:
+
+- no row within ``timeout`` seconds of the previous one: the child is killed,
+  the point gets status ``timeout``;
+- the child dies (segfault, abort, os._exit): the point gets ``crashed`` with
+  the signal or exit code;
+
+and a fresh child takes the remaining points.  So :meth:`IsolatedRunner.run`
+always returns exactly one row per point it was given.
+
+The *payload* (:func:`make_payload`) carries the pickled
+:class:`~orchestrator.system.System` together with the bytes of its FMU files
+and Python unit files; the child writes them into its own temporary folder and
+points the unit types there, so no shared filesystem is assumed.
+"""
+
+from __future__ import annotations
+
+import atexit
+import hashlib
+import os
+import pickle
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from multiprocessing.connection import Connection
+from pathlib import Path
+from typing import Any, Sequence
+
+LOAD_TIMEOUT = 300.0  # seconds a fresh child may take to import, unpack and load the system
+
+# -- the payload ------------------------------------------------------------------
+
+
+def make_payload(system: Any) -> dict[str, Any]:
+    """Everything a child needs to run points of ``system``, with no file shared with this process.
+
+    Keys: ``key`` (a digest of the whole payload), ``system`` (pickled System),
+    ``files`` (unit name -> (file name, bytes)) for FMUs and ``file.py:Class`` units.
+    Raises OSError when a unit's file cannot be read.
+    """
+    from .units.fmu import FmuUnitType
+    from .units.python import PythonUnitType
+
+    files: dict[str, tuple[str, bytes]] = {}
+    for name, system_unit in system.units.items():
+        unit_type = system_unit.unit_type
+        if isinstance(unit_type, FmuUnitType):
+            unit_type.digest  # computed here so the child need not hash its copy
+            files[name] = (Path(unit_type.path).name, Path(unit_type.path).read_bytes())
+        elif isinstance(unit_type, PythonUnitType):
+            path = _python_file(unit_type)
+            if path is not None:
+                files[name] = (path.name, path.read_bytes())
+    blob = pickle.dumps(system, protocol=pickle.HIGHEST_PROTOCOL)
+    h = hashlib.sha256(system.spec.digest.encode())
+    for name in sorted(files):
+        h.update(name.encode())
+        h.update(hashlib.sha256(files[name][1]).digest())
+    return {"key": h.hexdigest()[:16], "system": blob, "files": files}
+
+
+def _python_file(unit_type: Any) -> Path | None:
+    module, sep, _ = unit_type.target.rpartition(":")
+    if not sep or not module.endswith(".py"):
+        return None  # an importable module: it must be installed where the worker runs
+    path = Path(module)
+    if not path.is_absolute() and unit_type.base_dir:
+        path = Path(unit_type.base_dir) / path
+    return path
+
+
+def load_payload(payload: dict[str, Any], folder: str) -> Any:
+    """The System of ``payload``, its unit files written under ``folder`` and used from there."""
+    from .units.fmu import FmuUnitType
+    from .units.python import PythonUnitType
+
+    system = pickle.loads(payload["system"])
+    for name, (file_name, data) in payload["files"].items():
+        unit_folder = Path(folder) / name  # one folder per unit: file names may repeat
+        unit_folder.mkdir(parents=True, exist_ok=True)
+        local = unit_folder / file_name
+        local.write_bytes(data)
+        unit_type = system.units[name].unit_type
+        if isinstance(unit_type, FmuUnitType):
+            unit_type.path = str(local)
+        elif isinstance(unit_type, PythonUnitType):
+            unit_type.target = f"{local}:{unit_type.target.rpartition(':')[2]}"
+    return system
+
+
+# -- the child ------------------------------------------------------------------------
+
+
+class PointRunner:
+    """Runs points of one system in this process, reusing unit instances between points."""
+
+    def __init__(self, system: Any):
+        self.system = system
+        self.units: dict[str, Any] | None = None
+
+    def run(self, point_id: str, values: dict[str, Any]) -> dict[str, Any]:
+        """One row for one point: point_id, status (ok|failed), message, run_time, objectives."""
+        from .execution import Execution
+        from .problems import SpecError
+
+        started = time.perf_counter()
+        try:
+            overrides = [self.system.assignment_for(t, v) for t, v in values.items()]
+        except SpecError as exc:
+            return _row(point_id, "failed", "; ".join(p.message for p in exc.problems), started)
+        try:
+            if self.units is None:
+                self.units = {n: su.unit_type.instantiate(n) for n, su in self.system.units.items()}
+        except Exception as exc:
+            self.close()
+            return _row(point_id, "failed", f"cannot instantiate the units: {type(exc).__name__}: {exc}", started)
+        result = Execution(self.system, overrides, record=False, units=self.units).run()
+        if result.ok:
+            try:
+                for unit in self.units.values():
+                    unit.reset()
+            except Exception:
+                self.close()  # a unit that cannot reset is instantiated afresh for the next point
+        else:
+            self.close()  # after a failure, trust no instance's state
+        row = _row(point_id, result.status, result.message, started)
+        row["objectives"] = result.objectives
+        return row
+
+    def close(self) -> None:
+        for unit in (self.units or {}).values():
+            try:
+                unit.terminate()
+            except Exception:
+                pass  # terminating the others matters more
+        self.units = None
+
+
+def _row(point_id: str, status: str, message: str, started: float) -> dict[str, Any]:
+    return {"point_id": point_id, "status": status, "message": message,
+            "run_time": time.perf_counter() - started, "objectives": {}}
+
+
+def _watch_parent(parent: int) -> None:
+    """Exit when the parent is gone, even while the main thread hangs inside an FMU."""
+    while True:
+        if os.getppid() != parent:
+            os._exit(3)
+        time.sleep(0.5)
+
+
+def child_main(read_fd: int, write_fd: int, parent: int) -> None:
+    """The child's loop: load the payload, then answer 'run' messages with one row per point."""
+    threading.Thread(target=_watch_parent, args=(parent,), daemon=True).start()
+    inbox, outbox = Connection(read_fd, writable=False), Connection(write_fd, readable=False)
+    folder = tempfile.mkdtemp(prefix="payload_")  # under the TMPDIR the parent made for this child
+    runner = None
+    try:
+        kind, payload = inbox.recv()
+        try:
+            runner = PointRunner(load_payload(payload, folder))
+            outbox.send(("ready", None))
+        except Exception as exc:
+            outbox.send(("error", f"cannot load the system on this worker: {type(exc).__name__}: {exc}"))
+            return
+        while True:
+            try:
+                kind, points = inbox.recv()
+            except EOFError:
+                return
+            if kind != "run":
+                return
+            for point_id, values in points:
+                outbox.send(("row", runner.run(point_id, values)))
+    finally:
+        if runner is not None:
+            runner.close()
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+# -- the parent side -----------------------------------------------------------------------
+
+_LIVE: set["IsolatedRunner"] = set()
+
+
+@atexit.register
+def _kill_children() -> None:
+    for runner in list(_LIVE):
+        runner.close()
+
+
+class IsolatedRunner:
+    """Runs batches of points of one payload in a child process with a watchdog (module docstring)."""
+
+    def __init__(self, payload: dict[str, Any]):
+        self.payload = payload
+        self.key = payload["key"]
+        self._proc: subprocess.Popen | None = None
+        self._inbox: Connection | None = None
+        self._outbox: Connection | None = None
+        self._folder: str | None = None
+
+    def _start(self) -> str | None:
+        """Start a child and load the payload; None when ready, else why it failed."""
+        to_child_r, to_child_w = os.pipe()
+        from_child_r, from_child_w = os.pipe()
+        # The child's temporary files (payload, extracted FMUs) go into a folder this
+        # process owns and removes, also when the child had to be killed.
+        self._folder = tempfile.mkdtemp(prefix="cosim_worker_")
+        env = dict(os.environ, TMPDIR=self._folder)
+        root = str(Path(__file__).resolve().parent.parent)
+        env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")  # works from a source checkout too
+        self._proc = subprocess.Popen(
+            [sys.executable, "-m", "orchestrator.isolation", str(to_child_r), str(from_child_w), str(os.getpid())],
+            pass_fds=(to_child_r, from_child_w), env=env, stdin=subprocess.DEVNULL)
+        os.close(to_child_r)
+        os.close(from_child_w)
+        self._outbox = Connection(to_child_w, readable=False)
+        self._inbox = Connection(from_child_r, writable=False)
+        _LIVE.add(self)
+        try:
+            self._outbox.send(("load", self.payload))
+            if not self._inbox.poll(LOAD_TIMEOUT):
+                self.close(force=True)
+                return f"the worker's child process did not load the system within {LOAD_TIMEOUT:g} s"
+            kind, message = self._inbox.recv()
+        except (EOFError, OSError):
+            return f"the worker's child process died while loading the system ({self._exit_text()})"
+        if kind != "ready":
+            self.close()
+            return message
+        return None
+
+    def run(self, points: Sequence[tuple[str, dict[str, Any]]], timeout: float | None = None) -> list[dict]:
+        """One row per point, in order; statuses ok, failed, timeout or crashed."""
+        rows: list[dict] = []
+        remaining = list(points)
+        while remaining:
+            if self._proc is None or self._proc.poll() is not None:
+                self.close()
+                problem = self._start()
+                if problem is not None:
+                    self.close()
+                    rows.extend(_row(pid, "failed", problem, time.perf_counter()) for pid, _ in remaining)
+                    break
+            try:
+                self._outbox.send(("run", remaining))
+            except OSError:
+                self.close()
+                continue
+            done = 0
+            for point_id, _ in remaining:
+                started = time.perf_counter()
+                try:
+                    ready = self._inbox.poll(timeout)
+                    if not ready:
+                        self.close(force=True)
+                        rows.append(_row(point_id, "timeout", f"no result within the timeout of {timeout:g} s; "
+                                                              "the run was stopped", started))
+                        done += 1
+                        break
+                    kind, row = self._inbox.recv()
+                except (EOFError, OSError):
+                    rows.append(_row(point_id, "crashed", f"the process running this point died "
+                                                          f"({self._exit_text()})", started))
+                    self.close()
+                    done += 1
+                    break
+                rows.append(row)
+                done += 1
+            remaining = remaining[done:]
+        return rows
+
+    def _exit_text(self) -> str:
+        if self._proc is None:
+            return "unknown cause"
+        try:
+            code = self._proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            return "still running"
+        if code < 0:
+            try:
+                return f"killed by signal {signal.Signals(-code).name}"
+            except ValueError:
+                return f"killed by signal {-code}"
+        return f"exit code {code}"
+
+    def close(self, force: bool = False) -> None:
+        """Stop the child and release its pipes and files.
+
+        The child is first asked to finish (it terminates its units); it is
+        killed when ``force`` is true or it does not exit within 2 s.
+        """
+        proc, self._proc = self._proc, None
+        for conn in (self._outbox, self._inbox):  # EOF on its inbox tells the child to finish
+            if conn is not None:
+                try:
+                    conn.close()
+                except OSError:
+                    pass
+        self._outbox = self._inbox = None
+        if proc is not None and proc.poll() is None:
+            if not force:
+                try:
+                    proc.wait(timeout=2)
+                except subprocess.TimeoutExpired:
+                    pass
+            if proc.poll() is None:
+                proc.kill()
+                try:
+                    proc.wait(timeout=5)
+                except subprocess.TimeoutExpired:
+                    pass
+        if self._folder is not None:
+            shutil.rmtree(self._folder, ignore_errors=True)
+            self._folder = None
+        _LIVE.discard(self)
+
+
+if __name__ == "__main__":
+    child_main(int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]))
