@@ -138,6 +138,10 @@ class _Parameter:
             if spec.is_bool:
                 self.dims = [_Dimension([False, True])]
             elif spec.values is not None:
+                seen = [json.dumps(v, sort_keys=True) for v in spec.values]
+                repeated = sorted({t for t in seen if seen.count(t) > 1})
+                if repeated:  # the same point twice would share one id
+                    raise ValueError(f"values repeat: {', '.join(repeated)}")
                 self.dims = [_Dimension(list(spec.values))]
             else:
                 lo, hi, step = spec.min, spec.max, spec.step
@@ -152,7 +156,8 @@ class _Parameter:
                     per = [[lo, hi, step]]
                 self.dims = [self._range(a, b, s, sampled) for a, b, s in per]
         except (ValueError, TypeError) as exc:
-            raise SpecError([Problem(file, path, str(exc), "write numbers with min <= max and a positive step")])
+            raise SpecError([Problem(file, path, str(exc), "write numbers with min <= max and a positive step, "
+                                                           "and each value once")]) from None
 
     @staticmethod
     def _range(lo: Any, hi: Any, step: Any, sampled: bool) -> _Dimension:
@@ -275,20 +280,34 @@ class DesignSpace:
 
     def __iter__(self) -> Iterator[Point]:
         index = 0
+        # a sampler snapping to steps may draw the same point twice: it is kept once
+        seen: set[str] | None = set() if self._samples is not None else None
         for flat in self._raw():
             values = self._values(flat)
             if self._accepts(values):
-                yield Point(index, self.point_id(values), values)
+                pid = self.point_id(values)
+                if seen is not None:
+                    if pid in seen:
+                        continue
+                    seen.add(pid)
+                yield Point(index, pid, values)
                 index += 1
 
     def __len__(self) -> int:
         if self._count is None:
-            if self.constraint is None:
-                self._count = len(self._samples) if self._samples is not None else math.prod(
-                    len(d) for d in self._dims)
+            if self.constraint is None and self._samples is None:
+                self._count = math.prod(len(d) for d in self._dims)
             else:
-                self._count = sum(1 for flat in self._raw() if self._accepts(self._values(flat)))
+                self._count = sum(1 for _ in self._raw_ids())
         return self._count
+
+    def _raw_ids(self) -> Iterator[str]:
+        if self._samples is None:
+            for flat in self._raw():
+                if self._accepts(self._values(flat)):
+                    yield ""
+        else:
+            yield from (p.id for p in self)
 
     def head(self, n: int) -> list[Point]:
         """The first ``n`` points."""

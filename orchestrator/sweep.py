@@ -1,0 +1,375 @@
+"""The Dask layer: every point of a design space, evaluated in parallel, nothing lost.
+
+:class:`Sweep` prepares a sweep (checks the spec, expands the design space,
+packs the system and its unit files into a payload) and :meth:`Sweep.run`
+evaluates the points on Dask:
+
+- Cluster: by default a ``distributed.LocalCluster`` of worker *processes*
+  (one per core, one thread each, bound to 127.0.0.1; FMUs cannot safely
+  share a process), or any running scheduler by address.
+- The payload is scattered to the workers once; FMU and ``file.py`` unit bytes
+  travel inside it, so workers need no shared filesystem (Python units named
+  ``package.module:Class`` must be installed where the workers run).
+- Points go in batches.  On a worker, :class:`~orchestrator.isolation.IsolatedRunner`
+  runs a batch in a child process that keeps the loaded system and live unit
+  instances between batches, with a per-point watchdog: a point that hangs
+  (``timeout``) or kills its process (``crashed``) gets a row and the other
+  points go on.  A batch lost with its whole worker (KilledWorker) gets
+  ``crashed`` rows.  Rows out = points in.
+- The client streams: a bounded number of batches in flight, each completed
+  batch appended to the :class:`~orchestrator.results.ResultsStore` at once,
+  so its memory does not grow with the number of points, and a kill -9 loses
+  at most the points in flight.  ``resume=True`` skips points already stored.
+"""
+
+from __future__ import annotations
+
+import getpass
+import itertools
+import math
+import os
+import platform
+import shutil
+import socket
+import sys
+import tempfile
+import threading
+import time
+from datetime import datetime, timezone
+from importlib import metadata as importlib_metadata
+from pathlib import Path
+from typing import Any, Iterable, Iterator, Sequence, TextIO
+
+import pandas as pd
+
+from .design import DesignSpace, Point
+from .isolation import IsolatedRunner, make_payload
+from .results import ResultsStore, counts_by_status
+
+PACKAGES = ("cosim", "fmpy", "dask", "distributed", "numpy", "pandas", "pyarrow", "scipy")
+
+
+class SweepError(Exception):
+    """A sweep cannot start as asked (results folder in use, resume of another spec, no workers)."""
+
+
+# -- worker side ------------------------------------------------------------------
+
+_IDLE: dict[str, list[IsolatedRunner]] = {}
+_IDLE_LOCK = threading.Lock()
+_MAX_PAYLOADS = 2  # idle child processes are kept for at most this many different systems
+
+
+def run_batch(payload: dict[str, Any], points: Sequence[tuple[str, dict[str, Any]]],
+              timeout: float | None) -> list[dict[str, Any]]:
+    """Run ``points`` on this worker; one row per point (see IsolatedRunner.run), with the worker named.
+
+    Runs on a Dask worker (or anywhere): the child process holding the system
+    is kept for the next batch of the same payload.
+    """
+    with _IDLE_LOCK:
+        idle = _IDLE.pop(payload["key"], [])
+        runner = idle.pop() if idle else IsolatedRunner(payload)
+        _IDLE[payload["key"]] = idle  # most recently used last
+        while len(_IDLE) > _MAX_PAYLOADS:  # a long-lived worker must not pile up children of old sweeps
+            for old in _IDLE.pop(next(iter(_IDLE))):
+                old.close()
+    try:
+        rows = runner.run(points, timeout)
+    finally:
+        with _IDLE_LOCK:
+            _IDLE.setdefault(payload["key"], []).append(runner)
+    name = _worker_name()
+    for row in rows:
+        row["worker"] = name
+    return rows
+
+
+def _worker_name() -> str:
+    try:
+        from distributed import get_worker
+
+        return str(get_worker().address)
+    except (ImportError, ValueError):
+        return f"{socket.gethostname()}:{os.getpid()}"
+
+
+# -- client side -------------------------------------------------------------------
+
+
+class Progress:
+    """One status line: points done, failed, rate, time left (rewritten in place on a terminal)."""
+
+    def __init__(self, total: int, stream: TextIO | None = None, already: int = 0):
+        self.total, self.done, self.failed, self.already = total, 0, 0, already
+        self.stream = stream if stream is not None else sys.stderr
+        self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
+        self.started = time.perf_counter()
+        self._last = 0.0
+        self._last_decile = -1
+
+    def update(self, done: int, failed: int) -> None:
+        self.done += done
+        self.failed += failed
+        now = time.perf_counter()
+        if self.tty and now - self._last < 0.2 and self.done < self.total:
+            return
+        decile = int(10 * self.done / max(self.total, 1))
+        if not self.tty and decile == self._last_decile and self.done < self.total:
+            return  # in a log, one line per tenth is enough
+        self._last, self._last_decile = now, decile
+        self._print(self.line(), end="\r" if self.tty else "\n")
+
+    def line(self) -> str:
+        elapsed = time.perf_counter() - self.started
+        rate = self.done / elapsed if elapsed > 0 else 0.0
+        left = (self.total - self.done) / rate if rate > 0 else math.inf
+        width = 24
+        filled = int(width * self.done / max(self.total, 1))
+        bar = "#" * filled + "." * (width - filled)
+        return (f"[{bar}] {self.done}/{self.total} points, {self.failed} not ok, {rate:.1f}/s, "
+                f"{_duration(left)} left")
+
+    def close(self) -> None:
+        if self.tty:
+            self._print("")
+
+    def _print(self, text: str, end: str = "\n") -> None:
+        try:
+            print(text, end=end, file=self.stream, flush=True)
+        except (OSError, ValueError):
+            pass  # a closed terminal must not stop the sweep
+
+
+def _duration(seconds: float) -> str:
+    if not math.isfinite(seconds):
+        return "?"
+    seconds = int(round(seconds))
+    return f"{seconds // 3600}:{seconds // 60 % 60:02d}:{seconds % 60:02d}" if seconds >= 3600 \
+        else f"{seconds // 60}:{seconds % 60:02d}"
+
+
+def _batched(points: Iterable[Point], size: int) -> Iterator[list[Point]]:
+    it = iter(points)
+    while batch := list(itertools.islice(it, size)):
+        yield batch
+
+
+def package_versions() -> dict[str, str]:
+    versions = {"python": platform.python_version()}
+    for name in PACKAGES:
+        try:
+            versions[name] = importlib_metadata.version(name)
+        except importlib_metadata.PackageNotFoundError:
+            pass
+    return versions
+
+
+def _now() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec="seconds")
+
+
+def _dashboard_available() -> bool:
+    try:
+        import bokeh  # noqa: F401  (distributed serves its dashboard only with bokeh)
+    except ImportError:
+        return False
+    return True
+
+
+class Sweep:
+    """A prepared sweep of the spec at ``spec_path`` (see the module docstring).
+
+    The constructor reads everything a sweep needs from disk (spec, units, FMU
+    bytes) and checks the results folder.  Raises SpecError for a bad spec or
+    design space, SweepError when ``out`` cannot be used as asked.
+    """
+
+    def __init__(self, spec_path: str | Path, workers: int | None = None, out: str | Path | None = None,
+                 scheduler: str | None = None, timeout: float | None = None, resume: bool = False,
+                 batch_size: int | None = None, csv: bool = False, progress: TextIO | None = None,
+                 quiet: bool = False):
+        from .validate import check_spec
+
+        if timeout is not None and timeout <= 0:
+            raise SweepError(f"the timeout must be positive, got {timeout}")
+        if workers is not None and workers < 1:
+            raise SweepError(f"workers must be at least 1, got {workers}")
+        self.system = check_spec(spec_path)
+        self.spec = self.system.spec
+        self.space = DesignSpace.from_spec(self.spec)
+        self.workers = workers or os.cpu_count() or 1
+        self.scheduler, self.timeout, self.resume = scheduler, timeout, resume
+        self.batch_size, self.csv, self.quiet = batch_size, csv, quiet
+        self.progress_stream = progress
+        self._temporary = out is None
+        if resume and out is None:
+            raise SweepError("resume needs the results folder of the interrupted sweep (--out DIR)")
+        self.out = Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="cosim_sweep_"))
+        self.store = ResultsStore(self.out)
+        self._check_folder()
+        self.payload = make_payload(self.system)  # FMU bytes read now: workers never open these paths
+
+    def _check_folder(self) -> None:
+        previous = self.store.metadata()
+        if self.resume:
+            if previous is not None and previous.get("spec_digest") != self.spec.digest:
+                raise SweepError(f"{self.out} holds results of a different spec (digest "
+                                 f"{str(previous.get('spec_digest'))[:12]}…, this one {self.spec.digest[:12]}…); "
+                                 "use another --out, or run without --resume into an empty folder")
+        elif self.store.has_rows():
+            raise SweepError(f"{self.out} already holds results; add --resume to finish that sweep, "
+                             "or choose another --out")
+
+    def _say(self, text: str) -> None:
+        if not self.quiet:
+            print(text, file=self.progress_stream or sys.stderr, flush=True)
+
+    def _metadata(self, started: str, client_info: dict[str, Any]) -> dict[str, Any]:
+        from .units.fmu import FmuUnitType
+
+        previous = self.store.metadata() or {}
+        return {
+            "spec_path": str(Path(self.spec.path).resolve()), "spec_digest": self.spec.digest, "spec": self.spec.raw,
+            "fmu_checksums": {name: su.unit_type.digest for name, su in self.system.units.items()
+                              if isinstance(su.unit_type, FmuUnitType)},
+            "packages": package_versions(), "host": socket.gethostname(), "user": _user(),
+            "points": len(self.space), "design_method": self.space.method,
+            "started": previous.get("started", started), "runs": previous.get("runs", []) + [client_info],
+            "ended": None, "counts": previous.get("counts"),
+        }
+
+    def run(self) -> pd.DataFrame:
+        """Evaluate every missing point; returns the whole table (every point once, in design order).
+
+        Raises SweepError when no Dask workers are reachable.  Ctrl-C stops the
+        sweep; the rows written so far stay and ``resume`` finishes the rest.
+        """
+        from distributed import Client, LocalCluster
+
+        started = _now()
+        done = self.store.done_ids() if self.resume else set()
+        total = len(self.space)
+        todo = total - len(done & {p.id for p in self.space}) if done else total
+        cluster = None
+        if self.scheduler is None:
+            dashboard = _dashboard_available()
+            cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                                   host="127.0.0.1", dashboard_address="127.0.0.1:0" if dashboard else None,
+                                   silence_logs=40)
+            client = Client(cluster)
+            link = cluster.dashboard_link if dashboard else "unavailable (install bokeh to get it)"
+        else:
+            try:
+                client = Client(self.scheduler, timeout=30)
+            except OSError as exc:
+                raise SweepError(f"cannot reach the Dask scheduler at {self.scheduler}: {exc}") from None
+            link = client.dashboard_link
+        try:
+            n_workers = sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values())
+            if n_workers == 0:
+                client.wait_for_workers(1, timeout=60)
+                n_workers = sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values())
+            info = {"started": started, "scheduler": client.scheduler.address, "workers": n_workers,
+                    "timeout": self.timeout}
+            self.store.write_metadata(self._metadata(started, info))
+            self._say(f"cosim sweep {self.spec.name}: {total} points ({todo} to run) on {n_workers} worker(s); "
+                      f"dashboard: {link}; results: {self.out}")
+            self._evaluate(client, done, todo, n_workers)
+        except KeyboardInterrupt:
+            self._say(f"interrupted: the rows so far are in {self.out}; run again with --resume to finish")
+            raise
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+        df = self.store.compact(order=(p.id for p in self.space), csv=self.csv)
+        meta = self.store.metadata() or {}
+        meta.update(ended=_now(), counts=counts_by_status(df))
+        meta["runs"][-1]["ended"] = meta["ended"]
+        self.store.write_metadata(meta)
+        if self._temporary:
+            shutil.rmtree(self.out, ignore_errors=True)
+        return df
+
+    def _evaluate(self, client: Any, done: set[str], todo: int, n_workers: int) -> None:
+        from distributed import as_completed
+
+        size = self.batch_size or max(1, min(64, math.ceil(todo / (n_workers * 8))))
+        batches = _batched((p for p in self.space if p.id not in done), size)
+        payload = client.scatter(self.payload, broadcast=True, hash=False)
+        progress = Progress(todo, self.progress_stream, already=len(done)) if not self.quiet else None
+        in_flight: dict[str, list[Point]] = {}
+        pending = as_completed()
+
+        def submit() -> bool:
+            batch = next(batches, None)
+            if batch is None:
+                return False
+            future = client.submit(run_batch, payload, [(p.id, p.values) for p in batch], self.timeout,
+                                   pure=False, retries=0)
+            in_flight[future.key] = batch
+            pending.add(future)
+            return True
+
+        for _ in range(2 * n_workers + 1):  # enough to keep every worker busy, few enough to stay small
+            if not submit():
+                break
+        for future in pending:
+            batch = in_flight.pop(future.key)
+            try:
+                rows = future.result()
+            except Exception as exc:  # the worker process itself died (KilledWorker) or the task broke
+                rows = [{"point_id": p.id, "status": "crashed", "message": f"lost with its worker: "
+                         f"{type(exc).__name__}: {exc}", "run_time": float("nan"), "worker": "",
+                         "objectives": {}} for p in batch]
+            future.release()
+            self.store.append([self._row(p, r) for p, r in zip(batch, rows)])
+            if progress is not None:
+                progress.update(len(rows), sum(r["status"] != "ok" for r in rows))
+            submit()
+        if progress is not None:
+            progress.close()
+
+    def _row(self, point: Point, row: dict[str, Any]) -> dict[str, Any]:
+        out = {"point_id": point.id}
+        out.update(self.space.columns(point.values))
+        out.update(row.get("objectives", {}))
+        for key in ("status", "message", "run_time", "worker"):
+            out[key] = row.get(key, "")
+        return out
+
+    def sample_runs(self, n: int = 3) -> list[dict[str, Any]]:
+        """Run the first ``n`` points locally (in a child process, so a crash cannot hit the caller)."""
+        runner = IsolatedRunner(self.payload)
+        try:
+            points = self.space.head(n)
+            return runner.run([(p.id, p.values) for p in points], self.timeout)
+        finally:
+            runner.close()
+
+
+def _user() -> str:
+    try:
+        return getpass.getuser()
+    except Exception:
+        return ""
+
+
+def sweep(spec_path: str | Path, workers: int = 2, out: str | Path | None = None, scheduler: str | None = None,
+          timeout: float | None = None, resume: bool = False, **options: Any) -> pd.DataFrame:
+    """Evaluate every point of the spec's design space on Dask; returns the results table.
+
+    One row per point: point_id, parameters, objectives, status (ok, failed,
+    timeout, crashed), message, run_time, worker.  ``out`` keeps the results
+    folder (results.parquet, metadata.json); without it the table is only
+    returned.  ``scheduler`` is the address of a running Dask scheduler
+    (default: a local cluster of ``workers`` processes).  ``timeout``: seconds
+    a point may run.  ``resume`` runs only the points missing in ``out``.
+    Further options: ``batch_size``, ``csv``, ``progress`` (a stream), ``quiet``.
+
+    Raises SpecError for a bad spec or design space, SweepError when ``out``
+    or the scheduler cannot be used.
+    """
+    return Sweep(spec_path, workers=workers, out=out, scheduler=scheduler, timeout=timeout, resume=resume,
+                 **options).run()
