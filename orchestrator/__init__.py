@@ -18,9 +18,10 @@ from .spec import Spec, load_spec
 from .system import System, build_system
 from .unit import UnitError, Variable
 from .units.python import PythonUnit
+from .sweep import sweep
 
 __all__ = ["Execution", "Problem", "PythonUnit", "RunResult", "Spec", "SpecError", "System", "UnitError",
-           "Variable", "build_system", "load_spec", "run"]
+           "Variable", "build_system", "load_spec", "run", "sweep"]
 __version__ = "0.1.0"
 
 

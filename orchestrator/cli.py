@@ -65,6 +65,8 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser("inspect", help="list an FMU's variables, or a spec's units, connections and order")
     p.add_argument("target", help="an .fmu file or a spec.json")
     p.set_defaults(handler=cmd_inspect)
+    from .sweep_cli import add_sweep_parser
+    add_sweep_parser(sub)
     return parser
 
 

@@ -1,8 +1,8 @@
 """Running design points in a child process, so a point can hang or segfault safely.
 
 An FMU is native code from someone else: it may crash its process or never
-return.  :class:`IsolatedRunner` keeps one child Python process (started with
-``python -m orchestrator.isolation``) that loads the system once and runs
+return.  :class:`IsolatedRunner` keeps one child Python process (running
+:func:`child_main`) that loads the system once and runs
 points one after the other, reusing live unit instances (``reset()`` between
 points, re-instantiated after a failed point).  The parent sends a whole batch
 and reads one row per point with a watchdog:
@@ -223,7 +223,8 @@ class IsolatedRunner:
         root = str(Path(__file__).resolve().parent.parent)
         env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")  # works from a source checkout too
         self._proc = subprocess.Popen(
-            [sys.executable, "-m", "orchestrator.isolation", str(to_child_r), str(from_child_w), str(os.getpid())],
+            [sys.executable, "-c", "import sys; from orchestrator.isolation import child_main; "
+             "child_main(*map(int, sys.argv[1:]))", str(to_child_r), str(from_child_w), str(os.getpid())],
             pass_fds=(to_child_r, from_child_w), env=env, stdin=subprocess.DEVNULL)
         os.close(to_child_r)
         os.close(from_child_w)
@@ -328,6 +329,3 @@ class IsolatedRunner:
             self._folder = None
         _LIVE.discard(self)
 
-
-if __name__ == "__main__":
-    child_main(int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]))

@@ -38,13 +38,13 @@ import time
 from datetime import datetime, timezone
 from importlib import metadata as importlib_metadata
 from pathlib import Path
-from typing import Any, Iterable, Iterator, Sequence, TextIO
-
-import pandas as pd
+from typing import TYPE_CHECKING, Any, Iterable, Iterator, Sequence, TextIO
 
 from .design import DesignSpace, Point
 from .isolation import IsolatedRunner, make_payload
-from .results import ResultsStore, counts_by_status
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 PACKAGES = ("cosim", "fmpy", "dask", "distributed", "numpy", "pandas", "pyarrow", "scipy")
 
@@ -189,6 +189,7 @@ class Sweep:
                  scheduler: str | None = None, timeout: float | None = None, resume: bool = False,
                  batch_size: int | None = None, csv: bool = False, progress: TextIO | None = None,
                  quiet: bool = False):
+        from .results import ResultsStore  # pandas and pyarrow only when a sweep is made
         from .validate import check_spec
 
         if timeout is not None and timeout <= 0:
@@ -252,6 +253,9 @@ class Sweep:
         total = len(self.space)
         todo = total - len(done & {p.id for p in self.space}) if done else total
         cluster = None
+        if todo == 0:
+            self._say(f"cosim sweep {self.spec.name}: all {total} points already in {self.out}")
+            return self._finish(started)
         if self.scheduler is None:
             dashboard = _dashboard_available()
             cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
@@ -283,10 +287,16 @@ class Sweep:
             client.close()
             if cluster is not None:
                 cluster.close()
+        return self._finish(started)
+
+    def _finish(self, started: str) -> "pd.DataFrame":
+        from .results import counts_by_status
+
         df = self.store.compact(order=(p.id for p in self.space), csv=self.csv)
         meta = self.store.metadata() or {}
         meta.update(ended=_now(), counts=counts_by_status(df))
-        meta["runs"][-1]["ended"] = meta["ended"]
+        if meta.get("runs"):
+            meta["runs"][-1]["ended"] = meta["ended"]
         self.store.write_metadata(meta)
         if self._temporary:
             shutil.rmtree(self.out, ignore_errors=True)

@@ -8,6 +8,7 @@ pre-builds the ctypes arrays of value references and values once, so that a
 from __future__ import annotations
 
 import ctypes
+import operator
 from collections import deque
 from typing import Any, Callable, Sequence
 
@@ -39,6 +40,7 @@ class FmiSelection(Selection):
         # array, so the others are read first (read-modify-write).
         self.partial_arrays = partial_arrays
         self.plain = False
+        self.pick: Callable[[Any], tuple] | None = None  # fast reader for one numeric group
 
 
 class FmiInstance(Unit):
@@ -120,8 +122,10 @@ class FmiInstance(Unit):
         selection = FmiSelection(refs, groups, positions, partial)
         # The common case, one numeric type read in buffer order, skips the
         # per-element bookkeeping in get/set (it is the stepping loop's hot path).
-        selection.plain = (len(groups) == 1 and not partial and groups[0].fmi_type not in ("Boolean", "String")
-                           and positions == [(0, i) for i in range(groups[0].n_values)])
+        numeric = len(groups) == 1 and groups[0].fmi_type not in ("Boolean", "String")
+        selection.plain = numeric and not partial and positions == [(0, i) for i in range(groups[0].n_values)]
+        if numeric and len(positions) > 1:
+            selection.pick = operator.itemgetter(*[i for _, i in positions])
         return selection
 
     def get(self, selection: Selection) -> list[Any]:
@@ -132,6 +136,8 @@ class FmiInstance(Unit):
                 raise self.fail_status(f"get{group.fmi_type}", status)
         if sel.plain:
             return sel.groups[0].values[:]
+        if sel.pick is not None:
+            return list(sel.pick(sel.groups[0].values))
         return [self._convert(sel.groups[g], sel.groups[g].values[i]) for g, i in sel.positions]
 
     def set(self, selection: Selection, values: Sequence[Any]) -> None:

@@ -1,0 +1,115 @@
+"""``cosim sweep``: evaluate a spec's design space on Dask (see :mod:`orchestrator.sweep`).
+
+Exit codes: 0 every point ok, 1 some points not ok (failed, timeout,
+crashed), 2 a bad spec, results folder or command line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+from pathlib import Path
+from typing import Any
+
+EXIT_OK, EXIT_RUN_FAILED, EXIT_USAGE = 0, 1, 2
+
+
+def add_sweep_parser(sub: Any) -> None:
+    """Register the ``sweep`` subcommand on an argparse sub-parser collection."""
+    p = sub.add_parser("sweep", help="evaluate every design point of a spec on Dask; write a results table")
+    p.add_argument("spec", help="path to spec.json")
+    p.add_argument("--out", metavar="DIR", help="results folder (default: results/<spec name> in the current folder)")
+    p.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: one per core)")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="use a running Dask scheduler, e.g. tcp://host:8786")
+    p.add_argument("--timeout", type=float, metavar="S", help="seconds a point may run before it is stopped")
+    p.add_argument("--resume", action="store_true", help="run only the points missing in --out")
+    p.add_argument("--csv", action="store_true", help="also write DIR/results.csv")
+    p.add_argument("--batch-size", type=int, metavar="N", help="points per Dask task (default: automatic)")
+    p.add_argument("--dry-run", action="store_true",
+                   help="print the number of points, a few of them and a time estimate from sample runs")
+    p.set_defaults(handler=cmd_sweep)
+
+
+def _default_out(spec_path: str) -> Path:
+    try:
+        name = json.loads(Path(spec_path).read_text(encoding="utf-8")).get("name") or Path(spec_path).stem
+    except (OSError, ValueError, AttributeError):
+        name = Path(spec_path).stem
+    return Path("results") / re.sub(r"[^A-Za-z0-9_.-]+", "_", str(name))
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    """Run (or dry-run) a sweep; returns the exit code. SpecError and UsageError reach cli.main."""
+    from .sweep import Sweep, SweepError
+
+    if args.batch_size is not None and args.batch_size < 1:
+        return _usage("--batch-size must be at least 1")
+    out = Path(args.out) if args.out else _default_out(args.spec)
+    try:
+        if args.dry_run:
+            return _dry_run(args)
+        sweep = Sweep(args.spec, workers=args.workers, out=out, scheduler=args.scheduler, timeout=args.timeout,
+                      resume=args.resume, batch_size=args.batch_size, csv=args.csv)
+        df = sweep.run()
+    except SweepError as exc:
+        return _usage(str(exc))
+    counts = df["status"].value_counts().to_dict() if len(df) else {}
+    summary = ", ".join(f"{n} {s}" for s, n in sorted(counts.items()))
+    print(f"{len(df)} points: {summary or 'none'}; table: {sweep.store.table_path}")
+    not_ok = df[df["status"] != "ok"] if len(df) else df
+    for _, row in not_ok.head(5).iterrows():
+        print(f"  {row['point_id']} {row['status']}: {str(row['message'])[:120]}", file=sys.stderr)
+    if len(not_ok) > 5:
+        print(f"  ... and {len(not_ok) - 5} more (see the 'message' column)", file=sys.stderr)
+    return EXIT_OK if len(not_ok) == 0 else EXIT_RUN_FAILED
+
+
+def _usage(message: str) -> int:
+    print(f"cosim: error: {message}", file=sys.stderr)
+    return EXIT_USAGE
+
+
+def _dry_run(args: argparse.Namespace) -> int:
+    import os
+    import tempfile
+
+    from .sweep import Sweep
+
+    with tempfile.TemporaryDirectory(prefix="cosim_dry_") as scratch:
+        sweep = Sweep(args.spec, workers=args.workers, out=scratch, timeout=args.timeout, quiet=True)
+        total = len(sweep.space)
+        print(f"{sweep.spec.name}: {total} points ({sweep.space.method}; parameters: "
+              f"{', '.join(sweep.space.targets) or 'none'})")
+        for point in sweep.space.head(5):
+            print(f"  {point.id}  " + ", ".join(f"{k}={v}" for k, v in point.values.items()))
+        if total > 5:
+            print(f"  ... and {total - 5} more")
+        samples = sweep.sample_runs(4)
+    for row in samples:
+        print(f"sample {row['point_id']}: {row['status']} in {row['run_time']:.3f} s"
+              + (f" ({row['message'][:100]})" if row["message"] else ""))
+    times = [r["run_time"] for r in samples if r["status"] == "ok"]
+    if times:
+        # the first run also instantiates the units; the others show the steady cost per point
+        steady = sorted(times[1:] or times)
+        per_point = steady[len(steady) // 2]
+        workers = args.workers or os.cpu_count() or 1
+        if args.scheduler:
+            print(f"estimate: {per_point:.3f} s per point; {total * per_point:.0f} s of work in total "
+                  "(divide by the scheduler's worker count)")
+        else:
+            print(f"estimate: {per_point:.3f} s per point, about {_fmt_time(total * per_point / workers)} "
+                  f"on {workers} worker(s)")
+    else:
+        print("estimate: none (no sample run succeeded)")
+    return EXIT_OK
+
+
+def _fmt_time(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
