@@ -272,7 +272,11 @@ class Sweep:
         try:
             n_workers = sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values())
             if n_workers == 0:
-                client.wait_for_workers(1, timeout=60)
+                try:
+                    client.wait_for_workers(1, timeout=60)
+                except TimeoutError:
+                    raise SweepError(f"the scheduler at {self.scheduler} has no workers (waited 60 s); "
+                                     "start some with: dask worker ADDRESS --nthreads 1") from None
                 n_workers = sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values())
             info = {"started": started, "scheduler": client.scheduler.address, "workers": n_workers,
                     "timeout": self.timeout}
