@@ -50,13 +50,17 @@ class Expression:
         self.names: set[str] = set()
         self._check(self._tree)
 
+    @property
+    def free_names(self) -> set[str]:
+        """Names that must come from the values (all but the built-in constants)."""
+        return self.names - CONSTANTS.keys()
+
     def _check(self, node: ast.AST) -> None:
         if isinstance(node, ast.Constant):
             if not isinstance(node.value, (int, float, bool)):
                 raise ExpressionError(f"'{self.text}': only numbers are allowed as constants")
         elif isinstance(node, ast.Name):
-            if node.id not in CONSTANTS:
-                self.names.add(node.id)
+            self.names.add(node.id)  # may also be a constant; a value of that name takes precedence
         elif isinstance(node, ast.BinOp) and type(node.op) in _BINARY:
             self._check(node.left)
             self._check(node.right)
@@ -93,9 +97,9 @@ class Expression:
         if isinstance(node, ast.Constant):
             return node.value
         if isinstance(node, ast.Name):
-            if node.id in CONSTANTS:
-                return CONSTANTS[node.id]
             if node.id not in values:
+                if node.id in CONSTANTS:
+                    return CONSTANTS[node.id]
                 raise ExpressionError(f"'{self.text}': unknown name '{node.id}'")
             value = values[node.id]
             return np.asarray(value, dtype=float) if isinstance(value, (list, tuple)) else value

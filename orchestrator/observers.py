@@ -129,8 +129,9 @@ def evaluate_expressions(objectives: Sequence[ObjectiveSpec], values: Mapping[st
     result = dict(values)
     pending = [o for o in objectives if o.expr]
     parsed = {o.name: Expression(o.expr) for o in pending}  # type: ignore[arg-type]
+    names = {o.name for o in objectives}
     while pending:
-        ready = [o for o in pending if parsed[o.name].names <= result.keys()]
+        ready = [o for o in pending if parsed[o.name].names & names <= result.keys()]
         if not ready:  # cycles are refused by the system check; this is a safety net
             raise ValueError("objective expressions refer to each other in a cycle")
         for o in ready:

@@ -557,7 +557,7 @@ def _check_objective_expressions(spec: Spec, problems: list[Problem]) -> None:
             problems.append(Problem(file=spec.path, path=path, message=str(exc),
                                     fix="use numbers, other objectives' names, + - * / ** and abs, sqrt, min, max"))
             continue
-        unknown = sorted(expression.names - names)
+        unknown = sorted(expression.free_names - names)
         for n in unknown:
             problems.append(Problem(spec.path, path, f"'{n}' is not an objective.{did_you_mean(n, names)}",
                                     "refer to objectives defined in this spec"))

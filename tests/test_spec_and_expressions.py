@@ -1,0 +1,111 @@
+"""Spec details (relative paths, port mapping, builtin FMUs) and the safe expression language."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+import orchestrator
+from orchestrator.expressions import Expression, ExpressionError
+from orchestrator.problems import SpecError
+from orchestrator.spec import load_spec
+from orchestrator.validate import check_spec
+
+from .conftest import TESTS
+
+
+def test_relative_paths_resolve_against_the_spec_folder(tmp_path, built_fmu, monkeypatch):
+    folder = tmp_path / "study"
+    (folder / "models").mkdir(parents=True)
+    shutil.copy(built_fmu("linear_ode", 2), folder / "models" / "ode.fmu")
+    shutil.copy(TESTS / "units_for_tests.py", folder / "my_units.py")
+    (folder / "spec.json").write_text(json.dumps({
+        "units": {"ode": {"fmu": "models/ode.fmu", "parameters": {"a": -1.0}},
+                  "gain": {"python": "my_units.py:Gain", "parameters": {"k": 2.0}}},
+        "connections": [{"from": "ode.y", "to": "gain.u"}],
+        "experiment": {"stop": 1.0, "step": 0.01},
+        "objectives": {"g": {"signal": "gain.y", "reduce": "final"}},
+    }))
+    monkeypatch.chdir(tmp_path)  # somewhere else than the spec's folder
+    result = orchestrator.run("study/spec.json")
+    assert result.ok, result.message
+    assert result.objectives["g"] == pytest.approx(2.0 * np.exp(-1.0), rel=1e-12)
+
+
+def test_port_mapping_lets_a_replacement_fmu_use_other_names(write_spec):
+    """The spec speaks of 'state' and 'drive'; the FMU calls them 'y' and 'u'."""
+    spec = {
+        "units": {"ode": {"fmu": "builtin:linear_ode_fmi3", "ports": {"state": "y", "drive": "u"},
+                          "start": {"drive": 1.0}, "parameters": {"a": -2.0, "x0": 0.0}}},
+        "experiment": {"stop": 3.0, "step": 0.01},
+        "record": ["ode.state"],
+        "objectives": {"x": {"signal": "ode.state", "reduce": "final"}},
+    }
+    result = orchestrator.run(str(write_spec(spec)))
+    assert result.ok, result.message
+    assert result.objectives["x"] == pytest.approx(0.5 * (1 - np.exp(-6.0)), rel=1e-12)
+    assert list(result.traces.columns) == ["time", "ode.state"]
+
+
+def test_port_mapping_to_a_missing_variable_is_reported(write_spec):
+    spec = {"units": {"ode": {"fmu": "builtin:linear_ode_fmi3", "ports": {"state": "yy"}}},
+            "experiment": {"stop": 1.0, "step": 0.1}}
+    with pytest.raises(SpecError) as info:
+        check_spec(write_spec(spec))
+    assert any(p.path == "$.units.ode.ports.state" and "Did you mean 'y'" in p.message for p in info.value.problems)
+
+
+def test_unknown_builtin_fmu_lists_the_available_ones(write_spec):
+    spec = {"units": {"m": {"fmu": "builtin:motor_fmi3"}}, "experiment": {"stop": 1.0, "step": 0.1}}
+    with pytest.raises(SpecError) as info:
+        check_spec(write_spec(spec))
+    text = str(info.value)
+    assert "$.units.m.fmu: no built-in FMU 'motor_fmi3'" in text and "builtin:motor_gear_energy_fmi3" in text
+
+
+def test_spec_digest_ignores_formatting_but_not_content(tmp_path):
+    content = {"units": {"a": {"python": "x:Y"}}, "experiment": {"stop": 1, "step": 0.1}}
+    (tmp_path / "a.json").write_text(json.dumps(content))
+    (tmp_path / "b.json").write_text(json.dumps(content, indent=4))
+    content["experiment"]["stop"] = 2
+    (tmp_path / "c.json").write_text(json.dumps(content))
+    digests = [load_spec(tmp_path / f"{n}.json").digest for n in "abc"]
+    assert digests[0] == digests[1] != digests[2]
+
+
+@pytest.mark.parametrize("text,values,expected", [
+    ("a + b * 2", {"a": 1, "b": 3}, 7),
+    ("(a + b) ** 2 / 4", {"a": 1, "b": 3}, 4.0),
+    ("sum(e) / max(e)", {"e": [1.0, 2.0, 5.0]}, 1.6),
+    ("e[2] - min(a, b)", {"e": [1.0, 2.0], "a": 5, "b": -1}, 3.0),
+    ("sqrt(abs(x)) + pi * 0", {"x": -16}, 4.0),
+    ("a > 1 and not b < 0", {"a": 2, "b": 1}, True),
+    ("-x // 3 % 2", {"x": 7}, 1),
+])
+def test_expressions_compute(text, values, expected):
+    assert Expression(text).evaluate(values) == pytest.approx(expected)
+
+
+@pytest.mark.parametrize("text", [
+    "__import__('os').system('true')", "a.__class__", "open('x')", "[1, 2]", "lambda: 1", "a if b else c",
+    "'text'", "x[y]", "exec('1')", "f(x=1)",
+])
+def test_expressions_refuse_everything_outside_the_whitelist(text):
+    with pytest.raises(ExpressionError):
+        Expression(text)
+
+
+def test_expression_errors_name_the_problem():
+    with pytest.raises(ExpressionError, match="unknown function 'foo'"):
+        Expression("foo(1)")
+    with pytest.raises(ExpressionError, match="cannot parse"):
+        Expression("1 +")
+    with pytest.raises(ExpressionError, match="index 4 outside 1..3"):
+        Expression("e[4]").evaluate({"e": [1, 2, 3]})
+    with pytest.raises(ExpressionError, match="unknown name 'q'"):
+        Expression("q + 1").evaluate({})
+    assert Expression("a / b").names == {"a", "b"}
+    assert np.isinf(Expression("a / b").evaluate({"a": 1.0, "b": 0.0}))
