@@ -206,6 +206,8 @@ class PandaExudyn(PythonUnit):
         st.endTime = self.start_time + self.substep
         self._solver.InitializeSolver(self._mbs, self._settings)  # also computes initial accelerations
         self._start_ref = (q0, qd0)
+        self._ee_last = None  # the path starts at the initial pose
+        self.ee_path_length = 0.0
         self._read_outputs(q0)
 
     def _build(self, key, q0, qd0) -> None:
@@ -266,6 +268,9 @@ class PandaExudyn(PythonUnit):
         self.tau[:] = self._tau_ff + self._kp * (self._q_r - self.q) + self._kd * (self._qd_r - self.qd)
         pin.forwardKinematics(self._model, self._data, self.q)
         self.ee_pos[:] = pin.updateFramePlacement(self._model, self._data, self._ee).translation
+        if self._ee_last is not None:  # one straight chord per communication step
+            self.ee_path_length += float(np.linalg.norm(self.ee_pos - self._ee_last))
+        self._ee_last = self.ee_pos.copy()
         self.tracking_error = float(np.max(np.abs(self.q - q_ref_now)))
         if self._body is not None:
             axis = self._mbs.GetObjectOutputBody(self._body, exu.OutputVariableType.RotationMatrix).reshape(3, 3)[:, 2]

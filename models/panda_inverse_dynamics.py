@@ -29,6 +29,7 @@ class PandaInverseDynamics(PythonUnit):
         "qdd": ("qdd_ref",),
         "tau": _refs,
         "ee_pos": ("q_ref",),
+        "ee_path_length": ("q_ref",),
         "tracking_error": (),
         "tau_ratio": _refs,
         "limit_violated": _refs,
@@ -36,7 +37,10 @@ class PandaInverseDynamics(PythonUnit):
 
     def initialize(self) -> None:
         self._ensure_model()
+        self._path_done = None  # (length, TCP position) at the last communication point
         self.compute_outputs()
+        self._path_done = (0.0, self.ee_pos.copy())
+        self.ee_path_length = 0.0
 
     def _ensure_model(self) -> None:
         key = payload_key(self.payload_mass, self.payload_com, self.payload_inertia)
@@ -56,9 +60,22 @@ class PandaInverseDynamics(PythonUnit):
         self.tau[:] = pin.rnea(m, d, self.q, self.qd, self.qdd)
         pin.forwardKinematics(m, d, self.q)  # rnea does not leave world placements in data
         self.ee_pos[:] = pin.updateFramePlacement(m, d, self._ee).translation
+        done = getattr(self, "_path_done", None)
+        if done is not None:  # the chord from the last communication point to now
+            self.ee_path_length = done[0] + float(np.linalg.norm(self.ee_pos - done[1]))
         self.tracking_error = 0.0
         np.divide(np.abs(self.tau), self.tau_max, out=self.tau_ratio)
         self.limit_violated = limits_exceeded(self.q, self.qd, self.tau_ratio, self.q_min, self.q_max, self.qd_max)
 
     def do_step(self, t: float, h: float) -> None:
-        """Nothing to integrate: PythonUnit recomputes outputs whenever inputs change."""
+        """Commit the TCP path up to the current inputs; the rest is recomputed whenever inputs change.
+
+        Under Gauss-Seidel the inputs at ``do_step(t, h)`` are the reference at
+        ``t + h``, under Jacobi at ``t``; either way the chord from the last
+        committed point to the current pose is added once, so the path length
+        is the same sum of chords between communication points.
+        """
+        if self._outputs_stale:
+            self._outputs_stale = False
+            self.compute_outputs()
+        self._path_done = (self.ee_path_length, self.ee_pos.copy())

@@ -189,7 +189,9 @@ def robot_variables():
     payload fixed to the hand (default none).  Inputs: the reference
     ``q_ref``, ``qd_ref``, ``qdd_ref``.  Outputs: the motion ``q``, ``qd``,
     ``qdd``, the joint torques ``tau`` actually applied, ``ee_pos`` (TCP in the
-    base frame), ``tracking_error`` (max over joints of ``|q - q_ref|``),
+    base frame), ``ee_path_length`` (distance the TCP has travelled since the
+    start, summed over communication steps as straight chords, so it is the
+    thesis's Cartesian distance), ``tracking_error`` (max over joints of ``|q - q_ref|``),
     ``tau_ratio`` (``|tau| / tau_max`` per joint) and ``limit_violated`` (a
     position, velocity or torque limit is exceeded at this instant).
     """
@@ -214,6 +216,8 @@ def robot_variables():
         Variable("qdd", "output", unit="rad/s2", start=0.0, description="joint accelerations", **arr),
         Variable("tau", "output", unit="N.m", start=0.0, description="joint torques applied", **arr),
         Variable("ee_pos", "output", unit="m", start=0.0, shape=(3,), description="TCP position in the base frame"),
+        Variable("ee_path_length", "output", unit="m", start=0.0,
+                 description="length of the TCP path since the start: sum of straight TCP displacements between communication points"),
         Variable("tracking_error", "output", unit="rad", start=0.0, description="max over joints of |q - q_ref|"),
         Variable("tau_ratio", "output", start=0.0, description="|tau| / tau_max per joint", **arr),
         Variable("limit_violated", "output", type="Boolean", start=False, description="a position, velocity or torque limit is exceeded now"),
