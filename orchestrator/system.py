@@ -381,7 +381,7 @@ def _assignment(unit: SystemUnit, port: str, value: Any, field_name: str | None,
         if message:
             problems.append(Problem(file, path, message[0], message[1]))
             return None
-        checked.append(float(v) if var.type == "Real" else v)
+        checked.append(float(v) if var.type == "Real" else int(v) if var.type == "Integer" else v)
     return Assignment(unit.name, tuple(refs), tuple(checked))
 
 
