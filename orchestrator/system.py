@@ -230,6 +230,8 @@ def _fmu_fix(problem: str) -> str:
         return "check the path; relative paths start at the spec's folder"
     if "no binary" in problem:
         return "re-export the FMU with a binary for this platform, or run it where it has one"
+    if "cannot build" in problem:
+        return "install gcc (apt-get install gcc), or set CC to a C compiler"
     if "co-simulation" in problem:
         return "export the FMU for co-simulation (FMI 2.0 or 3.0)"
     return "re-export the FMU from its tool"

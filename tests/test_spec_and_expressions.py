@@ -109,3 +109,14 @@ def test_expression_errors_name_the_problem():
         Expression("q + 1").evaluate({})
     assert Expression("a / b").names == {"a", "b"}
     assert np.isinf(Expression("a / b").evaluate({"a": 1.0, "b": 0.0}))
+
+
+def test_without_a_compiler_a_builtin_fmu_gives_a_clear_problem(write_spec, tmp_path, monkeypatch):
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-gcc"))
+    monkeypatch.setenv("COSIM_FMU_CACHE", str(tmp_path / "empty-cache"))
+    spec = {"units": {"m": {"fmu": "builtin:linear_ode_fmi3"}}, "experiment": {"stop": 1.0, "step": 0.1}}
+    with pytest.raises(SpecError) as info:
+        check_spec(write_spec(spec))
+    (problem,) = info.value.problems
+    assert problem.path == "$.units.m.fmu" and "no C compiler" in problem.message
+    assert "apt-get install gcc" in problem.fix

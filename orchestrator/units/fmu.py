@@ -138,17 +138,21 @@ def resolve_fmu_path(reference: str, base_dir: str | Path | None = None) -> Path
 
     ``builtin:NAME_fmiN`` names an FMU we ship as C source (built on first use,
     see :mod:`fmus.build`); anything else is a path, relative to ``base_dir``.
-    Raises FileNotFoundError for an unknown builtin name.
+    Raises FileNotFoundError for an unknown builtin name and FmuProblems when
+    a built-in FMU cannot be built (e.g. no C compiler).
     """
     if reference.startswith(BUILTIN_PREFIX):
-        from fmus.build import available_models, ensure_built  # local: compiling only when asked
+        from fmus.build import FmuBuildError, available_models, ensure_built  # local: compiling only when asked
 
         stem = reference[len(BUILTIN_PREFIX):]
         m = re.match(r"^(?P<name>.+)_fmi(?P<version>[23])$", stem)
         if not m or m.group("name") not in available_models():
             names = ", ".join(f"builtin:{n}_fmi3" for n in sorted(available_models()))
             raise FileNotFoundError(f"no built-in FMU '{stem}'; available: {names} (or _fmi2)")
-        return Path(ensure_built(m.group("name"), int(m.group("version"))))
+        try:
+            return Path(ensure_built(m.group("name"), int(m.group("version"))))
+        except FmuBuildError as exc:  # no compiler, or our C sources do not build here
+            raise FmuProblems(reference, [f"cannot build the built-in FMU: {exc}"]) from None
     path = Path(reference)
     if not path.is_absolute() and base_dir is not None:
         path = Path(base_dir) / path
