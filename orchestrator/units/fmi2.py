@@ -28,6 +28,7 @@ class Fmi2Unit(FmiInstance):
     _c_types = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Enumeration": ctypes.c_int,
                 "Boolean": ctypes.c_int, "String": ctypes.c_char_p}
     _vr_type = ctypes.c_uint
+    _prefix = "fmi2"
 
     def __init__(self, name: str, unit_type: Any):
         super().__init__(name, unit_type)
@@ -68,27 +69,13 @@ class Fmi2Unit(FmiInstance):
                     lambda: self._slave.setupExperiment(startTime=start_time, stopTime=stop_time))
 
     def enter_initialization(self) -> None:
-        self._guard("fmi2EnterInitializationMode", self._slave.enterInitializationMode)
+        self._guard(f"{self._prefix}EnterInitializationMode", self._slave.enterInitializationMode)
 
     def exit_initialization(self) -> None:
-        self._guard("fmi2ExitInitializationMode", self._slave.exitInitializationMode)
+        self._guard(f"{self._prefix}ExitInitializationMode", self._slave.exitInitializationMode)
 
     def do_step(self, t: float, h: float) -> None:
         self.time = t
         status = self._do_step(self._component, t, h, 1)
         if status > 1:
             raise self.fail_status("fmi2DoStep", status)
-
-    def reset(self) -> None:
-        self._guard("fmi2Reset", self._slave.reset)
-
-    def terminate(self) -> None:
-        if not self._alive:
-            return
-        self._alive = False
-        try:
-            self._slave.terminate()
-        except Exception:
-            pass  # an FMU in error state may refuse terminate; freeing it still matters
-        finally:
-            self._slave.freeInstance()

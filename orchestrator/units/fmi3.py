@@ -24,6 +24,7 @@ class Fmi3Unit(FmiInstance):
         "Enumeration": ctypes.c_int64, "Boolean": ctypes.c_bool, "String": ctypes.c_char_p,
     }
     _vr_type = ctypes.c_uint
+    _prefix = "fmi3"
 
     def __init__(self, name: str, unit_type: Any):
         super().__init__(name, unit_type)
@@ -61,11 +62,11 @@ class Fmi3Unit(FmiInstance):
         self._stop_time = stop_time
 
     def enter_initialization(self) -> None:
-        self._guard("fmi3EnterInitializationMode",
+        self._guard(f"{self._prefix}EnterInitializationMode",
                     lambda: self._slave.enterInitializationMode(startTime=self._start_time, stopTime=self._stop_time))
 
     def exit_initialization(self) -> None:
-        self._guard("fmi3ExitInitializationMode", self._slave.exitInitializationMode)
+        self._guard(f"{self._prefix}ExitInitializationMode", self._slave.exitInitializationMode)
 
     def do_step(self, t: float, h: float) -> None:
         self.time = t
@@ -73,17 +74,3 @@ class Fmi3Unit(FmiInstance):
                                self._early_ref, self._last_time_ref)
         if status > 1:
             raise self.fail_status("fmi3DoStep", status)
-
-    def reset(self) -> None:
-        self._guard("fmi3Reset", self._slave.reset)
-
-    def terminate(self) -> None:
-        if not self._alive:
-            return
-        self._alive = False
-        try:
-            self._slave.terminate()
-        except Exception:
-            pass  # an FMU in error state may refuse terminate; freeing it still matters
-        finally:
-            self._slave.freeInstance()

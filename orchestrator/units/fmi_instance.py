@@ -47,11 +47,14 @@ class FmiInstance(Unit):
     """Common part of :class:`Fmi2Unit` and :class:`Fmi3Unit`.
 
     Subclasses provide ``_c_types`` (FMI type -> ctypes type), ``_vr_type``,
-    ``_get_call(group)`` / ``_set_call(group)`` and the lifecycle calls.
+    ``_prefix``, ``_slave`` (fmpy's slave object), ``_get_call(group)`` /
+    ``_set_call(group)`` and the version-specific lifecycle calls.
     """
 
     _c_types: dict[str, Any] = {}
     _vr_type: Any = ctypes.c_uint
+    _prefix = "fmi"  # "fmi2" or "fmi3": names the calls in error messages
+    _slave: Any = None
 
     def __init__(self, name: str, unit_type: Any):
         self.name = name
@@ -165,6 +168,22 @@ class FmiInstance(Unit):
         if group.fmi_type == "String":
             return value.decode("utf-8") if value is not None else ""
         return value
+
+    # Lifecycle shared by both versions ------------------------------------
+
+    def reset(self) -> None:
+        self._guard(f"{self._prefix}Reset", self._slave.reset)
+
+    def terminate(self) -> None:
+        if not self._alive:
+            return
+        self._alive = False
+        try:
+            self._slave.terminate()
+        except Exception:
+            pass  # an FMU in error state may refuse terminate; freeing it still matters
+        finally:
+            self._slave.freeInstance()  # also unloads the library (fmpy), so the slave is never reused
 
     # Implemented per FMI version -------------------------------------------
 
