@@ -153,17 +153,26 @@ def _row(point_id: str, status: str, message: str, started: float) -> dict[str, 
             "run_time": time.perf_counter() - started, "objectives": {}}
 
 
+def _remove_own_folder_and_exit(*_: Any) -> None:
+    """Exit now, removing the temporary folder the parent made for this child (it may not get to)."""
+    folder = os.environ.get("TMPDIR", "")
+    if Path(folder).name.startswith("cosim_worker_"):
+        shutil.rmtree(folder, ignore_errors=True)
+    os._exit(3)
+
+
 def _watch_parent(parent: int) -> None:
     """Exit when the parent is gone, even while the main thread hangs inside an FMU."""
     while True:
         if os.getppid() != parent:
-            os._exit(3)
+            _remove_own_folder_and_exit()  # e.g. a Dask worker stopped with SIGTERM or SIGKILL
         time.sleep(0.5)
 
 
 def child_main(read_fd: int, write_fd: int, parent: int) -> None:
     """The child's loop: load the payload, then answer 'run' messages with one row per point."""
     threading.Thread(target=_watch_parent, args=(parent,), daemon=True).start()
+    signal.signal(signal.SIGTERM, _remove_own_folder_and_exit)  # a group SIGTERM reaches this child too
     inbox, outbox = Connection(read_fd, writable=False), Connection(write_fd, readable=False)
     folder = tempfile.mkdtemp(prefix="payload_")  # under the TMPDIR the parent made for this child
     runner = None

@@ -259,7 +259,7 @@ class Sweep:
         if self.scheduler is None:
             dashboard = _dashboard_available()
             cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                   host="127.0.0.1", dashboard_address="127.0.0.1:0" if dashboard else None,
+                                   host="127.0.0.1", dashboard_address="127.0.0.1:0",
                                    silence_logs=40)
             client = Client(cluster)
             link = cluster.dashboard_link if dashboard else "unavailable (install bokeh to get it)"

@@ -1,0 +1,75 @@
+"""Fixtures for the sweep tests: a real LocalCluster, real `dask scheduler` / `dask worker` processes."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def kill_group(proc: subprocess.Popen) -> None:
+    """SIGKILL a process started with start_new_session=True and everything it started."""
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    proc.wait(timeout=10)
+
+
+@pytest.fixture(scope="module")
+def local_cluster():
+    """A real distributed.LocalCluster: 2 worker processes, 1 thread each, on 127.0.0.1."""
+    from distributed import LocalCluster
+
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                           dashboard_address="127.0.0.1:0", silence_logs=40)
+    yield cluster.scheduler_address
+    cluster.close()
+
+
+@pytest.fixture(scope="module")
+def dask_processes(tmp_path_factory):
+    """`dask scheduler` and `dask worker` (2 processes) started as commands, workers in their own folder.
+
+    Yields (scheduler address, worker folder).
+    """
+    dask = shutil.which("dask") or [sys.executable, "-m", "distributed.cli.dask_scheduler"]
+    port = free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    worker_dir = tmp_path_factory.mktemp("worker_cwd")
+    scheduler = subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    workers = subprocess.Popen([dask, "worker", address, "--nworkers", "2", "--nthreads", "1", "--no-dashboard",
+                                "--host", "127.0.0.1", "--local-directory", str(worker_dir)],
+                               cwd=worker_dir, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                               start_new_session=True)
+    try:
+        from distributed import Client
+
+        deadline = time.monotonic() + 60
+        while True:
+            try:
+                with Client(address, timeout=5) as client:
+                    client.wait_for_workers(2, timeout=max(1, deadline - time.monotonic()))
+                break
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.5)
+        yield address, Path(worker_dir)
+    finally:
+        kill_group(workers)
+        kill_group(scheduler)

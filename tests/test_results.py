@@ -1,0 +1,54 @@
+"""ResultsStore: durable part files, compaction, resume ids, metadata."""
+
+from __future__ import annotations
+
+import math
+
+import pandas as pd
+
+from orchestrator.results import ResultsStore, counts_by_status
+
+
+def rows(ids, status="ok", **extra):
+    return [{"point_id": i, "p.x": n, **extra, "status": status, "message": "", "run_time": 0.1, "worker": "w"}
+            for n, i in enumerate(ids)]
+
+
+def test_append_then_read_and_compact_in_order(tmp_path):
+    store = ResultsStore(tmp_path / "out")
+    store.append(rows(["c", "d"], y=1.0))
+    store.append(rows(["a"], status="failed"))  # a failed batch has no objective column
+    assert store.done_ids() == {"a", "c", "d"}
+    df = store.compact(order=["a", "b", "c", "d"], csv=True)
+    assert list(df["point_id"]) == ["a", "c", "d"]
+    assert list(df.columns) == ["point_id", "p.x", "y", "status", "message", "run_time", "worker"]
+    assert math.isnan(df.loc[0, "y"]) and df.loc[1, "y"] == 1.0
+    assert not list((tmp_path / "out" / "parts").iterdir())
+    assert pd.read_csv(tmp_path / "out" / "results.csv")["point_id"].tolist() == ["a", "c", "d"]
+    assert counts_by_status(df) == {"ok": 2, "failed": 1, "timeout": 0, "crashed": 0}
+
+
+def test_reopened_store_continues_numbering_and_latest_row_wins(tmp_path):
+    ResultsStore(tmp_path).append(rows(["a", "b"], y=1.0))
+    store = ResultsStore(tmp_path)  # as after a client restart
+    store.append(rows(["b"], y=2.0))
+    assert len(list((tmp_path / "parts").glob("part-*.parquet"))) == 2
+    df = store.read()
+    assert sorted(df["point_id"]) == ["a", "b"] and df.set_index("point_id").loc["b", "y"] == 2.0
+    store.compact()
+    store.append(rows(["e"], y=3.0))
+    assert store.done_ids() == {"a", "b", "e"} and len(store.read()) == 3
+
+
+def test_partial_temporary_file_is_ignored(tmp_path):
+    store = ResultsStore(tmp_path)
+    store.append(rows(["a"]))
+    (tmp_path / "parts" / "tmpabc.tmp").write_bytes(b"half a parquet file")  # a write cut by kill -9
+    assert store.done_ids() == {"a"} and len(store.read()) == 1
+
+
+def test_metadata_round_trip(tmp_path):
+    store = ResultsStore(tmp_path)
+    assert store.metadata() is None and not store.has_rows()
+    store.write_metadata({"spec_digest": "abc", "counts": {"ok": 1}})
+    assert store.metadata() == {"spec_digest": "abc", "counts": {"ok": 1}}

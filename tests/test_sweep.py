@@ -1,0 +1,162 @@
+"""cosim sweep on real Dask: a LocalCluster, `dask scheduler` + `dask worker` processes, the CLI, resume."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+import orchestrator
+from orchestrator.cli import main
+from orchestrator.design import DesignSpace
+from orchestrator.spec import load_spec
+from orchestrator.sweep import Sweep, SweepError
+
+from .conftest import TESTS
+from .sweep_fixtures import dask_processes, local_cluster  # noqa: F401  (fixtures)
+
+STOP = 0.5
+
+
+def ode_spec(fmu: str = "builtin:linear_ode_fmi3", step: float = 0.01, **design) -> dict:
+    """x' = a x from x0 (u = 0): y(STOP) = x0 exp(a STOP) exactly, a check for every row."""
+    return {
+        "name": "ode_sweep",
+        "units": {"ode": {"fmu": fmu}},
+        "experiment": {"stop": STOP, "step": step},
+        "objectives": {"y_end": {"signal": "ode.y", "reduce": "final"},
+                       "y_max": {"signal": "ode.y", "reduce": "max"}},
+        "design": design or {"parameters": {"ode.a": {"min": -2.0, "max": 0.0, "step": 0.5},
+                                            "ode.x0": {"values": [1.0, 2.0]}}},
+    }
+
+
+def assert_exact(df: pd.DataFrame) -> None:
+    assert (df["status"] == "ok").all(), df[df["status"] != "ok"][["status", "message"]]
+    expected = df["ode.x0"] * (df["ode.a"] * STOP).map(math.exp)
+    assert (df["y_end"] - expected).abs().max() < 1e-9
+    assert (df["y_max"] - df["ode.x0"]).abs().max() < 1e-12  # a <= 0: the start is the maximum
+
+
+def test_api_on_default_local_cluster_returns_every_point(write_spec, tmp_path):
+    spec_path = write_spec(ode_spec())
+    df = orchestrator.sweep(str(spec_path), workers=2, out=tmp_path / "out")
+    ids = [p.id for p in DesignSpace.from_spec(load_spec(spec_path))]
+    assert list(df["point_id"]) == ids  # every point once, in design order
+    assert list(df.columns) == ["point_id", "ode.a", "ode.x0", "y_end", "y_max", "status", "message", "run_time",
+                                "worker"]
+    assert_exact(df)
+    assert df["worker"].nunique() == 2 and (df["run_time"] > 0).all()
+    stored = pd.read_parquet(tmp_path / "out" / "results.parquet")
+    pd.testing.assert_frame_equal(stored, df)
+    meta = json.loads((tmp_path / "out" / "metadata.json").read_text())
+    assert meta["spec_digest"] == load_spec(spec_path).digest and meta["points"] == 10
+    assert meta["counts"] == {"ok": 10, "failed": 0, "timeout": 0, "crashed": 0}
+    assert len(meta["fmu_checksums"]["ode"]) == 64 and meta["packages"]["distributed"]
+    assert meta["started"] <= meta["ended"]
+
+
+def test_array_parameter_and_python_unit_on_local_cluster(write_spec, local_cluster):
+    spec = {
+        "units": {"clock": {"python": f"{TESTS / 'units_for_tests.py'}:Clock"},
+                  "gain": {"python": f"{TESTS / 'units_for_tests.py'}:Gain"}},
+        "connections": [{"from": "clock.time", "to": "gain.u"}],
+        "experiment": {"stop": 1.0, "step": 0.1},
+        "objectives": {"out": {"signal": "gain.y", "reduce": "final"}},
+        "design": {"parameters": {"gain.k": {"min": 0.5, "max": 2.0, "step": 0.5}}, "constraint": "k != 1.5"},
+    }
+    df = orchestrator.sweep(str(write_spec(spec)), scheduler=local_cluster, batch_size=1)
+    assert list(df["gain.k"]) == [0.5, 1.0, 2.0]
+    assert (df["status"] == "ok").all() and list(df["out"]) == pytest.approx([0.5, 1.0, 2.0])
+
+
+def test_remote_scheduler_and_workers_get_the_fmu_bytes(dask_processes, tmp_path, built_fmu):
+    address, worker_dir = dask_processes
+    study = tmp_path / "study"
+    study.mkdir()
+    shutil.copy(built_fmu("linear_ode", 2), study / "ode.fmu")
+    shutil.copy(TESTS / "units_for_tests.py", study / "my_units.py")
+    spec = ode_spec(fmu="ode.fmu")
+    spec["units"]["g"] = {"python": "my_units.py:Gain", "parameters": {"k": 3.0}}
+    spec["connections"] = [{"from": "ode.y", "to": "g.u"}]
+    spec["objectives"]["g_end"] = {"signal": "g.y", "reduce": "final"}
+    spec_path = study / "spec.json"
+    spec_path.write_text(json.dumps(spec))
+    sweep = Sweep(spec_path, scheduler=address, out=tmp_path / "out", quiet=True)
+    shutil.rmtree(study)  # from here on no process can read the FMU or unit file from the client's disk
+    df = sweep.run()
+    assert len(df) == 10 and df["worker"].nunique() == 2
+    assert all(w.startswith("tcp://127.0.0.1:") and w != address for w in df["worker"])
+    assert_exact(df)
+    assert (df["g_end"] - 3.0 * df["y_end"]).abs().max() < 1e-12
+    assert not list(worker_dir.glob("*.fmu"))  # the workers' folder got no copy by path either
+
+
+def test_cli_exit_codes_and_dry_run(write_spec, tmp_path, capsys, local_cluster):
+    spec_path = str(write_spec(ode_spec()))
+    out = str(tmp_path / "cli_out")
+    assert main(["sweep", spec_path, "--out", out, "--scheduler", local_cluster, "--csv"]) == 0
+    assert len(pd.read_csv(Path(out) / "results.csv")) == 10
+    assert main(["sweep", spec_path, "--out", out, "--scheduler", local_cluster]) == 2  # folder in use
+    assert "--resume" in capsys.readouterr().err
+    assert main(["sweep", spec_path, "--out", out, "--resume"]) == 0  # nothing left: no cluster needed
+    assert main(["sweep", spec_path, "--dry-run"]) == 0
+    text = capsys.readouterr().out
+    assert "10 points" in text and "ode.a=-2.0, ode.x0=1.0" in text and "estimate:" in text
+    assert main(["sweep", spec_path, "--out", str(tmp_path / "x"), "--timeout", "-1"]) == 2
+    bad = write_spec({**ode_spec(), "design": {"parameters": {"ode.nope": {"values": [1]}}}}, "bad.json")
+    assert main(["sweep", str(bad), "--out", str(tmp_path / "y")]) == 2
+    assert "ode.nope" in capsys.readouterr().err
+
+
+def test_resume_of_another_spec_is_refused(write_spec, tmp_path, local_cluster):
+    out = tmp_path / "out"
+    orchestrator.sweep(str(write_spec(ode_spec())), scheduler=local_cluster, out=out, quiet=True)
+    other = write_spec(ode_spec(step=0.02), "other.json")
+    with pytest.raises(SweepError, match="different spec"):
+        Sweep(other, out=out, resume=True)
+
+
+def test_resume_after_kill_9_of_the_client_runs_only_missing_points(write_spec, tmp_path):
+    design = {"parameters": {"ode.a": {"min": -3.0, "max": 0.0, "step": 0.1}, "ode.x0": {"values": [1.0, 2.0]}}}
+    spec_path = write_spec(ode_spec(step=0.0002, **design))  # 2500 steps a point: a sweep of a few seconds
+    total = len(DesignSpace.from_spec(load_spec(spec_path)))
+    out = tmp_path / "out"
+    command = [sys.executable, "-m", "orchestrator.cli", "sweep", str(spec_path), "--out", str(out),
+               "--workers", "2", "--batch-size", "2"]
+    client = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.monotonic() + 60
+    while len(list((out / "parts").glob("part-*.parquet"))) < 4:
+        assert client.poll() is None, "the sweep ended before it could be killed"
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    os.kill(client.pid, signal.SIGKILL)  # kill -9 of the client itself...
+    client.wait()
+    time.sleep(0.5)
+    try:
+        os.killpg(client.pid, signal.SIGTERM)  # ...then its orphaned local cluster
+    except ProcessLookupError:
+        pass
+    from orchestrator.results import ResultsStore
+
+    before = ResultsStore(out).read()
+    assert 0 < len(before) < total
+    result = subprocess.run(command + ["--resume"], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert f"({total - len(before)} to run)" in result.stderr
+    df = pd.read_parquet(out / "results.parquet")
+    ids = [p.id for p in DesignSpace.from_spec(load_spec(spec_path))]
+    assert list(df["point_id"]) == ids  # no gaps, no duplicates, design order
+    assert_exact(df)
+    kept = df.set_index("point_id").loc[before["point_id"], "run_time"]
+    assert list(kept) == list(before["run_time"])  # rows from before the kill were not recomputed
+    assert len(json.loads((out / "metadata.json").read_text())["runs"]) == 2
