@@ -1,0 +1,225 @@
+"""The explorer: its state without a window, and the real Tk window on a virtual X screen (Xvfb).
+
+The window test starts its own Xvfb on a free display with ``-fbdir``, so the
+screen is also an XWD image file; the screenshot is that file converted to
+PNG (``explorer-screenshot.png`` in the test's temporary folder, and in
+``$COSIM_SCREENSHOTS`` when set).  Needs Debian's ``xvfb`` package.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from orchestrator.analysis.explorer import SLIDER_STEPS, ExplorerState
+from orchestrator.analysis.table import AnalysisError, load_results
+
+from .conftest import python_unit
+from .test_analysis_table import make_sweep_table
+
+# -- state, no window --------------------------------------------------------------------------------------
+
+
+def test_state_defaults_ranges_greyed_and_selection(tmp_path):
+    table = load_results(make_sweep_table(tmp_path / "s"))
+    state = ExplorerState(table)
+    assert (state.x, state.y, state.color, state.z) == ("traj.q_via[2]", "traj.q_via[4]", "energy", None)
+    n = len(table.df)
+    assert state.greyed().size == 0 and state.coloured().size == n
+    q2 = table.values("traj.q_via[2]")
+    state.set_range_steps("traj.q_via[2]", SLIDER_STEPS // 2, SLIDER_STEPS)
+    assert state.ranges["traj.q_via[2]"].lo == pytest.approx(-40.0)
+    assert np.array_equal(state.greyed(), np.flatnonzero(q2 < -40))
+    # narrowing an objective greys the rows without a value too (failed rows)
+    state.set_range("energy", 0, 60)
+    e = table.values("energy")
+    assert np.array_equal(state.coloured(), np.flatnonzero((q2 >= -40) & (e <= 60)))
+    # slider ends are exactly the bounds: the extreme rows stay coloured
+    state.reset_ranges()
+    state.set_range_steps("traj.q_via[4]", 0, SLIDER_STEPS)
+    assert state.narrowed() == [] and state.greyed().size == 0
+    # picking: nearest within the radius, else nothing changes
+    screen = np.array([[10.0, 10.0], [50.0, 50.0], [100.0, 10.0]])
+    rows = np.array([4, 9, 17])
+    assert state.pick(screen, rows, (47.0, 55.0)) == 9 and state.selected == 9
+    assert state.pick(screen, rows, (300.0, 300.0)) is None and state.selected == 9
+    assert state.selected_values()["point_id"] == table.df["point_id"][9]
+    # axes with missing values: those rows are not drawn
+    state.set_axis("x", "energy")
+    assert state.drawable().sum() == n - 3
+    with pytest.raises(AnalysisError, match="Did you mean 'energy'"):
+        state.set_axis("color", "enrgy")
+    state.set_axis("color", "")
+    assert state.color is None
+
+
+def test_state_works_for_a_foreign_table(tmp_path):
+    path = tmp_path / "foreign.csv"
+    pd.DataFrame({"a": [1, 2, 3], "b": [3.0, np.nan, 1.0], "name": ["x", "y", "z"]}).to_csv(path, index=False)
+    state = ExplorerState(load_results(path))
+    assert state.columns == ["a", "b"] and (state.x, state.y, state.color) == ("a", "b", None)
+    assert state.drawable().tolist() == [True, False, True]
+
+
+# -- the real window under Xvfb ---------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def xvfb(tmp_path_factory):
+    """A private Xvfb display; yields (display, framebuffer XWD file)."""
+    if shutil.which("Xvfb") is None:
+        pytest.skip("Xvfb is not installed (Debian package 'xvfb'; .ci/run installs it)")
+    fbdir = tmp_path_factory.mktemp("xvfb")
+    number = next(n for n in range(90, 200) if not Path(f"/tmp/.X11-unix/X{n}").exists()
+                  and not Path(f"/tmp/.X{n}-lock").exists())
+    proc = subprocess.Popen(["Xvfb", f":{number}", "-screen", "0", "1280x1024x24", "-nolisten", "tcp",
+                             "-fbdir", str(fbdir)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 15
+    while not Path(f"/tmp/.X11-unix/X{number}").exists():
+        if proc.poll() is not None or time.monotonic() > deadline:
+            proc.kill()
+            pytest.fail(f"Xvfb did not start: {proc.stderr.read().decode()[-500:]}")
+        time.sleep(0.05)
+    old = os.environ.get("DISPLAY")
+    os.environ["DISPLAY"] = f":{number}"
+    yield f":{number}", fbdir / "Xvfb_screen0"
+    if old is None:
+        os.environ.pop("DISPLAY", None)
+    else:
+        os.environ["DISPLAY"] = old
+    proc.terminate()
+    proc.wait(timeout=10)
+
+
+def xwd_to_rgb(path: Path) -> np.ndarray:
+    """Decode an XWD file (ZPixmap, 32 bits per pixel, as Xvfb writes it) to an RGB uint8 array."""
+    data = path.read_bytes()
+    h = np.frombuffer(data[:100], dtype=">u4")
+    header_size, width, height, byte_order, bpp, bpl = int(h[0]), int(h[4]), int(h[5]), int(h[7]), int(h[11]), int(h[12])
+    masks, ncolors = (int(h[14]), int(h[15]), int(h[16])), int(h[19])
+    assert bpp == 32, f"unexpected {bpp} bits per pixel"
+    start = header_size + 12 * ncolors
+    pixels = np.frombuffer(data[start:start + bpl * height], dtype="<u4" if byte_order == 0 else ">u4")
+    pixels = pixels.reshape(height, bpl // 4)[:, :width]
+    channels = [((pixels & m) >> (int(m) & -int(m)).bit_length() - 1).astype(np.uint8) for m in masks]
+    return np.dstack(channels)
+
+
+def pump(root, until=lambda: True, timeout=10.0):
+    deadline = time.monotonic() + timeout
+    while True:
+        root.update()
+        if until() or time.monotonic() > deadline:
+            return until()
+        time.sleep(0.01)
+
+
+def linear_ode_sweep(folder: Path, write_spec) -> Path:
+    """A tiny real sweep table: dy/dt = a*y, y(0) = 1, over a in {-2, -1, -0.5}; metadata names the spec."""
+    spec = {"name": "decay", "units": {"ode": {"python": python_unit("LinearOde"), "parameters": {"x0": 1.0}}},
+            "experiment": {"start": 0.0, "stop": 1.0, "step": 0.01}, "record": ["ode.y"],
+            "objectives": {"y_end": {"signal": "ode.y", "reduce": "final", "unit": "1", "sense": "minimize"}},
+            "design": {"parameters": {"ode.a": {"values": [-2.0, -1.0, -0.5]}}}}
+    spec_path = write_spec(spec)
+    folder.mkdir(parents=True, exist_ok=True)
+    a = np.array([-2.0, -1.0, -0.5])
+    pd.DataFrame({"point_id": ["pa", "pb", "pc"], "ode.a": a, "y_end": np.exp(a), "status": "ok", "message": "",
+                  "run_time": 0.01, "worker": "w"}).to_parquet(folder / "results.parquet", index=False)
+    (folder / "metadata.json").write_text(json.dumps({"spec_path": str(spec_path), "spec": spec}))
+    return folder / "results.parquet"
+
+
+def test_explorer_window_slider_click_rerun_and_screenshot(xvfb, tmp_path, write_spec):
+    import tkinter as tk
+
+    from orchestrator.analysis.explorer import ExplorerWindow
+
+    display, framebuffer = xvfb
+    table = load_results(make_sweep_table(tmp_path / "s"))
+    root = tk.Tk()
+    try:
+        root.geometry("1100x900+0+0")
+        window = ExplorerWindow(root, ExplorerState(table))
+        pump(root, timeout=1.0)
+        assert root.winfo_viewable()
+        q2, q4 = table.values("traj.q_via[2]"), table.values("traj.q_via[4]")
+
+        # move the lower slider of q_via[2] to its middle: points left of -40 deg turn grey
+        lo, hi, shown, _ = window.sliders["traj.q_via[2]"]
+        lo.set(SLIDER_STEPS // 2)
+        assert pump(root, lambda: window.state.greyed().size > 0 and window._pending is None)
+        expected_grey = np.flatnonzero(q2 < -40)
+        assert np.array_equal(window.state.greyed(), expected_grey)
+        assert shown.cget("text").startswith("-40")
+        greyed = [c for c in window.ax.collections if c.get_gid() == "greyed"][0]
+        coloured = [c for c in window.ax.collections if c.get_gid() == "points"][0]
+        assert len(greyed.get_offsets()) == expected_grey.size
+        assert len(coloured.get_offsets()) == len(table.df) - expected_grey.size
+
+        # click a coloured point through Tk's own event queue
+        row = int(np.flatnonzero((q2 == 20) & (q4 == 70))[0])
+        x, y = window.screen_position(row)
+        widget = window.canvas.get_tk_widget()
+        # the Tk backend maps widget pixels to display pixels 1:1, y flipped
+        tk_x, tk_y = int(round(x)), int(round(widget.winfo_height() - y))
+        widget.event_generate("<Motion>", x=tk_x, y=tk_y, warp=True)
+        widget.event_generate("<ButtonPress-1>", x=tk_x, y=tk_y)
+        widget.event_generate("<ButtonRelease-1>", x=tk_x, y=tk_y)
+        assert pump(root, lambda: window.state.selected is not None)
+        assert window.state.selected == row
+        ring = [c for c in window.ax.collections if c.get_gid() == "selected"]
+        assert ring and tuple(ring[0].get_offsets()[0]) == (20.0, 70.0)
+        value_label = window.sliders["energy"][3]
+        assert value_label.cget("fg") == "red"
+        assert float(value_label.cget("text")) == pytest.approx(table.values("energy")[row], rel=1e-5)
+
+        # the figure can be saved; the whole screen is captured from Xvfb's frame buffer
+        window.save_figure(str(tmp_path / "explorer-figure.png"))
+        assert (tmp_path / "explorer-figure.png").read_bytes()[:4] == b"\x89PNG"
+        pump(root, timeout=0.3)
+        image = xwd_to_rgb(framebuffer)
+        import matplotlib.image
+
+        shot = tmp_path / "explorer-screenshot.png"
+        matplotlib.image.imsave(shot, image)
+        if os.environ.get("COSIM_SCREENSHOTS"):
+            Path(os.environ["COSIM_SCREENSHOTS"]).mkdir(parents=True, exist_ok=True)
+            shutil.copy(shot, Path(os.environ["COSIM_SCREENSHOTS"]) / shot.name)
+        window_px = image[:900, :1100].reshape(-1, 3)
+        assert len(np.unique(window_px, axis=0)) > 200  # a drawn colour map, not an empty screen
+        # the greyed points' colour (0.78 grey blended on white) is on screen
+        assert np.any(np.all(np.abs(window_px.astype(int) - 227) <= 3, axis=1))
+    finally:
+        root.destroy()
+
+
+def test_explorer_reruns_the_selected_design_and_shows_its_traces(xvfb, tmp_path, write_spec):
+    import tkinter as tk
+
+    from orchestrator.analysis.explorer import ExplorerWindow
+
+    table = load_results(linear_ode_sweep(tmp_path / "decay", write_spec))
+    root = tk.Tk()
+    try:
+        window = ExplorerWindow(root, ExplorerState(table))
+        pump(root, timeout=0.5)
+        window.state.select(1)  # a = -1
+        window.rerun_button.invoke()
+        assert pump(root, lambda: bool(window.trace_windows), timeout=60), window.status.cget("text")
+        win = window.trace_windows[0]
+        assert "pb" in win.title() and "ok" in win.title()
+        lines = [line for ax in win.figure.axes for line in ax.get_lines()]
+        y = next(line for line in lines if line.get_label() == "y")
+        t, v = y.get_xdata(), y.get_ydata()
+        assert t[-1] == pytest.approx(1.0) and v[-1] == pytest.approx(np.exp(-1.0), rel=1e-6)
+        assert win.animation is None  # no joint angles, no arm
+    finally:
+        root.destroy()
