@@ -199,6 +199,18 @@ def cmd_explore(args: argparse.Namespace) -> int:
     return run_explorer(table, spec_path=args.spec)
 
 
+def prepare_point_run(spec: str, point_id: str, results: str | None, out: Path | None):
+    """``cosim run SPEC --point ID``: (system recording every output, overrides, traces path); see analysis.rerun."""
+    from .analysis.rerun import prepare_point_run as prepare
+    from .analysis.table import AnalysisError
+    from .cli import UsageError
+
+    try:
+        return prepare(spec, point_id, results, out)
+    except AnalysisError as exc:
+        raise UsageError(str(exc)) from None
+
+
 if __name__ == "__main__":  # pragma: no cover - convenience
     from .cli import main
 

@@ -60,6 +60,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--set", dest="sets", action="append", default=[], metavar="UNIT.PARAM=VALUE",
                    help="set a parameter (VALUE as JSON: 2.5, true, [1,2,3]); repeatable")
     p.add_argument("--out", help="write the recorded signals to this .parquet or .csv file")
+    p.add_argument("--point", metavar="ID", help="re-run this design point of a sweep, recording every output")
+    p.add_argument("--results", help="the sweep's results.parquet or folder for --point (default: results/<name>/)")
     p.set_defaults(handler=cmd_run)
 
     p = sub.add_parser("inspect", help="list an FMU's variables, or a spec's units, connections and order")
@@ -115,6 +117,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise UsageError(f"--out {out}: use a .parquet or .csv file name")
     system = check_spec(args.spec)
     overrides = []
+    if args.point:  # values from the sweep's table; traces by default to <results>/points/<ID>.parquet
+        from .analysis_cli import prepare_point_run
+        system, overrides, out = prepare_point_run(args.spec, args.point, args.results, out)
     from .problems import SpecError
 
     problems = []
