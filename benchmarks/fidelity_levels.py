@@ -1,0 +1,165 @@
+"""Cost of one pick-and-place point per fidelity level, split into unit work and orchestration.
+
+For each configuration (a spec of ``examples/pick_and_place`` with the robot
+unit, communication step and reference sampling it names) this builds the
+system once, instantiates the units once and runs ``POINTS`` design points
+through :class:`orchestrator.Execution` with the units reused (``reset()``
+between points), as a sweep worker does.  Every unit's ``do_step``, ``get``,
+``set`` and lifecycle calls are wrapped with a timer, so
+
+    unit work     = time inside the units' own calls (FMU calls, Exudyn, pinocchio, the trajectory)
+    orchestration = Execution wall time - unit work (master loop, transfers, probes, reducers, setup)
+
+The timer wrappers themselves cost ``WRAP_COST`` per call, measured below and
+subtracted from the unit work (they are part of neither).  The energy of each
+configuration is compared with the 0.25 ms reference at the same points.
+
+Usage::
+
+    python benchmarks/fidelity_levels.py            # all configurations, 12 points each
+    python benchmarks/fidelity_levels.py --points 30
+
+Results are recorded in benchmarks/fidelity_levels.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from orchestrator.execution import Execution  # noqa: E402
+from orchestrator.spec import spec_from_dict  # noqa: E402
+from orchestrator.system import build_system  # noqa: E402
+
+SPEC = ROOT / "examples" / "pick_and_place" / "spec.json"
+ID = "models.panda_inverse_dynamics:PandaInverseDynamics"
+EXUDYN = "models.panda_exudyn:PandaExudyn"
+TIMED = ("do_step", "get", "set", "setup", "enter_initialization", "exit_initialization", "reset")
+
+# name -> (robot unit, communication step, trajectory sampling)
+CONFIGS = {
+    "ID, 1 ms, instant (before)": (ID, 0.001, "instant"),
+    "ID, 10 ms, step_midpoint (after, spec.json)": (ID, 0.01, "step_midpoint"),
+    "Exudyn, 1 ms, instant (spec_exudyn.json)": (EXUDYN, 0.001, "instant"),
+}
+REFERENCE = (ID, 0.00025, "step_midpoint")
+
+
+def make_raw(robot: str, step: float, sampling: str) -> dict:
+    """The study spec (as a dict) at one fidelity level."""
+    raw = json.loads(SPEC.read_text())
+    raw = copy.deepcopy(raw)
+    raw["units"]["robot"]["python"] = robot
+    raw["experiment"]["step"] = step
+    raw["units"]["traj"]["parameters"]["sampling"] = sampling
+    return raw
+
+
+def design_points(n: int, seed: int = 7) -> list[tuple[float, float]]:
+    """``n`` grid points of the study (q2[2], q2[4]) in degrees: the four corners, then random ones."""
+    rng = np.random.default_rng(seed)
+    corners = [(0.0, 0.0), (-100.0, 140.0), (20.0, 140.0), (-100.0, 0.0)]
+    rest = [(float(rng.integers(-100, 21)), float(rng.integers(0, 141))) for _ in range(max(0, n - 4))]
+    return (corners + rest)[:n]
+
+
+class UnitClock:
+    """Wraps the protocol methods of live units with one accumulating timer."""
+
+    def __init__(self, units: dict):
+        self.total = 0.0
+        self.calls = 0
+        for unit in units.values():
+            for name in TIMED:
+                setattr(unit, name, self._wrap(getattr(unit, name)))
+
+    def _wrap(self, method):
+        clock = time.perf_counter
+
+        def timed(*args):
+            t0 = clock()
+            try:
+                return method(*args)
+            finally:
+                self.total += clock() - t0
+                self.calls += 1
+        return timed
+
+
+def wrap_cost(n: int = 200_000) -> float:
+    """Seconds one timer wrapper adds per call (its own two clock reads and bookkeeping)."""
+    class Dummy:
+        def do_step(self, *a):
+            return None
+    plain = Dummy()
+    t0 = time.perf_counter()
+    for _ in range(n):
+        plain.do_step(0.0, 0.0)
+    bare = time.perf_counter() - t0
+    wrapped = Dummy()
+    clock = UnitClock.__new__(UnitClock)
+    clock.total, clock.calls = 0.0, 0
+    wrapped.do_step = clock._wrap(wrapped.do_step)
+    t0 = time.perf_counter()
+    for _ in range(n):
+        wrapped.do_step(0.0, 0.0)
+    return max(0.0, (time.perf_counter() - t0 - bare) / n)
+
+
+def run_config(robot: str, step: float, sampling: str, points, timed: bool = True):
+    """Run ``points``; returns per-point (wall s, unit s, calls, e_total J)."""
+    system = build_system(spec_from_dict(make_raw(robot, step, sampling), SPEC))
+    units = {n: su.unit_type.instantiate(n) for n, su in system.units.items()}
+    clock = UnitClock(units) if timed else None
+    out = []
+    first = True
+    for q22, q24 in [points[0]] + list(points):  # the first run warms up (imports, model build) and is dropped
+        for u in units.values():
+            u.reset()
+        overrides = [system.assignment_for("traj.waypoints[9]", q22), system.assignment_for("traj.waypoints[11]", q24)]
+        unit0, calls0 = (clock.total, clock.calls) if clock else (0.0, 0)
+        result = Execution(system, overrides, units=units).run()
+        if not result.ok:
+            raise RuntimeError(result.message)
+        if not first:
+            unit_s = (clock.total - unit0) if clock else float("nan")
+            calls = (clock.calls - calls0) if clock else 0
+            out.append((result.elapsed, unit_s, calls, result.objectives["e_total"]))
+        first = False
+    for u in units.values():
+        u.terminate()
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--points", type=int, default=12)
+    args = parser.parse_args()
+    points = design_points(args.points)
+    per_call = wrap_cost()
+    print(f"timer wrapper cost {per_call * 1e6:.2f} us per call (subtracted from unit work)")
+    ref = [r[3] for r in run_config(*REFERENCE, points, timed=False)]
+    print(f"{'configuration':46s} {'wall/point':>10s} {'units':>9s} {'orchestr.':>9s} {'ratio':>6s} "
+          f"{'max |dE| vs 0.25 ms':>20s}")
+    for name, config in CONFIGS.items():
+        rows = run_config(*config, points)
+        wall = statistics.median(r[0] for r in rows)
+        unit = statistics.median(r[1] - r[2] * per_call for r in rows)
+        err = max(abs(r[3] - e) / e for r, e in zip(rows, ref))
+        print(f"{name:46s} {wall * 1e3:8.1f}ms {unit * 1e3:7.1f}ms {(wall - unit) * 1e3:7.1f}ms "
+              f"{wall / unit:6.2f} {err * 100:18.2f} %", flush=True)
+    print(f"points: {points}")
+
+
+if __name__ == "__main__":
+    main()
