@@ -223,3 +223,30 @@ def test_explorer_reruns_the_selected_design_and_shows_its_traces(xvfb, tmp_path
         assert win.animation is None  # no joint angles, no arm
     finally:
         root.destroy()
+
+
+def test_explorer_animates_the_arm_of_a_rerun_robot_design(xvfb, tmp_path):
+    import tkinter as tk
+
+    from orchestrator.analysis.explorer import ExplorerWindow
+
+    from .test_analysis_traces import PICK_AND_PLACE, robot_table
+
+    if not PICK_AND_PLACE.exists():
+        pytest.skip("examples/pick_and_place/spec.json is not there")
+    root = tk.Tk()
+    try:
+        window = ExplorerWindow(root, ExplorerState(load_results(robot_table(tmp_path / "pp"))))
+        window.state.select(0)
+        window.rerun_button.invoke()
+        assert pump(root, lambda: bool(window.trace_windows), timeout=60), window.status.cget("text")
+        win = window.trace_windows[0]
+        assert [a.get_ylabel() for a in win.figure.axes] == ["joint angles [rad]", "joint torques [N m]",
+                                                             "electric power [W]"]
+        assert win.animation is not None
+        arm = next(line for line in win.arm_figure.axes[0].get_lines() if line.get_gid() == "arm")
+        first = np.array(arm.get_data_3d())
+        # the animation runs on Tk's timer: after a while the arm has moved
+        assert pump(root, lambda: not np.allclose(np.array(arm.get_data_3d()), first), timeout=10)
+    finally:
+        root.destroy()

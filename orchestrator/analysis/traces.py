@@ -111,6 +111,7 @@ def arm_animation(fig: Figure, traces: pd.DataFrame, frames: int = 60):
     ax = fig.add_subplot(111, projection="3d")
     reach = float(np.abs(pts).max()) * 1.05
     ax.set_xlim(-reach, reach), ax.set_ylim(-reach, reach), ax.set_zlim(0, reach * 1.2)
+    ax.set_box_aspect((1.0, 1.0, 0.6))  # equal metres on every axis
     ax.set_xlabel("x [m]"), ax.set_ylabel("y [m]"), ax.set_zlabel("z [m]")
     ax.plot(pts[:, 8, 0], pts[:, 8, 1], pts[:, 8, 2], color="tab:orange", linewidth=0.8, gid="tool-path")
     (line,) = ax.plot(*pts[0].T, "-o", color="tab:blue", linewidth=3, markersize=4, gid="arm")

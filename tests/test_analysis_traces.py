@@ -1,0 +1,84 @@
+"""Traces of a re-run Panda design: panels chosen from the signals, forward kinematics of the stick figure."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import matplotlib
+import numpy as np
+import pandas as pd
+import pytest
+
+from orchestrator.analysis.rerun import rerun
+from orchestrator.analysis.table import load_results
+from orchestrator.analysis.traces import arm_animation, arm_points, trace_groups, traces_figure
+
+matplotlib.use("Agg")
+
+PICK_AND_PLACE = Path(__file__).resolve().parent.parent / "examples" / "pick_and_place" / "spec.json"
+
+
+def robot_table(folder: Path) -> Path:
+    """Two design points of the pick-and-place study as a sweep table naming its spec."""
+    folder.mkdir(parents=True, exist_ok=True)
+    spec = json.loads(PICK_AND_PLACE.read_text())
+    targets = list(spec["design"]["parameters"])
+    pd.DataFrame({"point_id": ["p0", "p1"], targets[0]: [-50.0, 0.0], targets[1]: [70.0, 0.0],
+                  "status": "ok"}).to_parquet(folder / "results.parquet", index=False)
+    (folder / "metadata.json").write_text(json.dumps({"spec_path": str(PICK_AND_PLACE), "spec": spec}))
+    return folder / "results.parquet"
+
+
+@pytest.fixture(scope="module")
+def robot_run(tmp_path_factory):
+    if not PICK_AND_PLACE.exists():
+        pytest.skip("examples/pick_and_place/spec.json is not there")
+    table = load_results(robot_table(tmp_path_factory.mktemp("pp")))
+    result, values = rerun(table, 0)
+    assert result.ok, result.message
+    return result, values
+
+
+def test_rerun_of_a_robot_design_records_everything_and_groups_robot_signals(robot_run):
+    result, values = robot_run
+    assert list(values.values()) == [-50.0, 70.0]
+    traces = result.traces
+    groups = dict(trace_groups(traces))
+    assert groups["joint angles [rad]"] == [f"robot.q[{i}]" for i in range(1, 8)]
+    assert groups["joint torques [N m]"] == [f"robot.tau[{i}]" for i in range(1, 8)]
+    assert any("p_el" in c for c in groups["electric power [W]"])
+    fig = matplotlib.figure.Figure()
+    axes = traces_figure(fig, traces, title="p0")
+    assert [a.get_ylabel() for a in axes] == list(groups)
+    assert len(axes[0].get_lines()) == 7 and axes[-1].get_xlabel() == "time [s]"
+    q_line = axes[0].get_lines()[1]
+    assert np.allclose(q_line.get_ydata(), traces["robot.q[2]"])
+
+
+def test_stick_figure_tool_point_is_the_recorded_end_effector(robot_run):
+    traces = robot_run[0].traces
+    q = traces[[f"robot.q[{i}]" for i in range(1, 8)]].to_numpy()
+    ee = traces[[f"robot.ee_pos[{i}]" for i in range(1, 4)]].to_numpy()
+    pts = arm_points(q[::20])
+    assert pts.shape == (len(q[::20]), 9, 3)
+    assert np.allclose(pts[:, 8], ee[::20], atol=1e-9)
+    assert np.allclose(pts[:, 0], 0.0) and np.allclose(pts[:, 1, 2], 0.333)  # base, then joint 1 at 0.333 m
+
+
+def test_arm_animation_moves_the_arm(robot_run):
+    traces = robot_run[0].traces
+    fig = matplotlib.figure.Figure()
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    FigureCanvasAgg(fig)
+    anim = arm_animation(fig, traces, frames=10)
+    fig.canvas.draw()
+    arm = next(line for line in fig.axes[0].get_lines() if line.get_gid() == "arm")
+    start = np.array(arm.get_data_3d())
+    anim._func(9)  # the last frame
+    end = np.array(arm.get_data_3d())
+    assert start.shape == (3, 9) and not np.allclose(start, end)
+    q_end = traces[[f"robot.q[{i}]" for i in range(1, 8)]].to_numpy()[-1]
+    assert np.allclose(end.T, arm_points(q_end)[0])
+    assert arm_animation(fig, traces.drop(columns=["robot.q[3]"])) is None
