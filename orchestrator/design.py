@@ -240,7 +240,7 @@ class DesignSpace:
             expression = Expression(text)
         except ExpressionError as exc:
             raise SpecError([Problem(self.spec.path, "$.design.constraint", str(exc), fix)]) from None
-        unknown = sorted(expression.names - set(names))
+        unknown = sorted(expression.free_names - set(names))
         if unknown:
             raise SpecError([Problem(self.spec.path, "$.design.constraint",
                                      f"unknown name(s) in the constraint: {', '.join(unknown)}", fix)])

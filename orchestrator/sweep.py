@@ -265,7 +265,7 @@ class Sweep:
             link = cluster.dashboard_link if dashboard else "unavailable (install bokeh to get it)"
         else:
             try:
-                client = Client(self.scheduler, timeout=30)
+                client = Client(self.scheduler, timeout=10)
             except OSError as exc:
                 raise SweepError(f"cannot reach the Dask scheduler at {self.scheduler}: {exc}") from None
             link = client.dashboard_link
