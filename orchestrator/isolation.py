@@ -153,11 +153,15 @@ def _row(point_id: str, status: str, message: str, started: float) -> dict[str, 
             "run_time": time.perf_counter() - started, "objectives": {}}
 
 
-def _remove_own_folder_and_exit(*_: Any) -> None:
-    """Exit now, removing the temporary folder the parent made for this child (it may not get to)."""
+def _remove_own_folder() -> None:
+    """Remove the temporary folder the parent made for this child (the parent may be gone already)."""
     folder = os.environ.get("TMPDIR", "")
     if Path(folder).name.startswith("cosim_worker_"):
         shutil.rmtree(folder, ignore_errors=True)
+
+
+def _remove_own_folder_and_exit(*_: Any) -> None:
+    _remove_own_folder()
     os._exit(3)
 
 
@@ -196,7 +200,10 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
     finally:
         if runner is not None:
             runner.close()
-        shutil.rmtree(folder, ignore_errors=True)
+        from .units.fmu import EXTRACTED
+
+        EXTRACTED.clear()
+        _remove_own_folder()
 
 
 # -- the parent side -----------------------------------------------------------------------
