@@ -210,5 +210,6 @@ def _fmt(value: Any) -> str:
     return f"{value:g}" if isinstance(value, float) else str(value)
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+if __name__ == "__main__":  # as orchestrator.cli, so that subcommand modules raise the UsageError caught here
+    from orchestrator.cli import main as _main
+    sys.exit(_main())

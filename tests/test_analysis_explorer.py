@@ -12,6 +12,7 @@ import json
 import os
 import shutil
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -181,6 +182,20 @@ def test_explorer_window_slider_click_rerun_and_screenshot(xvfb, tmp_path, write
         assert value_label.cget("fg") == "red"
         assert float(value_label.cget("text")) == pytest.approx(table.values("energy")[row], rel=1e-5)
 
+        # in 3-D (z chosen in its combobox) a click picks the point projected nearest to it
+        window.choosers["z"].set("energy")
+        window.choosers["z"].event_generate("<<ComboboxSelected>>")
+        assert pump(root, lambda: window.ax.name == "3d")
+        other = int(np.flatnonzero((q2 == 0) & (q4 == 30))[0])
+        x, y = window.screen_position(other)
+        tk_x, tk_y = int(round(x)), int(round(widget.winfo_height() - y))
+        widget.event_generate("<ButtonPress-1>", x=tk_x, y=tk_y)
+        widget.event_generate("<ButtonRelease-1>", x=tk_x, y=tk_y)
+        assert pump(root, lambda: window.state.selected == other), window.state.selected
+        window.choosers["z"].set("")
+        window.choosers["z"].event_generate("<<ComboboxSelected>>")
+        assert pump(root, lambda: window.ax.name != "3d")
+
         # the figure can be saved; the whole screen is captured from Xvfb's frame buffer
         window.save_figure(str(tmp_path / "explorer-figure.png"))
         assert (tmp_path / "explorer-figure.png").read_bytes()[:4] == b"\x89PNG"
@@ -213,7 +228,7 @@ def test_explorer_reruns_the_selected_design_and_shows_its_traces(xvfb, tmp_path
         pump(root, timeout=0.5)
         window.state.select(1)  # a = -1
         window.rerun_button.invoke()
-        assert pump(root, lambda: bool(window.trace_windows), timeout=60), window.status.cget("text")
+        assert pump(root, lambda: bool(window.trace_windows), timeout=120), window.status.cget("text")
         win = window.trace_windows[0]
         assert "pb" in win.title() and "ok" in win.title()
         lines = [line for ax in win.figure.axes for line in ax.get_lines()]
@@ -239,14 +254,22 @@ def test_explorer_animates_the_arm_of_a_rerun_robot_design(xvfb, tmp_path):
         window = ExplorerWindow(root, ExplorerState(load_results(robot_table(tmp_path / "pp"))))
         window.state.select(0)
         window.rerun_button.invoke()
-        assert pump(root, lambda: bool(window.trace_windows), timeout=60), window.status.cget("text")
+        assert pump(root, lambda: bool(window.trace_windows), timeout=120), window.status.cget("text")
         win = window.trace_windows[0]
         assert [a.get_ylabel() for a in win.figure.axes] == ["joint angles [rad]", "joint torques [N m]",
                                                              "electric power [W]"]
         assert win.animation is not None
         arm = next(line for line in win.arm_figure.axes[0].get_lines() if line.get_gid() == "arm")
         first = np.array(arm.get_data_3d())
-        # the animation runs on Tk's timer: after a while the arm has moved
-        assert pump(root, lambda: not np.allclose(np.array(arm.get_data_3d()), first), timeout=10)
+        # the animation runs on Tk's timer: after a while the arm has moved (generous: CI machines get busy)
+        assert pump(root, lambda: not np.allclose(np.array(arm.get_data_3d()), first), timeout=90)
     finally:
         root.destroy()
+
+
+def test_explore_without_a_display_is_a_usage_error(tmp_path):
+    path = make_sweep_table(tmp_path / "s")
+    env = {k: v for k, v in os.environ.items() if k != "DISPLAY"}
+    done = subprocess.run([sys.executable, "-m", "orchestrator.cli", "explore", str(path)], env=env,
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and "cannot open a window" in done.stderr and "Traceback" not in done.stderr

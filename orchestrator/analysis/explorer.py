@@ -368,6 +368,7 @@ class ExplorerWindow:
                 if anim is not None:
                     arm_canvas.get_tk_widget().pack(side="right", fill="both", expand=True)
                     win.arm_figure, win.animation = arm_fig, anim  # keep the animation alive
+                    arm_canvas.draw_idle()  # its first draw starts the animation's timer
             except Exception as exc:  # no pinocchio model: traces alone are still useful
                 self.status.configure(text=f"no arm animation: {exc}")
         canvas.draw_idle()
