@@ -29,7 +29,11 @@ Servo
     communication step ``[t, t+h]`` is extrapolated from the inputs sampled at
     ``t`` (exact inside a parabolic-blend phase) and evaluated at
     ``t_k + ref_phase * dt`` of each internal step ``[t_k, t_k + dt]``; the default
-    0.5 is the middle of the step as DESIGN.md prescribes.
+    0.5 is the middle of the step as DESIGN.md prescribes.  ``ref_timing``
+    says when the inputs were sampled: at ``t`` (``"step_start"``, default:
+    Jacobi) or at ``t + h`` (``"step_end"``: Gauss-Seidel with the trajectory
+    stepped first), in which case the reference is extrapolated backwards, so
+    the arm does not run one communication step ahead of its reference.
 
 Stepping
     ``MainSolverImplicitSecondOrder`` (generalized-alpha), initialised once per
@@ -69,6 +73,7 @@ from .panda_model import EE_FRAME, GRAVITY, N_JOINTS, cached_model, ee_frame_id,
 
 # libfranka example joint_impedance_control.cpp: k_gains and d_gains.
 DEFAULT_KP = (600.0, 600.0, 600.0, 600.0, 250.0, 150.0, 50.0)  # N.m/rad
+REF_TIMINGS = ("step_start", "step_end")
 DEFAULT_KD = (50.0, 50.0, 50.0, 50.0, 30.0, 25.0, 15.0)  # N.m.s/rad
 
 
@@ -167,6 +172,10 @@ class PandaExudyn(PythonUnit):
         Variable("ref_phase", "parameter", start=0.5, min=0.0, max=1.0,
                  description="where in each internal step the reference is evaluated (0 start, 0.5 middle, 1 end)",
                  variability="fixed"),
+        Variable("ref_timing", "parameter", type="String", start="step_start",
+                 description="when the reference inputs seen by do_step(t, h) were sampled: 'step_start' (at t, "
+                             "e.g. Jacobi) or 'step_end' (at t + h: Gauss-Seidel after a trajectory unit that stepped first)",
+                 variability="fixed"),
         Variable("pendulum_bob_mass", "parameter", unit="kg", start=0.0, min=0.0,
                  description="bob of a pendulum swinging from the TCP (bin picking: 0.25); 0 and no rod: none",
                  variability="fixed"),
@@ -236,6 +245,15 @@ class PandaExudyn(PythonUnit):
         mbs.SetObjectParameter(tree, "jointVelocityOffsetVector", qd_r)
 
     def do_step(self, t: float, h: float) -> None:
+        if self.ref_timing not in REF_TIMINGS:
+            raise ValueError(f"ref_timing must be one of {REF_TIMINGS}, got {self.ref_timing!r}")
+        if self.ref_timing == "step_end":
+            # The inputs already hold the reference at t + h (the trajectory stepped
+            # first); the start of the run was delivered in initialization.
+            self._start_ref = None
+            shift = h
+        else:
+            shift = 0.0
         if self._start_ref is not None:
             # The run starts on the reference.  A master may deliver the reference's
             # start only after this unit initialized (its outputs were not ready in
@@ -250,13 +268,14 @@ class PandaExudyn(PythonUnit):
         q_ref, qd_ref, qdd_ref = (np.array(x, dtype=float) for x in (self.q_ref, self.qd_ref, self.qdd_ref))
         solver, it = self._solver, self._solver.it
         for k in range(n_sub):
-            tau_k = (k + self.ref_phase) * dt  # reference time, relative to the input sample at t
+            tau_k = (k + self.ref_phase) * dt - shift  # reference time, relative to the input sample
             self._set_servo(q_ref + qd_ref * tau_k + 0.5 * qdd_ref * tau_k * tau_k, qd_ref + qdd_ref * tau_k, qdd_ref)
             it.startTime = t + k * dt
             it.endTime = t + (k + 1) * dt
             if not solver.SolveSteps(self._mbs, self._settings):
                 raise RuntimeError(f"Exudyn solver failed in [{it.startTime:g}, {it.endTime:g}] s: {solver.GetErrorString()}")
-        self._read_outputs(q_ref + qd_ref * h + 0.5 * qdd_ref * h * h)
+        end = h - shift  # t + h relative to the input sample
+        self._read_outputs(q_ref + qd_ref * end + 0.5 * qdd_ref * end * end)
 
     def _read_outputs(self, q_ref_now: np.ndarray) -> None:
         sd = self._mbs.systemData
