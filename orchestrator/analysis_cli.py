@@ -36,6 +36,7 @@ def add_analysis_parsers(sub: Any) -> None:
     p.add_argument("--z", help="column on the z axis (3-D plot)")
     p.add_argument("--color", help="column giving the colour (with a colour bar)")
     _filters(p)
+    _spec_option(p)
     p.add_argument("-o", "--out", required=True, help="figure file: .png, .svg or .pdf")
     p.add_argument("--title", help="figure title")
     p.set_defaults(handler=_guard(cmd_plot))
@@ -45,6 +46,7 @@ def add_analysis_parsers(sub: Any) -> None:
     p.add_argument("--min", dest="objectives", action=_Objective, metavar="OBJ", help="minimize OBJ (repeatable)")
     p.add_argument("--max", dest="objectives", action=_Objective, metavar="OBJ", help="maximize OBJ (repeatable)")
     _filters(p)
+    _spec_option(p)
     p.add_argument("--csv", help="write the front (all columns) to this CSV file")
     p.add_argument("--plot", help="draw the front over the cloud of the first two objectives into this figure")
     p.add_argument("--color", help="colour the cloud of --plot by this column")
@@ -53,12 +55,18 @@ def add_analysis_parsers(sub: Any) -> None:
     p = sub.add_parser("report", help="one self-contained HTML page about a sweep")
     p.add_argument("table", help="results.parquet, a .csv, or a sweep folder")
     p.add_argument("-o", "--out", required=True, help="the .html file to write")
+    _spec_option(p)
     p.set_defaults(handler=_guard(cmd_report))
 
     p = sub.add_parser("explore", help="interactive point-cloud window (Tk)")
     p.add_argument("table", help="results.parquet, a .csv, or a sweep folder")
-    p.add_argument("--spec", help="spec.json for re-runs (default: the one named in metadata.json)")
+    _spec_option(p)
     p.set_defaults(handler=_guard(cmd_explore))
+
+
+def _spec_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--spec", help="spec.json of the sweep, for units, senses and re-runs when no metadata.json "
+                                  "lies beside the table (overrides the metadata's spec)")
 
 
 def _filters(p: argparse.ArgumentParser) -> None:
@@ -99,7 +107,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
     from .analysis.table import load_results
 
     out = _figure_path(args.out, "-o")
-    table = load_results(args.table)
+    table = load_results(args.table, args.spec)
     for column in (args.x, args.y, args.z, args.color):
         if column:
             table.check_column(column)
@@ -141,13 +149,15 @@ def cmd_pareto(args: argparse.Namespace) -> int:
     """``cosim pareto``: the non-dominated ok rows; ties are all kept, rows with a missing value never count."""
     import pandas as pd
 
-    from .analysis.table import load_results
+    from .analysis.table import AnalysisError, load_results
 
-    table = load_results(args.table)
+    table = load_results(args.table, args.spec)
     objectives = resolve_objectives(table, args.objectives)
     if args.color:
         table.check_column(args.color)
     plot = _figure_path(args.plot, "--plot") if args.plot else None
+    if plot is not None and len(objectives) < 2:
+        raise AnalysisError("--plot needs at least two objectives (--min A --min B)")
     front, considered = front_of(table, objectives, args.where)
     names = [name for name, _ in objectives]
     shown = [c for c in ["point_id", *table.parameter_columns()] if c in table.df.columns and c not in names]
@@ -163,10 +173,7 @@ def cmd_pareto(args: argparse.Namespace) -> int:
         print(f"written: {args.csv}")
     if plot is not None:
         from .analysis.plots import draw_front, new_figure, save, scatter_cloud
-        from .analysis.table import AnalysisError
 
-        if len(names) < 2:
-            raise AnalysisError("--plot needs at least two objectives")
         fig = new_figure()
         ax, _ = scatter_cloud(fig, table, names[0], names[1], color=args.color, active=considered)
         draw_front(ax, table, names[0], names[1], front)
@@ -181,7 +188,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     from .analysis.table import load_results
 
     out = Path(args.out)
-    table = load_results(args.table)
+    table = load_results(args.table, args.spec)
     write_report(table, out)
     print(f"written: {out}")
     return 0
@@ -191,12 +198,12 @@ def cmd_explore(args: argparse.Namespace) -> int:
     """``cosim explore``: open the window; needs a display."""
     from .analysis.table import AnalysisError, load_results
 
-    table = load_results(args.table)
+    table = load_results(args.table, args.spec)
     try:
         from .analysis.explorer import run_explorer
     except ImportError as exc:  # tkinter missing from this Python
         raise AnalysisError(f"the explorer needs tkinter: {exc}") from None
-    return run_explorer(table, spec_path=args.spec)
+    return run_explorer(table)
 
 
 def prepare_point_run(spec: str, point_id: str, results: str | None, out: Path | None):

@@ -103,3 +103,24 @@ def test_analysis_of_a_real_sweep(tmp_path, write_spec, capsys):
     text = (tmp_path / "r.html").read_text()
     assert f"{front_size} non-dominated of 10 ok rows" in text
     assert json.loads((out / "metadata.json").read_text())["spec_path"]
+
+
+def test_spec_option_stands_in_for_missing_metadata(tmp_path, write_spec, capsys):
+    from orchestrator.analysis.rerun import rerun
+
+    table_path = linear_ode_sweep(tmp_path / "decay", write_spec)
+    (tmp_path / "decay" / "metadata.json").unlink()
+    spec = str(tmp_path / "spec.json")
+    assert load_results(table_path).objective_senses() == {}
+    table = load_results(table_path, spec)
+    assert table.objective_senses() == {"y_end": "min"} and table.label("y_end") == "y_end [1]"
+    result, values = rerun(table, 2)
+    assert values == {"ode.a": -0.5} and result.traces["ode.y"].iloc[-1] == pytest.approx(np.exp(-0.5), rel=1e-9)
+    assert main(["pareto", str(table_path), "--spec", spec]) == 0
+    assert "Pareto front (min y_end): 1 of 3 rows" in capsys.readouterr().out
+    # a plot of the front needs two objectives: said before any work is done
+    assert main(["pareto", str(table_path), "--spec", spec, "--plot", str(tmp_path / "f.png")]) == 2
+    assert "needs at least two objectives" in capsys.readouterr().err and not (tmp_path / "f.png").exists()
+    assert main(["plot", str(table_path), "--spec", str(tmp_path / "nope.json"), "--x", "ode.a", "--y", "y_end",
+                 "-o", str(tmp_path / "g.png")]) == 2
+    assert "file not found" in capsys.readouterr().err

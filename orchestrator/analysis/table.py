@@ -208,12 +208,14 @@ class ColumnExpression(Expression):
         return super()._eval(node, values)
 
 
-def load_results(path: str | Path) -> ResultsTable:
+def load_results(path: str | Path, spec: str | Path | None = None) -> ResultsTable:
     """Read a results table: a sweep folder, a ``.parquet`` or a ``.csv`` file.
 
     A ``metadata.json`` beside the table is read when present (its ``spec``
-    entry gives units and senses).  Raises AnalysisError when the table is
-    missing or unreadable.
+    entry gives units and senses).  ``spec`` (a spec.json) replaces the spec
+    of the metadata, for tables stored without one; re-runs then use it too.
+    Raises AnalysisError when the table is missing or unreadable, SpecError
+    when ``spec`` is broken.
     """
     path = Path(path)
     if path.is_dir():
@@ -234,6 +236,12 @@ def load_results(path: str | Path) -> ResultsTable:
             metadata = json.loads(meta_path.read_text(encoding="utf-8"))
         except (OSError, ValueError):
             metadata = None  # a broken metadata file costs units and senses, not the table
+    if spec is not None:
+        from ..spec import load_spec
+
+        loaded = load_spec(spec)
+        metadata = {**(metadata or {}), "spec_path": str(Path(spec).resolve()), "spec_digest": loaded.digest,
+                    "spec": dict(loaded.raw)}
     return ResultsTable(df=df, path=path, metadata=metadata, spec=spec_of(metadata))
 
 
