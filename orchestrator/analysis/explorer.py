@@ -11,14 +11,15 @@ selected" and "Save figure" buttons, the plot with matplotlib's toolbar; below,
 one row per numeric column with two sliders (lower and upper end of its
 range; points outside are greyed), the range and, in red, the selected
 row's value.  Clicking a point selects the nearest drawn point (within 12
-pixels).  A re-run (in a background thread) opens a window with the run's
-traces and, when they have joint angles ``q[1..7]``, an animation of the arm.
+pixels).  A re-run opens a window with the run's traces and, when they have
+joint angles ``q[1..7]``, an animation of the arm.  It runs in the window's
+own thread (a design run takes a fraction of a second to seconds; the window
+is busy meanwhile): Tk objects must never be touched, nor garbage-collected,
+in another thread.
 """
 
 from __future__ import annotations
 
-import queue
-import threading
 from dataclasses import dataclass
 from typing import Any
 
@@ -168,7 +169,6 @@ class ExplorerWindow:
         self.ax = None
         self._drawn_rows = np.zeros(0, dtype=int)
         self._pending: Any = None
-        self._results: queue.Queue = queue.Queue()
         self.trace_windows: list[Any] = []
         root.title(f"cosim explore: {state.table.path}")
         top = ttk.Frame(root)
@@ -260,35 +260,23 @@ class ExplorerWindow:
             self.redraw()
 
     def on_rerun(self) -> None:
+        """Run the selected design again, in this thread (see the module docstring), and show its traces."""
+        from .rerun import rerun
+
         row = self.state.selected
         if row is None:
             self.status.configure(text="select a point first (click it)")
             return
         self.status.configure(text=f"re-running row {row} …")
-        self.rerun_button.state(["disabled"])
-
-        def work():
-            from .rerun import rerun
-
-            try:
-                result, values = rerun(self.state.table, row, self.spec_path)
-                self._results.put((row, result, values, None))
-            except Exception as exc:  # shown in the window, never a crash of the GUI
-                self._results.put((row, None, None, exc))
-
-        threading.Thread(target=work, daemon=True).start()
-        self.root.after(100, self._poll_rerun)
-
-    def _poll_rerun(self) -> None:
+        self.root.configure(cursor="watch")
+        self.root.update_idletasks()
         try:
-            row, result, values, error = self._results.get_nowait()
-        except queue.Empty:
-            self.root.after(100, self._poll_rerun)
+            result, _ = rerun(self.state.table, row, self.spec_path)
+        except Exception as exc:  # a bad spec or value is shown in the window, never a crash of the GUI
+            self.status.configure(text=f"re-run failed: {str(exc).splitlines()[0] if str(exc) else exc!r}")
             return
-        self.rerun_button.state(["!disabled"])
-        if error is not None:
-            self.status.configure(text=f"re-run failed: {error}")
-            return
+        finally:
+            self.root.configure(cursor="")
         self.status.configure(text=f"row {row}: {result.status} in {result.elapsed:.2f} s {result.message}")
         self.show_traces(row, result)
 
