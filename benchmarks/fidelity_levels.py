@@ -4,7 +4,9 @@ For each configuration (a spec of ``examples/pick_and_place`` with the robot
 unit, communication step and reference sampling it names) this builds the
 system once, instantiates the units once and runs ``POINTS`` design points
 through :class:`orchestrator.Execution` with the units reused (``reset()``
-between points), as a sweep worker does.  Every unit's ``do_step``, ``get``,
+between points), as a sweep worker does.  The configurations run interleaved
+(all of them at one point, then the next point) so that a shared machine's
+changing load hits them alike: compare ratios within one run.  Every unit's ``do_step``, ``get``,
 ``set`` and lifecycle calls are wrapped with a timer, so
 
     unit work     = time inside the units' own calls (FMU calls, Exudyn, pinocchio, the trajectory)
@@ -121,29 +123,33 @@ def wrap_cost(n: int = 200_000) -> float:
     return max(0.0, (time.perf_counter() - t0 - bare) / n)
 
 
-def run_config(robot: str, step: float, sampling: str, parameters: dict, points, timed: bool = True):
-    """Run ``points``; returns per-point (wall s, unit s, calls, e_total J)."""
-    system = build_system(spec_from_dict(make_raw(robot, step, sampling, parameters), SPEC))
-    units = {n: su.unit_type.instantiate(n) for n, su in system.units.items()}
-    clock = UnitClock(units) if timed else None
-    out = []
-    first = True
-    for q22, q24 in [points[0]] + list(points):  # the first run warms up (imports, model build) and is dropped
-        for u in units.values():
+class Bench:
+    """One configuration, built once: its system, live units (reused) and their clock."""
+
+    def __init__(self, robot: str, step: float, sampling: str, parameters: dict, timed: bool = True):
+        self.system = build_system(spec_from_dict(make_raw(robot, step, sampling, parameters), SPEC))
+        self.units = {n: su.unit_type.instantiate(n) for n, su in self.system.units.items()}
+        self.clock = UnitClock(self.units) if timed else None
+        self.rows: list[tuple[float, float, int, float]] = []
+
+    def run(self, q22: float, q24: float, keep: bool = True) -> None:
+        """Run one point; keep (wall s, unit s, unit calls, e_total J) unless it is a warm-up."""
+        for u in self.units.values():
             u.reset()
+        system = self.system
         overrides = [system.assignment_for("traj.waypoints[9]", q22), system.assignment_for("traj.waypoints[11]", q24)]
-        unit0, calls0 = (clock.total, clock.calls) if clock else (0.0, 0)
-        result = Execution(system, overrides, units=units).run()
+        unit0, calls0 = (self.clock.total, self.clock.calls) if self.clock else (0.0, 0)
+        result = Execution(system, overrides, units=self.units).run()
         if not result.ok:
             raise RuntimeError(result.message)
-        if not first:
-            unit_s = (clock.total - unit0) if clock else float("nan")
-            calls = (clock.calls - calls0) if clock else 0
-            out.append((result.elapsed, unit_s, calls, result.objectives["e_total"]))
-        first = False
-    for u in units.values():
-        u.terminate()
-    return out
+        if keep:
+            unit_s = (self.clock.total - unit0) if self.clock else float("nan")
+            calls = (self.clock.calls - calls0) if self.clock else 0
+            self.rows.append((result.elapsed, unit_s, calls, result.objectives["e_total"]))
+
+    def close(self) -> None:
+        for u in self.units.values():
+            u.terminate()
 
 
 def main() -> None:
@@ -153,16 +159,29 @@ def main() -> None:
     points = design_points(args.points)
     per_call = wrap_cost()
     print(f"timer wrapper cost {per_call * 1e6:.2f} us per call (subtracted from unit work)")
-    ref = [r[3] for r in run_config(*REFERENCE, points, timed=False)]
+    reference = Bench(*REFERENCE, timed=False)
+    benches = {name: Bench(*config) for name, config in CONFIGS.items()}
+    for bench in [reference, *benches.values()]:
+        bench.run(*points[0], keep=False)  # warm-up: imports, model build, first allocation
+    # Interleaved (every configuration at one point, then the next point), so that the
+    # load of a shared machine drifts over all configurations alike and ratios hold.
+    for q22, q24 in points:
+        for bench in [reference, *benches.values()]:
+            bench.run(q22, q24)
+    ref = [r[3] for r in reference.rows]
+    first = None
     print(f"{'configuration':46s} {'wall/point':>10s} {'units':>9s} {'orchestr.':>9s} {'ratio':>6s} "
-          f"{'max |dE| vs ID 0.25 ms':>22s}")
-    for name, config in CONFIGS.items():
-        rows = run_config(*config, points)
+          f"{'vs first':>8s} {'max |dE| vs ID 0.25 ms':>22s}")
+    for name, bench in benches.items():
+        rows = bench.rows
         wall = statistics.median(r[0] for r in rows)
         unit = statistics.median(r[1] - r[2] * per_call for r in rows)
         err = max(abs(r[3] - e) / e for r, e in zip(rows, ref))
+        first = first or wall
         print(f"{name:46s} {wall * 1e3:8.1f}ms {unit * 1e3:7.1f}ms {(wall - unit) * 1e3:7.1f}ms "
-              f"{wall / unit:6.2f} {err * 100:20.2f} %", flush=True)
+              f"{wall / unit:6.2f} {wall / first:8.3f} {err * 100:20.2f} %", flush=True)
+        bench.close()
+    reference.close()
     print(f"points: {points}")
 
 
