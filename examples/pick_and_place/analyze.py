@@ -6,6 +6,7 @@ Reads ``results.parquet`` (the full study, written by run_study.py) and writes
 - ``figures/joint_energy_grid.png``      energy of joints 1, 2 and 4 (fig. 8-2, 8-3, 8-4)
 - ``figures/energy_vs_joint_distance.png``      (fig. 8-5)
 - ``figures/energy_vs_cartesian_distance.png``  (fig. 8-6)
+- ``figures/distances_time_energy_3d.png``  (fig. 8-7)
 - ``figures/peak_torque_and_limits.png``  what the thesis did not show: peak torque ratio, position limits
 - ``results_table.md``                   our minima and maxima, where they occur, and table 8-1
 
@@ -149,6 +150,18 @@ def main() -> None:
         fig.tight_layout()
         fig.savefig(out / name, dpi=120)
         plt.close(fig)
+
+    fig = plt.figure(figsize=(8, 6))
+    ax = fig.add_subplot(projection="3d")
+    sc = ax.scatter(df["cartesian_distance"], df["joint_distance"], df["duration"], c=df["e_total"], s=2, cmap="turbo")
+    ax.set_xlabel("Cartesian distance (m)")
+    ax.set_ylabel("joint distance (deg)")
+    ax.set_zlabel("execution time (s)")
+    plt.colorbar(sc, ax=ax, shrink=0.7, label="total electric energy (J)")
+    ax.set_title("Distances, time and energy (cf. fig. 8-7)")
+    fig.tight_layout()
+    fig.savefig(out / "distances_time_energy_3d.png", dpi=110)
+    plt.close(fig)
 
     fig, axes = plt.subplots(1, 2, figsize=(13, 4.6))
     df["peak_tau_ratio_max"] = df[[f"peak_tau_ratio[{j}]" for j in range(1, 8)]].max(axis=1)
