@@ -265,11 +265,13 @@ class PandaExudyn(PythonUnit):
                 self._start_ref = None
         n_sub = max(1, math.ceil(h / self.substep - 1e-9))
         dt = h / n_sub
-        q_ref, qd_ref, qdd_ref = (np.array(x, dtype=float) for x in (self.q_ref, self.qd_ref, self.qdd_ref))
+        q_ref, qd_ref, qdd_ref = self.q_ref, self.qd_ref, self.qdd_ref  # float arrays, not modified here
         solver, it = self._solver, self._solver.it
         for k in range(n_sub):
             tau_k = (k + self.ref_phase) * dt - shift  # reference time, relative to the input sample
-            self._set_servo(q_ref + qd_ref * tau_k + 0.5 * qdd_ref * tau_k * tau_k, qd_ref + qdd_ref * tau_k, qdd_ref)
+            qd_r = qd_ref + qdd_ref * tau_k
+            # q + qd tau + qdd tau^2 / 2 = q + (qd + qd_r) tau / 2, with one temporary less
+            self._set_servo(q_ref + (qd_ref + qd_r) * (0.5 * tau_k), qd_r, qdd_ref)
             it.startTime = t + k * dt
             it.endTime = t + (k + 1) * dt
             if not solver.SolveSteps(self._mbs, self._settings):
@@ -288,13 +290,14 @@ class PandaExudyn(PythonUnit):
         pin.forwardKinematics(self._model, self._data, self.q)
         self.ee_pos[:] = pin.updateFramePlacement(self._model, self._data, self._ee).translation
         if self._ee_last is not None:  # one straight chord per communication step
-            self.ee_path_length += float(np.linalg.norm(self.ee_pos - self._ee_last))
+            d = self.ee_pos - self._ee_last
+            self.ee_path_length += math.sqrt(d.dot(d))
         self._ee_last = self.ee_pos.copy()
-        self.tracking_error = float(np.max(np.abs(self.q - q_ref_now)))
+        self.tracking_error = float(abs(self.q - q_ref_now).max())
         if self._body is not None:
             axis = self._mbs.GetObjectOutputBody(self._body, exu.OutputVariableType.RotationMatrix).reshape(3, 3)[:, 2]
             self.pendulum_angle = float(np.arccos(np.clip(axis[2], -1.0, 1.0)))  # body z is world z at rest
         np.divide(np.abs(self.tau), self.tau_max, out=self.tau_ratio)
         self.limit_violated = limits_exceeded(self.q, self.qd, self.tau_ratio, self.q_min, self.q_max, self.qd_max)
-        if not np.all(np.isfinite(self.q)):
+        if not math.isfinite(self.q.sum()):  # a NaN or an infinity makes the sum non-finite
             raise RuntimeError("the simulation diverged (non-finite joint angles)")
