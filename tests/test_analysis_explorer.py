@@ -165,6 +165,13 @@ def test_explorer_window_slider_click_rerun_and_screenshot(xvfb, tmp_path, write
         assert len(greyed.get_offsets()) == expected_grey.size
         assert len(coloured.get_offsets()) == len(table.df) - expected_grey.size
 
+        # "Reset ranges" brings every point back, then the slider is moved again
+        window.reset_button.invoke()
+        assert pump(root, lambda: window._pending is None) and window.state.greyed().size == 0
+        assert int(lo.get()) == 0 and window.state.narrowed() == []
+        lo.set(SLIDER_STEPS // 2)
+        assert pump(root, lambda: np.array_equal(window.state.greyed(), expected_grey) and window._pending is None)
+
         # click a coloured point through Tk's own event queue
         row = int(np.flatnonzero((q2 == 20) & (q4 == 70))[0])
         x, y = window.screen_position(row)

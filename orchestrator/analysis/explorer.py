@@ -185,6 +185,8 @@ class ExplorerWindow:
             box.pack(side="left")
             self.choosers[which] = box
         ttk.Button(bar, text="Save figure…", command=self.on_save).pack(side="right", padx=4)
+        self.reset_button = ttk.Button(bar, text="Reset ranges", command=self.on_reset)
+        self.reset_button.pack(side="right", padx=4)
         self.rerun_button = ttk.Button(bar, text="Re-run selected", command=self.on_rerun)
         self.rerun_button.pack(side="right", padx=4)
         self.status = ttk.Label(top, text="")
@@ -215,6 +217,9 @@ class ExplorerWindow:
         canvas.configure(yscrollcommand=scroll.set)
         canvas.pack(side="left", fill="both", expand=True)
         scroll.pack(side="right", fill="y")
+        for sequence, units in (("<Button-4>", -1), ("<Button-5>", 1)):  # the mouse wheel on X11
+            canvas.bind_all(sequence, lambda e, u=units: canvas.yview_scroll(u, "units")
+                            if str(e.widget).startswith(str(outer)) else None)
         for i, c in enumerate(self.state.columns):
             ttk.Label(inner, text=self.state.table.label(c), width=28, anchor="w").grid(row=i, column=0, sticky="w")
             lo = tk.Scale(inner, from_=0, to=SLIDER_STEPS, orient="horizontal", showvalue=0, length=160,
@@ -246,6 +251,15 @@ class ExplorerWindow:
         self._show_range(column)
         if self._pending is None:  # redraw once after a burst of slider moves
             self._pending = self.root.after_idle(self._redraw_pending)
+
+    def on_reset(self) -> None:
+        """Every slider back to its column's full range."""
+        self.state.reset_ranges()
+        for c, (lo, hi, _, _) in self.sliders.items():
+            lo.set(0)
+            hi.set(SLIDER_STEPS)
+            self._show_range(c)
+        self.redraw()
 
     def _redraw_pending(self) -> None:
         self._pending = None
