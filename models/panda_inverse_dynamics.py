@@ -10,6 +10,8 @@ master that orders units by feed-through sees this instant's torques.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pinocchio as pin
 
@@ -62,7 +64,8 @@ class PandaInverseDynamics(PythonUnit):
         self.ee_pos[:] = pin.updateFramePlacement(m, d, self._ee).translation
         done = getattr(self, "_path_done", None)
         if done is not None:  # the chord from the last communication point to now
-            self.ee_path_length = done[0] + float(np.linalg.norm(self.ee_pos - done[1]))
+            d = self.ee_pos - done[1]
+            self.ee_path_length = done[0] + math.sqrt(d.dot(d))
         self.tracking_error = 0.0
         np.divide(np.abs(self.tau), self.tau_max, out=self.tau_ratio)
         self.limit_violated = limits_exceeded(self.q, self.qd, self.tau_ratio, self.q_min, self.q_max, self.qd_max)

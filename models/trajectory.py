@@ -65,14 +65,17 @@ class ParabolicBlendTrajectory:
     phase_v: np.ndarray = field(repr=False)
     phase_a: np.ndarray = field(repr=False)
     _starts: list = field(init=False, repr=False, compare=False)
+    _duration: float = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "_starts", self.phase_start.tolist())  # bisect is fastest on a list
+        # sample() needs it at every call: computed once
+        object.__setattr__(self, "_duration", float(self.waypoint_times[-1] + self.blend_durations[-1] / 2))
 
     @property
     def duration(self) -> float:
         """Total duration t_f (s), eq. 7-4."""
-        return float(self.waypoint_times[-1] + self.blend_durations[-1] / 2)
+        return self._duration
 
     def sample(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Position, velocity and acceleration at time ``t`` (s from the start).
@@ -83,7 +86,7 @@ class ParabolicBlendTrajectory:
         if t <= 0.0:
             z = np.zeros(self.waypoints.shape[1])
             return self.waypoints[0].copy(), z, z.copy()
-        if t >= self.duration:
+        if t >= self._duration:
             z = np.zeros(self.waypoints.shape[1])
             return self.waypoints[-1].copy(), z, z.copy()
         k = bisect.bisect_right(self._starts, t) - 1
@@ -281,13 +284,18 @@ class TrajectoryGenerator(PythonUnit):
             # (qd(t) - qd(t - h)) / h: exact inside a phase, and across a blend's
             # start or end the time-weighted mix of the two accelerations
             qd_end = self.trajectory.sample(local)[1]
-            qd_start = self.trajectory.sample(local - h)[1]
+            t_last, qd_last = self._last_end
+            # the previous step's end is this step's start (steps follow each other)
+            qd_start = qd_last if abs(t_last - (local - h)) <= 1e-12 * max(1.0, abs(local)) else \
+                self.trajectory.sample(local - h)[1]
             np.subtract(qd_end, qd_start, out=self.qdd_ref)
             self.qdd_ref /= h
+            self._last_end = (local, qd_end)
         else:
             q, qd, qdd = self.trajectory.sample(local)
             self.q_ref[:] = q
             self.qd_ref[:] = qd
             self.qdd_ref[:] = qdd
+            self._last_end = (local, qd)
         # a hair of tolerance so a run that stops at t_f on a tick grid counts as finished
         self.finished = bool(local >= self.duration - 1e-9)
