@@ -13,9 +13,11 @@ Arm geometry
 Self-collision
     Pairs of links on the same or on neighbouring joints always touch at the
     joint and are never checked (MoveIt's "adjacent" pairs).  Additionally, a
-    pair whose meshes already overlap in the ``READY_POSE`` (MoveIt's "default"
-    pairs; here link5/link7 style wrist overlaps) is disabled; the list is
-    computed, not hand-written, and available as :attr:`CellCollision.disabled_pairs`.
+    pair whose meshes already overlap in the ``READY_POSE`` would be disabled
+    (MoveIt's "default" pairs); the list is computed, not hand-written, and
+    available as :attr:`CellCollision.disabled_pairs`; with these meshes it is
+    empty.  Note that link 5 and link 7 do overlap at ``q6 = 0`` (inside the
+    joint range, which starts at -1 deg): that pose counts as a self-collision.
 
 Plant geometry
     :class:`models.plant.Obstacle` boxes (``coal.Box``), fixed to the world

@@ -438,7 +438,9 @@ class BinPickingPlanner(_ExecutionCheck, PythonUnit):
                float(self.collision_margin), bool(self.self_collision), float(self.eef_step), float(self.max_joint_step),
                float(self.jump_threshold), float(self.path_tolerance), float(self.velocity_scaling),
                float(self.acceleration_scaling), tuple(self.v_max), tuple(self.a_max), bool(self.execute_partial))
-        if getattr(self, "_plan_key", None) != key:  # enter_initialization and exit_initialization both call us
+        # plan only when something changed: enter_ and exit_initialization both call us, and a
+        # sweep worker re-initializes the same instance for every point
+        if getattr(self, "_plan_key", None) != key:
             t0 = time.perf_counter()
             plant, _ = _plant_in_base(self)
             settings = PlannerSettings(eef_step=float(self.eef_step), max_joint_step=float(self.max_joint_step),
@@ -452,9 +454,10 @@ class BinPickingPlanner(_ExecutionCheck, PythonUnit):
                 path = CartesianPath(path.q[:1], [0], path.fraction, path.code, path.blocked_by, path.blocked_link, path.segment, path.tcp[:1])
             self.trajectory = time_parameterize(path, np.asarray(self.v_max) * self.velocity_scaling,
                                                 np.asarray(self.a_max) * self.acceleration_scaling, float(self.path_tolerance))
-            self.planning_time = time.perf_counter() - t0
+            self._planning_time = time.perf_counter() - t0
             self._plan_key = key
         p = self.path
+        self.planning_time = self._planning_time  # 0-cost when the same plan was reused
         self.fraction_planned = p.fraction
         self.planned_ok = p.ok
         self.blocked_code = int(p.code)
