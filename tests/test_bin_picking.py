@@ -119,3 +119,48 @@ def test_payload_swings_and_changes_the_joint_torques(runs):
 def test_spec_grid_is_the_thesis_grid():
     space = DesignSpace.from_spec(load_spec(SPEC))
     assert len(space) == 12 * 9 * 12 * 2 == 2592
+
+
+def _planner_unit(**values):
+    from models.planner import BinPickingPlanner
+
+    unit = BinPickingPlanner()
+    unit.set_values(values)
+    unit.setup(0.0, None)
+    unit.enter_initialization()
+    unit.exit_initialization()
+    return unit
+
+
+def test_planner_unit_plays_a_partial_plan_only_when_asked():
+    blocked = {"box_variant": "complex", "offset_x": 0.1}
+    rest = _planner_unit(**blocked, execute_partial=False)
+    out = rest.get_values(["planned_ok", "fraction_planned", "blocked_code", "duration", "finished", "blocked_link"])
+    assert out["planned_ok"] is False and out["blocked_code"] == COLLISION_PLANT and out["blocked_link"] == "panda_link5"
+    assert out["fraction_planned"] == pytest.approx(0.162, abs=0.005)
+    assert out["duration"] == 0.0 and out["finished"] is True
+    partial = _planner_unit(**blocked, execute_partial=True)
+    d = partial.get_values(["duration"])["duration"]
+    assert 0.3 < d < 2.0  # the descent into the box, up to the lip, at rest at both ends
+    partial.do_step(0.0, d + 0.01)
+    q_end = np.array(partial.get_values(["q_ref"])["q_ref"])
+    assert q_end == pytest.approx(partial.path.q[-1], abs=1e-12)
+
+
+def test_planner_unit_plans_again_only_when_its_parameters_change():
+    unit = _planner_unit()
+    first = unit.path
+    assert unit.get_values(["planning_time"])["planning_time"] > 0
+    unit.reset()
+    unit.setup(0.0, None)
+    unit.enter_initialization()
+    unit.exit_initialization()
+    assert unit.path is first  # same parameters: the same plan, reused
+    assert unit.get_values(["planning_time"])["planning_time"] > 0  # still reported
+    unit.reset()
+    unit.set_values({"offset_y": 0.1})
+    unit.setup(0.0, None)
+    unit.enter_initialization()
+    unit.exit_initialization()
+    assert unit.path is not first and unit.path.ok
+    assert unit.path.tcp[0][2] == pytest.approx(first.tcp[0][2] - 0.1, abs=2e-4)  # robot 0.1 m higher

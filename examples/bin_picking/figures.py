@@ -100,7 +100,7 @@ def result_figures(table: Path) -> None:
         fig = plt.figure(figsize=(6.5, 5.5))
         ax = fig.add_subplot(projection="3d")
         sc = ax.scatter(valid[OFFSETS[0]], valid[OFFSETS[2]], valid[OFFSETS[1]], c=valid["duration"], cmap="viridis", s=30)
-        fig.colorbar(sc, label="execution time [s]", shrink=0.7)
+        fig.colorbar(sc, label="execution time [s]", shrink=0.7, pad=0.12)
         ax.set_xlabel("x_pos [m]"), ax.set_ylabel("z_pos [m]"), ax.set_zlabel("y_pos [m]")
         best = valid.loc[valid["duration"].idxmin()]
         ax.set_title(f"{variant}: t_min = {best['duration']:.2f} s at "
