@@ -200,3 +200,32 @@ def test_exudyn_follows_the_reference_of_the_step_end_under_gauss_seidel():
     h = raw["experiment"]["step"]
     lead = errors["step_start"] - errors["step_end"]  # about one step ahead: ~qd * h, qd up to 2.175 rad/s
     assert 1.0 * h < lead < 1.5 * FRANKA_DOC_LIMITS.qd_max[0] * h
+
+
+def test_trajectory_step_midpoint_sampling_reports_the_step_just_taken():
+    from models.trajectory import TrajectoryGenerator
+    from orchestrator.unit import UnitError
+
+    unit = TrajectoryGenerator("traj")
+    unit.waypoints[:21] = thesis_waypoints(-45.0, 70.0).ravel()
+    unit.n_waypoints, unit.convention, unit.sampling = 3, "thesis_deg", "step_midpoint"
+    unit.setup(0.0, 3.0)
+    unit.enter_initialization()
+    unit.exit_initialization()
+    plan = unit.trajectory
+    np.testing.assert_array_equal(unit.q_ref, plan.sample(0.0)[0])  # the start is the start
+    h, t = 0.01, 0.0
+    blend_end = plan.blend_durations[0]  # joint accelerations jump here, inside the step [0.14, 0.15]
+    while t < plan.duration + h:
+        unit.do_step(t, h)
+        q_mid, qd_mid, _ = plan.sample(t + h / 2)
+        np.testing.assert_allclose(unit.q_ref, q_mid, atol=1e-12)
+        np.testing.assert_allclose(unit.qd_ref, qd_mid, atol=1e-12)
+        np.testing.assert_allclose(unit.qdd_ref, (plan.sample(t + h)[1] - plan.sample(t)[1]) / h, atol=1e-9)
+        t += h
+    assert unit.finished
+    assert 0.1 < blend_end < 0.2
+    unit.reset()
+    unit.sampling = "halfway"
+    with pytest.raises(UnitError, match="sampling"):
+        unit.exit_initialization()
