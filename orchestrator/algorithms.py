@@ -28,22 +28,21 @@ def step_unit(unit: Unit, t: float, h: float) -> None:
 class Transfer:
     """Copies a group of output elements of one unit to input elements of another."""
 
-    __slots__ = ("source", "source_selection", "target", "target_selection")
+    __slots__ = ("source", "source_selection", "target", "target_selection", "read", "_set")
 
     def __init__(self, source: Unit, target: Unit, connections: Sequence[Connection]):
         self.source = source
         self.target = target
         self.source_selection = source.select([r for c in connections for r in c.source.refs])
         self.target_selection = target.select([r for c in connections for r in c.target.refs])
+        self.read = source.reader(self.source_selection)  # valid until its next call
+        self._set = target.set
 
-    def read(self) -> list:
-        return self.source.get(self.source_selection)
-
-    def write(self, values: list) -> None:
-        self.target.set(self.target_selection, values)
+    def write(self, values: Sequence) -> None:
+        self._set(self.target_selection, values)
 
     def run(self) -> None:
-        self.target.set(self.target_selection, self.source.get(self.source_selection))
+        self._set(self.target_selection, self.read())
 
 
 def group_transfers(units: Mapping[str, Unit], connections: Sequence[Connection]) -> list[Transfer]:
@@ -97,6 +96,7 @@ class Jacobi(MasterAlgorithm):
         self._units = [units[n] for n in order]
 
     def step(self, t: float, h: float) -> None:
+        # each transfer reads into its own buffer, so all reads stay valid until the writes
         values = [transfer.read() for transfer in self._transfers]
         for transfer, v in zip(self._transfers, values):
             transfer.write(v)

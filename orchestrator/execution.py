@@ -73,14 +73,20 @@ class Probe:
                 positions.setdefault(signal.unit, []).append(len(self.columns))
                 per_unit.setdefault(signal.unit, []).append(ref)
                 self.columns.append(column)
-        self._reads = [(units[name], units[name].select(refs), np.array(positions[name], dtype=int))
-                       for name, refs in per_unit.items()]
         self.values = np.zeros(len(self.columns))
+        self._reads = []
+        for name, refs in per_unit.items():
+            where = np.array(positions[name], dtype=int)
+            contiguous = bool(np.all(np.diff(where) == 1))
+            # a contiguous run is written through a slice, cheaper than fancy indexing
+            target = slice(int(where[0]), int(where[-1]) + 1) if contiguous else where
+            self._reads.append((units[name].reader(units[name].select(refs)), target))
 
     def read(self) -> np.ndarray:
-        for unit, selection, where in self._reads:
-            self.values[where] = unit.get(selection)
-        return self.values
+        values = self.values
+        for read, where in self._reads:
+            values[where] = read()
+        return values
 
 
 class Execution:
@@ -127,15 +133,18 @@ class Execution:
             values = probe.read()
             for observer in observers:
                 observer.initialized(t, values)
+            start, h, last = exp.start, exp.step, n_steps - 1
+            step, read = algorithm.step, probe.read
+            hooks = [observer.step for observer in observers]
             for k in range(n_steps):
-                t = exp.start + k * exp.step
-                t_next = exp.stop if k == n_steps - 1 else exp.start + (k + 1) * exp.step
-                algorithm.step(t, t_next - t)
+                t = start + k * h  # whole steps counted, never summed: no drift
+                t_next = exp.stop if k == last else start + (k + 1) * h
+                step(t, t_next - t)
                 t = t_next
                 steps += 1
-                values = probe.read()
-                for observer in observers:
-                    observer.step(t, values)
+                values = read()
+                for hook in hooks:
+                    hook(t, values)
                 if stop_column is not None and values[stop_column]:
                     break
             for observer in observers:

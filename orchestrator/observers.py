@@ -40,7 +40,9 @@ class TraceRecorder(Observer):
 
     def __init__(self, all_columns: Sequence[str], recorded: Sequence[str], capacity: int = 1024):
         self.columns = list(recorded)
-        self._index = np.array([list(all_columns).index(c) for c in recorded], dtype=int)
+        index = [list(all_columns).index(c) for c in recorded]
+        # recording every probed column in order is a plain copy, not fancy indexing
+        self._index = slice(None) if index == list(range(len(all_columns))) else np.array(index, dtype=int)
         self._data = np.empty((max(capacity, 1), len(self.columns) + 1))
         self._n = 0
 

@@ -27,13 +27,16 @@ import tempfile
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
 
+import numpy as np
 import pandas as pd
 import pyarrow as pa
+import pyarrow.csv as pa_csv
 import pyarrow.parquet as pq
 
 STATUSES = ("ok", "failed", "timeout", "crashed")
 TAIL_COLUMNS = ("status", "message", "run_time", "worker")
 _PART = re.compile(r"^part-(\d+)\.parquet$")
+COMPACT_WINDOW = 50_000  # rows held at once while merging parts into the final table
 
 
 class ResultsStore:
@@ -107,24 +110,88 @@ class ResultsStore:
         df = df.drop_duplicates("point_id", keep="last")
         return _order_columns(df).reset_index(drop=True)
 
-    def compact(self, order: Iterable[str] | None = None, csv: bool = False) -> pd.DataFrame:
-        """Merge parts into ``results.parquet`` (rows in ``order`` of point ids when given) and return it.
+    def compact(self, order: Iterable[str] | None = None, csv: bool = False) -> dict[str, int]:
+        """Merge parts into ``results.parquet`` (rows in ``order`` of point ids when given); returns counts by status.
 
-        The parts are removed only after the new table is in place, so an
-        interruption here loses nothing.
+        Each point appears once, its latest row winning.  The merge streams:
+        it holds the point ids and at most ``COMPACT_WINDOW`` rows at a time,
+        never the whole table, so a sweep's client memory does not grow with
+        its size.  Rows whose ids are not in ``order`` follow, in the order
+        they were written.  The parts are removed only after the new table is
+        in place, so an interruption here loses nothing.
         """
-        df = self.read()
-        if order is not None and len(df):
-            rank = {pid: i for i, pid in enumerate(order)}
-            df = df.iloc[df["point_id"].map(rank).fillna(len(rank)).argsort(kind="stable")].reset_index(drop=True)
+        sources = ([self.table_path] if self.table_path.exists() else []) + self._part_files()
+        counts = {s: 0 for s in STATUSES}
+        latest: dict[str, tuple[int, int]] = {}
+        for s_index, path in enumerate(sources):
+            for r_index, pid in enumerate(pq.read_table(path, columns=["point_id"]).column("point_id").to_pylist()):
+                latest.pop(pid, None)  # re-inserted, so dict order is the order of the latest rows
+                latest[pid] = (s_index, r_index)
+        rank = {pid: i for i, pid in enumerate(order)} if order is not None else {}
+        keys = np.fromiter((rank.get(pid, len(rank) + i) for i, pid in enumerate(latest)), dtype=np.int64,
+                           count=len(latest))
+        position = np.empty(len(keys), dtype=np.int64)
+        position[np.argsort(keys, kind="stable")] = np.arange(len(keys))
+        where = np.array(list(latest.values()), dtype=np.int64).reshape(-1, 2)
+        del latest, rank, keys
+        schema = _unified_schema(sources)
         tmp = self.table_path.with_suffix(".parquet.tmp")
-        df.to_parquet(tmp, index=False)
+        csv_tmp = self.folder / "results.csv.tmp"
+        csv_writer = None
+        with pq.ParquetWriter(tmp, schema) as writer:
+            for low in range(0, len(position), COMPACT_WINDOW):
+                in_window = (position >= low) & (position < low + COMPACT_WINDOW)
+                pieces = []
+                for s_index, path in enumerate(sources):
+                    chosen = in_window & (where[:, 0] == s_index)
+                    if chosen.any():
+                        table = _conform(pq.read_table(path).take(pa.array(where[chosen, 1])), schema)
+                        pieces.append(table.append_column("__position", pa.array(position[chosen])))
+                if not pieces:
+                    continue
+                window = pa.concat_tables(pieces).sort_by("__position").drop_columns(["__position"])
+                writer.write_table(window)
+                for status, n in zip(*np.unique(window.column("status").to_numpy(zero_copy_only=False),
+                                                return_counts=True)):
+                    counts[str(status)] = counts.get(str(status), 0) + int(n)
+                if csv:
+                    if csv_writer is None:
+                        csv_writer = pa_csv.CSVWriter(csv_tmp, schema)
+                    csv_writer.write_table(window)
+        if csv and csv_writer is None:
+            pa_csv.CSVWriter(csv_tmp, schema).close()
+        elif csv_writer is not None:
+            csv_writer.close()
         os.replace(tmp, self.table_path)
+        if csv:
+            os.replace(csv_tmp, self.folder / "results.csv")
         for part in self._part_files():
             part.unlink()
-        if csv:
-            df.to_csv(self.folder / "results.csv", index=False)
-        return df
+        return counts
+
+    def table(self, columns: Sequence[str] | None = None) -> pd.DataFrame:
+        """The compacted table (``results.parquet``) as a DataFrame, optionally only some columns."""
+        return pd.read_parquet(self.table_path, columns=list(columns) if columns else None)
+
+
+def _unified_schema(sources: Sequence[Path]) -> pa.Schema:
+    """One schema for all parts (a failed batch lacks objective columns; an all-null column has no type)."""
+    if not sources:
+        return pa.schema([("point_id", pa.string()), ("status", pa.string()), ("message", pa.string()),
+                          ("run_time", pa.float64()), ("worker", pa.string())])
+    schema = pa.unify_schemas([pq.read_schema(p).remove_metadata() for p in sources], promote_options="permissive")
+    names = schema.names
+    tail = [c for c in TAIL_COLUMNS if c in names]
+    middle = [c for c in names if c != "point_id" and c not in tail]
+    fields = [schema.field(n) for n in ["point_id", *middle, *tail] if n in names]
+    return pa.schema([f.with_type(pa.float64()) if pa.types.is_null(f.type) else f for f in fields])
+
+
+def _conform(table: pa.Table, schema: pa.Schema) -> pa.Table:
+    """``table`` with exactly ``schema``'s columns and types (missing ones as nulls)."""
+    columns = [table.column(f.name).cast(f.type) if f.name in table.column_names else pa.nulls(len(table), f.type)
+               for f in schema]
+    return pa.Table.from_arrays(columns, schema=schema)
 
 
 def counts_by_status(df: pd.DataFrame) -> dict[str, int]:

@@ -240,9 +240,11 @@ class Sweep:
             "ended": None, "counts": previous.get("counts"),
         }
 
-    def run(self) -> pd.DataFrame:
+    def run(self, load: bool = True) -> pd.DataFrame | dict[str, int]:
         """Evaluate every missing point; returns the whole table (every point once, in design order).
 
+        With ``load=False`` it returns only the counts by status and never
+        holds the table in memory (the command line's way, for huge sweeps).
         Raises SweepError when no Dask workers are reachable.  Ctrl-C stops the
         sweep; the rows written so far stay and ``resume`` finishes the rest.
         """
@@ -255,7 +257,7 @@ class Sweep:
         cluster = None
         if todo == 0:
             self._say(f"cosim sweep {self.spec.name}: all {total} points already in {self.out}")
-            return self._finish(started)
+            return self._finish(started, load)
         if self.scheduler is None:
             dashboard = _dashboard_available()
             cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
@@ -291,20 +293,19 @@ class Sweep:
             client.close()
             if cluster is not None:
                 cluster.close()
-        return self._finish(started)
+        return self._finish(started, load)
 
-    def _finish(self, started: str) -> "pd.DataFrame":
-        from .results import counts_by_status
-
-        df = self.store.compact(order=(p.id for p in self.space), csv=self.csv)
+    def _finish(self, started: str, load: bool) -> "pd.DataFrame | dict[str, int]":
+        counts = self.store.compact(order=(p.id for p in self.space), csv=self.csv)
         meta = self.store.metadata() or {}
-        meta.update(ended=_now(), counts=counts_by_status(df))
+        meta.update(ended=_now(), counts=counts)
         if meta.get("runs"):
             meta["runs"][-1]["ended"] = meta["ended"]
         self.store.write_metadata(meta)
+        result = self.store.table() if load or self._temporary else counts
         if self._temporary:
             shutil.rmtree(self.out, ignore_errors=True)
-        return df
+        return result
 
     def _evaluate(self, client: Any, done: set[str], todo: int, n_workers: int) -> None:
         from distributed import as_completed

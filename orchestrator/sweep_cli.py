@@ -52,18 +52,28 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             return _dry_run(args)
         sweep = Sweep(args.spec, workers=args.workers, out=out, scheduler=args.scheduler, timeout=args.timeout,
                       resume=args.resume, batch_size=args.batch_size, csv=args.csv)
-        df = sweep.run()
+        counts = sweep.run(load=False)  # the table stays on disk: a huge sweep never sits in memory
     except SweepError as exc:
         return _usage(str(exc))
-    counts = df["status"].value_counts().to_dict() if len(df) else {}
-    summary = ", ".join(f"{n} {s}" for s, n in sorted(counts.items()))
-    print(f"{len(df)} points: {summary or 'none'}; table: {sweep.store.table_path}")
-    not_ok = df[df["status"] != "ok"] if len(df) else df
-    for _, row in not_ok.head(5).iterrows():
-        print(f"  {row['point_id']} {row['status']}: {str(row['message'])[:120]}", file=sys.stderr)
-    if len(not_ok) > 5:
-        print(f"  ... and {len(not_ok) - 5} more (see the 'message' column)", file=sys.stderr)
-    return EXIT_OK if len(not_ok) == 0 else EXIT_RUN_FAILED
+    total = sum(counts.values())
+    summary = ", ".join(f"{n} {s}" for s, n in sorted(counts.items()) if n)
+    print(f"{total} points: {summary or 'none'}; table: {sweep.store.table_path}")
+    not_ok = total - counts.get("ok", 0)
+    if not_ok:
+        for row in _first_not_ok(sweep.store.table_path, 5):
+            print(f"  {row['point_id']} {row['status']}: {str(row['message'])[:120]}", file=sys.stderr)
+        if not_ok > 5:
+            print(f"  ... and {not_ok - 5} more (see the 'message' column)", file=sys.stderr)
+    return EXIT_OK if not_ok == 0 else EXIT_RUN_FAILED
+
+
+def _first_not_ok(table: Path, n: int) -> list[dict]:
+    """The first ``n`` rows whose status is not ok, reading only three columns."""
+    import pyarrow.compute as pc
+    import pyarrow.parquet as pq
+
+    rows = pq.read_table(table, columns=["point_id", "status", "message"])
+    return rows.filter(pc.not_equal(rows.column("status"), "ok")).slice(0, n).to_pylist()
 
 
 def _usage(message: str) -> int:

@@ -22,7 +22,7 @@ import abc
 import math
 import re
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 CAUSALITIES = (
     "parameter",
@@ -224,6 +224,14 @@ class Unit(abc.ABC):
     @abc.abstractmethod
     def set(self, selection: Selection, values: Sequence[Any]) -> None:
         """Set the selected elements to ``values`` (same order and length)."""
+
+    def reader(self, selection: Selection) -> Callable[[], Sequence[Any]]:
+        """A function returning the selected values, for reading them every step.
+
+        Units may return something faster than ``get`` (e.g. a numpy view of a
+        buffer refreshed in place); the result is only valid until the next call.
+        """
+        return lambda: self.get(selection)
 
     @abc.abstractmethod
     def setup(self, start_time: float, stop_time: float | None) -> None:

@@ -19,13 +19,14 @@ def test_append_then_read_and_compact_in_order(tmp_path):
     store.append(rows(["c", "d"], y=1.0))
     store.append(rows(["a"], status="failed"))  # a failed batch has no objective column
     assert store.done_ids() == {"a", "c", "d"}
-    df = store.compact(order=["a", "b", "c", "d"], csv=True)
+    counts = store.compact(order=["a", "b", "c", "d"], csv=True)
+    df = store.table()
     assert list(df["point_id"]) == ["a", "c", "d"]
     assert list(df.columns) == ["point_id", "p.x", "y", "status", "message", "run_time", "worker"]
     assert math.isnan(df.loc[0, "y"]) and df.loc[1, "y"] == 1.0
     assert not list((tmp_path / "out" / "parts").iterdir())
     assert pd.read_csv(tmp_path / "out" / "results.csv")["point_id"].tolist() == ["a", "c", "d"]
-    assert counts_by_status(df) == {"ok": 2, "failed": 1, "timeout": 0, "crashed": 0}
+    assert counts_by_status(df) == counts == {"ok": 2, "failed": 1, "timeout": 0, "crashed": 0}
 
 
 def test_reopened_store_continues_numbering_and_latest_row_wins(tmp_path):
@@ -52,3 +53,20 @@ def test_metadata_round_trip(tmp_path):
     assert store.metadata() is None and not store.has_rows()
     store.write_metadata({"spec_digest": "abc", "counts": {"ok": 1}})
     assert store.metadata() == {"spec_digest": "abc", "counts": {"ok": 1}}
+
+
+def test_compaction_streams_in_windows_and_keeps_design_order(tmp_path, monkeypatch):
+    import orchestrator.results as results
+
+    monkeypatch.setattr(results, "COMPACT_WINDOW", 3)  # force several windows over 8 rows
+    store = ResultsStore(tmp_path)
+    order = [f"p{i}" for i in range(8)]
+    store.append(rows(["p5", "p1", "p7"], y=1.0))
+    store.append(rows(["p0", "p3"], status="failed"))
+    store.append(rows(["p2", "p6", "p4", "p1"], y=2.0))  # p1 again: this row wins
+    store.append(rows(["zz"], y=9.0))                     # not in the design order: last
+    counts = store.compact(order=order)
+    df = store.table()
+    assert list(df["point_id"]) == order + ["zz"]
+    assert df.set_index("point_id").loc["p1", "y"] == 2.0 and math.isnan(df.set_index("point_id").loc["p3", "y"])
+    assert counts == {"ok": 7, "failed": 2, "timeout": 0, "crashed": 0}

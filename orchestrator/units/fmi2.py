@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import ctypes
-from typing import Any
+from functools import partial
+from typing import Any, Callable
 
 from fmpy.fmi2 import (
     FMU2Slave,
@@ -57,11 +58,10 @@ class Fmi2Unit(FmiInstance):
         }
         self._do_step = dll.fmi2DoStep
 
-    def _get_call(self, group: _TypeGroup) -> int:
-        return self._calls[group.fmi_type][0](self._component, group.vrs, group.n_vrs, group.values)
-
-    def _set_call(self, group: _TypeGroup) -> int:
-        return self._calls[group.fmi_type][1](self._component, group.vrs, group.n_vrs, group.values)
+    def _bind(self, group: _TypeGroup) -> tuple[Callable[[], int], Callable[[], int]]:
+        get, put = self._calls[group.fmi_type]
+        args = (self._component, group.vrs, group.n_vrs, group.values)
+        return partial(get, *args), partial(put, *args)
 
     def setup(self, start_time: float, stop_time: float | None) -> None:
         self.time = start_time

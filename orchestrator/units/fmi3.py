@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import ctypes
-from typing import Any
+from functools import partial
+from typing import Any, Callable
 
 from fmpy.fmi3 import FMU3Slave
 
@@ -50,11 +51,10 @@ class Fmi3Unit(FmiInstance):
     def _log_callback_py(self, env: Any, status: int, category: bytes, message: bytes) -> None:
         self._record_log(status, category, message)
 
-    def _get_call(self, group: _TypeGroup) -> int:
-        return self._calls[group.fmi_type][0](self._component, group.vrs, group.n_vrs, group.values, group.n_values)
-
-    def _set_call(self, group: _TypeGroup) -> int:
-        return self._calls[group.fmi_type][1](self._component, group.vrs, group.n_vrs, group.values, group.n_values)
+    def _bind(self, group: _TypeGroup) -> tuple[Callable[[], int], Callable[[], int]]:
+        get, put = self._calls[group.fmi_type]
+        args = (self._component, group.vrs, group.n_vrs, group.values, group.n_values)
+        return partial(get, *args), partial(put, *args)
 
     def setup(self, start_time: float, stop_time: float | None) -> None:
         self.time = start_time

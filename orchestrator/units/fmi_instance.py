@@ -12,6 +12,8 @@ import operator
 from collections import deque
 from typing import Any, Callable, Sequence
 
+import numpy as np
+
 from ..unit import ElementRef, Selection, Unit, UnitError
 
 STATUS_LABELS = ["OK", "Warning", "Discard", "Error", "Fatal", "Pending"]
@@ -26,6 +28,10 @@ class _TypeGroup:
         self.n_vrs = len(vrs)
         self.n_values = sum(sizes)
         self.values = (c_type * self.n_values)()
+        # Zero-argument FMI calls bound by the instance (functools.partial over
+        # the library function): the stepping loop's cheapest possible call.
+        self.read: Callable[[], int] = lambda: 0
+        self.write: Callable[[], int] = lambda: 0
 
 
 class FmiSelection(Selection):
@@ -47,7 +53,7 @@ class FmiInstance(Unit):
     """Common part of :class:`Fmi2Unit` and :class:`Fmi3Unit`.
 
     Subclasses provide ``_c_types`` (FMI type -> ctypes type), ``_vr_type``,
-    ``_prefix``, ``_slave`` (fmpy's slave object), ``_get_call(group)`` /
+    ``_prefix``, ``_slave`` (fmpy's slave object), ``_bind(group)``
     ``_set_call(group)`` and the version-specific lifecycle calls.
     """
 
@@ -111,8 +117,9 @@ class FmiInstance(Unit):
             for vr, size in sizes.items():
                 offsets[(fmi_type, vr)] = (g, start)
                 start += size
-            groups.append(_TypeGroup(fmi_type, self._c_types[fmi_type], self._vr_type,
-                                     list(sizes), list(sizes.values())))
+            group = _TypeGroup(fmi_type, self._c_types[fmi_type], self._vr_type, list(sizes), list(sizes.values()))
+            group.read, group.write = self._bind(group)
+            groups.append(group)
         positions = []
         covered: dict[tuple[str, int], set[int]] = {}
         for ref in refs:
@@ -134,7 +141,7 @@ class FmiInstance(Unit):
     def get(self, selection: Selection) -> list[Any]:
         sel: FmiSelection = selection  # type: ignore[assignment]
         for group in sel.groups:
-            status = self._get_call(group)
+            status = group.read()
             if status > 1:  # above fmiWarning
                 raise self.fail_status(f"get{group.fmi_type}", status)
         if sel.plain:
@@ -143,6 +150,21 @@ class FmiInstance(Unit):
             return list(sel.pick(sel.groups[0].values))
         return [self._convert(sel.groups[g], sel.groups[g].values[i]) for g, i in sel.positions]
 
+    def reader(self, selection: Selection) -> Callable[[], Sequence[Any]]:
+        sel: FmiSelection = selection  # type: ignore[assignment]
+        if not sel.plain:
+            return lambda: self.get(sel)
+        group = sel.groups[0]
+        read, view, fail = group.read, np.frombuffer(group.values, dtype=group.values._type_), self.fail_status
+
+        def read_into_view() -> np.ndarray:
+            status = read()
+            if status > 1:
+                raise fail(f"get{group.fmi_type}", status)
+            return view  # a numpy view of the buffer the FMU just filled: no copy
+
+        return read_into_view
+
     def set(self, selection: Selection, values: Sequence[Any]) -> None:
         sel: FmiSelection = selection  # type: ignore[assignment]
         if sel.plain:
@@ -150,14 +172,14 @@ class FmiInstance(Unit):
         else:
             if sel.partial_arrays:
                 for group in sel.groups:
-                    status = self._get_call(group)
+                    status = group.read()
                     if status > 1:
                         raise self.fail_status(f"get{group.fmi_type}", status)
             for (g, i), value in zip(sel.positions, values):
                 group = sel.groups[g]
                 group.values[i] = value.encode("utf-8") if group.fmi_type == "String" else value
         for group in sel.groups:
-            status = self._set_call(group)
+            status = group.write()
             if status > 1:
                 raise self.fail_status(f"set{group.fmi_type}", status)
 
@@ -187,10 +209,6 @@ class FmiInstance(Unit):
 
     # Implemented per FMI version -------------------------------------------
 
-    def _get_call(self, group: _TypeGroup) -> int:
-        """Read the group's values from the FMU; returns the FMI status."""
-        raise NotImplementedError
-
-    def _set_call(self, group: _TypeGroup) -> int:
-        """Write the group's values into the FMU; returns the FMI status."""
+    def _bind(self, group: _TypeGroup) -> tuple[Callable[[], int], Callable[[], int]]:
+        """Calls that read / write the group's values from / into the FMU, returning the FMI status."""
         raise NotImplementedError
