@@ -1,7 +1,7 @@
 """Sweep throughput, parallel efficiency, client memory, and cosim vs hand-written fmpy + dask.bag.
 
     python benchmarks/sweep_throughput.py            # all three parts (several minutes on 2 cores)
-    python benchmarks/sweep_throughput.py --part efficiency|memory|bag [--repeat 3]
+    python benchmarks/sweep_throughput.py --part efficiency|memory|bag|pickplace [--repeat 3]
 
 1. efficiency: runs/s of ``cosim sweep`` of an FMU study (fmus/linear_ode, FMI 2.0, 10 000 steps a
    point) on a LocalCluster of 1 and of 2 worker processes; parallel efficiency = rate(2) / (2 rate(1)).
@@ -11,6 +11,8 @@
 3. bag: the same FMU and points through ``cosim sweep`` and through the pattern FMPy documents for
    parameter variation (dask.bag, one FMU2Slave per partition, reset() per point, the output read every
    step), on one 2-worker LocalCluster, alternating, in one run: ratio = rate(cosim) / rate(bag).
+4. pickplace: runs/s of the pick-and-place coarse grid (273 points) at both robot fidelity levels
+   (examples/pick_and_place/spec_coarse.json and spec_coarse_exudyn.json) on 1 and 2 workers.
 """
 
 from __future__ import annotations
@@ -206,9 +208,29 @@ def part_bag(folder: Path, repeat: int, n_points: int) -> dict:
     return {"bag": bag_rates, "cosim": cosim_rates, "ratio": ratio}
 
 
+def part_pickplace(repeat: int) -> dict:
+    specs = {"inverse dynamics": ROOT / "examples" / "pick_and_place" / "spec_coarse.json",
+             "Exudyn": ROOT / "examples" / "pick_and_place" / "spec_coarse_exudyn.json"}
+    out = {}
+    with tempfile.TemporaryDirectory(prefix="cosim_pp_") as tmp:
+        for level, spec in specs.items():
+            rates = {}
+            for workers in (1, 2):
+                with cluster(workers) as c:
+                    timed_sweep(spec, c.scheduler_address, Path(tmp) / "warm")  # workers keep the loaded system
+                    runs = [timed_sweep(spec, c.scheduler_address, Path(tmp) / "run") for _ in range(repeat)]
+                rates[workers] = statistics.median(n / seconds for seconds, n in runs)
+            efficiency = rates[2] / (2 * rates[1])
+            print(f"  {level}: 273 points, runs/s 1 worker {rates[1]:.1f}, 2 workers {rates[2]:.1f}; "
+                  f"parallel efficiency {efficiency:.1%}; 17061 points would take "
+                  f"{17061 / rates[2] / 60:.1f} min on 2 workers", flush=True)
+            out[level] = rates
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--part", choices=["efficiency", "memory", "bag", "all"], default="all")
+    parser.add_argument("--part", choices=["efficiency", "memory", "bag", "pickplace", "all"], default="all")
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--points", type=int, default=200, help="FMU points for efficiency and bag")
     parser.add_argument("--sizes", default="10000,100000", help="point counts for the memory part")
@@ -229,6 +251,9 @@ def main() -> None:
         if args.part in ("bag", "all"):
             print("cosim sweep vs fmpy + dask.bag:")
             part_bag(folder, args.repeat, args.points)
+        if args.part in ("pickplace", "all"):
+            print("pick-and-place coarse grid:")
+            part_pickplace(args.repeat)
 
 
 if __name__ == "__main__":

@@ -21,6 +21,7 @@ import pandas as pd
 import pytest
 
 from orchestrator.analysis.explorer import SLIDER_STEPS, ExplorerState
+from orchestrator.analysis.screen import xwd_to_rgb
 from orchestrator.analysis.table import AnalysisError, load_results
 
 from .conftest import python_unit
@@ -98,20 +99,6 @@ def xvfb(tmp_path_factory):
         os.environ["DISPLAY"] = old
     proc.terminate()
     proc.wait(timeout=10)
-
-
-def xwd_to_rgb(path: Path) -> np.ndarray:
-    """Decode an XWD file (ZPixmap, 32 bits per pixel, as Xvfb writes it) to an RGB uint8 array."""
-    data = path.read_bytes()
-    h = np.frombuffer(data[:100], dtype=">u4")
-    header_size, width, height, byte_order, bpp, bpl = int(h[0]), int(h[4]), int(h[5]), int(h[7]), int(h[11]), int(h[12])
-    masks, ncolors = (int(h[14]), int(h[15]), int(h[16])), int(h[19])
-    assert bpp == 32, f"unexpected {bpp} bits per pixel"
-    start = header_size + 12 * ncolors
-    pixels = np.frombuffer(data[start:start + bpl * height], dtype="<u4" if byte_order == 0 else ">u4")
-    pixels = pixels.reshape(height, bpl // 4)[:, :width]
-    channels = [((pixels & m) >> (int(m) & -int(m)).bit_length() - 1).astype(np.uint8) for m in masks]
-    return np.dstack(channels)
 
 
 def pump(root, until=lambda: True, timeout=10.0):
