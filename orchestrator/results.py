@@ -20,6 +20,7 @@ objective (flat, e.g. ``e_el[3]``), ``status`` (ok, failed, timeout, crashed),
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import re
@@ -122,31 +123,23 @@ class ResultsStore:
         """
         sources = ([self.table_path] if self.table_path.exists() else []) + self._part_files()
         counts = {s: 0 for s in STATUSES}
-        latest: dict[str, tuple[int, int]] = {}
-        for s_index, path in enumerate(sources):
-            for r_index, pid in enumerate(pq.read_table(path, columns=["point_id"]).column("point_id").to_pylist()):
-                latest.pop(pid, None)  # re-inserted, so dict order is the order of the latest rows
-                latest[pid] = (s_index, r_index)
-        rank = {pid: i for i, pid in enumerate(order)} if order is not None else {}
-        keys = np.fromiter((rank.get(pid, len(rank) + i) for i, pid in enumerate(latest)), dtype=np.int64,
-                           count=len(latest))
-        position = np.empty(len(keys), dtype=np.int64)
-        position[np.argsort(keys, kind="stable")] = np.arange(len(keys))
-        where = np.array(list(latest.values()), dtype=np.int64).reshape(-1, 2)
-        del latest, rank, keys
+        where, position = _latest_rows_in_order(sources, order)
         schema = _unified_schema(sources)
         tmp = self.table_path.with_suffix(".parquet.tmp")
         csv_tmp = self.folder / "results.csv.tmp"
         csv_writer = None
         with pq.ParquetWriter(tmp, schema) as writer:
             for low in range(0, len(position), COMPACT_WINDOW):
-                in_window = (position >= low) & (position < low + COMPACT_WINDOW)
+                chosen = np.flatnonzero((position >= low) & (position < low + COMPACT_WINDOW))
+                if len(chosen) == 0:
+                    continue
+                chosen = chosen[np.argsort(where[chosen, 0], kind="stable")]  # grouped by source file
+                splits = np.flatnonzero(np.diff(where[chosen, 0])) + 1
                 pieces = []
-                for s_index, path in enumerate(sources):
-                    chosen = in_window & (where[:, 0] == s_index)
-                    if chosen.any():
-                        table = _conform(pq.read_table(path).take(pa.array(where[chosen, 1])), schema)
-                        pieces.append(table.append_column("__position", pa.array(position[chosen])))
+                for group in np.split(chosen, splits):
+                    path = sources[int(where[group[0], 0])]
+                    table = _conform(pq.read_table(path).take(pa.array(where[group, 1])), schema)
+                    pieces.append(table.append_column("__position", pa.array(position[group])))
                 if not pieces:
                     continue
                 window = pa.concat_tables(pieces).sort_by("__position").drop_columns(["__position"])
@@ -172,6 +165,48 @@ class ResultsStore:
     def table(self, columns: Sequence[str] | None = None) -> pd.DataFrame:
         """The compacted table (``results.parquet``) as a DataFrame, optionally only some columns."""
         return pd.read_parquet(self.table_path, columns=list(columns) if columns else None)
+
+
+def _latest_rows_in_order(sources: Sequence[Path], order: Iterable[str] | None) -> tuple[np.ndarray, np.ndarray]:
+    """Which rows to keep and where they go.
+
+    Returns ``where`` (one (source index, row index) pair per kept row: the
+    latest row of each point id) and ``position`` (each kept row's place in the
+    final table: design ``order`` first, ids not in it after, in write order).
+    The bookkeeping is in Arrow arrays (a few bytes a point), not Python objects.
+    """
+    if not sources:
+        return np.zeros((0, 2), dtype=np.int64), np.zeros(0, dtype=np.int64)
+    id_columns = [pq.read_table(path, columns=["point_id"]).column("point_id") for path in sources]
+    lengths = np.array([len(c) for c in id_columns], dtype=np.int64)
+    source_of = np.repeat(np.arange(len(sources), dtype=np.int64), lengths)
+    row_of = np.arange(int(lengths.sum()), dtype=np.int64) - np.repeat(np.cumsum(lengths) - lengths, lengths)
+    rows = pa.table({"point_id": pa.chunked_array([c.cast(pa.string()) for c in id_columns], type=pa.string()),
+                     "seq": pa.array(np.arange(len(source_of), dtype=np.int64))})
+    latest = rows.group_by("point_id").aggregate([("seq", "max")]).rename_columns(["point_id", "seq"])
+    if order is not None:
+        ranks = _order_table(order)
+        latest = latest.join(ranks, "point_id", join_type="left outer")
+        rank = latest.column("rank").to_numpy(zero_copy_only=False)
+        seq = latest.column("seq").to_numpy()
+        unknown = np.isnan(rank) if rank.dtype.kind == "f" else np.zeros(len(rank), dtype=bool)
+        key = np.where(unknown, len(ranks) + seq, np.nan_to_num(rank)).astype(np.int64)
+    else:
+        seq = latest.column("seq").to_numpy()
+        key = seq
+    position = np.empty(len(key), dtype=np.int64)
+    position[np.argsort(key, kind="stable")] = np.arange(len(key))
+    where = np.stack([source_of[seq], row_of[seq]], axis=1)
+    return where, position
+
+
+def _order_table(order: Iterable[str], chunk: int = 10_000) -> pa.Table:
+    """point_id -> rank, built in chunks so the ids never sit in a Python list all at once."""
+    arrays, it = [], iter(order)
+    while ids := list(itertools.islice(it, chunk)):
+        arrays.append(pa.array(ids, type=pa.string()))
+    ids = pa.chunked_array(arrays, type=pa.string())
+    return pa.table({"point_id": ids, "rank": pa.array(np.arange(len(ids), dtype=np.int64))})
 
 
 def _unified_schema(sources: Sequence[Path]) -> pa.Schema:
