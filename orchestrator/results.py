@@ -37,7 +37,10 @@ import pyarrow.parquet as pq
 STATUSES = ("ok", "failed", "timeout", "crashed")
 TAIL_COLUMNS = ("status", "message", "run_time", "worker")
 _PART = re.compile(r"^part-(\d+)\.parquet$")
-COMPACT_WINDOW = 50_000  # rows held at once while merging parts into the final table
+COMPACT_WINDOW = 10_000  # rows held at once while merging parts into the final table
+# Every MERGE_PARTS appended batches, the part files are merged into one: thousands of tiny files cost
+# the final merge more memory (per-file reader state) than their rows do.
+MERGE_PARTS = 128
 
 
 class ResultsStore:
@@ -51,6 +54,7 @@ class ResultsStore:
         self.folder.mkdir(parents=True, exist_ok=True)
         self.parts.mkdir(exist_ok=True)
         self._next = max((int(m.group(1)) for m in map(_PART.match, os.listdir(self.parts)) if m), default=-1) + 1
+        self._parts_written = 0
 
     # -- writing --------------------------------------------------------------
     def append(self, rows: Sequence[Mapping[str, Any]]) -> None:
@@ -70,6 +74,39 @@ class ResultsStore:
         except BaseException:
             Path(tmp).unlink(missing_ok=True)
             raise
+        self._parts_written += 1
+        if self._parts_written % MERGE_PARTS == 0:
+            self._merge_parts()
+
+    def _merge_parts(self) -> None:
+        """Merge the last MERGE_PARTS part files into one (keeps the final merge cheap for huge sweeps).
+
+        Only the newest, small parts are merged, so a merge never reads more
+        than MERGE_PARTS batches, however long the sweep.
+
+        The merged file gets the next number and is in place before the small
+        parts are removed: a kill in between leaves rows twice, which the
+        final merge resolves (latest row wins; they are the same rows).
+        """
+        parts = self._part_files()[-MERGE_PARTS:]
+        if len(parts) < 2:
+            return
+        schema = _unified_schema(parts)
+        table = pa.concat_tables([_conform(_read(p), schema) for p in parts])
+        final = self.parts / f"part-{self._next:08d}.parquet"
+        self._next += 1
+        fd, tmp = tempfile.mkstemp(dir=self.parts, suffix=".tmp")
+        try:
+            with os.fdopen(fd, "wb") as f:
+                pq.write_table(table, f)
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(tmp, final)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+        for part in parts:
+            part.unlink()
 
     def write_metadata(self, metadata: Mapping[str, Any]) -> None:
         """Replace ``metadata.json`` atomically."""
@@ -95,7 +132,7 @@ class ResultsStore:
         """Ids of every point that already has a row (any status): what ``--resume`` skips."""
         ids: set[str] = set()
         for path in ([self.table_path] if self.table_path.exists() else []) + self._part_files():
-            ids.update(pq.read_table(path, columns=["point_id"]).column("point_id").to_pylist())
+            ids.update(_read(path, ["point_id"]).column("point_id").to_pylist())
         return ids
 
     def read(self) -> pd.DataFrame:
@@ -138,8 +175,10 @@ class ResultsStore:
                 pieces = []
                 for group in np.split(chosen, splits):
                     path = sources[int(where[group[0], 0])]
-                    table = _conform(pq.read_table(path).take(pa.array(where[group, 1])), schema)
+                    table = _conform(_read(path).take(pa.array(where[group, 1])), schema)
                     pieces.append(table.append_column("__position", pa.array(position[group])))
+                    if len(pieces) >= 64:  # thousands of tiny tables cost more than their rows: merge early
+                        pieces = [pa.concat_tables(pieces).combine_chunks()]
                 if not pieces:
                     continue
                 window = pa.concat_tables(pieces).sort_by("__position").drop_columns(["__position"])
@@ -167,46 +206,54 @@ class ResultsStore:
         return pd.read_parquet(self.table_path, columns=list(columns) if columns else None)
 
 
+def _read(path: Path, columns: Sequence[str] | None = None) -> pa.Table:
+    """One part file.  ``ParquetFile.read`` rather than ``pq.read_table``: the latter sets up the
+    dataset machinery per call, and over thousands of small parts that costs tens of MB."""
+    return pq.ParquetFile(path).read(columns=list(columns) if columns else None)
+
+
 def _latest_rows_in_order(sources: Sequence[Path], order: Iterable[str] | None) -> tuple[np.ndarray, np.ndarray]:
     """Which rows to keep and where they go.
 
     Returns ``where`` (one (source index, row index) pair per kept row: the
     latest row of each point id) and ``position`` (each kept row's place in the
     final table: design ``order`` first, ids not in it after, in write order).
-    The bookkeeping is in Arrow arrays (a few bytes a point), not Python objects.
+    The bookkeeping is in flat numpy arrays (about 100 bytes a point); Arrow's
+    hash group-by and join cost several times more for this job.
     """
     if not sources:
         return np.zeros((0, 2), dtype=np.int64), np.zeros(0, dtype=np.int64)
-    id_columns = [pq.read_table(path, columns=["point_id"]).column("point_id") for path in sources]
-    lengths = np.array([len(c) for c in id_columns], dtype=np.int64)
+    id_parts = [np.array(_read(path, ["point_id"]).column("point_id").to_pylist(), dtype=str) for path in sources]
+    lengths = np.array([len(a) for a in id_parts], dtype=np.int64)
+    ids = np.concatenate(id_parts)
+    del id_parts
     source_of = np.repeat(np.arange(len(sources), dtype=np.int64), lengths)
-    row_of = np.arange(int(lengths.sum()), dtype=np.int64) - np.repeat(np.cumsum(lengths) - lengths, lengths)
-    rows = pa.table({"point_id": pa.chunked_array([c.cast(pa.string()) for c in id_columns], type=pa.string()),
-                     "seq": pa.array(np.arange(len(source_of), dtype=np.int64))})
-    latest = rows.group_by("point_id").aggregate([("seq", "max")]).rename_columns(["point_id", "seq"])
+    row_of = np.arange(len(ids), dtype=np.int64) - np.repeat(np.cumsum(lengths) - lengths, lengths)
+    _, first_from_end = np.unique(ids[::-1], return_index=True)
+    seq = np.sort(len(ids) - 1 - first_from_end)  # the latest row of each id, in write order
+    kept = ids[seq]
+    del ids
+    key = seq.copy()
     if order is not None:
-        ranks = _order_table(order)
-        latest = latest.join(ranks, "point_id", join_type="left outer")
-        rank = latest.column("rank").to_numpy(zero_copy_only=False)
-        seq = latest.column("seq").to_numpy()
-        unknown = np.isnan(rank) if rank.dtype.kind == "f" else np.zeros(len(rank), dtype=bool)
-        key = np.where(unknown, len(ranks) + seq, np.nan_to_num(rank)).astype(np.int64)
-    else:
-        seq = latest.column("seq").to_numpy()
-        key = seq
+        order_ids = _order_array(order)
+        if len(order_ids):
+            sorter = np.argsort(order_ids, kind="stable")
+            found_at = np.clip(np.searchsorted(order_ids, kept, sorter=sorter), 0, len(order_ids) - 1)
+            rank = sorter[found_at]
+            known = order_ids[rank] == kept
+            key = np.where(known, rank, len(order_ids) + seq)
     position = np.empty(len(key), dtype=np.int64)
     position[np.argsort(key, kind="stable")] = np.arange(len(key))
     where = np.stack([source_of[seq], row_of[seq]], axis=1)
     return where, position
 
 
-def _order_table(order: Iterable[str], chunk: int = 10_000) -> pa.Table:
-    """point_id -> rank, built in chunks so the ids never sit in a Python list all at once."""
+def _order_array(order: Iterable[str], chunk: int = 10_000) -> np.ndarray:
+    """The design order's ids as a numpy string array, built in chunks (never one big Python list)."""
     arrays, it = [], iter(order)
     while ids := list(itertools.islice(it, chunk)):
-        arrays.append(pa.array(ids, type=pa.string()))
-    ids = pa.chunked_array(arrays, type=pa.string())
-    return pa.table({"point_id": ids, "rank": pa.array(np.arange(len(ids), dtype=np.int64))})
+        arrays.append(np.array(ids, dtype=str))
+    return np.concatenate(arrays) if arrays else np.array([], dtype=str)
 
 
 def _unified_schema(sources: Sequence[Path]) -> pa.Schema:
@@ -214,7 +261,8 @@ def _unified_schema(sources: Sequence[Path]) -> pa.Schema:
     if not sources:
         return pa.schema([("point_id", pa.string()), ("status", pa.string()), ("message", pa.string()),
                           ("run_time", pa.float64()), ("worker", pa.string())])
-    schema = pa.unify_schemas([pq.read_schema(p).remove_metadata() for p in sources], promote_options="permissive")
+    schema = pa.unify_schemas([pq.ParquetFile(p).schema_arrow.remove_metadata() for p in sources],
+                              promote_options="permissive")
     names = schema.names
     tail = [c for c in TAIL_COLUMNS if c in names]
     middle = [c for c in names if c != "point_id" and c not in tail]

@@ -70,3 +70,19 @@ def test_compaction_streams_in_windows_and_keeps_design_order(tmp_path, monkeypa
     assert list(df["point_id"]) == order + ["zz"]
     assert df.set_index("point_id").loc["p1", "y"] == 2.0 and math.isnan(df.set_index("point_id").loc["p3", "y"])
     assert counts == {"ok": 7, "failed": 2, "timeout": 0, "crashed": 0}
+
+
+def test_parts_are_merged_as_they_accumulate_without_losing_rows(tmp_path, monkeypatch):
+    import orchestrator.results as results
+
+    monkeypatch.setattr(results, "MERGE_PARTS", 3)
+    store = ResultsStore(tmp_path)
+    for b in range(7):
+        store.append(rows([f"p{b}-{i}" for i in range(4)], y=float(b)))
+    store.append(rows(["p0-0"], y=99.0))  # a later row of an early point still wins
+    # merges after batches 3 and 6 (each of the 3 newest parts), then 2 new parts
+    assert len(list((tmp_path / "parts").glob("part-*.parquet"))) == 4
+    assert len(store.done_ids()) == 28
+    store.compact()
+    df = store.table().set_index("point_id")
+    assert len(df) == 28 and df.loc["p0-0", "y"] == 99.0 and df.loc["p6-3", "y"] == 6.0
