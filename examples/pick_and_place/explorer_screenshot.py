@@ -26,7 +26,7 @@ HERE = Path(__file__).resolve().parent
 def start_xvfb(fbdir: Path) -> tuple[subprocess.Popen, str]:
     number = next(n for n in range(90, 200) if not Path(f"/tmp/.X11-unix/X{n}").exists()
                   and not Path(f"/tmp/.X{n}-lock").exists())
-    proc = subprocess.Popen(["Xvfb", f":{number}", "-screen", "0", "1600x1000x24", "-nolisten", "tcp",
+    proc = subprocess.Popen(["Xvfb", f":{number}", "-screen", "0", "2300x1000x24", "-nolisten", "tcp",
                              "-fbdir", str(fbdir)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     while not Path(f"/tmp/.X11-unix/X{number}").exists():
         time.sleep(0.05)
@@ -66,10 +66,14 @@ def main() -> None:
             window.redraw()
             pump(root, 1.0)
             window.on_rerun()
-            pump(root, 6.0)  # the trace window opens beside the explorer and the arm starts moving
+            for trace_window in window.trace_windows:  # beside the explorer, not over it
+                trace_window.geometry("+1010+0")
+            pump(root, 6.0)  # the arm animation runs
             image = xwd_to_rgb(Path(fbdir) / "Xvfb_screen0")
             out = HERE / "figures" / "explorer.png"
-            matplotlib.image.imsave(out, image)
+            height, width = image.shape[:2]
+            right = max(int(np.flatnonzero(image.reshape(height, width, 3).any(axis=2).any(axis=0))[-1]) + 1, 1000)
+            matplotlib.image.imsave(out, image[:, :right])
             print(f"wrote {out}; status: {window.status.cget('text')}")
             root.destroy()
         finally:
