@@ -62,6 +62,13 @@ class ResultsStore:
         if not rows:
             return
         table = pa.Table.from_pandas(pd.DataFrame(list(rows)), preserve_index=False)
+        self._write_part(table)
+        self._parts_written += 1
+        if self._parts_written % MERGE_PARTS == 0:
+            self._merge_parts()
+
+    def _write_part(self, table: pa.Table) -> None:
+        """Write ``table`` as the next part file: temporary file, fsync, rename (whole or absent after a kill)."""
         final = self.parts / f"part-{self._next:08d}.parquet"
         self._next += 1
         fd, tmp = tempfile.mkstemp(dir=self.parts, suffix=".tmp")
@@ -74,9 +81,6 @@ class ResultsStore:
         except BaseException:
             Path(tmp).unlink(missing_ok=True)
             raise
-        self._parts_written += 1
-        if self._parts_written % MERGE_PARTS == 0:
-            self._merge_parts()
 
     def _merge_parts(self) -> None:
         """Merge the last MERGE_PARTS part files into one (keeps the final merge cheap for huge sweeps).
@@ -93,18 +97,7 @@ class ResultsStore:
             return
         schema = _unified_schema(parts)
         table = pa.concat_tables([_conform(_read(p), schema) for p in parts])
-        final = self.parts / f"part-{self._next:08d}.parquet"
-        self._next += 1
-        fd, tmp = tempfile.mkstemp(dir=self.parts, suffix=".tmp")
-        try:
-            with os.fdopen(fd, "wb") as f:
-                pq.write_table(table, f)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, final)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        self._write_part(table)
         for part in parts:
             part.unlink()
 
