@@ -195,6 +195,10 @@ def _default_experiment(model: Model) -> str:
     return f"  <DefaultExperiment{_attrs(startTime=d.get('startTime'), stopTime=d.get('stopTime'), stepSize=d.get('stepSize'))}/>"
 
 
+LOG_CATEGORIES = ['  <LogCategories>', '    <Category name="logStatusError" description="Errors and bad values"/>',
+                  '    <Category name="logEvents" description="Lifecycle messages"/>', '  </LogCategories>']
+
+
 def _has_start(v: ModelVariable) -> bool:
     # Outputs and locals are "calculated": FMI forbids a start value for them.
     return v.causality in ("parameter", "input")
@@ -212,13 +216,11 @@ def fmi3_model_description(model: Model) -> str:
            ' canGetAndSetFMUState="false" canSerializeFMUState="false" canBeInstantiatedOnlyOncePerProcess="false"'
            ' needsExecutionTool="false" providesIntermediateUpdate="false" hasEventMode="false"/>']
     out += _unit_definitions(model)
-    out += ['  <LogCategories>', '    <Category name="logStatusError" description="Errors and bad values"/>',
-            '    <Category name="logEvents" description="Lifecycle messages"/>', '  </LogCategories>']
+    out += LOG_CATEGORIES
     out.append(_default_experiment(model))
     out.append("  <ModelVariables>")
-    out.append('    <Float64 name="time" valueReference="0" causality="independent" variability="continuous" unit="s" description="Simulation time"/>'
-               if "s" in model.units else
-               '    <Float64 name="time" valueReference="0" causality="independent" variability="continuous" description="Simulation time"/>')
+    time_unit = _attrs(unit="s") if "s" in model.units else ""
+    out.append(f'    <Float64 name="time" valueReference="0" causality="independent" variability="continuous"{time_unit} description="Simulation time"/>')
     for v in model.variables:
         tag = FMI3_TYPES[v.type]
         start = " ".join(_fmt(s, v.type) for s in v.starts()) if _has_start(v) else None
@@ -258,8 +260,7 @@ def fmi2_model_description(model: Model) -> str:
            ' canGetAndSetFMUstate="false" canSerializeFMUstate="false" canBeInstantiatedOnlyOncePerProcess="false"'
            ' needsExecutionTool="false" canNotUseMemoryManagementFunctions="true"/>']
     out += _unit_definitions(model)
-    out += ['  <LogCategories>', '    <Category name="logStatusError" description="Errors and bad values"/>',
-            '    <Category name="logEvents" description="Lifecycle messages"/>', '  </LogCategories>']
+    out += LOG_CATEGORIES
     out.append(_default_experiment(model))
     out.append("  <ModelVariables>")
     time_unit = _attrs(unit="s") if "s" in model.units else ""

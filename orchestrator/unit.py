@@ -144,6 +144,24 @@ def parse_port(port: str) -> tuple[str, int | None]:
     return port, None
 
 
+def indexed_runs(names: Iterable[str]) -> dict[str, list[str]]:
+    """Complete runs of scalar names ``base[1]`` .. ``base[n]``, by base, in first-seen order.
+
+    Only runs numbered from 1 without gaps, whose base is not itself a name
+    and has no brackets, count.  They are offered as one array ``base``, so
+    FMI 2.0 scalars and recorded columns connect like FMI 3.0 arrays.
+    """
+    names = list(names)
+    known = set(names)
+    groups: dict[str, dict[int, str]] = {}
+    for name in names:
+        base, index = parse_port(name)
+        if index is not None and "[" not in base:
+            groups.setdefault(base, {})[index] = name
+    return {base: [members[i] for i in range(1, len(members) + 1)] for base, members in groups.items()
+            if base not in known and sorted(members) == list(range(1, len(members) + 1))}
+
+
 def resolve_port(description: UnitDescription, port: str) -> tuple[Variable, list[ElementRef]]:
     """Turn a port name into its variable and scalar elements.
 

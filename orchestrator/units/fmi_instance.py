@@ -81,16 +81,16 @@ class FmiInstance(Unit):
     def fail_status(self, call: str, status: int) -> UnitError:
         """A UnitError for an FMI call that returned ``status``, with the FMU's last log lines."""
         label = STATUS_LABELS[status] if 0 <= status < len(STATUS_LABELS) else f"illegal status {status}"
-        text = f"{call} returned {label}"
-        if self.log:
-            text += "; FMU log: " + " | ".join(self.log)
-        return UnitError(self.name, text, self.time)
+        return self._error(f"{call} returned {label}")
 
     def fail(self, call: str, exc: BaseException) -> UnitError:
-        """A UnitError for a failed FMI call, with its status and the FMU's last log lines."""
+        """A UnitError for a failed FMI call (an fmpy exception), with its status and the FMU's last log lines."""
         status = getattr(exc, "status", None)
-        label = STATUS_LABELS[status] if isinstance(status, int) and 0 <= status < len(STATUS_LABELS) else None
-        text = f"{call} returned {label}" if label else f"{call} failed: {exc}"
+        if isinstance(status, int) and 0 <= status < len(STATUS_LABELS):
+            return self.fail_status(call, status)
+        return self._error(f"{call} failed: {exc}")
+
+    def _error(self, text: str) -> UnitError:
         if self.log:
             text += "; FMU log: " + " | ".join(self.log)
         return UnitError(self.name, text, self.time)

@@ -27,11 +27,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..unit import Unit, UnitDescription, UnitType, Variable
+from ..unit import Unit, UnitDescription, UnitType, Variable, indexed_runs, parse_port
 
 BUILTIN_PREFIX = "builtin:"
-
-_INDEXED = re.compile(r"^(?P<base>[^\[\]]+)\[(?P<index>\d+)\]$")
 
 _FMI3_TYPE = {
     "Float64": "Real", "Float32": "Real",
@@ -315,27 +313,19 @@ def _describe(md: Any, reference: str) -> tuple[UnitDescription, dict[str, list[
 
 
 def _group_indexed(variables: list[Variable], elements: dict[str, list[FmiElement]]):
-    """Offer runs ``x[1]..x[n]`` of FMI 2.0 scalars also as an array ``x``."""
-    groups: dict[str, dict[int, Variable]] = {}
-    names = {v.name for v in variables}
-    for v in variables:
-        m = _INDEXED.match(v.name)
-        if m:
-            groups.setdefault(m.group("base"), {})[int(m.group("index"))] = v
+    """Offer runs ``x[1]..x[n]`` of FMI 2.0 scalars (same causality and type) also as an array ``x``."""
+    by_name = {v.name: v for v in variables}
     extra = []
-    for base, members in groups.items():
-        n = len(members)
-        if base in names or sorted(members) != list(range(1, n + 1)):
+    for base, member_names in indexed_runs(by_name).items():
+        ordered = [by_name[n] for n in member_names]
+        first = ordered[0]
+        if any(m.causality != first.causality or m.type != first.type for m in ordered):
             continue
-        first = members[1]
-        if any(m.causality != first.causality or m.type != first.type for m in members.values()):
-            continue
-        ordered = [members[i] for i in range(1, n + 1)]
         starts = [m.start for m in ordered]
         extra.append(Variable(
             name=base, causality=first.causality, type=first.type, unit=first.unit,
             start=None if all(s is None for s in starts) else tuple(starts),
-            description=first.description, shape=(n,), min=first.min, max=first.max,
+            description=first.description, shape=(len(ordered),), min=first.min, max=first.max,
             variability=first.variability,
         ))
         elements[base] = [elements[m.name][0] for m in ordered]
@@ -347,12 +337,14 @@ def _group_feedthrough(feedthrough: dict[str, tuple[str, ...]], variables: list[
     arrays = {v.name for v in variables if v.is_array}
     result = dict(feedthrough)
     for base in arrays:
-        members = [k for k in feedthrough if _INDEXED.match(k) and _INDEXED.match(k).group("base") == base]
+        members = [k for k in feedthrough if parse_port(k)[1] is not None and parse_port(k)[0] == base]
         if members:
             deps: set[str] = set()
             for k in members:
                 deps.update(feedthrough[k])
-            deps.update({_INDEXED.match(d).group("base") for d in list(deps)
-                         if _INDEXED.match(d) and _INDEXED.match(d).group("base") in arrays})
+            for dependency in list(deps):  # an element input stands for its array too
+                dep_base, dep_index = parse_port(dependency)
+                if dep_index is not None and dep_base in arrays:
+                    deps.add(dep_base)
             result[base] = tuple(sorted(deps))
     return result

@@ -16,15 +16,13 @@ sample at or before t) or ``nearest``.  Beyond the recorded range:
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
 
-from ..unit import ElementRef, Selection, Unit, UnitDescription, UnitError, UnitType, Variable
+from ..unit import ElementRef, Selection, Unit, UnitDescription, UnitError, UnitType, Variable, indexed_runs
 
-_INDEXED = re.compile(r"^(?P<base>.+)\[(?P<index>\d+)\]$")
 INTERPOLATIONS = ("linear", "hold", "nearest")
 
 
@@ -66,10 +64,11 @@ class PlayerUnitType(UnitType):
         self.interpolation = interpolation
         self.extrapolation = extrapolation
         self._table: tuple[np.ndarray, np.ndarray, list[str]] | None = None
+        self._aliases: dict[str, str] | None = None
 
     def __getstate__(self) -> dict:
         state = dict(self.__dict__)
-        state["_table"] = None
+        state["_table"] = state["_aliases"] = None
         return state
 
     def table(self) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -84,13 +83,15 @@ class PlayerUnitType(UnitType):
         return self._table
 
     def aliases(self) -> dict[str, str]:
-        """Short port name -> recorded column, for columns 'unit.port' whose 'port' is unique."""
-        _, _, names = self.table()
-        short: dict[str, list[str]] = {}
-        for n in names:
-            if "." in n:
-                short.setdefault(n.split(".", 1)[1], []).append(n)
-        return {k: v[0] for k, v in short.items() if len(v) == 1 and k not in names}
+        """Short port name -> recorded column, for columns 'unit.port' whose 'port' is unique (computed once)."""
+        if self._aliases is None:
+            _, _, names = self.table()
+            short: dict[str, list[str]] = {}
+            for n in names:
+                if "." in n:
+                    short.setdefault(n.split(".", 1)[1], []).append(n)
+            self._aliases = {k: v[0] for k, v in short.items() if len(v) == 1 and k not in names}
+        return self._aliases
 
     def describe(self) -> UnitDescription:
         _, values, columns = self.table()
@@ -99,15 +100,9 @@ class PlayerUnitType(UnitType):
         index = {n: i for i, n in enumerate(columns)} | {a: columns.index(c) for a, c in aliases.items()}
         variables = [Variable(n, "output", "Real", start=float(values[0, index[n]]),
                               description=f"played from {self.path}") for n in names]
-        groups: dict[str, dict[int, int]] = {}
-        for i, n in enumerate(names):
-            m = _INDEXED.match(n)
-            if m:
-                groups.setdefault(m.group("base"), {})[int(m.group("index"))] = i
-        for base, members in groups.items():
-            if base not in names and sorted(members) == list(range(1, len(members) + 1)):
-                variables.append(Variable(base, "output", "Real", shape=(len(members),),
-                                          description=f"array of {base}[1..{len(members)}] played from {self.path}"))
+        for base, members in indexed_runs(names).items():
+            variables.append(Variable(base, "output", "Real", shape=(len(members),),
+                                      description=f"array of {base}[1..{len(members)}] played from {self.path}"))
         return UnitDescription(name=Path(self.path).name, variables=tuple(variables), kind="player",
                                feedthrough={v.name: () for v in variables}, source=self.path)
 
