@@ -136,8 +136,12 @@ class CartesianPlanner:
             return np.concatenate([p - M.translation, np.cross(M.rotation[:, 2], R[:, 2])[:2]])
         return np.concatenate([p - M.translation, pin.log3(R @ M.rotation.T)])  # world-frame pose error
 
-    def ik(self, p, R, q0, iterations: int, max_step: float = np.inf, free_yaw: bool = False) -> tuple[np.ndarray, bool]:
+    def ik(self, p, R, q0, iterations: int, max_step: float = np.inf, free_yaw: bool = False,
+           limits: bool = True) -> tuple[np.ndarray, bool]:
         """DLS inverse kinematics for TCP pose (p, R) from ``q0``; (q, converged).  Never raises.
+
+        With ``limits`` false the joint limits are ignored (used to tell why an
+        IK within the limits failed).
 
         With ``free_yaw`` only the TCP's z axis is held to ``R``'s (5-D task, the
         hand may turn about the vertical); the tool axis must then be vertical,
@@ -155,14 +159,26 @@ class CartesianPlanner:
             n = np.abs(dq).max()
             if n > max_step:  # free IK to the start: small steps keep it near the seed's branch
                 dq *= max_step / n
-            q = np.clip(q + dq, self.q_min, self.q_max)
+            q = np.clip(q + dq, self.q_min, self.q_max) if limits else q + dq
         return q, bool(np.abs(self._error(q, p, R, free_yaw)).max() < self.s.ik_tolerance)
 
-    def _ik_failure(self, q) -> tuple[int, str, str]:
-        at_limit = np.flatnonzero((q <= self.q_min + 1e-9) | (q >= self.q_max - 1e-9))
-        if len(at_limit):
-            j = int(at_limit[0]) + 1
-            return JOINT_LIMIT, f"joint limit of panda_joint{j}", f"panda_joint{j}"
+    def _ik_failure(self, p, R, q0, iterations: int, max_step: float = np.inf,
+                    free_yaw: bool = False) -> tuple[int, str, str]:
+        """Why the IK of (p, R) from ``q0`` failed: (code, reason, joint).
+
+        The IK is solved again without joint limits: if that converges, the
+        joint furthest outside its range blocked (JOINT_LIMIT); otherwise the
+        pose is out of reach.  Judging from where the limited IK stopped is not
+        reproducible: near a singularity damped least squares oscillates, and
+        whether its last iterate sits on a limit depends on the last bits of
+        the floating-point arithmetic (it differed between two x86-64 CPUs).
+        """
+        q, ok = self.ik(p, R, q0, iterations, max_step, free_yaw, limits=False)
+        if ok:
+            outside = np.maximum(self.q_min - q, q - self.q_max)
+            if outside.max() > 0:
+                j = int(np.argmax(outside)) + 1
+                return JOINT_LIMIT, f"joint limit of panda_joint{j}", f"panda_joint{j}"
         return UNREACHABLE, "out of reach (IK did not converge)", ""
 
     def _collision(self, q) -> tuple[int, str, str] | None:
@@ -197,9 +213,10 @@ class CartesianPlanner:
         """
         W = np.asarray(waypoints, dtype=float)
         n_seg = len(W) - 1
-        q, ok = self.ik(W[0], R, self.seed(W[0], R) if q_seed is None else q_seed, 10 * self.s.ik_iterations, max_step=0.1)
+        q0 = self.seed(W[0], R) if q_seed is None else q_seed
+        q, ok = self.ik(W[0], R, q0, 10 * self.s.ik_iterations, max_step=0.1)
         if not ok:
-            code, why, link = self._ik_failure(q)
+            code, why, link = self._ik_failure(W[0], R, q0, 10 * self.s.ik_iterations, max_step=0.1)
             return self._result([q], [0], 0.0, code, f"start pose {why}", link, 0)
         hit = self._collision(q)
         if hit:
@@ -209,10 +226,11 @@ class CartesianPlanner:
             a, b = W[s], W[s + 1]
             n = max(1, math.ceil(np.linalg.norm(b - a) / self.s.eef_step - 1e-9))
             for k in range(1, n + 1):
-                q_new, ok = self.ik(a + (b - a) * (k / n), R, q, self.s.ik_iterations, free_yaw=self.s.free_yaw)
+                target = a + (b - a) * (k / n)
+                q_new, ok = self.ik(target, R, q, self.s.ik_iterations, free_yaw=self.s.free_yaw)
                 failure = None
                 if not ok:
-                    code, why, link = self._ik_failure(q_new)
+                    code, why, link = self._ik_failure(target, R, q, self.s.ik_iterations, free_yaw=self.s.free_yaw)
                     failure = (code, why, link)
                 elif np.abs(q_new - q).max() > self.s.max_joint_step:
                     j = int(np.argmax(np.abs(q_new - q))) + 1

@@ -55,15 +55,25 @@ def test_segment_into_an_obstacle_stops_before_it_and_names_the_link():
 
 def test_segment_out_of_reach_stops_at_the_workspace_boundary(free_planner):
     path = free_planner.plan(np.array([(0.5, 0.0, 0.3), (1.2, 0.0, 0.3)]), DOWN)
-    assert path.code in (UNREACHABLE, JOINT_LIMIT) and not path.ok
-    # the next sample needs the elbow (joint 4) beyond its stretched-out limit (Franka: -0.0698 rad)
-    assert path.blocked_link == "panda_joint4" and -1.0 < path.q[-1][3] < L.q_max[3]
-    reach = path.tcp[-1][0]
-    assert 0.7 < reach < 0.85
-    assert path.fraction == pytest.approx((reach - 0.5) / 0.7, abs=0.02)
+    # beyond 0.78 m the gripper-down pose cannot be reached even with the joint limits removed
+    assert path.code == UNREACHABLE and not path.ok and path.blocked_link == ""
+    assert "out of reach" in path.blocked_by
+    assert path.tcp[-1] == pytest.approx((0.78, 0.0, 0.3), abs=2e-4)
+    assert path.fraction == pytest.approx(0.4)
+    # the arm is stretched out: elbow (joint 4) near its stretched limit, not folded
+    assert -1.0 < path.q[-1][3] < L.q_max[3]
     # a start pose out of reach plans nothing
     none = free_planner.plan(np.array([(1.3, 0.0, 0.3), (1.2, 0.0, 0.3)]), DOWN)
-    assert none.fraction == 0.0 and none.code in (UNREACHABLE, JOINT_LIMIT) and "start pose" in none.blocked_by
+    assert none.fraction == 0.0 and none.code == UNREACHABLE and none.blocked_by.startswith("start pose out of reach")
+
+
+def test_segment_toward_the_base_stops_at_the_elbow_limit(free_planner):
+    path = free_planner.plan(np.array([(0.3, 0.0, 0.3), (0.05, 0.0, 0.3)]), DOWN)
+    # reachable if the elbow could fold further than Franka's -3.0718 rad: a joint limit, named
+    assert path.code == JOINT_LIMIT and path.blocked_link == "panda_joint4"
+    assert path.blocked_by == "segment 1 at 44 %: joint limit of panda_joint4"
+    assert path.q[-1][3] == pytest.approx(L.q_min[3], abs=0.1)
+    assert path.fraction == pytest.approx(0.44)
 
 
 def test_segment_that_needs_a_joint_jump_is_cut_there(free_planner):
