@@ -32,6 +32,8 @@ import tempfile
 import zipfile
 from pathlib import Path
 
+from orchestrator.errors import UserError  # one error family: a failed build is the user's to fix
+
 from .model_description import (ModelJsonError, fmi2_model_description, fmi3_model_description, generated_header,
                                 generated_source, load_model)
 
@@ -41,8 +43,8 @@ CFLAGS = ("-shared", "-fPIC", "-O2", "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-
 FMI_VERSIONS = (2, 3)
 
 
-class FmuBuildError(RuntimeError):
-    """An FMU could not be built; the message says what to do about it."""
+class FmuBuildError(UserError, RuntimeError):
+    """An FMU could not be built; the message says what to do about it (a user error: e.g. no C compiler)."""
 
 
 def available_models() -> list[str]:

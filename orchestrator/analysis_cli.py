@@ -2,8 +2,8 @@
 
 Every command takes a results table (a sweep folder, ``results.parquet`` or a
 ``.csv``), with or without the sweep's ``metadata.json`` beside it.  User
-mistakes (missing file, unknown column, bad ``--where``) end with exit code 2
-and one line of text, never a traceback.
+mistakes (missing file, unknown column, bad ``--where``) raise AnalysisError,
+a UserError: exit code 2 and one line of text, never a traceback.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -39,7 +39,7 @@ def add_analysis_parsers(sub: Any) -> None:
     _spec_option(p)
     p.add_argument("-o", "--out", required=True, help="figure file: .png, .svg or .pdf")
     p.add_argument("--title", help="figure title")
-    p.set_defaults(handler=_guard(cmd_plot))
+    p.set_defaults(handler=cmd_plot)
 
     p = sub.add_parser("pareto", help="the non-dominated designs of chosen objectives")
     p.add_argument("table", help="results.parquet, a .csv, or a sweep folder")
@@ -50,18 +50,18 @@ def add_analysis_parsers(sub: Any) -> None:
     p.add_argument("--csv", help="write the front (all columns) to this CSV file")
     p.add_argument("--plot", help="draw the front over the cloud of the first two objectives into this figure")
     p.add_argument("--color", help="colour the cloud of --plot by this column")
-    p.set_defaults(handler=_guard(cmd_pareto))
+    p.set_defaults(handler=cmd_pareto)
 
     p = sub.add_parser("report", help="one self-contained HTML page about a sweep")
     p.add_argument("table", help="results.parquet, a .csv, or a sweep folder")
     p.add_argument("-o", "--out", required=True, help="the .html file to write")
     _spec_option(p)
-    p.set_defaults(handler=_guard(cmd_report))
+    p.set_defaults(handler=cmd_report)
 
     p = sub.add_parser("explore", help="interactive point-cloud window (Tk)")
     p.add_argument("table", help="results.parquet, a .csv, or a sweep folder")
     _spec_option(p)
-    p.set_defaults(handler=_guard(cmd_explore))
+    p.set_defaults(handler=cmd_explore)
 
 
 def _spec_option(p: argparse.ArgumentParser) -> None:
@@ -73,22 +73,6 @@ def _filters(p: argparse.ArgumentParser) -> None:
     p.add_argument("--where", help="keep rows where this expression is true, e.g. \"e_el_1 < 20 and "
                                    "traj_q_via_2 > -50\" (names: non-identifier characters become '_')")
     p.add_argument("--only-ok", action="store_true", help="leave out rows whose status is not 'ok'")
-
-
-def _guard(handler: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
-    """Turn AnalysisError (a user mistake) into the CLI's UsageError (exit 2)."""
-
-    def run(args: argparse.Namespace) -> int:
-        from .analysis.table import AnalysisError
-        from .cli import UsageError
-
-        try:
-            return handler(args)
-        except AnalysisError as exc:
-            raise UsageError(str(exc)) from None
-
-    run.__doc__ = handler.__doc__
-    return run
 
 
 def _figure_path(text: str, option: str) -> Path:
@@ -204,18 +188,6 @@ def cmd_explore(args: argparse.Namespace) -> int:
     except ImportError as exc:  # tkinter missing from this Python
         raise AnalysisError(f"the explorer needs tkinter: {exc}") from None
     return run_explorer(table)
-
-
-def prepare_point_run(spec: str, point_id: str, results: str | None, out: Path | None):
-    """``cosim run SPEC --point ID``: (system recording every output, overrides, traces path); see analysis.rerun."""
-    from .analysis.rerun import prepare_point_run as prepare
-    from .analysis.table import AnalysisError
-    from .cli import UsageError
-
-    try:
-        return prepare(spec, point_id, results, out)
-    except AnalysisError as exc:
-        raise UsageError(str(exc)) from None
 
 
 if __name__ == "__main__":  # pragma: no cover - convenience

@@ -1,7 +1,8 @@
 """The ``cosim`` command line: one function per subcommand.
 
 Exit codes follow the kind of outcome: 0 everything ran, 1 a run failed,
-2 a bad spec, file or usage (the user's to fix), 70 an internal error (ours).
+2 a bad spec, file or usage (the user's to fix), 70 an internal error (ours);
+:func:`orchestrator.errors.exit_code` decides them for every subcommand.
 A user's mistake never shows a traceback.
 """
 
@@ -14,37 +15,42 @@ import traceback
 from pathlib import Path
 from typing import Any, Sequence
 
-EXIT_OK, EXIT_RUN_FAILED, EXIT_USAGE, EXIT_INTERNAL = 0, 1, 2, 70
+from .errors import EXIT_INTERNAL, EXIT_OK, EXIT_RUN_FAILED, EXIT_USAGE, UsageError, UserError, exit_code
 
-
-class UsageError(Exception):
-    """A mistake in the command line itself."""
+__all__ = ["EXIT_INTERNAL", "EXIT_OK", "EXIT_RUN_FAILED", "EXIT_USAGE", "UsageError", "main"]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``cosim`` console script; returns the exit code."""
+    """Entry point of the ``cosim`` console script; returns the exit code.
+
+    Every subcommand returns its own code for what it ran (0, or 1 when a run
+    failed); whatever it raises is reported here and mapped by
+    :func:`orchestrator.errors.exit_code`: a UserError lists its problems
+    (exit 2), anything unexpected prints a traceback (exit 70).
+    """
     parser = _parser()
     args = parser.parse_args(argv)
     if not getattr(args, "handler", None):
         parser.print_help()
         return EXIT_USAGE
-    from .problems import SpecError
-
     try:
         return args.handler(args)
-    except SpecError as exc:
+    except BaseException as exc:  # noqa: BLE001 - every outcome gets its exit code here, and only here
+        if isinstance(exc, SystemExit):
+            raise
+        report_error(exc)
+        return exit_code(exc)
+
+
+def report_error(exc: BaseException) -> None:
+    """Print what a user needs to know about ``exc`` on stderr (no traceback for a user's mistake)."""
+    if isinstance(exc, UserError):
         _print_problems(exc.problems)
-        return EXIT_USAGE
-    except UsageError as exc:
-        print(f"cosim: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    except KeyboardInterrupt:
+    elif isinstance(exc, KeyboardInterrupt):
         print("cosim: interrupted", file=sys.stderr)
-        return 130
-    except Exception:
+    else:
         print("cosim: internal error (please report it with the text below)", file=sys.stderr)
-        traceback.print_exc()
-        return EXIT_INTERNAL
+        traceback.print_exception(exc)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -75,6 +81,9 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _print_problems(problems: Sequence[Any]) -> None:
+    if len(problems) == 1 and not problems[0].file and not problems[0].path:  # a command-line mistake
+        print(f"cosim: error: {problems[0]}", file=sys.stderr)
+        return
     count = len(problems)
     print(f"{count} problem{'s' if count != 1 else ''} found:", file=sys.stderr)
     for problem in problems:
@@ -118,7 +127,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     system = check_spec(args.spec)
     overrides = []
     if args.point:  # values from the sweep's table; traces by default to <results>/points/<ID>.parquet
-        from .analysis_cli import prepare_point_run
+        from .analysis.rerun import prepare_point_run
         system, overrides, out = prepare_point_run(args.spec, args.point, args.results, out)
     from .problems import SpecError
 
@@ -148,7 +157,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         else:
             result.traces.to_parquet(out, index=False)
         print(f"traces: {out} ({len(result.traces)} rows, {len(result.traces.columns) - 1} signals)")
-    return EXIT_OK if result.ok else EXIT_RUN_FAILED
+    return result.exit_code
 
 
 def cmd_inspect(args: argparse.Namespace) -> int:
@@ -175,13 +184,11 @@ def cmd_inspect(args: argparse.Namespace) -> int:
 
 
 def _inspect_fmu(reference: str) -> int:
-    from .units.fmu import FmuProblems, FmuUnitType, resolve_fmu_path
+    from .units.fmu import FmuUnitType, resolve_fmu_path
 
     try:
         unit_type = FmuUnitType(resolve_fmu_path(reference), reference)
         d = unit_type.describe()
-    except FmuProblems as exc:
-        raise UsageError(f"{reference}: " + "; ".join(exc.problems)) from None
     except FileNotFoundError as exc:
         raise UsageError(str(exc)) from None
     print(f"{reference}: {d.name}, FMI {d.fmi_version} co-simulation"

@@ -20,9 +20,14 @@ import numpy as np
 from .algorithms import group_transfers, make_algorithm
 from .observers import ObjectiveReducer, Observer, TraceRecorder, evaluate_expressions, flatten_objectives
 from .system import Assignment, System
-from .unit import Unit, UnitError
+from .errors import EXIT_INTERNAL, EXIT_OK, EXIT_RUN_FAILED, EXIT_USAGE, UnitError, UserError
+from .unit import Unit
 
 OK, FAILED = "ok", "failed"
+# Why a run failed, for RunResult.failure: a unit (or a non-finite objective),
+# a user's file found unusable only while running, or a bug in cosim.
+UNIT_FAILURE, USER_FAILURE, INTERNAL_FAILURE = "unit", "user", "internal"
+_EXIT_CODES = {"": EXIT_OK, UNIT_FAILURE: EXIT_RUN_FAILED, USER_FAILURE: EXIT_USAGE, INTERNAL_FAILURE: EXIT_INTERNAL}
 
 
 @dataclass
@@ -30,7 +35,10 @@ class RunResult:
     """What one run produced.
 
     ``objectives`` is flat (array objectives as ``name[i]``); ``traces`` is a
-    pandas DataFrame when recording was asked for, else None.
+    pandas DataFrame when recording was asked for, else None.  ``failure``
+    says why a failed run failed: ``"unit"`` (a unit, or a non-finite
+    objective), ``"user"`` (a user's file found unusable only while running,
+    e.g. an FMU archive that escapes its folder) or ``"internal"`` (a bug).
     """
 
     status: str
@@ -40,10 +48,16 @@ class RunResult:
     elapsed: float = 0.0
     steps: int = 0
     end_time: float = math.nan
+    failure: str = ""
 
     @property
     def ok(self) -> bool:
         return self.status == OK
+
+    @property
+    def exit_code(self) -> int:
+        """The command line's exit code for this run (see :func:`orchestrator.errors.exit_code`)."""
+        return EXIT_OK if self.ok else _EXIT_CODES.get(self.failure, EXIT_RUN_FAILED)
 
 
 def step_count(start: float, stop: float, h: float) -> int:
@@ -152,14 +166,22 @@ class Execution:
             objectives = evaluate_expressions(self.system.spec.objectives, reducer.results())
             flat = flatten_objectives(objectives)
             nan = [name for name, v in flat.items() if not math.isfinite(v)]
-            status, message = (FAILED, f"objective(s) not finite: {', '.join(nan)}") if nan else (OK, "")
-            return RunResult(status, message, flat, recorder.frame() if recorder else None,
+            if nan:
+                return RunResult(FAILED, f"objective(s) not finite: {', '.join(nan)}", flat,
+                                 recorder.frame() if recorder else None, time.perf_counter() - started, steps, t,
+                                 failure=UNIT_FAILURE)
+            return RunResult(OK, "", flat, recorder.frame() if recorder else None,
                              time.perf_counter() - started, steps, t)
         except UnitError as exc:
-            return RunResult(FAILED, str(exc), elapsed=time.perf_counter() - started, steps=steps, end_time=t)
+            return RunResult(FAILED, str(exc), elapsed=time.perf_counter() - started, steps=steps, end_time=t,
+                             failure=UNIT_FAILURE)
+        except UserError as exc:  # e.g. an FMU archive found unsafe when it is extracted
+            return RunResult(FAILED, str(exc).replace("\n", " "), elapsed=time.perf_counter() - started,
+                             steps=steps, end_time=t, failure=USER_FAILURE)
         except Exception as exc:  # an orchestrator bug must still become a row, not a lost point
             return RunResult(FAILED, f"internal error at t={t:g}: {type(exc).__name__}: {exc}",
-                             elapsed=time.perf_counter() - started, steps=steps, end_time=t)
+                             elapsed=time.perf_counter() - started, steps=steps, end_time=t,
+                             failure=INTERNAL_FAILURE)
         finally:
             if owned:
                 for unit in units.values():

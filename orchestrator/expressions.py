@@ -14,6 +14,8 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from .errors import UserError
+
 FUNCTIONS: dict[str, Callable[..., Any]] = {
     "abs": np.abs, "sqrt": np.sqrt, "exp": np.exp, "log": np.log, "log10": np.log10,
     "sin": np.sin, "cos": np.cos, "tan": np.tan, "deg": np.degrees, "rad": np.radians,
@@ -26,11 +28,11 @@ CONSTANTS = {"pi": np.pi, "e": np.e, "true": True, "false": False, "True": True,
 _BINARY = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul, ast.Div: operator.truediv,
            ast.FloorDiv: operator.floordiv, ast.Mod: operator.mod, ast.Pow: operator.pow}
 _UNARY = {ast.USub: operator.neg, ast.UAdd: operator.pos, ast.Not: np.logical_not}
-_COMPARE = {ast.Lt: operator.lt, ast.LtE: operator.le, ast.Gt: operator.gt, ast.GtE: operator.ge,
+COMPARISONS = {ast.Lt: operator.lt, ast.LtE: operator.le, ast.Gt: operator.gt, ast.GtE: operator.ge,
             ast.Eq: operator.eq, ast.NotEq: operator.ne}
 
 
-class ExpressionError(ValueError):
+class ExpressionError(UserError, ValueError):
     """The expression is malformed, uses something not allowed, or names an unknown value."""
 
 
@@ -69,7 +71,7 @@ class Expression:
         elif isinstance(node, ast.BoolOp):
             for value in node.values:
                 self._check(value)
-        elif isinstance(node, ast.Compare) and all(type(op) in _COMPARE for op in node.ops):
+        elif isinstance(node, ast.Compare) and all(type(op) in COMPARISONS for op in node.ops):
             self._check(node.left)
             for comparator in node.comparators:
                 self._check(comparator)
@@ -117,7 +119,7 @@ class Expression:
             left = self._eval(node.left, values)
             for op, comparator in zip(node.ops, node.comparators):
                 right = self._eval(comparator, values)
-                if not _COMPARE[type(op)](left, right):
+                if not COMPARISONS[type(op)](left, right):
                     return False
                 left = right
             return True

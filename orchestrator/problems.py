@@ -2,38 +2,22 @@
 
 Every check in cosim collects :class:`Problem` objects instead of stopping at
 the first one, and raises :class:`SpecError` with all of them at the end, so a
-user sees every mistake of a spec in one go.
+user sees every mistake of a spec in one go.  Both belong to the error family
+of :mod:`orchestrator.errors`.
 """
 
 from __future__ import annotations
 
 import difflib
-from dataclasses import dataclass
-from typing import Iterable, Sequence
+from typing import Iterable
+
+from .errors import Problem, UserError
+
+__all__ = ["Problem", "SpecError", "did_you_mean", "json_path"]
 
 
-@dataclass(frozen=True)
-class Problem:
-    """One mistake: the file, the JSON path inside it, what is wrong, how to fix it."""
-
-    file: str
-    path: str
-    message: str
-    fix: str = ""
-
-    def __str__(self) -> str:
-        text = f"{self.file}: {self.path}: {self.message}"
-        if self.fix:
-            text += f"\n    fix: {self.fix}"
-        return text
-
-
-class SpecError(Exception):
+class SpecError(UserError):
     """A spec cannot be used; ``problems`` lists every reason found."""
-
-    def __init__(self, problems: Sequence[Problem]):
-        self.problems = list(problems)
-        super().__init__("\n".join(str(p) for p in self.problems))
 
 
 def did_you_mean(name: str, candidates: Iterable[str]) -> str:

@@ -41,6 +41,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterable, Iterator, Sequence, TextIO
 
 from .design import DesignSpace, Point
+from .errors import UserError
 from .isolation import IsolatedRunner, make_payload
 
 if TYPE_CHECKING:
@@ -49,7 +50,7 @@ if TYPE_CHECKING:
 PACKAGES = ("cosim", "fmpy", "dask", "distributed", "numpy", "pandas", "pyarrow", "scipy")
 
 
-class SweepError(Exception):
+class SweepError(UserError):
     """A sweep cannot start as asked (results folder in use, resume of another spec, no workers)."""
 
 

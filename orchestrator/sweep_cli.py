@@ -1,7 +1,8 @@
 """``cosim sweep``: evaluate a spec's design space on Dask (see :mod:`orchestrator.sweep`).
 
 Exit codes: 0 every point ok, 1 some points not ok (failed, timeout,
-crashed), 2 a bad spec, results folder or command line.
+crashed), 2 a bad spec, results folder or command line (a UserError raised
+to :func:`orchestrator.cli.main`).
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-EXIT_OK, EXIT_RUN_FAILED, EXIT_USAGE = 0, 1, 2
+from .errors import EXIT_OK, EXIT_RUN_FAILED, UsageError
 
 
 def add_sweep_parser(sub: Any) -> None:
@@ -41,20 +42,17 @@ def _default_out(spec_path: str) -> Path:
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
-    """Run (or dry-run) a sweep; returns the exit code. SpecError and UsageError reach cli.main."""
-    from .sweep import Sweep, SweepError
+    """Run (or dry-run) a sweep; returns the exit code. SpecError, SweepError and UsageError reach cli.main."""
+    from .sweep import Sweep
 
     if args.batch_size is not None and args.batch_size < 1:
-        return _usage("--batch-size must be at least 1")
+        raise UsageError("--batch-size must be at least 1")
     out = Path(args.out) if args.out else _default_out(args.spec)
-    try:
-        if args.dry_run:
-            return _dry_run(args)
-        sweep = Sweep(args.spec, workers=args.workers, out=out, scheduler=args.scheduler, timeout=args.timeout,
-                      resume=args.resume, batch_size=args.batch_size, csv=args.csv)
-        counts = sweep.run(load=False)  # the table stays on disk: a huge sweep never sits in memory
-    except SweepError as exc:
-        return _usage(str(exc))
+    if args.dry_run:
+        return _dry_run(args)
+    sweep = Sweep(args.spec, workers=args.workers, out=out, scheduler=args.scheduler, timeout=args.timeout,
+                  resume=args.resume, batch_size=args.batch_size, csv=args.csv)
+    counts = sweep.run(load=False)  # the table stays on disk: a huge sweep never sits in memory
     total = sum(counts.values())
     summary = ", ".join(f"{n} {s}" for s, n in sorted(counts.items()) if n)
     print(f"{total} points: {summary or 'none'}; table: {sweep.store.table_path}")
@@ -74,11 +72,6 @@ def _first_not_ok(table: Path, n: int) -> list[dict]:
 
     rows = pq.read_table(table, columns=["point_id", "status", "message"])
     return rows.filter(pc.not_equal(rows.column("status"), "ok")).slice(0, n).to_pylist()
-
-
-def _usage(message: str) -> int:
-    print(f"cosim: error: {message}", file=sys.stderr)
-    return EXIT_USAGE
 
 
 def _dry_run(args: argparse.Namespace) -> int:

@@ -203,7 +203,9 @@ def _load_unit(u: UnitSpec, folder: str, file: str, problems: list[Problem]) -> 
         description = unit_type.describe()
     except FmuProblems as exc:
         for p in exc.problems:
-            problems.append(Problem(file, path, f"FMU '{u.source}': {p}", _fmu_fix(p)))
+            where = f" ({p.path})" if p.path else ""
+            problems.append(Problem(file, path, f"FMU '{u.source}'{where}: {p.message}",
+                                    p.fix or "re-export the FMU from its tool"))
         return None
     except FileNotFoundError as exc:
         problems.append(Problem(file, path, str(exc), "check the path; relative paths start at the spec's folder"))
@@ -223,18 +225,6 @@ def _load_unit(u: UnitSpec, folder: str, file: str, problems: list[Problem]) -> 
                                     f"unit '{u.name}' has no variable '{actual}'.{did_you_mean(actual, names)}",
                                     "map the spec's port name to one of the unit's variables"))
     return SystemUnit(u, unit_type, description)
-
-
-def _fmu_fix(problem: str) -> str:
-    if "not found" in problem:
-        return "check the path; relative paths start at the spec's folder"
-    if "no binary" in problem:
-        return "re-export the FMU with a binary for this platform, or run it where it has one"
-    if "cannot build" in problem:
-        return "install gcc (apt-get install gcc), or set CC to a C compiler"
-    if "co-simulation" in problem:
-        return "export the FMU for co-simulation (FMI 2.0 or 3.0)"
-    return "re-export the FMU from its tool"
 
 
 def _port_names(unit: SystemUnit) -> list[str]:

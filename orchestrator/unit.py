@@ -24,29 +24,9 @@ import re
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
-CAUSALITIES = (
-    "parameter",
-    "calculatedParameter",
-    "structuralParameter",
-    "input",
-    "output",
-    "local",
-    "independent",
-)
-TYPES = ("Real", "Integer", "Boolean", "String")
+from .errors import UnitError  # noqa: F401  (re-exported: units raise it from here)
 
 _ELEMENT_RE = re.compile(r"^(?P<base>.+?)\[(?P<index>\d+)\]$")
-
-
-class UnitError(Exception):
-    """A unit failed: names the unit, the time and what went wrong."""
-
-    def __init__(self, unit: str, message: str, time: float | None = None):
-        self.unit = unit
-        self.time = time
-        self.message = message
-        where = f"unit '{unit}'" + (f" at t={time:g}" if time is not None else "")
-        super().__init__(f"{where}: {message}")
 
 
 @dataclass(frozen=True)

@@ -135,11 +135,31 @@ def test_fmu_escaping_its_folder_is_refused(tmp_path, capsys, built_fmu):
     path = tmp_path / "spec.json"
     path.write_text(json.dumps({"units": {"a": {"fmu": str(evil)}}, "experiment": {"stop": 1, "step": 0.1},
                                 "objectives": {"y": {"signal": "a.y", "reduce": "final"}}}))
-    assert validate(capsys, path)[0] == 0  # reading the description does not extract
+    code, text = validate(capsys, path)  # found when the spec is checked: no worker ever extracts it
+    assert code == 2 and "Traceback" not in text
+    assert "$.units.a.fmu: FMU" in text and "(../../escape.txt): archive member escapes the extraction folder" in text
+    assert "fix: re-export the FMU with relative member paths" in text
     code = main(["run", str(path)])
     text = capsys.readouterr()
-    assert code == 1
-    assert "escapes the extraction folder" in text.out + text.err
+    assert code == 2 and "escapes the extraction folder" in text.err and "internal error" not in text.err
+    assert not (tmp_path.parent / "escape.txt").exists()
+
+
+def test_fmu_found_unsafe_only_when_instantiated_is_a_user_error(tmp_path, built_fmu):
+    """An FMU replaced by an unsafe archive after the check: the run fails as the user's, never as internal."""
+    from orchestrator import Execution, build_system, load_spec
+    from orchestrator.errors import EXIT_USAGE
+
+    fmu = tmp_path / "a.fmu"
+    shutil.copy(built_fmu("linear_ode", 2), fmu)
+    path = tmp_path / "spec.json"
+    path.write_text(json.dumps({"units": {"a": {"fmu": "a.fmu"}}, "experiment": {"stop": 1, "step": 0.1},
+                                "objectives": {"y": {"signal": "a.y", "reduce": "final"}}}))
+    system = build_system(load_spec(path))
+    rewrite_fmu(built_fmu("linear_ode", 2), fmu, extra={"../../escape.txt": b"x"})
+    result = Execution(system).run()
+    assert result.status == "failed" and result.failure == "user" and result.exit_code == EXIT_USAGE
+    assert "escapes the extraction folder" in result.message and "internal error" not in result.message
     assert not (tmp_path.parent / "escape.txt").exists()
 
 

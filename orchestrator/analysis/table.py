@@ -29,13 +29,14 @@ from typing import Any, Mapping
 import numpy as np
 import pandas as pd
 
-from ..expressions import Expression, ExpressionError, _COMPARE
+from ..expressions import Expression, ExpressionError, COMPARISONS
+from ..errors import UserError
 from ..problems import did_you_mean
 
 TAIL = ("status", "message", "run_time", "worker")
 
 
-class AnalysisError(ValueError):
+class AnalysisError(UserError, ValueError):
     """A user mistake when analysing a table: a missing file, unknown column, bad filter."""
 
 
@@ -200,7 +201,7 @@ class ColumnExpression(Expression):
             result: Any = True
             for op, comparator in zip(node.ops, node.comparators):
                 right = self._eval(comparator, values)
-                result = np.logical_and(result, _COMPARE[type(op)](left, right))
+                result = np.logical_and(result, COMPARISONS[type(op)](left, right))
                 left = right
             return result
         if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.Not):

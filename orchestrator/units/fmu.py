@@ -25,8 +25,9 @@ import threading
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
+from ..errors import Problem, UserError
 from ..unit import Unit, UnitDescription, UnitType, Variable, indexed_runs, parse_port
 
 BUILTIN_PREFIX = "builtin:"
@@ -40,13 +41,24 @@ _FMI3_TYPE = {
 }
 
 
-class FmuProblems(Exception):
-    """An FMU cannot be used; ``problems`` lists every reason (with fixes)."""
+class FmuProblems(UserError):
+    """An FMU cannot be used; ``problems`` lists every reason as a :class:`Problem` with its fix.
 
-    def __init__(self, path: str, problems: list[str]):
+    A plain string in ``problems`` becomes a Problem without a fix.
+    ``path`` is the FMU's file (or its ``builtin:`` name).
+    """
+
+    def __init__(self, path: str, problems: Sequence[Problem | str]):
         self.path = path
-        self.problems = problems
-        super().__init__(f"{path}: " + "; ".join(problems))
+        super().__init__([p if isinstance(p, Problem) else Problem(path, "", p) for p in problems])
+
+    @property
+    def messages(self) -> list[str]:
+        """What is wrong, one text per problem (without file and fix)."""
+        return [p.message for p in self.problems]
+
+
+_REEXPORT = "re-export the FMU from its tool"
 
 
 @dataclass(frozen=True)
@@ -76,19 +88,33 @@ def shared_library_suffix() -> str:
     return {"Linux": ".so", "Darwin": ".dylib", "Windows": ".dll"}.get(platform.system(), ".so")
 
 
-def safe_extract(archive: str | Path, target: str | Path) -> None:
-    """Extract a zip archive, refusing members that would land outside ``target``.
-
-    Raises FmuProblems when a member's path escapes (absolute paths, ``..``).
-    """
-    target = Path(target).resolve()
+def unsafe_members(archive: str | Path) -> list[str]:
+    """Members of a zip archive whose path would land outside the folder it is extracted into."""
+    target = Path(tempfile.gettempdir()).resolve() / "cosim_extract_check"  # any folder: only names matter
+    unsafe = []
     with zipfile.ZipFile(archive) as zf:
         for member in zf.infolist():
             destination = (target / member.filename).resolve()
             if destination != target and target not in destination.parents:
-                raise FmuProblems(str(archive), [f"archive member '{member.filename}' escapes the extraction "
-                                                 "folder; refusing to extract this FMU"])
+                unsafe.append(member.filename)
+    return unsafe
+
+
+def safe_extract(archive: str | Path, target: str | Path) -> None:
+    """Extract a zip archive, refusing members that would land outside ``target``.
+
+    Raises FmuProblems (a user error) when a member's path escapes (absolute paths, ``..``).
+    """
+    unsafe = unsafe_members(archive)
+    if unsafe:
+        raise FmuProblems(str(archive), [_unsafe_member(str(archive), m) for m in unsafe])
+    with zipfile.ZipFile(archive) as zf:
         zf.extractall(target)
+
+
+def _unsafe_member(archive: str, member: str) -> Problem:
+    return Problem(archive, member, "archive member escapes the extraction folder (absolute path or '..'); "
+                   "refusing to extract this FMU", "re-export the FMU with relative member paths inside the archive")
 
 
 class _ExtractionCache:
@@ -150,7 +176,8 @@ def resolve_fmu_path(reference: str, base_dir: str | Path | None = None) -> Path
         try:
             return Path(ensure_built(m.group("name"), int(m.group("version"))))
         except FmuBuildError as exc:  # no compiler, or our C sources do not build here
-            raise FmuProblems(reference, [f"cannot build the built-in FMU: {exc}"]) from None
+            raise FmuProblems(reference, [Problem(reference, "", f"cannot build the built-in FMU: {exc}",
+                                                  "install gcc (apt-get install gcc), or set CC to a C compiler")]) from None
     path = Path(reference)
     if not path.is_absolute() and base_dir is not None:
         path = Path(base_dir) / path
@@ -193,19 +220,26 @@ class FmuUnitType(UnitType):
         from fmpy import read_model_description
 
         if not os.path.isfile(self.path):
-            raise FmuProblems(self.path, [f"file not found: {self.path}; check the path (relative paths "
-                                          "are relative to the spec's folder)"])
+            raise FmuProblems(self.path, [Problem(self.path, "", f"file not found: {self.path}",
+                                                  "check the path; relative paths start at the spec's folder")])
         if not zipfile.is_zipfile(self.path):
-            raise FmuProblems(self.path, ["not a zip archive, so not an FMU; rebuild or re-export it"])
+            raise FmuProblems(self.path, [Problem(self.path, "", "not a zip archive, so not an FMU",
+                                                  "rebuild or re-export it")])
+        unsafe = unsafe_members(self.path)
+        if unsafe:  # found here, when the spec is checked, not first when a worker extracts it
+            raise FmuProblems(self.path, [_unsafe_member(self.path, m) for m in unsafe])
         try:
             md = read_model_description(self.path, validate=False)
         except Exception as exc:  # fmpy raises many kinds for a broken XML
-            raise FmuProblems(self.path, [f"cannot read modelDescription.xml: {exc}"]) from None
+            raise FmuProblems(self.path, [Problem(self.path, "modelDescription.xml", f"cannot read it: {exc}",
+                                                  _REEXPORT)]) from None
         problems = []
         if md.fmiVersion not in ("2.0", "3.0"):
-            problems.append(f"FMI version {md.fmiVersion} is not supported; export the FMU as FMI 2.0 or 3.0")
+            problems.append(Problem(self.path, "modelDescription.xml", f"FMI version {md.fmiVersion} is not "
+                                    "supported", "export the FMU as FMI 2.0 or 3.0"))
         if md.coSimulation is None:
-            problems.append("the FMU does not support co-simulation (model exchange only)")
+            problems.append(Problem(self.path, "modelDescription.xml", "the FMU does not support co-simulation "
+                                    "(model exchange only)", "export the FMU for co-simulation (FMI 2.0 or 3.0)"))
         else:
             folder2, folder3 = platform_folders()
             folder = folder3 if md.fmiVersion == "3.0" else folder2
@@ -214,8 +248,10 @@ class FmuUnitType(UnitType):
                 if library not in zf.namelist():
                     present = sorted({n.split("/")[1] for n in zf.namelist()
                                       if n.startswith("binaries/") and n.count("/") >= 2})
-                    problems.append(f"no binary for this platform ({library}); the FMU has binaries for "
-                                    f"{', '.join(present) or 'no platform'}")
+                    problems.append(Problem(self.path, library, "no binary for this platform; the FMU has "
+                                            f"binaries for {', '.join(present) or 'no platform'}",
+                                            "re-export the FMU with a binary for this platform, or run it "
+                                            "where it has one"))
         if problems:
             raise FmuProblems(self.path, problems)
         self._md = md
