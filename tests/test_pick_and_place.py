@@ -130,11 +130,16 @@ def test_objectives_agree_with_traces_and_an_independent_computation():
     assert o["tracking_error"] == 0.0
 
 
-def run_points(spec_path: Path, points, robot: str | None = None) -> list[dict]:
-    """Objectives of ``points`` (q2[2], q2[4]) with units reused, optionally with another robot unit."""
+def run_points(spec_path: Path, points, robot: str | None = None, robot_unit: dict | None = None) -> list[dict]:
+    """Objectives of ``points`` (q2[2], q2[4]) with units reused, optionally with another robot unit.
+
+    ``robot`` replaces the robot's Python class, ``robot_unit`` its whole entry (e.g. an FMU).
+    """
     raw = json.loads(spec_path.read_text())
     if robot is not None:
         raw["units"]["robot"]["python"] = robot
+    if robot_unit is not None:
+        raw["units"]["robot"] = robot_unit
     system = build_system(spec_from_dict(raw, spec_path))
     units = {n: su.unit_type.instantiate(n) for n, su in system.units.items()}
     out = []
