@@ -23,7 +23,7 @@ from fmus.build import FmuBuildError, build_fmu, ensure_built
 from fmus.testing import FmuInstance
 
 REPO = Path(__file__).resolve().parents[1]
-MODELS = ["fault", "gain_array", "linear_ode", "motor_gear_energy"]
+MODELS = ["fault", "gain_array", "linear_ode", "motor_gear_energy", "panda_inverse_dynamics"]
 
 
 @pytest.fixture
