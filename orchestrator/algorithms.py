@@ -9,7 +9,9 @@ long runs do not drift.
 
 from __future__ import annotations
 
-from typing import Mapping, Sequence
+from typing import Callable, Mapping, Sequence
+
+import numpy as np
 
 from .system import Connection
 from .unit import Unit, UnitError
@@ -35,7 +37,10 @@ class Transfer:
         self.target = target
         self.source_selection = source.select([r for c in connections for r in c.source.refs])
         self.target_selection = target.select([r for c in connections for r in c.target.refs])
-        self.read = source.reader(self.source_selection)  # valid until its next call
+        read = source.reader(self.source_selection)  # valid until its next call
+        if any((c.factor, c.offset) != (1.0, 0.0) for c in connections):
+            read = _converting(read, connections)
+        self.read = read
         self._set = target.set
 
     def write(self, values: Sequence) -> None:
@@ -43,6 +48,13 @@ class Transfer:
 
     def run(self) -> None:
         self._set(self.target_selection, self.read())
+
+
+def _converting(read: Callable[[], Sequence], connections: Sequence[Connection]) -> Callable[[], list]:
+    """``read`` followed by each element's unit conversion ``factor * x + offset`` (one multiply-add, no drift)."""
+    factor = np.array([c.factor for c in connections for _ in c.source.refs])
+    offset = np.array([c.offset for c in connections for _ in c.source.refs])
+    return lambda: (np.asarray(read(), dtype=float) * factor + offset).tolist()
 
 
 def group_transfers(units: Mapping[str, Unit], connections: Sequence[Connection]) -> list[Transfer]:

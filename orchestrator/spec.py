@@ -45,6 +45,7 @@ class ConnectionSpec:
     source: str
     target: str
     index: int
+    convert: bool = True  # False: pass values unchanged even when the two ends' units differ
 
 
 @dataclass(frozen=True)
@@ -259,11 +260,11 @@ def _build(raw: dict, path: Path) -> Spec:
     units = []
     for name, u in raw["units"].items():
         kind = next(k for k in ("fmu", "python", "player") if k in u)
-        options = {k: u[k] for k in ("columns", "interpolation", "extrapolation") if k in u}
+        options = {k: u[k] for k in ("columns", "interpolation", "extrapolation", "units") if k in u}
         units.append(UnitSpec(name=name, kind=kind, source=u[kind], parameters=dict(u.get("parameters", {})),
                               start=dict(u.get("start", {})), ports=dict(u.get("ports", {})), options=options))
     # None marks an entry set aside by orchestrator.validate; indices stay those of the file
-    connections = tuple(ConnectionSpec(c["from"], c["to"], i)
+    connections = tuple(ConnectionSpec(c["from"], c["to"], i, c.get("convert", True))
                         for i, c in enumerate(raw.get("connections", [])) if c is not None)
     e = raw["experiment"]
     experiment = ExperimentSpec(start=float(e.get("start", 0.0)), stop=float(e["stop"]), step=float(e["step"]),

@@ -16,6 +16,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
+from .connection_units import connection_conversion
 from .expressions import Expression, ExpressionError
 from .problems import Problem, SpecError, did_you_mean, json_path
 from .spec import Spec, UnitSpec
@@ -58,10 +59,16 @@ class Signal:
 
 @dataclass(frozen=True)
 class Connection:
-    """A checked connection between element lists of equal length."""
+    """A checked connection between element lists of equal length.
+
+    The master sets ``target = factor * source + offset`` (units of measure
+    converted, see :mod:`orchestrator.connection_units`); (1, 0) passes values unchanged.
+    """
 
     source: Signal
     target: Signal
+    factor: float = 1.0
+    offset: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -122,7 +129,7 @@ def make_unit_type(spec: UnitSpec, folder: str) -> UnitType:
     path = Path(spec.source)
     path = path if path.is_absolute() else Path(folder) / path
     return PlayerUnitType(path, spec.options.get("columns"), spec.options.get("interpolation", "linear"),
-                          spec.options.get("extrapolation", "hold"))
+                          spec.options.get("extrapolation", "hold"), spec.options.get("units"))
 
 
 def build_system(spec: Spec, broken_units: frozenset[str] = frozenset()) -> System:
@@ -323,8 +330,14 @@ def _check_connections(spec: Spec, units: Mapping[str, SystemUnit], problems: li
                 ok = False
                 break
             fed[key] = c.index
+        (factor, offset), unit_problem = connection_conversion(
+            c.source, source.variable, units[source.unit].description, c.target, target.variable,
+            units[target.unit].description, c.convert, file, json_path(base))
+        if unit_problem is not None:
+            problems.append(unit_problem)
+            ok = False
         if ok:
-            connections.append(Connection(source, target))
+            connections.append(Connection(source, target, factor, offset))
     return connections
 
 

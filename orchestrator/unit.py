@@ -83,6 +83,8 @@ class UnitDescription:
     default_step: float | None = None
     description: str = ""
     source: str = ""
+    # The unit's own definitions of unit names (an FMU's <UnitDefinitions>), see orchestrator.quantities
+    unit_definitions: Mapping[str, Any] = field(default_factory=dict)
 
     def variable(self, name: str) -> Variable:
         """The variable called ``name``; raises KeyError if there is none."""

@@ -96,3 +96,35 @@ class DriveProfile(PythonUnit):
         j = np.arange(1, 8)
         self.omega[:] = 1.5 * np.sin(2.0 * t + j) / j
         self.tau[:] = 40.0 * np.cos(1.3 * t + 0.5 * j) / j + 5.0
+
+
+class MeasuredSource(PythonUnit):
+    """Ramps in everyday units: speed = 600 + 30 t rpm, temp = 20 + t degC, length = 1000 t mm, torque = t N.m."""
+
+    variables = (
+        Variable("speed", "output", start=600.0, unit="rpm"),
+        Variable("temp", "output", start=20.0, unit="degC"),
+        Variable("length", "output", start=0.0, unit="mm"),
+        Variable("torque", "output", start=0.0, unit="N.m"),
+    )
+
+    def do_step(self, t, h):
+        t = t + h
+        self.speed, self.temp, self.length, self.torque = 600.0 + 30.0 * t, 20.0 + t, 1000.0 * t + 0.1, t
+
+
+class SiSink(PythonUnit):
+    """Takes SI inputs (rad/s, K, m, A) and echoes them as outputs at the next step."""
+
+    variables = (
+        Variable("omega", "input", start=0.0, unit="rad/s"),
+        Variable("temperature", "input", start=0.0, unit="K"),
+        Variable("x", "input", start=0.0, unit="m"),
+        Variable("current", "input", start=0.0, unit="A"),
+        Variable("omega_seen", "output", start=0.0, unit="rad/s"),
+        Variable("temperature_seen", "output", start=0.0, unit="K"),
+        Variable("x_seen", "output", start=0.0, unit="m"),
+    )
+
+    def do_step(self, t, h):
+        self.omega_seen, self.temperature_seen, self.x_seen = self.omega, self.temperature, self.x

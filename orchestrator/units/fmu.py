@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from ..errors import Problem, UserError
+from ..quantities import fmi_unit_definitions
 from ..unit import Unit, UnitDescription, UnitType, Variable, indexed_runs, parse_port
 
 BUILTIN_PREFIX = "builtin:"
@@ -343,7 +344,7 @@ def _describe(md: Any, reference: str) -> tuple[UnitDescription, dict[str, list[
     description = UnitDescription(
         name=md.modelName, variables=tuple(variables), kind="fmu", fmi_version=md.fmiVersion,
         can_reset=True, feedthrough=feedthrough, default_step=default_step,
-        description=md.description or "", source=reference,
+        description=md.description or "", source=reference, unit_definitions=fmi_unit_definitions(md),
     )
     return description, elements
 

@@ -12,6 +12,11 @@ signals recorded in the whole system.
 Interpolation between samples: ``linear`` (default), ``hold`` (the last
 sample at or before t) or ``nearest``.  Beyond the recorded range:
 ``hold`` the end values (default) or ``error``.
+
+Units of measure: a table has none, so the spec may give them per column,
+alias or array (``"units": {"speed": "rpm"}``); an element ``x[2]`` has the
+unit of its array ``x`` unless given its own.  Connections then convert them
+like an FMU's (see :mod:`orchestrator.quantities`).
 """
 
 from __future__ import annotations
@@ -21,7 +26,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ..unit import ElementRef, Selection, Unit, UnitDescription, UnitError, UnitType, Variable, indexed_runs
+from ..unit import (ElementRef, Selection, Unit, UnitDescription, UnitError, UnitType, Variable, indexed_runs,
+                    parse_port)
 
 INTERPOLATIONS = ("linear", "hold", "nearest")
 
@@ -56,13 +62,14 @@ class PlayerUnitType(UnitType):
     """Blueprint of a signal player over the table at ``path``."""
 
     def __init__(self, path: str | Path, columns: Sequence[str] | None = None, interpolation: str = "linear",
-                 extrapolation: str = "hold"):
+                 extrapolation: str = "hold", units: dict[str, str] | None = None):
         if interpolation not in INTERPOLATIONS:
             raise ValueError(f"interpolation '{interpolation}' is not one of {', '.join(INTERPOLATIONS)}")
         self.path = str(path)
         self.columns = list(columns) if columns else None
         self.interpolation = interpolation
         self.extrapolation = extrapolation
+        self.units = dict(units or {})
         self._table: tuple[np.ndarray, np.ndarray, list[str]] | None = None
         self._aliases: dict[str, str] | None = None
 
@@ -98,13 +105,24 @@ class PlayerUnitType(UnitType):
         aliases = self.aliases()
         names = columns + list(aliases)
         index = {n: i for i, n in enumerate(columns)} | {a: columns.index(c) for a, c in aliases.items()}
-        variables = [Variable(n, "output", "Real", start=float(values[0, index[n]]),
+        runs = indexed_runs(names)
+        unknown = sorted(set(self.units) - set(names) - set(runs))
+        if unknown:
+            raise ValueError(f"'units' names {', '.join(unknown)}, not played by {self.path}; "
+                             f"played: {', '.join(names[:8])}{' ...' if len(names) > 8 else ''}")
+        variables = [Variable(n, "output", "Real", unit=self._unit_of(n), start=float(values[0, index[n]]),
                               description=f"played from {self.path}") for n in names]
-        for base, members in indexed_runs(names).items():
-            variables.append(Variable(base, "output", "Real", shape=(len(members),),
+        for base, members in runs.items():
+            variables.append(Variable(base, "output", "Real", unit=self.units.get(base), shape=(len(members),),
                                       description=f"array of {base}[1..{len(members)}] played from {self.path}"))
         return UnitDescription(name=Path(self.path).name, variables=tuple(variables), kind="player",
                                feedthrough={v.name: () for v in variables}, source=self.path)
+
+    def _unit_of(self, name: str) -> str | None:
+        if name in self.units:
+            return self.units[name]
+        base, index = parse_port(name)
+        return self.units.get(base) if index is not None else None
 
     def column_index(self, ref: ElementRef) -> int:
         """The table column of one element (scalar column, alias, or array element)."""
