@@ -66,7 +66,7 @@ def test_a_spec_with_many_mistakes_lists_each_with_its_path(tmp_path, capsys, bu
             {"from": "clock2.done", "to": "energy.omega[2]"},                 # 11 Boolean into Real
             {"from": "g1.y", "to": "g2.u"},
             {"from": "g2.y", "to": "g1.u"},                                   # 12 algebraic loop g1 <-> g2
-            {"from": "clock2.time", "to": "energy.tau[3]"},
+            {"from": "clock2.time", "to": "energy.tau[3]"},                   # 17 s into N.m
             {"from": "ode.y", "to": "energy.tau[3]"},                         # 13 input fed twice
         ],
         "experiment": {"stop": 1.0, "step": 0.01, "algorithm": "gauss_seidel"},   # 14 bad algorithm name
@@ -94,6 +94,8 @@ def test_a_spec_with_many_mistakes_lists_each_with_its_path(tmp_path, capsys, bu
         ("$.connections[3]", "type mismatch: 'clock2.done' is Boolean, 'energy.omega[2]' is Real"),
         ("$.connections", "algebraic loop through units g1, g2"),
         ("$.connections[7].to", "input 'energy.tau[3]' is already fed by connection 6"),
+        ("$.connections[6]", "units do not fit (different quantities): 'clock2.time' is in 's', "
+                             "'energy.tau[3]' is in 'N.m'"),
         ("$.experiment.algorithm", "'gauss_seidel' is not allowed. Did you mean 'gauss-seidel'?"),
         ("$.objectives.e.reduce", "unknown reduction 'average'"),
         ("$.objectives.r.expr", "'duration' is not an objective"),
