@@ -15,7 +15,7 @@ decides what the master does with the values:
 
 from __future__ import annotations
 
-from .problems import Problem
+from .errors import Problem
 from .quantities import IncompatibleUnits, UnitConversionError, conversion
 from .unit import UnitDescription, Variable
 
