@@ -31,6 +31,6 @@ def run(spec_path: str, values: Mapping[str, Any] | None = None, record: bool = 
     Raises SpecError when the spec or a value does not fit; a failing run is
     reported in the result's status and message instead.
     """
-    system = build_system(load_spec(spec_path))
-    overrides = [system.assignment_for(target, value) for target, value in (values or {}).items()]
-    return Execution(system, overrides, record=record).run()
+    from .point import run_point
+
+    return run_point(build_system(load_spec(spec_path)), values, record=record)

@@ -117,30 +117,24 @@ def parse_assignment(text: str) -> tuple[str, Any]:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    """``cosim run spec.json``: run one point, print objectives, optionally write traces."""
-    from .execution import Execution
+    """``cosim run spec.json``: run one point, print objectives, optionally write traces.
+
+    The spec is loaded and its system built once, also with ``--point``.
+    """
+    from .point import run_point
     from .validate import check_spec
 
     out = Path(args.out) if args.out else None
     if out is not None and out.suffix.lower() not in (".parquet", ".csv"):
         raise UsageError(f"--out {out}: use a .parquet or .csv file name")
+    sets = dict(parse_assignment(text) for text in args.sets)
     system = check_spec(args.spec)
-    overrides = []
+    values: dict[str, Any] = {}
     if args.point:  # values from the sweep's table; traces by default to <results>/points/<ID>.parquet
         from .analysis.rerun import prepare_point_run
-        system, overrides, out = prepare_point_run(args.spec, args.point, args.results, out)
-    from .problems import SpecError
-
-    problems = []
-    for text in args.sets:
-        target, value = parse_assignment(text)
-        try:
-            overrides.append(system.assignment_for(target, value))
-        except SpecError as exc:
-            problems.extend(exc.problems)
-    if problems:
-        raise SpecError(problems)
-    result = Execution(system, overrides, record=out is not None).run()
+        system, values, out = prepare_point_run(system, args.point, args.results, out)
+    values.update(sets)  # --set wins over the point's value of the same parameter
+    result = run_point(system, values, record=out is not None)
     units = {o.name: o.unit or "" for o in system.spec.objectives}
     if result.objectives:
         width = max(len(k) for k in result.objectives)

@@ -112,21 +112,22 @@ class PointRunner:
 
     def run(self, point_id: str, values: dict[str, Any]) -> dict[str, Any]:
         """One row for one point: point_id, status (ok|failed), message, run_time, objectives."""
-        from .execution import Execution
+        from .errors import CosimError
+        from .point import run_point
         from .problems import SpecError
 
         started = time.perf_counter()
-        try:
-            overrides = [self.system.assignment_for(t, v) for t, v in values.items()]
-        except SpecError as exc:
-            return _row(point_id, "failed", "; ".join(p.message for p in exc.problems), started)
         try:
             if self.units is None:
                 self.units = {n: su.unit_type.instantiate(n) for n, su in self.system.units.items()}
         except Exception as exc:
             self.close()
-            return _row(point_id, "failed", f"cannot instantiate the units: {type(exc).__name__}: {exc}", started)
-        result = Execution(self.system, overrides, record=False, units=self.units).run()
+            cause = str(exc) if isinstance(exc, CosimError) else f"{type(exc).__name__}: {exc}"
+            return _row(point_id, "failed", f"cannot instantiate the units: {cause}", started)
+        try:
+            result = run_point(self.system, values, units=self.units)
+        except SpecError as exc:  # raised before the units are touched: they stay fresh for the next point
+            return _row(point_id, "failed", "; ".join(p.message for p in exc.problems), started)
         if result.ok:
             try:
                 for unit in self.units.values():

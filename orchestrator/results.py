@@ -43,6 +43,15 @@ COMPACT_WINDOW = 10_000  # rows held at once while merging parts into the final 
 MERGE_PARTS = 128
 
 
+def default_folder(spec_path: str | Path) -> Path:
+    """Where ``cosim sweep`` writes without ``--out``: ``results/<spec name>`` (the file's stem without a name)."""
+    try:
+        name = json.loads(Path(spec_path).read_text(encoding="utf-8")).get("name") or Path(spec_path).stem
+    except (OSError, ValueError, AttributeError):
+        name = Path(spec_path).stem
+    return Path("results") / re.sub(r"[^A-Za-z0-9_.-]+", "_", str(name))
+
+
 class ResultsStore:
     """Rows of one sweep in folder ``folder`` (created when missing)."""
 

@@ -8,8 +8,6 @@ to :func:`orchestrator.cli.main`).
 from __future__ import annotations
 
 import argparse
-import json
-import re
 import sys
 from pathlib import Path
 from typing import Any
@@ -33,21 +31,15 @@ def add_sweep_parser(sub: Any) -> None:
     p.set_defaults(handler=cmd_sweep)
 
 
-def _default_out(spec_path: str) -> Path:
-    try:
-        name = json.loads(Path(spec_path).read_text(encoding="utf-8")).get("name") or Path(spec_path).stem
-    except (OSError, ValueError, AttributeError):
-        name = Path(spec_path).stem
-    return Path("results") / re.sub(r"[^A-Za-z0-9_.-]+", "_", str(name))
-
-
 def cmd_sweep(args: argparse.Namespace) -> int:
     """Run (or dry-run) a sweep; returns the exit code. SpecError, SweepError and UsageError reach cli.main."""
     from .sweep import Sweep
 
     if args.batch_size is not None and args.batch_size < 1:
         raise UsageError("--batch-size must be at least 1")
-    out = Path(args.out) if args.out else _default_out(args.spec)
+    from .results import default_folder
+
+    out = Path(args.out) if args.out else default_folder(args.spec)
     if args.dry_run:
         return _dry_run(args)
     sweep = Sweep(args.spec, workers=args.workers, out=out, scheduler=args.scheduler, timeout=args.timeout,

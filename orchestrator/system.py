@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import heapq
 import math
-from dataclasses import dataclass, field
-from typing import Any, Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any, Mapping, Sequence
 
 from .connection_units import connection_conversion
 from .expressions import Expression, ExpressionError
@@ -117,6 +117,24 @@ class System:
             raise SpecError(problems)
         return result
 
+    def recording(self, texts: Sequence[str]) -> "System":
+        """This system, also recording ``texts`` ('unit.port' or 'unit.*' for every output of a unit).
+
+        The units are not loaded or described again.  Raises SpecError when a
+        text does not name a signal of the system.
+        """
+        problems: list[Problem] = []
+        probes = {s.text: s for s in self.probes}
+        recorded = list(self.recorded)
+        _add_recorded([(text, "$.record") for text in texts], self.units, problems, self.spec.path, probes, recorded)
+        if problems:
+            raise SpecError(problems)
+        return replace(self, probes=tuple(probes.values()), recorded=tuple(recorded))
+
+    def recording_all_outputs(self) -> "System":
+        """This system recording every output of every unit besides its own record list (for re-runs)."""
+        return self.recording([f"{name}.*" for name in self.units])
+
 
 def make_unit_type(spec: UnitSpec, folder: str) -> UnitType:
     """The blueprint for one unit of a spec (no file is opened yet except builtin FMU builds)."""
@@ -167,12 +185,8 @@ def build_system(spec: Spec, broken_units: frozenset[str] = frozenset()) -> Syst
 
     probes: dict[str, Signal] = {}
     recorded: list[str] = []
-    for i, text in enumerate(spec.record):
-        for expanded in _expand_wildcard(text, units):
-            s = _resolve_signal(expanded, units, problems, file, json_path(["record", i]))
-            if s is not None:
-                probes.setdefault(s.text, s)
-                recorded.extend(c for c in s.columns if c not in recorded)
+    _add_recorded([(text, json_path(["record", i])) for i, text in enumerate(spec.record)], units, problems, file,
+                  probes, recorded)
     for o in spec.objectives:
         if o.signal:
             s = _resolve_signal(o.signal, units, problems, file, json_path(["objectives", o.name, "signal"]))
@@ -192,6 +206,17 @@ def build_system(spec: Spec, broken_units: frozenset[str] = frozenset()) -> Syst
     return System(spec=spec, units=dict(units), connections=tuple(connections), order=tuple(order),
                   init_order=tuple(init_order), assignments=tuple(assignments), probes=tuple(probes.values()),
                   recorded=tuple(recorded))
+
+
+def _add_recorded(texts: Sequence[tuple[str, str]], units: Mapping[str, SystemUnit], problems: list[Problem],
+                  file: str, probes: dict[str, Signal], recorded: list[str]) -> None:
+    """Resolve (text, JSON path) record entries into ``probes`` and the column list ``recorded``."""
+    for text, path in texts:
+        for expanded in _expand_wildcard(text, units):
+            s = _resolve_signal(expanded, units, problems, file, path)
+            if s is not None:
+                probes.setdefault(s.text, s)
+                recorded.extend(c for c in s.columns if c not in recorded)
 
 
 class _LoadedUnits(dict):

@@ -124,3 +124,58 @@ def test_spec_option_stands_in_for_missing_metadata(tmp_path, write_spec, capsys
     assert main(["plot", str(table_path), "--spec", str(tmp_path / "nope.json"), "--x", "ode.a", "--y", "y_end",
                  "-o", str(tmp_path / "g.png")]) == 2
     assert "file not found" in capsys.readouterr().err
+
+
+def test_run_point_loads_the_spec_once_and_builds_the_system_once(tmp_path, write_spec, capsys, monkeypatch):
+    import orchestrator.spec
+    import orchestrator.system
+    import orchestrator.validate
+
+    table = linear_ode_sweep(tmp_path / "decay", write_spec)
+    calls = {"load": 0, "build": 0, "describe": 0}
+
+    def counted(name, fn):
+        def wrapper(*args, **kwargs):
+            calls[name] += 1
+            return fn(*args, **kwargs)
+        return wrapper
+
+    load, build = counted("load", orchestrator.spec.load_spec), counted("build", orchestrator.system.build_system)
+    for module in (orchestrator.spec, orchestrator.validate):
+        monkeypatch.setattr(module, "load_spec", load)
+    for module in (orchestrator.system, orchestrator.validate):
+        monkeypatch.setattr(module, "build_system", build)
+    from orchestrator.units.python import PythonUnitType
+
+    monkeypatch.setattr(PythonUnitType, "describe", counted("describe", PythonUnitType.describe))
+    assert main(["run", str(tmp_path / "spec.json"), "--point", "pb", "--results", str(table)]) == 0
+    assert calls == {"load": 1, "build": 1, "describe": 1}
+    assert objectives_printed(capsys.readouterr().out)["y_end"] == pytest.approx(np.exp(-1.0), rel=1e-5)
+
+
+def test_every_caller_runs_a_point_through_run_point(tmp_path, write_spec, monkeypatch):
+    """orchestrator.run, cosim run (with --set and --point), the re-run of a row and the sweep's child: one pipeline."""
+    import orchestrator
+    import orchestrator.point
+    from orchestrator.analysis.rerun import rerun
+    from orchestrator.isolation import PointRunner
+    from orchestrator.validate import check_spec
+
+    table_path = linear_ode_sweep(tmp_path / "decay", write_spec)
+    spec = str(tmp_path / "spec.json")
+    seen = []
+    real = orchestrator.point.run_point
+
+    def spy(system, values=None, **kwargs):
+        seen.append(dict(values or {}))
+        return real(system, values, **kwargs)
+
+    monkeypatch.setattr(orchestrator.point, "run_point", spy)
+    assert orchestrator.run(spec, {"ode.a": -2.0}).objectives["y_end"] == pytest.approx(np.exp(-2.0), rel=1e-5)
+    assert main(["run", spec, "--set", "ode.a=-0.5"]) == 0
+    assert main(["run", spec, "--point", "pb", "--results", str(table_path)]) == 0
+    result, _ = rerun(load_results(table_path), 0)
+    assert result.ok and list(result.traces.columns) == ["time", "ode.y"]
+    row = PointRunner(check_spec(spec)).run("p", {"ode.a": -1.5})
+    assert row["status"] == "ok" and row["objectives"]["y_end"] == pytest.approx(np.exp(-1.5), rel=1e-5)
+    assert seen == [{"ode.a": -2.0}, {"ode.a": -0.5}, {"ode.a": -1.0}, {"ode.a": -2.0}, {"ode.a": -1.5}]

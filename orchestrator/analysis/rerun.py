@@ -4,13 +4,12 @@ The values of a point come from its row: the spec's design parameters name
 the columns (``target``, or ``target[1]``..``target[n]`` for an array).  The
 spec is the one given, else ``spec_path`` from the sweep's metadata, else the
 spec stored in the metadata itself (its relative paths then resolve against
-the table's folder).  *Full recording* adds every output of every unit
-(``unit.*``) to the spec's ``record`` list.
+the table's folder).  *Full recording* records every output of every unit
+besides the spec's ``record`` list (:meth:`~orchestrator.system.System.recording_all_outputs`).
 """
 
 from __future__ import annotations
 
-import copy
 import sys
 from pathlib import Path
 from typing import Any
@@ -38,8 +37,8 @@ def _did_you_mean(name: str, ids) -> str:
     return f" Did you mean '{starts[0]}'?" if len(starts) == 1 else did_you_mean(name, list(ids)[:5000])
 
 
-def load_rerun_spec(table: ResultsTable | None, spec_path: str | Path | None, full_record: bool = True):
-    """The spec to re-run with (see the module docstring), recording every unit output when ``full_record``.
+def load_rerun_spec(table: ResultsTable | None, spec_path: str | Path | None):
+    """The spec to re-run with (see the module docstring), as it is: without full recording.
 
     Raises AnalysisError when there is no spec to use, SpecError when it is broken.
     """
@@ -49,17 +48,11 @@ def load_rerun_spec(table: ResultsTable | None, spec_path: str | Path | None, fu
     if spec_path is None and meta.get("spec_path") and Path(meta["spec_path"]).exists():
         spec_path = meta["spec_path"]
     if spec_path is not None:
-        raw, where = copy.deepcopy(dict(load_spec(spec_path).raw)), Path(spec_path)
-    elif table is not None and table.spec:
-        raw, where = copy.deepcopy(table.spec), table.path.parent / "spec.json"
-    else:
-        raise AnalysisError("re-running a design needs its spec: give --spec spec.json "
-                            "(the table has no sweep metadata naming one)")
-    if full_record:
-        record = list(raw.get("record") or [])
-        record += [f"{name}.*" for name in raw.get("units", {}) if f"{name}.*" not in record]
-        raw["record"] = record
-    return spec_from_dict(raw, where)
+        return load_spec(spec_path)
+    if table is not None and table.spec:
+        return spec_from_dict(table.spec, table.path.parent / "spec.json")
+    raise AnalysisError("re-running a design needs its spec: give --spec spec.json "
+                        "(the table has no sweep metadata naming one)")
 
 
 def point_values(table: ResultsTable, row: int, targets: list[str]) -> dict[str, Any]:
@@ -92,19 +85,20 @@ def rerun(table: ResultsTable | None, row: int | None = None, spec_path: str | P
           values: dict[str, Any] | None = None, full_record: bool = True):
     """Run row ``row`` of ``table`` (or explicit ``values``) again; returns (RunResult, values).
 
-    Raises AnalysisError or SpecError when the spec or the values do not fit;
-    a failing run is reported in the result's status instead.
+    ``full_record`` records every output of every unit besides the spec's
+    record list.  Raises AnalysisError or SpecError when the spec or the
+    values do not fit; a failing run is reported in the result's status instead.
     """
-    from ..execution import Execution
+    from ..point import run_point
     from ..system import build_system
 
-    spec = load_rerun_spec(table, spec_path, full_record)
+    spec = load_rerun_spec(table, spec_path)
     if values is None:
-        targets = [p.target for p in spec.design.parameters]
-        values = point_values(table, row, targets)  # type: ignore[arg-type]
+        values = point_values(table, row, [p.target for p in spec.design.parameters])  # type: ignore[arg-type]
     system = build_system(spec)
-    overrides = [system.assignment_for(target, value) for target, value in values.items()]
-    return Execution(system, overrides, record=True).run(), values
+    if full_record:
+        system = system.recording_all_outputs()
+    return run_point(system, values, record=True), values
 
 
 def find_table_for(spec_path: str | Path, given: str | Path | None) -> Path:
@@ -115,12 +109,9 @@ def find_table_for(spec_path: str | Path, given: str | Path | None) -> Path:
     """
     if given is not None:
         return Path(given)
-    try:
-        from ..sweep_cli import _default_out
+    from ..results import default_folder
 
-        default = _default_out(str(spec_path))
-    except ImportError:  # pragma: no cover - sweep not installed
-        default = Path("results") / Path(spec_path).stem
+    default = default_folder(spec_path)
     candidates = [default / "results.parquet", Path(spec_path).resolve().parent / default / "results.parquet"]
     for c in candidates:
         if c.exists():
@@ -129,26 +120,25 @@ def find_table_for(spec_path: str | Path, given: str | Path | None) -> Path:
                         + "; give it with --results DIR/results.parquet")
 
 
-def prepare_point_run(spec_path: str, point_id: str, results: str | None, out: Path | None):
-    """For ``cosim run SPEC --point ID``: (system with full recording, overrides, traces path).
+def prepare_point_run(system: Any, point_id: str, results: str | Path | None, out: Path | None):
+    """For ``cosim run SPEC --point ID``: (``system`` recording every output, the point's values, traces path).
 
-    The traces go to ``out`` or, by default, ``<results folder>/points/<ID>.parquet``.
-    A spec changed since the sweep is run anyway, with a warning on stderr.
+    ``system`` is the checked system of SPEC (loaded and built once by the
+    caller).  The traces go to ``out`` or, by default,
+    ``<results folder>/points/<ID>.parquet``.  A spec changed since the sweep
+    is run anyway, with a warning on stderr.  Raises AnalysisError when the
+    table or the point cannot be found.
     """
-    from ..system import build_system
     from .table import load_results
 
+    spec_path = system.spec.path
     table = load_results(find_table_for(spec_path, results))
     row = find_row(table, point_id)
-    spec = load_rerun_spec(None, spec_path, full_record=True)
     digest = (table.metadata or {}).get("spec_digest")
-    from ..spec import load_spec
-
-    if digest and digest != load_spec(spec_path).digest:
+    if digest and digest != system.spec.digest:
         print(f"cosim: warning: {spec_path} changed since the sweep that wrote {table.path}; running the point's "
               "values with the spec as it is now", file=sys.stderr)
-    values = point_values(table, row, [p.target for p in spec.design.parameters])
-    system = build_system(spec)
-    overrides = [system.assignment_for(t, v) for t, v in values.items()]
+    values = point_values(table, row, [p.target for p in system.spec.design.parameters])
     print(f"point {point_id}: " + ", ".join(f"{t}={v}" for t, v in values.items()))
-    return system, overrides, out if out is not None else table.path.parent / "points" / f"{point_id}.parquet"
+    traces = out if out is not None else table.path.parent / "points" / f"{point_id}.parquet"
+    return system.recording_all_outputs(), values, traces
