@@ -38,6 +38,8 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any, Sequence
 
+from .limits import LIMITS
+
 LOAD_TIMEOUT = 300.0  # seconds a fresh child may take to import, unpack and load the system
 
 # -- the payload ------------------------------------------------------------------
@@ -68,7 +70,10 @@ def make_payload(system: Any) -> dict[str, Any]:
     for name in sorted(files):
         h.update(name.encode())
         h.update(hashlib.sha256(files[name][1]).digest())
-    return {"key": h.hexdigest()[:16], "system": blob, "files": files}
+    from .limits import settings
+
+    # the client's limits hold in every worker child, wherever it runs (orchestrator.limits)
+    return {"key": h.hexdigest()[:16], "system": blob, "files": files, "limits": settings()}
 
 
 def _python_file(unit_type: Any) -> Path | None:
@@ -237,6 +242,9 @@ class IsolatedRunner:
         # process owns and removes, also when the child had to be killed.
         self._folder = tempfile.mkdtemp(prefix="cosim_worker_")
         env = dict(os.environ, TMPDIR=self._folder)
+        for setting in LIMITS.values():  # the limits of the client that made the payload, not this worker's
+            env.pop(setting.env, None)
+        env.update(self.payload.get("limits", {}))
         root = str(Path(__file__).resolve().parent.parent)
         env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")  # works from a source checkout too
         self._proc = subprocess.Popen(

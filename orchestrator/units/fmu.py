@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
 
+from ..archive import ArchiveError, check_archive, extract_to_new_folder
 from ..errors import Problem, UserError
 from ..quantities import fmi_unit_definitions
 from ..unit import Unit, UnitDescription, UnitType, Variable, indexed_runs, parse_port
@@ -89,33 +90,33 @@ def shared_library_suffix() -> str:
     return {"Linux": ".so", "Darwin": ".dylib", "Windows": ".dll"}.get(platform.system(), ".so")
 
 
-def unsafe_members(archive: str | Path) -> list[str]:
-    """Members of a zip archive whose path would land outside the folder it is extracted into."""
-    target = Path(tempfile.gettempdir()).resolve() / "cosim_extract_check"  # any folder: only names matter
-    unsafe = []
-    with zipfile.ZipFile(archive) as zf:
-        for member in zf.infolist():
-            destination = (target / member.filename).resolve()
-            if destination != target and target not in destination.parents:
-                unsafe.append(member.filename)
-    return unsafe
-
-
 def safe_extract(archive: str | Path, target: str | Path) -> None:
-    """Extract a zip archive, refusing members that would land outside ``target``.
+    """Extract an FMU within the archive rules and limits (see :mod:`orchestrator.archive`).
 
-    Raises FmuProblems (a user error) when a member's path escapes (absolute paths, ``..``).
+    Raises FmuProblems (a user error) naming the FMU, the member and the rule
+    or limit it breaks; the target folder is then removed.
     """
-    unsafe = unsafe_members(archive)
-    if unsafe:
-        raise FmuProblems(str(archive), [_unsafe_member(str(archive), m) for m in unsafe])
-    with zipfile.ZipFile(archive) as zf:
-        zf.extractall(target)
+    try:
+        extract_to_new_folder(archive, target)
+    except ArchiveError as exc:
+        raise FmuProblems(str(archive), exc.problems) from None
 
 
-def _unsafe_member(archive: str, member: str) -> Problem:
-    return Problem(archive, member, "archive member escapes the extraction folder (absolute path or '..'); "
-                   "refusing to extract this FMU", "re-export the FMU with relative member paths inside the archive")
+def model_identifier_problem(archive: str, identifier: Any) -> Problem | None:
+    """Why ``identifier`` cannot name the FMU's library, or None.
+
+    The library is looked up as ``binaries/<platform>/<modelIdentifier>.so``
+    inside the extracted FMU; an identifier with a path in it (absolute, with
+    ``/``, ``\\`` or ``..``) would make the FMU load a library from anywhere
+    on the machine.
+    """
+    text = str(identifier or "")
+    if re.fullmatch(r"[A-Za-z0-9_][A-Za-z0-9_.+-]*", text) and ".." not in text:
+        return None
+    return Problem(archive, "modelDescription.xml", f"modelIdentifier '{text[:80]}' is not a plain file name "
+                   "(letters, digits, '_', '.', '-', no path); it names the library inside binaries/<platform>/ "
+                   "of the FMU, and cosim loads nothing from outside the FMU",
+                   "re-export the FMU with a plain modelIdentifier")
 
 
 class _ExtractionCache:
@@ -131,11 +132,7 @@ class _ExtractionCache:
         with self._lock:
             if key not in self._folders:
                 folder = tempfile.mkdtemp(prefix="cosim_fmu_")
-                try:
-                    safe_extract(path, folder)
-                except BaseException:
-                    shutil.rmtree(folder, ignore_errors=True)
-                    raise
+                safe_extract(path, folder)  # removes the folder when the FMU is refused
                 self._folders[key] = folder
             return self._folders[key]
 
@@ -226,9 +223,10 @@ class FmuUnitType(UnitType):
         if not zipfile.is_zipfile(self.path):
             raise FmuProblems(self.path, [Problem(self.path, "", "not a zip archive, so not an FMU",
                                                   "rebuild or re-export it")])
-        unsafe = unsafe_members(self.path)
-        if unsafe:  # found here, when the spec is checked, not first when a worker extracts it
-            raise FmuProblems(self.path, [_unsafe_member(self.path, m) for m in unsafe])
+        try:  # found here, when the spec is checked, not first when a worker unpacks it
+            check_archive(self.path)
+        except ArchiveError as exc:
+            raise FmuProblems(self.path, exc.problems) from None
         try:
             md = read_model_description(self.path, validate=False)
         except Exception as exc:  # fmpy raises many kinds for a broken XML
@@ -244,6 +242,9 @@ class FmuUnitType(UnitType):
         else:
             folder2, folder3 = platform_folders()
             folder = folder3 if md.fmiVersion == "3.0" else folder2
+            identifier_problem = model_identifier_problem(self.path, md.coSimulation.modelIdentifier)
+            if identifier_problem:
+                raise FmuProblems(self.path, problems + [identifier_problem])
             library = f"binaries/{folder}/{md.coSimulation.modelIdentifier}{shared_library_suffix()}"
             with zipfile.ZipFile(self.path) as zf:
                 if library not in zf.namelist():
