@@ -107,10 +107,10 @@ def cmd_plot(args: argparse.Namespace) -> int:
 
 
 def front_of(table, objectives: list[tuple[str, str]], where: str | None):
-    """(mask of front rows, rows considered): ok rows passing ``where`` and with every objective present."""
+    """(mask of front rows, rows considered): ok, feasible rows passing ``where``, every objective present."""
     from .analysis.pareto import pareto_mask
 
-    considered = table.ok_mask() & table.where(where)
+    considered = table.ok_mask() & table.feasible_mask() & table.where(where)
     values = np.column_stack([table.values(name) for name, _ in objectives])
     values[~considered] = np.nan
     return pareto_mask(values, [s for _, s in objectives]), considered

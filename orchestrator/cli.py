@@ -75,6 +75,8 @@ def _parser() -> argparse.ArgumentParser:
     p.set_defaults(handler=cmd_inspect)
     from .sweep_cli import add_sweep_parser
     add_sweep_parser(sub)
+    from .optimize_cli import add_optimize_parser
+    add_optimize_parser(sub)
     from .analysis_cli import add_analysis_parsers
     add_analysis_parsers(sub)
     return parser

@@ -184,16 +184,16 @@ class DesignSpace:
     yields :class:`Point` objects lazily, in a deterministic order.
     """
 
-    def __init__(self, spec: Spec):
+    def __init__(self, spec: Spec, dimensions_only: bool = False):
         self.spec = spec
         design = spec.design
         self.method = design.method
-        sampled = self.method in SAMPLERS
+        sampled = self.method in SAMPLERS or dimensions_only
         self.parameters = [_Parameter(p, sampled, spec.path) for p in design.parameters]
         self.targets = [p.target for p in self.parameters]
         self._dims = [d for p in self.parameters for d in p.dims]
         self._samples: np.ndarray | None = None
-        if sampled:
+        if sampled and not dimensions_only:
             if design.samples is None and self.parameters:
                 raise SpecError([Problem(spec.path, "$.design.samples", f"method '{self.method}' needs 'samples'",
                                          "add e.g. \"samples\": 100")])
@@ -205,6 +205,30 @@ class DesignSpace:
     def from_spec(cls, spec: Spec) -> "DesignSpace":
         """The design space of ``spec``; raises SpecError for a bad range, sampler or constraint."""
         return cls(spec)
+
+    @classmethod
+    def dimensions_of(cls, spec: Spec) -> "DesignSpace":
+        """The space's parameters as dimensions (ranges continuous, or stepped where a step is given),
+        drawing no points: for drivers that choose the points themselves (optimisation, sensitivity).
+        Raises SpecError like :meth:`from_spec`."""
+        return cls(spec, dimensions_only=True)
+
+    @property
+    def dimensions(self) -> list[tuple[str, "_Dimension"]]:
+        """``(flat name, dimension)`` per axis: ``target``, or ``target[i]`` (from 1) for array elements."""
+        out = []
+        for p in self.parameters:
+            for i, dim in enumerate(p.dims, start=1):
+                out.append((f"{p.target}[{i}]" if p.is_array else p.target, dim))
+        return out
+
+    def values_of(self, flat: Sequence[Any]) -> dict[str, Any]:
+        """``{target: value}`` from one value per dimension (in :attr:`dimensions` order)."""
+        return self._values(tuple(flat))
+
+    def accepts(self, values: dict[str, Any]) -> bool:
+        """Whether the design ``constraint`` holds for ``values`` (True without one)."""
+        return self._accepts(values)
 
     # -- construction helpers -------------------------------------------------
     def _draw(self, n: int, seed: int | None) -> np.ndarray:

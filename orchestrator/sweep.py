@@ -42,6 +42,7 @@ from typing import TYPE_CHECKING, Any, Iterable, Iterator, Sequence, TextIO
 
 from .design import DesignSpace, Point
 from .errors import UserError
+from .evaluator import lost_rows
 from .isolation import IsolatedRunner, make_payload
 
 if TYPE_CHECKING:
@@ -170,14 +171,6 @@ def _now() -> str:
     return datetime.now(timezone.utc).isoformat(timespec="seconds")
 
 
-def _dashboard_available() -> bool:
-    try:
-        import bokeh  # noqa: F401  (distributed serves its dashboard only with bokeh)
-    except ImportError:
-        return False
-    return True
-
-
 class Sweep:
     """A prepared sweep of the spec at ``spec_path`` (see the module docstring).
 
@@ -249,51 +242,28 @@ class Sweep:
         Raises SweepError when no Dask workers are reachable.  Ctrl-C stops the
         sweep; the rows written so far stay and ``resume`` finishes the rest.
         """
-        from distributed import Client, LocalCluster
+        from .evaluator import ClusterError, dask_client
 
         started = _now()
         done = self.store.done_ids() if self.resume else set()
         total = len(self.space)
         todo = total - len(done & {p.id for p in self.space}) if done else total
-        cluster = None
         if todo == 0:
             self._say(f"cosim sweep {self.spec.name}: all {total} points already in {self.out}")
             return self._finish(started, load)
-        if self.scheduler is None:
-            dashboard = _dashboard_available()
-            cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                   host="127.0.0.1", dashboard_address="127.0.0.1:0",
-                                   silence_logs=40)
-            client = Client(cluster)
-            link = cluster.dashboard_link if dashboard else "unavailable (install bokeh to get it)"
-        else:
-            try:
-                client = Client(self.scheduler, timeout=10)
-            except OSError as exc:
-                raise SweepError(f"cannot reach the Dask scheduler at {self.scheduler}: {exc}") from None
-            link = client.dashboard_link
         try:
-            n_workers = sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values())
-            if n_workers == 0:
-                try:
-                    client.wait_for_workers(1, timeout=60)
-                except TimeoutError:
-                    raise SweepError(f"the scheduler at {self.scheduler} has no workers (waited 60 s); "
-                                     "start some with: dask worker ADDRESS --nthreads 1") from None
-                n_workers = sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values())
-            info = {"started": started, "scheduler": client.scheduler.address, "workers": n_workers,
-                    "timeout": self.timeout}
-            self.store.write_metadata(self._metadata(started, info))
-            self._say(f"cosim sweep {self.spec.name}: {total} points ({todo} to run) on {n_workers} worker(s); "
-                      f"dashboard: {link}; results: {self.out}")
-            self._evaluate(client, done, todo, n_workers)
+            with dask_client(self.workers, self.scheduler) as (client, n_workers, link):
+                info = {"started": started, "scheduler": client.scheduler.address, "workers": n_workers,
+                        "timeout": self.timeout}
+                self.store.write_metadata(self._metadata(started, info))
+                self._say(f"cosim sweep {self.spec.name}: {total} points ({todo} to run) on {n_workers} "
+                          f"worker(s); dashboard: {link}; results: {self.out}")
+                self._evaluate(client, done, todo, n_workers)
+        except ClusterError as exc:
+            raise SweepError(str(exc)) from None
         except KeyboardInterrupt:
             self._say(f"interrupted: the rows so far are in {self.out}; run again with --resume to finish")
             raise
-        finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
         return self._finish(started, load)
 
     def _finish(self, started: str, load: bool) -> "pd.DataFrame | dict[str, int]":
@@ -336,9 +306,7 @@ class Sweep:
             try:
                 rows = future.result()
             except Exception as exc:  # the worker process itself died (KilledWorker) or the task broke
-                rows = [{"point_id": p.id, "status": "crashed", "message": f"lost with its worker: "
-                         f"{type(exc).__name__}: {exc}", "run_time": float("nan"), "worker": "",
-                         "objectives": {}} for p in batch]
+                rows = lost_rows([p.id for p in batch], exc)
             future.release()
             self.store.append([self._row(p, r) for p, r in zip(batch, rows)])
             if progress is not None:

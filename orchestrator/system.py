@@ -618,7 +618,7 @@ def _check_design(spec: Spec, units: _LoadedUnits, problems: list[Problem]) -> N
             if p.step is not None and isinstance(p.step, (int, float)) and p.step <= 0:
                 problems.append(Problem(spec.path, path, f"step must be positive, got {p.step}",
                                         "write a positive step"))
-            if spec.design.method == "grid" and p.step is None:
+            if spec.design.method == "grid" and p.step is None and "optimize" not in spec.raw:
                 problems.append(Problem(spec.path, path, "a grid needs a 'step' for each range",
                                         "add 'step', or use method 'lhs', 'sobol' or 'random' with 'samples'"))
     if spec.design.method != "grid" and spec.design.parameters and spec.design.samples is None:

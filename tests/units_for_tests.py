@@ -128,3 +128,29 @@ class SiSink(PythonUnit):
 
     def do_step(self, t, h):
         self.omega_seen, self.temperature_seen, self.x_seen = self.omega, self.temperature, self.x
+
+
+class TwoBowls(PythonUnit):
+    """A bi-objective test problem with a known Pareto front.
+
+    f1 = x^2 + y^2 and f2 = (x - 2)^2 + y^2: the designs that cannot be improved
+    in one objective without losing in the other are y = 0, 0 <= x <= 2, so the
+    front is f2 = (2 - sqrt(f1))^2 for 0 <= f1 <= 4.  A design with
+    x > crash_above kills its process (a crashing point).
+    """
+
+    variables = (
+        Variable("x", "parameter", start=0.0),
+        Variable("y", "parameter", start=0.0),
+        Variable("crash_above", "parameter", start=math.inf),
+        Variable("f1", "output", start=0.0),
+        Variable("f2", "output", start=0.0),
+    )
+
+    def do_step(self, t, h):
+        if self.x > self.crash_above:
+            import os
+
+            os._exit(3)
+        self.f1 = self.x ** 2 + self.y ** 2
+        self.f2 = (self.x - 2.0) ** 2 + self.y ** 2

@@ -83,7 +83,8 @@ def build_report(table: ResultsTable) -> str:
              f"</title><style>{CSS}</style></head><body>",
              f"<h1>Sweep report: {html.escape(_name(table))}</h1>", _overview(table, parameters, objectives),
              _status_section(table), _objective_section(table, parameters, objectives, ok),
-             _pareto_section(table, parameters, ok), _sensitivity_section(table, parameters, objectives, ok),
+             _pareto_section(table, parameters, ok & table.feasible_mask()), _optimization_section(table),
+             _sensitivity_section(table, parameters, objectives, ok),
              _figure_section(table, parameters, objectives, ok), "</body></html>"]
     return "\n".join(parts)
 
@@ -160,7 +161,7 @@ def _pareto_section(table: ResultsTable, parameters: list[str], ok: np.ndarray) 
     front = pareto_mask(values, [senses[n] for n in names])
     show = [c for c in ["point_id", *parameters] if c in table.df.columns]
     df = table.df.loc[front, show + names].sort_values(names[0], ascending=senses[names[0]] == "min")
-    text = head + (f"<p>{int(front.sum())} non-dominated of {int(ok.sum())} ok rows for "
+    text = head + (f"<p>{int(front.sum())} non-dominated of {int(ok.sum())} ok (and feasible) rows for "
                    + ", ".join(f"{senses[n]}imize {html.escape(n)}" for n in names) + ".</p>")
     text += _table(show + names, df.head(MAX_FRONT_ROWS).itertuples(index=False), left=1)
     if len(df) > MAX_FRONT_ROWS:
@@ -170,6 +171,39 @@ def _pareto_section(table: ResultsTable, parameters: list[str], ok: np.ndarray) 
     draw_front(ax, table, names[0], names[1], front)
     return text + f"<figure>{png_base64(fig)}<figcaption>Pareto front of {html.escape(names[0])} and " \
                   f"{html.escape(names[1])} over all ok rows (greyed: not ok).</figcaption></figure>"
+
+
+def _optimization_section(table: ResultsTable) -> str:
+    """For an optimisation run: its settings and the hypervolume of the front against evaluations."""
+    meta = table.metadata or {}
+    if meta.get("kind") != "optimization":
+        return ""
+    from ..optimize import HV_REFERENCE, hypervolume_history
+
+    settings = meta.get("optimize") or {}
+    text = "<h2>Optimisation</h2>" + _table(["", ""], [(k, str(settings.get(k))) for k in
+                                                      ("sampler", "budget", "batch", "seed", "objectives",
+                                                       "constraints")], left=2)
+    senses = table.objective_senses()
+    if not senses:
+        return text
+    names = list(senses)
+    order = np.argsort(table.values("trial"), kind="stable") if "trial" in table.df.columns \
+        else np.arange(len(table.df))
+    values = np.column_stack([table.values(n) for n in names])[order]
+    usable = (table.ok_mask() & table.feasible_mask())[order] & np.all(np.isfinite(values), axis=1)
+    history = hypervolume_history(values, [senses[n] for n in names], usable)
+    fig = new_figure(6.0, 4.0)
+    ax = fig.add_subplot(111)
+    ax.plot(np.arange(1, len(history) + 1), history, drawstyle="steps-post")
+    ax.set_xlabel("evaluations")
+    ax.set_ylabel("hypervolume")
+    ax.grid(alpha=0.3)
+    final = float(history[-1]) if len(history) else 0.0
+    return text + (f"<p>Hypervolume of the feasible front after each evaluation: objectives scaled to [0, 1] "
+                   f"over the feasible ok rows, reference point {HV_REFERENCE} in each (the largest possible "
+                   f"value is {HV_REFERENCE ** len(names):.4g}); final {final:.4f}.</p>"
+                   f"<figure>{png_base64(fig)}<figcaption>Hypervolume against evaluations.</figcaption></figure>")
 
 
 def _sensitivity_section(table: ResultsTable, parameters: list[str], objectives: list[str], ok: np.ndarray) -> str:

@@ -112,7 +112,12 @@ class ResultsTable:
         return f"{column} [{unit}]" if unit else column
 
     def objective_senses(self) -> dict[str, str]:
-        """Flat objective columns with a ``sense`` in the spec -> 'min' or 'max', in spec order."""
+        """Flat objective columns with a ``sense`` -> 'min' or 'max': those of the spec's ``optimize``
+        section when it names them (the objectives an optimisation ran on), else the spec's, in spec order."""
+        optimized = ((self.spec or {}).get("optimize") or {}).get("objectives")
+        if isinstance(optimized, Mapping) and optimized:
+            return {c: ("max" if str(s).startswith("max") else "min")
+                    for name, s in optimized.items() for c in self._columns_of(name)}
         senses: dict[str, str] = {}
         for name, o in ((self.spec or {}).get("objectives") or {}).items():
             sense = o.get("sense") if isinstance(o, Mapping) else None
@@ -151,6 +156,12 @@ class ResultsTable:
         if "status" not in self.df.columns:
             return np.ones(len(self.df), dtype=bool)
         return (self.df["status"].astype(str) == "ok").to_numpy()
+
+    def feasible_mask(self) -> np.ndarray:
+        """False for rows an optimisation marked infeasible (column ``feasible``); True everywhere else."""
+        if "feasible" not in self.df.columns:
+            return np.ones(len(self.df), dtype=bool)
+        return self.df["feasible"].fillna(False).astype(bool).to_numpy()
 
     def where(self, text: str | None) -> np.ndarray:
         """Boolean mask of the rows for which ``text`` is true (all rows for None or '').

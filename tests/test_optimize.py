@@ -1,0 +1,171 @@
+"""cosim optimize on real Dask: a problem with a known Pareto front, constraints, crashes, resume after kill -9."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from orchestrator.analysis.pareto import pareto_mask
+from orchestrator.cli import main
+from orchestrator.optimize import Optimization, hypervolume, normalised_losses
+
+from .conftest import python_unit
+from .sweep_fixtures import kill_group, local_cluster  # noqa: F401  (fixture)
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def bowls_spec(**optimize) -> dict:
+    """TwoBowls over x in [-1, 3], y in [-2, 2]: the front is y = 0, 0 <= x <= 2, f2 = (2 - sqrt(f1))^2."""
+    return {
+        "name": "bowls",
+        "units": {"b": {"python": python_unit("TwoBowls")}},
+        "experiment": {"stop": 1.0, "step": 1.0},
+        "objectives": {"f1": {"signal": "b.f1", "reduce": "final", "sense": "minimize"},
+                       "f2": {"signal": "b.f2", "reduce": "final", "sense": "minimize"}},
+        "design": {"parameters": {"b.x": {"min": -1.0, "max": 3.0}, "b.y": {"min": -2.0, "max": 2.0}}},
+        "optimize": {"budget": 120, "batch": 8, "seed": 3, **optimize},
+    }
+
+
+def front_of(df: pd.DataFrame) -> np.ndarray:
+    usable = (df["status"] == "ok") & df["feasible"]
+    values = df.loc[usable, ["f1", "f2"]].to_numpy(float)
+    return values[pareto_mask(values)]
+
+
+def test_front_found_within_tolerance_and_output_constraint_respected(write_spec, tmp_path, local_cluster):
+    spec = write_spec(bowls_spec(constraints=["f1 <= 2"]))
+    run = Optimization(spec, tmp_path / "out", scheduler=local_cluster, quiet=True)
+    counts = run.run()
+    df = run.store.table()
+    assert counts["ok"] == 120 and len(df) == 120 and df["point_id"].is_unique
+    assert df["trial"].is_monotonic_increasing and set(df["sampler"]) == {"tpe"}
+    # objectives and feasibility recomputed from the parameters, independently of the unit
+    x, y = df["b.x"].to_numpy(), df["b.y"].to_numpy()
+    np.testing.assert_allclose(df["f1"], x ** 2 + y ** 2, rtol=1e-12)
+    np.testing.assert_array_equal(df["feasible"], x ** 2 + y ** 2 <= 2)
+    assert (~df["feasible"]).any(), "the constraint never bit: the test would not see a violation"
+    front = front_of(df)
+    assert (front[:, 0] <= 2).all()
+    # never beyond the true front; every front point near it and the front's hypervolume near the true one's,
+    # in objectives scaled to [0, 1] over the true (constrained) front
+    assert (front[:, 1] >= (2 - np.sqrt(front[:, 0])) ** 2 - 1e-9).all()
+    f1 = np.linspace(0, 2, 4001)
+    true = np.column_stack([f1, (2 - np.sqrt(f1)) ** 2])
+    ideal, nadir = true.min(axis=0), true.max(axis=0)
+    scale = dict(senses=["min", "min"], ideal=ideal, nadir=nadir)
+    scaled_true = normalised_losses(true, **scale)
+    distance = np.min(np.linalg.norm(normalised_losses(front, **scale)[:, None] - scaled_true[None], axis=2), axis=1)
+    assert distance.max() < 0.05, distance
+    found_hv = hypervolume(normalised_losses(front, **scale))
+    true_hv = hypervolume(normalised_losses(true, **scale))
+    assert found_hv >= 0.95 * true_hv, (found_hv, true_hv)
+    # cosim pareto never lists an infeasible design
+    assert main(["pareto", str(tmp_path / "out"), "--csv", str(tmp_path / "front.csv")]) == 0
+    listed = pd.read_csv(tmp_path / "front.csv")
+    assert len(listed) == len(front) and listed["feasible"].all()
+
+
+def test_crashing_points_do_not_stop_the_optimisation(write_spec, tmp_path, local_cluster, capsys):
+    spec_dict = bowls_spec(budget=24, seed=5)
+    spec_dict["units"]["b"]["parameters"] = {"crash_above": 2.5}  # 1/8 of the x range kills the process
+    spec = write_spec(spec_dict)
+    code = main(["optimize", str(spec), "--out", str(tmp_path / "out"), "--scheduler", local_cluster])
+    assert code == 1  # some evaluations not ok
+    df = pd.read_parquet(tmp_path / "out" / "results.parquet")
+    assert len(df) == 24 and df["point_id"].is_unique
+    crashed = df["status"] == "crashed"
+    assert crashed.any() and (df.loc[crashed, "b.x"] > 2.5).all() and (df.loc[~crashed, "b.x"] <= 2.5).all()
+    assert (df.loc[crashed, "feasible"] == False).all()  # noqa: E712
+    assert "crashed" in capsys.readouterr().err
+
+
+def test_stepped_and_categorical_dimensions_never_evaluate_a_design_twice(write_spec, tmp_path, local_cluster):
+    spec_dict = bowls_spec(budget=15, batch=4, sampler="random")
+    spec_dict["design"]["parameters"] = {"b.x": {"values": [0.0, 0.5, 1.0, 1.5, 2.0]},
+                                         "b.y": {"min": -1, "max": 1, "step": 1}}
+    spec = write_spec(spec_dict)
+    run = Optimization(spec, tmp_path / "out", scheduler=local_cluster, quiet=True)
+    run.run()
+    df = run.store.table()
+    # 5 x 3 = 15 designs: the budget covers all of them exactly once, however often they were proposed
+    assert len(df) == 15 and len(set(zip(df["b.x"], df["b.y"]))) == 15
+    assert set(df["b.y"]) == {-1, 0, 1} and df["b.y"].dtype.kind == "i"
+    assert df["trial"].max() >= 15  # random proposals repeat on 15 designs: some trials were answered from the table
+
+
+@pytest.mark.parametrize("sampler", ["nsga2", "random", "qmc"])
+def test_other_samplers_fill_the_budget(write_spec, tmp_path, local_cluster, sampler):
+    spec = write_spec(bowls_spec(budget=24, batch=6, sampler=sampler))
+    run = Optimization(spec, tmp_path / "out", scheduler=local_cluster, quiet=True)
+    run.run()
+    df = run.store.table()
+    assert len(df) == 24 and set(df["sampler"]) == {sampler}
+    # batches of at most 6 evaluations, in order (a design proposed again costs no evaluation)
+    assert df["batch"].is_monotonic_increasing and df["batch"].value_counts().max() <= 6
+    assert df["batch"].nunique() >= 4
+    meta = json.loads((tmp_path / "out" / "metadata.json").read_text())
+    assert meta["kind"] == "optimization" and meta["optimize"]["sampler"] == sampler
+
+
+def _table_without_timing(path: Path) -> pd.DataFrame:
+    df = pd.read_parquet(path)
+    return df.drop(columns=["run_time", "worker"])
+
+
+def test_resume_after_kill_gives_the_table_of_an_uninterrupted_run(write_spec, tmp_path, local_cluster):
+    spec = write_spec(bowls_spec(budget=64, batch=8, seed=11, constraints=["f1 <= 3"]))
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    # the client is killed (kill -9 of its process group); the cluster is the test's, as with --scheduler in use
+    command = [sys.executable, "-m", "orchestrator.cli", "optimize", str(spec), "--scheduler", local_cluster]
+    whole = subprocess.run(command + ["--out", str(tmp_path / "whole")], env=env, capture_output=True, text=True,
+                           timeout=300)
+    assert whole.returncode == 0, whole.stderr
+    killed = tmp_path / "killed"
+    proc = subprocess.Popen(command + ["--out", str(killed)], env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while len(list((killed / "parts").glob("part-*.parquet"))) < 3:  # 3 of 8 batches stored
+            assert proc.poll() is None and time.monotonic() < deadline, "the run ended before it could be killed"
+            time.sleep(0.02)
+    finally:
+        kill_group(proc)  # SIGKILL
+    assert proc.returncode == -signal.SIGKILL
+    stored = len(pd.concat(pd.read_parquet(p) for p in (killed / "parts").glob("part-*.parquet")))
+    assert 24 <= stored < 64
+    resumed = subprocess.run(command + ["--out", str(killed), "--resume"], env=env, capture_output=True,
+                             text=True, timeout=300)
+    assert resumed.returncode == 0, resumed.stderr
+    assert f"{stored} evaluations stored" in resumed.stderr
+    pd.testing.assert_frame_equal(_table_without_timing(killed / "results.parquet"),
+                                  _table_without_timing(tmp_path / "whole" / "results.parquet"))
+    meta = json.loads((killed / "metadata.json").read_text())
+    assert len(meta["runs"]) == 2 and meta["counts"]["ok"] == 64
+
+
+def test_bad_optimize_section_is_exit_2_naming_the_field(write_spec, tmp_path, capsys):
+    spec = write_spec(bowls_spec(objectives={"energy": "minimize"}, constraints=["f1 + 1"]))
+    assert main(["optimize", str(spec), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "$.optimize.objectives.energy" in err and "'energy' is not an objective" in err
+    spec = write_spec(bowls_spec(constraints=["f1 + 1"]), "c.json")
+    assert main(["optimize", str(spec), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "$.optimize.constraints[0]" in err and "not one comparison" in err
+    spec = write_spec(bowls_spec(constraints=["f3 <= 1"]), "d.json")
+    assert main(["optimize", str(spec), "--out", str(tmp_path / "o")]) == 2
+    assert "unknown name(s) in 'f3 <= 1': f3" in capsys.readouterr().err
+    spec = write_spec(bowls_spec(sampler="annealing"), "e.json")
+    assert main(["validate", str(spec)]) == 2
+    assert "$.optimize.sampler" in capsys.readouterr().err
