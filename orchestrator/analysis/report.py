@@ -161,7 +161,8 @@ def _pareto_section(table: ResultsTable, parameters: list[str], ok: np.ndarray) 
     front = pareto_mask(values, [senses[n] for n in names])
     show = [c for c in ["point_id", *parameters] if c in table.df.columns]
     df = table.df.loc[front, show + names].sort_values(names[0], ascending=senses[names[0]] == "min")
-    text = head + (f"<p>{int(front.sum())} non-dominated of {int(ok.sum())} ok (and feasible) rows for "
+    kind = "ok, feasible" if "feasible" in table.df.columns else "ok"
+    text = head + (f"<p>{int(front.sum())} non-dominated of {int(ok.sum())} {kind} rows for "
                    + ", ".join(f"{senses[n]}imize {html.escape(n)}" for n in names) + ".</p>")
     text += _table(show + names, df.head(MAX_FRONT_ROWS).itertuples(index=False), left=1)
     if len(df) > MAX_FRONT_ROWS:
