@@ -34,6 +34,7 @@ Python objects at once.
 
 from __future__ import annotations
 
+import collections
 import hashlib
 import itertools
 import json
@@ -46,6 +47,7 @@ from typing import Any, Iterator, Sequence
 
 import numpy as np
 
+from . import limits
 from .expressions import Expression, ExpressionError
 from .problems import Problem, SpecError, json_path
 from .spec import DesignParameterSpec, Spec
@@ -86,6 +88,18 @@ def _flatten(value: Any) -> list[Any]:
 
 def _decimal(x: Any) -> Decimal:
     return Decimal(repr(x)) if isinstance(x, float) else Decimal(int(x))
+
+
+def range_count(lo: Any, hi: Any, step: Any) -> int:
+    """How many values ``range_values(lo, hi, step)`` has, computed without making them.
+
+    Raises ValueError for a non-positive step or hi < lo.
+    """
+    if step is None or step <= 0:
+        raise ValueError(f"step must be positive, got {step}")
+    if hi < lo:
+        raise ValueError(f"max ({hi}) is below min ({lo})")
+    return int((_decimal(hi) - _decimal(lo)) // _decimal(step)) + 1
 
 
 def range_values(lo: Any, hi: Any, step: Any) -> list[Any]:
@@ -138,10 +152,11 @@ class _Parameter:
             if spec.is_bool:
                 self.dims = [_Dimension([False, True])]
             elif spec.values is not None:
-                seen = [json.dumps(v, sort_keys=True) for v in spec.values]
-                repeated = sorted({t for t in seen if seen.count(t) > 1})
+                counts = collections.Counter(json.dumps(v, sort_keys=True) for v in spec.values)
+                repeated = sorted(t for t, n in counts.items() if n > 1)
                 if repeated:  # the same point twice would share one id
-                    raise ValueError(f"values repeat: {', '.join(repeated)}")
+                    raise ValueError(f"values repeat: {', '.join(repeated[:5])}"
+                                     + (f" and {len(repeated) - 5} more" if len(repeated) > 5 else ""))
                 self.dims = [_Dimension(list(spec.values))]
             else:
                 lo, hi, step = spec.min, spec.max, spec.step
@@ -170,6 +185,10 @@ class _Parameter:
             return _Dimension(None, lo, hi, step, integer)
         if step is None:
             raise ValueError("a grid needs a 'step' for each range")
+        count, most = range_count(lo, hi, step), limits.limit("points")
+        if count > most:  # checked before a single value is made
+            raise ValueError(f"the range {lo} .. {hi} in steps of {step} has {count:.3g} values, more than the "
+                             f"limit of {most} design points; {limits.raise_hint('points')}")
         return _Dimension(range_values(lo, hi, step))
 
     def value(self, parts: Sequence[Any]) -> Any:
@@ -189,6 +208,9 @@ class DesignSpace:
         design = spec.design
         self.method = design.method
         sampled = self.method in SAMPLERS or dimensions_only
+        size = [] if dimensions_only else size_problems(spec)  # before any value or sample is made
+        if size:
+            raise SpecError(size)
         self.parameters = [_Parameter(p, sampled, spec.path) for p in design.parameters]
         self.targets = [p.target for p in self.parameters]
         self._dims = [d for p in self.parameters for d in p.dims]
@@ -290,8 +312,8 @@ class DesignSpace:
         if self.constraint is None:
             return True
         scope = {name: values[target] for name, target in self._names.items()}
-        try:
-            return bool(self.constraint.evaluate(scope))
+        try:  # strict: a division by zero or an invalid operation is the spec's mistake, not "true"
+            return bool(self.constraint.evaluate(scope, strict=True))
         except (ExpressionError, TypeError, ValueError) as exc:
             raise SpecError([Problem(self.spec.path, "$.design.constraint", str(exc),
                                      "check the indices and names used in the constraint")]) from None
@@ -343,6 +365,52 @@ class DesignSpace:
         for target in self.targets:
             out.update(flat_columns(target, values[target]))
         return out
+
+
+def size_problems(spec: Spec) -> list[Problem]:
+    """Design spaces larger than the ``points`` limit, counted without making a single point.
+
+    A grid has the product of its parameters' value counts (a range counts
+    ``floor((max - min) / step) + 1`` values, an array range the product over
+    its elements), a sampler ``samples`` points.  Parameters whose numbers
+    are malformed are left to the other checks.
+    """
+    design, most = spec.design, limits.limit("points")
+    fix = f"use fewer values or larger steps, or a sampler with fewer samples; {limits.raise_hint('points')}"
+    if design.method in SAMPLERS:
+        if isinstance(design.samples, int) and design.samples > most:
+            return [Problem(spec.path, "$.design.samples", f"{design.samples} samples, more than the limit of "
+                            f"{most} design points", fix)]
+        return []
+    total, factors = 1, []
+    for p in design.parameters:
+        try:
+            count = _value_count(p)
+        except (TypeError, ValueError, ArithmeticError):
+            continue
+        if count > most:
+            return [Problem(spec.path, json_path(["design", "parameters", p.target]), f"{count:.3g} values, more "
+                            f"than the limit of {most} design points", fix)]
+        total *= count
+        factors.append(str(count))
+    if total > most:
+        return [Problem(spec.path, "$.design", f"the grid has {total:.3g} points ({' x '.join(factors)}), more "
+                        f"than the limit of {most}", fix)]
+    return []
+
+
+def _value_count(p: DesignParameterSpec) -> int:
+    if p.is_bool:
+        return 2
+    if p.values is not None:
+        return len(p.values)
+    arrays = [x for x in (p.min, p.max, p.step) if isinstance(x, list)]
+    size = len(arrays[0]) if arrays else 1
+    count = 1
+    for i in range(size):
+        lo, hi, step = (x[i] if isinstance(x, list) else x for x in (p.min, p.max, p.step))
+        count *= range_count(lo, hi, step)
+    return count
 
 
 def _json_default(x: Any) -> Any:

@@ -4,16 +4,29 @@ An expression is parsed with Python's ``ast`` module and then *interpreted*
 node by node over a whitelist: numbers, names, ``+ - * / // % **``,
 comparisons, ``and or not``, a few math functions, and 1-based element access
 ``name[i]`` on array values.  Nothing is ever passed to ``eval``.
+
+Every operation's cost is bounded, so an expression from a hostile spec can
+neither hang the client nor exhaust its memory: the text's length and nesting
+depth are limited at parse time (``COSIM_EXPRESSION_LENGTH``,
+``COSIM_EXPRESSION_DEPTH``), as are the size of number literals and the
+functions' argument counts; powers of whole numbers are computed as floats
+(``9**9**9`` overflows at once instead of building a number with millions of
+digits).  Any failure while evaluating (division of whole numbers by zero,
+overflow, a bad index) is an :class:`ExpressionError` with one line of text;
+``strict=True`` also turns float division by zero and invalid results into
+errors (design constraints use it).
 """
 
 from __future__ import annotations
 
 import ast
+import math
 import operator
 from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from . import limits
 from .errors import UserError
 
 FUNCTIONS: dict[str, Callable[..., Any]] = {
@@ -23,6 +36,10 @@ FUNCTIONS: dict[str, Callable[..., Any]] = {
     "min": lambda *a: np.min(a[0]) if len(a) == 1 else np.minimum.reduce(a),
     "max": lambda *a: np.max(a[0]) if len(a) == 1 else np.maximum.reduce(a),
 }
+# how many arguments each function takes: (fewest, most); None: any number
+_ARITY: dict[str, tuple[int, int | None]] = {name: (1, 1) for name in FUNCTIONS}
+_ARITY.update(min=(1, None), max=(1, None))
+MAX_LITERAL = 1e308  # number literals beyond a float's range are refused
 CONSTANTS = {"pi": np.pi, "e": np.e, "true": True, "false": False, "True": True, "False": False}
 
 _BINARY = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul, ast.Div: operator.truediv,
@@ -45,12 +62,32 @@ class Expression:
 
     def __init__(self, text: str):
         self.text = text
+        self._shown = text if len(text) <= 80 else text[:77] + "..."
+        longest = limits.limit("expression_length")
+        if len(text) > longest:
+            raise ExpressionError(f"'{self._shown}': {len(text)} characters, more than the limit of {longest}; "
+                                  f"{limits.raise_hint('expression_length')}")
         try:
             self._tree = ast.parse(text.strip(), mode="eval").body
         except SyntaxError as exc:
-            raise ExpressionError(f"cannot parse '{text}': {exc.msg} at column {exc.offset}") from None
+            raise ExpressionError(f"cannot parse '{self._shown}': {exc.msg} at column {exc.offset}") from None
+        except (RecursionError, MemoryError, ValueError) as exc:  # the parser's own limits
+            raise ExpressionError(f"cannot parse '{self._shown}': nested too deeply for the parser "
+                                  f"({type(exc).__name__})") from None
+        self._check_depth(self._tree)
         self.names: set[str] = set()
         self._check(self._tree)
+
+    def _check_depth(self, tree: ast.AST) -> None:
+        """Refuse nesting deeper than the limit (iteratively: the recursive checks below need it bounded)."""
+        deepest = limits.limit("expression_depth")
+        stack = [(tree, 1)]
+        while stack:
+            node, depth = stack.pop()
+            if depth > deepest:
+                raise ExpressionError(f"'{self._shown}': nested more than {deepest} levels deep; "
+                                      f"{limits.raise_hint('expression_depth')}")
+            stack.extend((child, depth + 1) for child in ast.iter_child_nodes(node))
 
     @property
     def free_names(self) -> set[str]:
@@ -60,7 +97,10 @@ class Expression:
     def _check(self, node: ast.AST) -> None:
         if isinstance(node, ast.Constant):
             if not isinstance(node.value, (int, float, bool)):
-                raise ExpressionError(f"'{self.text}': only numbers are allowed as constants")
+                raise ExpressionError(f"'{self._shown}': only numbers are allowed as constants")
+            if not isinstance(node.value, bool) and abs(node.value) > MAX_LITERAL:
+                raise ExpressionError(f"'{self._shown}': the number {str(node.value)[:20]}... is too large "
+                                      f"(at most {MAX_LITERAL:g})")
         elif isinstance(node, ast.Name):
             self.names.add(node.id)  # may also be a constant; a value of that name takes precedence
         elif isinstance(node, ast.BinOp) and type(node.op) in _BINARY:
@@ -78,22 +118,39 @@ class Expression:
         elif isinstance(node, ast.Call):
             if not isinstance(node.func, ast.Name) or node.func.id not in FUNCTIONS or node.keywords:
                 name = getattr(node.func, "id", ast.unparse(node.func))
-                raise ExpressionError(f"'{self.text}': unknown function '{name}'; allowed: "
+                raise ExpressionError(f"'{self._shown}': unknown function '{name}'; allowed: "
                                       + ", ".join(sorted(FUNCTIONS)))
+            fewest, most = _ARITY[node.func.id]
+            if len(node.args) < fewest or (most is not None and len(node.args) > most):
+                wanted = f"{fewest}" if fewest == most else f"at least {fewest}"
+                raise ExpressionError(f"'{self._shown}': {node.func.id}() takes {wanted} argument(s), "
+                                      f"got {len(node.args)}")
             for arg in node.args:
                 self._check(arg)
         elif isinstance(node, ast.Subscript):
             if not (isinstance(node.value, ast.Name) and isinstance(node.slice, ast.Constant)
                     and isinstance(node.slice.value, int)):
-                raise ExpressionError(f"'{self.text}': only name[i] with a whole number i is allowed")
+                raise ExpressionError(f"'{self._shown}': only name[i] with a whole number i is allowed")
             self.names.add(node.value.id)
         else:
-            raise ExpressionError(f"'{self.text}': '{ast.unparse(node)}' is not allowed in an expression")
+            raise ExpressionError(f"'{self._shown}': '{ast.unparse(node)}' is not allowed in an expression")
 
-    def evaluate(self, values: Mapping[str, Any]) -> Any:
-        """The value of the expression; raises ExpressionError for an unknown name or bad index."""
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            return self._eval(self._tree, values)
+    def evaluate(self, values: Mapping[str, Any], strict: bool = False) -> Any:
+        """The value of the expression.
+
+        Raises ExpressionError (one line) for an unknown name, a bad index, a
+        division of whole numbers by zero, an overflow or any other failure of
+        an operation.  With ``strict``, float division by zero and invalid
+        operations (``0/0``, ``sqrt(-1)``) are errors too instead of inf/NaN.
+        """
+        mode = "raise" if strict else "ignore"
+        try:
+            with np.errstate(divide=mode, invalid=mode, over=mode):
+                return self._eval(self._tree, values)
+        except ExpressionError:
+            raise
+        except (ArithmeticError, ValueError, TypeError, IndexError) as exc:
+            raise ExpressionError(f"'{self._shown}': cannot evaluate: {_reason(exc)}") from None
 
     def _eval(self, node: ast.AST, values: Mapping[str, Any]) -> Any:
         if isinstance(node, ast.Constant):
@@ -102,13 +159,15 @@ class Expression:
             if node.id not in values:
                 if node.id in CONSTANTS:
                     return CONSTANTS[node.id]
-                raise ExpressionError(f"'{self.text}': unknown name '{node.id}'")
+                raise ExpressionError(f"'{self._shown}': unknown name '{node.id}'")
             value = values[node.id]
             return np.asarray(value, dtype=float) if isinstance(value, (list, tuple)) else value
         if isinstance(node, ast.BinOp):
             left, right = self._eval(node.left, values), self._eval(node.right, values)
             if isinstance(node.op, ast.Div):
                 return np.divide(np.asarray(left, dtype=float), right)[()]
+            if isinstance(node.op, ast.Pow):
+                return _power(left, right)
             return _BINARY[type(node.op)](left, right)
         if isinstance(node, ast.UnaryOp):
             return _UNARY[type(node.op)](self._eval(node.operand, values))
@@ -129,6 +188,37 @@ class Expression:
             array = np.atleast_1d(self._eval(node.value, values))
             index = node.slice.value  # type: ignore[attr-defined]
             if not 1 <= index <= array.size:
-                raise ExpressionError(f"'{self.text}': index {index} outside 1..{array.size}")
+                raise ExpressionError(f"'{self._shown}': index {index} outside 1..{array.size}")
             return array.flat[index - 1]
-        raise ExpressionError(f"'{self.text}': cannot evaluate '{ast.unparse(node)}'")
+        raise ExpressionError(f"'{self._shown}': cannot evaluate '{ast.unparse(node)}'")
+
+
+def _power(base: Any, exponent: Any) -> Any:
+    """``base ** exponent`` in floating point, so its cost never depends on the size of the result.
+
+    Python computes ``int ** int`` exactly, and ``9**9**9`` would build a
+    number with hundreds of millions of digits; as floats it overflows at once
+    (OverflowError, or inf for numpy arrays).
+    """
+    if isinstance(base, (int, np.integer)) and not isinstance(base, bool):
+        base = float(base)
+    if isinstance(base, np.ndarray) and base.dtype.kind in "iub":
+        base = base.astype(float)
+    if isinstance(exponent, (int, np.integer)) and not isinstance(exponent, bool):
+        exponent = float(exponent)
+    result = operator.pow(base, exponent)
+    if isinstance(result, float) and math.isinf(result) and math.isfinite(base) and math.isfinite(exponent):
+        raise OverflowError("power overflowed")
+    return result
+
+
+def _reason(exc: BaseException) -> str:
+    """One line saying why an operation failed."""
+    text = str(exc).splitlines()[0] if str(exc) else ""
+    if isinstance(exc, ZeroDivisionError) or "divide by zero" in text:
+        return "division by zero"
+    if isinstance(exc, OverflowError) or "overflow" in text:
+        return "the result is too large"
+    if "invalid value" in text:
+        return "invalid operation (the result is not a number)"
+    return f"{type(exc).__name__}: {text}"

@@ -11,13 +11,16 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
 import jsonschema
 
+from . import limits
 from .problems import Problem, SpecError, did_you_mean, json_path
+from .spec_json import read_spec_json  # strict JSON: no NaN, no key twice, bounded nesting
 
 SCHEMA_PATH = Path(__file__).resolve().parent.parent / "specs" / "spec.schema.json"
 REDUCTIONS = ("final", "initial", "min", "max", "mean", "integral", "integral_abs", "rms",
@@ -120,22 +123,12 @@ def load_spec(path: str | Path) -> Spec:
     """Read and check a spec file.
 
     Raises SpecError listing every problem of form found: unreadable file,
-    malformed JSON (with line and column), missing or unknown fields, wrong
+    malformed JSON (with line and column), values JSON does not allow (NaN,
+    Infinity), keys given twice, too deep nesting, missing or unknown fields, wrong
     types, bad reduction or algorithm names.
     """
     path = Path(path)
-    name = str(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise SpecError([Problem(name, "$", "file not found", "check the path of the spec file")]) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SpecError([Problem(name, "$", f"cannot read the file: {exc}", "save it as UTF-8 text")]) from None
-    try:
-        raw = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise SpecError([Problem(name, "$", f"malformed JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}",
-                                 "fix the JSON syntax there (a missing comma or quote is the usual cause)")]) from None
+    raw = read_spec_json(path)
     return spec_from_dict(raw, path)
 
 
@@ -186,10 +179,22 @@ def _value_problems(raw: dict, file: str, seen: set[tuple[str, str]]) -> list[Pr
                                             "use one of: " + ", ".join(REDUCTIONS)))
     experiment = raw.get("experiment")
     if isinstance(experiment, dict):
-        start, stop = experiment.get("start", 0), experiment.get("stop")
-        if isinstance(start, (int, float)) and isinstance(stop, (int, float)) and stop <= start:
-            problems.append(Problem(file, "$.experiment.stop", f"stop ({stop}) must be after start ({start})",
-                                    "make 'stop' larger than 'start'"))
+        start, stop, step = experiment.get("start", 0), experiment.get("stop"), experiment.get("step")
+        numbers = {k: v for k, v in (("start", start), ("stop", stop), ("step", step))
+                   if isinstance(v, (int, float)) and not isinstance(v, bool)}
+        for key, value in numbers.items():
+            if not math.isfinite(value):  # only from the Python API: the JSON reader refuses these
+                problems.append(Problem(file, f"$.experiment.{key}", f"{value} is not a finite number",
+                                        "write a finite number"))
+        if len(numbers) == 3 and all(math.isfinite(v) for v in numbers.values()):
+            if stop <= start:
+                problems.append(Problem(file, "$.experiment.stop", f"stop ({stop}) must be after start ({start})",
+                                        "make 'stop' larger than 'start'"))
+            elif step > 0 and (stop - start) / step > limits.limit("steps"):
+                problems.append(Problem(file, "$.experiment.step", f"(stop - start) / step is "
+                                        f"{(stop - start) / step:.3g} steps, more than the limit of "
+                                        f"{limits.limit('steps'):.3g} for one run",
+                                        f"use a larger step or a shorter time span; {limits.raise_hint('steps')}"))
     return [p for p in problems if (p.path, p.message) not in seen]
 
 

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Mapping, Sequence
 
 from .connection_units import connection_conversion
+from .design import size_problems
 from .expressions import Expression, ExpressionError
 from .problems import Problem, SpecError, did_you_mean, json_path
 from .spec import Spec, UnitSpec
@@ -624,6 +625,7 @@ def _check_design(spec: Spec, units: _LoadedUnits, problems: list[Problem]) -> N
     if spec.design.method != "grid" and spec.design.parameters and spec.design.samples is None:
         problems.append(Problem(spec.path, "$.design.samples", f"method '{spec.design.method}' needs 'samples'",
                                 "add e.g. \"samples\": 100"))
+    problems.extend(size_problems(spec))  # counted, never made
     if spec.design.constraint:
         try:
             Expression(spec.design.constraint)

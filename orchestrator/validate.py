@@ -9,13 +9,13 @@ aside and the rest of the spec still goes through the system check.
 from __future__ import annotations
 
 import copy
-import json
 from pathlib import Path
 from typing import Any
 
 from .problems import Problem, SpecError
 from .spec import _build as build_spec
 from .spec import load_spec, schema_problems
+from .spec_json import read_spec_json
 from .system import System, build_system
 
 # Where an error's JSON path points into one of these, the whole entry is set
@@ -34,7 +34,7 @@ def check_spec(path: str | Path) -> System:
         problems = list(first.problems)
         if any("malformed JSON" in p.message or p.path == "$" for p in problems):
             raise
-        raw = json.loads(Path(path).read_text(encoding="utf-8"))
+        raw = read_spec_json(path)
         if not schema_problems(raw, str(path)):
             raise  # the spec's form is fine: these already are all the problems
         sanitized, broken_units = _set_aside_broken_entries(raw, str(path))
