@@ -37,13 +37,14 @@ def add_optimize_parser(sub: Any) -> None:
 def cmd_optimize(args: argparse.Namespace) -> int:
     """Run an optimisation; returns the exit code. SpecError, OptimizeError and UsageError reach cli.main."""
     from .optimize import Optimization
-    from .sweep_cli import _default_out, _first_not_ok
+    from .results import default_folder
+    from .sweep_cli import _first_not_ok
 
     for option in ("budget", "batch", "workers"):
         value = getattr(args, option)
         if value is not None and value < 1:
             raise UsageError(f"--{option} must be at least 1")
-    out = Path(args.out) if args.out else Path(f"{_default_out(args.spec)}_optimize")
+    out = Path(args.out) if args.out else Path(f"{default_folder(args.spec)}_optimize")
     run = Optimization(args.spec, out, budget=args.budget, sampler=args.sampler, batch=args.batch,
                        seed=args.seed, resume=args.resume, workers=args.workers, scheduler=args.scheduler,
                        timeout=args.timeout)
