@@ -14,14 +14,14 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from .system import Connection
-from .unit import Unit, UnitError
+from .unit import SimulationEnded, Unit, UnitError
 
 
 def step_unit(unit: Unit, t: float, h: float) -> None:
     """``unit.do_step(t, h)``; any exception becomes a UnitError naming the unit and time."""
     try:
         unit.do_step(t, h)
-    except UnitError:
+    except (UnitError, SimulationEnded):
         raise
     except Exception as exc:  # a Python unit's own bug, reported like an FMU's error status
         raise UnitError(unit.name, f"do_step raised {type(exc).__name__}: {exc}", t) from exc

@@ -18,10 +18,10 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from .algorithms import group_transfers, make_algorithm
-from .observers import ObjectiveReducer, Observer, TraceRecorder, evaluate_expressions, flatten_objectives
+from .observers import ExactColumns, ObjectiveReducer, Observer, TraceRecorder, evaluate_expressions, flatten_objectives
 from .system import Assignment, System
 from .errors import EXIT_INTERNAL, EXIT_OK, EXIT_RUN_FAILED, EXIT_USAGE, UnitError, UserError
-from .unit import Unit
+from .unit import NUMERIC_TYPES, SimulationEnded, Unit
 
 OK, FAILED = "ok", "failed"
 # Why a run failed, for RunResult.failure: a unit (or a non-finite objective),
@@ -74,19 +74,35 @@ def step_count(start: float, stop: float, h: float) -> int:
 
 
 class Probe:
-    """Reads every probed signal of the system into one float vector."""
+    """Reads every probed signal of the system into one float vector.
+
+    Signals whose values are not floats (String, Binary) or do not fit one
+    exactly (64-bit integers) are also read as Python objects by
+    :meth:`read_exact`, for the trace recorder; only numbers enter the vector.
+    """
 
     def __init__(self, system: System, units: Mapping[str, Unit]):
         self.columns: list[str] = []
+        self.types: dict[str, tuple[str, str | None]] = {}
         per_unit: dict[str, list] = {}
         positions: dict[str, list[int]] = {}
+        exact: dict[str, list] = {}
+        self.exact_columns: list[str] = []
         for signal in system.probes:
             for ref, column in zip(signal.refs, signal.columns):
-                if column in self.columns:
+                if column in self.types:
+                    continue
+                variable = signal.variable
+                self.types[column] = (variable.type, variable.fmi_type)
+                if variable.type not in NUMERIC_TYPES or variable.fmi_type in ("Int64", "UInt64"):
+                    exact.setdefault(signal.unit, []).append(ref)
+                    self.exact_columns.append(column)
+                if variable.type not in NUMERIC_TYPES:
                     continue
                 positions.setdefault(signal.unit, []).append(len(self.columns))
                 per_unit.setdefault(signal.unit, []).append(ref)
                 self.columns.append(column)
+        self._exact_reads = [(units[name].select(refs), units[name]) for name, refs in exact.items()]
         self.values = np.zeros(len(self.columns))
         self._reads = []
         for name, refs in per_unit.items():
@@ -101,6 +117,13 @@ class Probe:
         for read, where in self._reads:
             values[where] = read()
         return values
+
+    def read_exact(self) -> list[Any]:
+        """The values of ``exact_columns``, as the units give them (str, bytes, int)."""
+        out: list[Any] = []
+        for selection, unit in self._exact_reads:
+            out.extend(unit.get(selection))
+        return out
 
 
 class Execution:
@@ -136,7 +159,9 @@ class Execution:
             n_steps = step_count(exp.start, exp.stop, exp.step)
             self._initialize(units)
             probe = Probe(self.system, units)
-            recorder = TraceRecorder(probe.columns, self.system.recorded, n_steps + 1) if self.record else None
+            exact = ExactColumns(probe.exact_columns, probe.read_exact) if probe.exact_columns else None
+            recorder = TraceRecorder(probe.columns, self.system.recorded, n_steps + 1, exact,
+                                     probe.types) if self.record else None
             reducer = ObjectiveReducer(probe.columns, [(o, self._columns_of(o.signal)) for o in
                                                        self.system.spec.objectives if o.signal])
             observers = [o for o in (recorder, reducer) if o is not None] + self.extra_observers
@@ -150,16 +175,20 @@ class Execution:
             start, h, last = exp.start, exp.step, n_steps - 1
             step, read = algorithm.step, probe.read
             hooks = [observer.step for observer in observers]
+            ended: SimulationEnded | None = None
             for k in range(n_steps):
                 t = start + k * h  # whole steps counted, never summed: no drift
                 t_next = exp.stop if k == last else start + (k + 1) * h
-                step(t, t_next - t)
+                try:
+                    step(t, t_next - t)
+                except SimulationEnded as stop:  # a unit ends the run: record where it got to, then stop
+                    ended, t_next = stop, stop.time
                 t = t_next
                 steps += 1
                 values = read()
                 for hook in hooks:
                     hook(t, values)
-                if stop_column is not None and values[stop_column]:
+                if ended is not None or stop_column is not None and values[stop_column]:
                     break
             for observer in observers:
                 observer.finished(t)
@@ -170,6 +199,14 @@ class Execution:
                 return RunResult(FAILED, f"objective(s) not finite: {', '.join(nan)}", flat,
                                  recorder.frame() if recorder else None, time.perf_counter() - started, steps, t,
                                  failure=UNIT_FAILURE)
+            if ended is not None:
+                message = f"stopped early: {ended} (stop time {exp.stop:g})"
+                if exp.early_stop == "fail":  # the spec says a run must reach its stop time
+                    return RunResult(FAILED, message + "; experiment.early_stop is 'fail'", flat,
+                                     recorder.frame() if recorder else None, time.perf_counter() - started,
+                                     steps, t, failure=UNIT_FAILURE)
+                return RunResult(OK, message, flat, recorder.frame() if recorder else None,
+                                 time.perf_counter() - started, steps, t)
             return RunResult(OK, "", flat, recorder.frame() if recorder else None,
                              time.perf_counter() - started, steps, t)
         except UnitError as exc:

@@ -11,7 +11,7 @@ signals to numbers on the fly, so a sweep never holds a whole trace.
 
 from __future__ import annotations
 
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -38,12 +38,20 @@ class TraceRecorder(Observer):
     ``capacity`` is the expected number of samples; storage grows if needed.
     """
 
-    def __init__(self, all_columns: Sequence[str], recorded: Sequence[str], capacity: int = 1024):
+    def __init__(self, all_columns: Sequence[str], recorded: Sequence[str], capacity: int = 1024,
+                 exact: "ExactColumns | None" = None, types: Mapping[str, tuple[str, str | None]] | None = None):
         self.columns = list(recorded)
-        index = [list(all_columns).index(c) for c in recorded]
+        # Strings, bytes and 64-bit integers are kept as Python objects (``exact``), the rest in one float array.
+        self._exact = exact if exact is not None and any(c in exact.columns for c in recorded) else None
+        exact_names = set(self._exact.columns) if self._exact else set()
+        self._float_columns = [c for c in recorded if c not in exact_names]
+        self._exact_index = [self._exact.columns.index(c) for c in recorded if c in exact_names] if self._exact else []
+        self._exact_rows: list[list[Any]] = []
+        self._types = dict(types or {})
+        index = [list(all_columns).index(c) for c in self._float_columns]
         # recording every probed column in order is a plain copy, not fancy indexing
         self._index = slice(None) if index == list(range(len(all_columns))) else np.array(index, dtype=int)
-        self._data = np.empty((max(capacity, 1), len(self.columns) + 1))
+        self._data = np.empty((max(capacity, 1), len(self._float_columns) + 1))
         self._n = 0
 
     def _append(self, t: float, values: np.ndarray) -> None:
@@ -53,6 +61,9 @@ class TraceRecorder(Observer):
         row[0] = t
         row[1:] = values[self._index]
         self._n += 1
+        if self._exact is not None:
+            current = self._exact.read()
+            self._exact_rows.append([current[i] for i in self._exact_index])
 
     def initialized(self, t: float, values: np.ndarray) -> None:
         self._append(t, values)
@@ -65,10 +76,42 @@ class TraceRecorder(Observer):
         return self._data[: self._n]
 
     def frame(self) -> Any:
-        """The traces as a pandas DataFrame: a 'time' column and one per signal."""
+        """The traces as a pandas DataFrame: a 'time' column and one per signal, each of its type.
+
+        Real signals are float64, Integer int64 (UInt64 uint64), Boolean bool, String str and
+        Binary the bytes as a hex string (so CSV and Parquet hold the same text).
+        """
         import pandas as pd
 
-        return pd.DataFrame(self._data[: self._n], columns=["time", *self.columns])
+        frame = pd.DataFrame(self._data[: self._n], columns=["time", *self._float_columns])
+        if self._exact is not None:
+            exact_names = [c for c in self.columns if c not in self._float_columns]
+            for j, name in enumerate(exact_names):
+                frame[name] = pd.Series([row[j] for row in self._exact_rows], dtype=object)
+        for name in self.columns:
+            kind, fmi_type = self._types.get(name, ("Real", None))
+            frame[name] = _typed(frame[name], kind, fmi_type)
+        return frame[["time", *self.columns]]
+
+
+def _typed(column: Any, kind: str, fmi_type: str | None) -> Any:
+    if kind == "Integer" and len(column):
+        return column.astype("uint64" if fmi_type == "UInt64" else "int64")
+    if kind == "Boolean":
+        return column.astype(bool)
+    if kind == "Binary":
+        return column.map(lambda b: bytes(b).hex())
+    if kind == "String":
+        return column.astype(str)
+    return column
+
+
+class ExactColumns:
+    """Columns read as Python objects, not floats: String, Binary and 64-bit integer signals."""
+
+    def __init__(self, columns: Sequence[str], read: Callable[[], Sequence[Any]]):
+        self.columns = list(columns)
+        self.read = read
 
 
 class ObjectiveReducer(Observer):

@@ -58,6 +58,7 @@ class ExperimentSpec:
     step: float
     algorithm: str = "gauss-seidel"
     stop_when: str | None = None
+    early_stop: str = "ok"  # a unit ending the simulation before 'stop': "ok" (status ok) or "fail"
 
 
 @dataclass(frozen=True)
@@ -273,7 +274,8 @@ def _build(raw: dict, path: Path) -> Spec:
                         for i, c in enumerate(raw.get("connections", [])) if c is not None)
     e = raw["experiment"]
     experiment = ExperimentSpec(start=float(e.get("start", 0.0)), stop=float(e["stop"]), step=float(e["step"]),
-                                algorithm=e.get("algorithm", "gauss-seidel"), stop_when=e.get("stop_when"))
+                                algorithm=e.get("algorithm", "gauss-seidel"), stop_when=e.get("stop_when"),
+                                early_stop=e.get("early_stop", "ok"))
     objectives = tuple(
         ObjectiveSpec(name=n, signal=o.get("signal"), reduce=o.get("reduce"), expr=o.get("expr"),
                       unit=o.get("unit"), sense=o.get("sense"), description=o.get("description", ""))

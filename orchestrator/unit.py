@@ -28,6 +28,27 @@ from .errors import UnitError  # noqa: F401  (re-exported: units raise it from h
 
 _ELEMENT_RE = re.compile(r"^(?P<base>.+?)\[(?P<index>\d+)\]$")
 
+# Variable types.  Only numbers are reduced to objectives (Boolean counts as 0/1);
+# String and Binary (FMI 3.0 bytes) values are recorded as they are, a Clock is never transferred.
+NUMERIC_TYPES = ("Real", "Integer", "Boolean")
+VALUE_TYPES = NUMERIC_TYPES + ("String", "Binary")
+
+
+class SimulationEnded(Exception):
+    """Raised by ``do_step`` when a unit ends the whole simulation (not an error).
+
+    ``time`` is the last time the unit reached (at most ``t + h``); FMI 2.0
+    FMUs say so with fmi2Discard + fmi2Terminated, FMI 3.0 FMUs with
+    ``terminateSimulation`` (and ``earlyReturn``/``lastSuccessfulTime``).
+    The run ends there, cleanly, with the traces up to ``time``.
+    """
+
+    def __init__(self, unit: str, time: float, reason: str = "asked to end the simulation"):
+        self.unit = unit
+        self.time = time
+        self.reason = reason
+        super().__init__(f"unit '{unit}' {reason} at t={time:g}")
+
 
 @dataclass(frozen=True)
 class Variable:
@@ -47,6 +68,7 @@ class Variable:
     min: float | None = None
     max: float | None = None
     variability: str = "continuous"
+    fmi_type: str | None = None  # an FMU variable's own FMI type (Float32, UInt64, Enumeration, Binary ...)
 
     @property
     def size(self) -> int:

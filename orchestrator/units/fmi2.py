@@ -15,7 +15,9 @@ from fmpy.fmi2 import (
     fmi2StepFinishedTYPE,
 )
 from fmpy.fmi2 import calloc, free  # the C allocator fmpy hands to FMUs
+from fmpy.fmi2 import fmi2LastSuccessfulTime, fmi2Terminated
 
+from ..unit import SimulationEnded
 from .fmi_instance import FmiInstance, _TypeGroup
 
 
@@ -77,5 +79,15 @@ class Fmi2Unit(FmiInstance):
     def do_step(self, t: float, h: float) -> None:
         self.time = t
         status = self._do_step(self._component, t, h, 1)
+        if status == 2 and self._terminated():  # fmi2Discard + fmi2Terminated: the FMU ends the simulation
+            end = self._guard("fmi2GetRealStatus", lambda: self._slave.getRealStatus(fmi2LastSuccessfulTime))
+            raise SimulationEnded(self.name, float(end), "ended the simulation (fmi2DoStep: fmi2Discard, "
+                                                         "fmi2Terminated)")
         if status > 1:
             raise self.fail_status("fmi2DoStep", status)
+
+    def _terminated(self) -> bool:
+        try:
+            return bool(self._slave.getBooleanStatus(fmi2Terminated))
+        except Exception:
+            return False  # an FMU that cannot tell: the Discard is reported as a failure

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import ctypes
 from functools import partial
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 from fmpy.fmi3 import FMU3Slave
 
+from ..unit import Selection, SimulationEnded
 from .fmi_instance import FmiInstance, _TypeGroup
 
 
@@ -23,6 +24,7 @@ class Fmi3Unit(FmiInstance):
         "Int8": ctypes.c_int8, "UInt8": ctypes.c_uint8, "Int16": ctypes.c_int16, "UInt16": ctypes.c_uint16,
         "Int32": ctypes.c_int32, "UInt32": ctypes.c_uint32, "Int64": ctypes.c_int64, "UInt64": ctypes.c_uint64,
         "Enumeration": ctypes.c_int64, "Boolean": ctypes.c_bool, "String": ctypes.c_char_p,
+        "Binary": ctypes.POINTER(ctypes.c_uint8),
     }
     _vr_type = ctypes.c_uint
     _prefix = "fmi3"
@@ -53,8 +55,21 @@ class Fmi3Unit(FmiInstance):
 
     def _bind(self, group: _TypeGroup) -> tuple[Callable[[], int], Callable[[], int]]:
         get, put = self._calls[group.fmi_type]
-        args = (self._component, group.vrs, group.n_vrs, group.values, group.n_values)
+        if group.fmi_type == "Binary":  # (..., valueSizes, values, nValues): sizes come before the values
+            args = (self._component, group.vrs, group.n_vrs, group.sizes, group.values, group.n_values)
+        else:
+            args = (self._component, group.vrs, group.n_vrs, group.values, group.n_values)
         return partial(get, *args), partial(put, *args)
+
+    def set(self, selection: Selection, values: Sequence[Any]) -> None:
+        """Set values; structural parameters are set in Configuration Mode, as FMI 3.0 requires."""
+        if not any(self.description.by_name[r.variable].causality == "structuralParameter" for r in selection.refs):
+            return super().set(selection, values)
+        self._guard("fmi3EnterConfigurationMode", self._slave.enterConfigurationMode)
+        try:
+            super().set(selection, values)
+        finally:
+            self._guard("fmi3ExitConfigurationMode", self._slave.exitConfigurationMode)
 
     def setup(self, start_time: float, stop_time: float | None) -> None:
         self.time = start_time
@@ -74,3 +89,14 @@ class Fmi3Unit(FmiInstance):
                                self._early_ref, self._last_time_ref)
         if status > 1:
             raise self.fail_status("fmi3DoStep", status)
+        if self._terminate.value or self._early.value:
+            self._ended_or_returned_early(t, h)
+
+    def _ended_or_returned_early(self, t: float, h: float) -> None:
+        """terminateSimulation ends the run at lastSuccessfulTime (t + h unless it returned early);
+        an early return without it cannot be followed by a fixed-step master."""
+        end = self._last_time.value if self._early.value else t + h
+        if self._terminate.value:
+            raise SimulationEnded(self.name, end, "ended the simulation (fmi3DoStep: terminateSimulation)")
+        raise self._error(f"fmi3DoStep returned early at t={end:g} (earlyReturn) although cosim instantiates "
+                          "FMUs with earlyReturnAllowed=false; the master cannot continue a step cut short")

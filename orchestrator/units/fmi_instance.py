@@ -28,6 +28,9 @@ class _TypeGroup:
         self.n_vrs = len(vrs)
         self.n_values = sum(sizes)
         self.values = (c_type * self.n_values)()
+        # FMI 3.0 Binary: each value is a pointer and a size; the buffers set are kept alive here
+        self.sizes = (ctypes.c_size_t * self.n_values)() if fmi_type == "Binary" else None
+        self.keep: list[Any] = [None] * self.n_values if fmi_type == "Binary" else []
         # Zero-argument FMI calls bound by the instance (functools.partial over
         # the library function): the stepping loop's cheapest possible call.
         self.read: Callable[[], int] = lambda: 0
@@ -132,7 +135,7 @@ class FmiInstance(Unit):
         selection = FmiSelection(refs, groups, positions, partial)
         # The common case, one numeric type read in buffer order, skips the
         # per-element bookkeeping in get/set (it is the stepping loop's hot path).
-        numeric = len(groups) == 1 and groups[0].fmi_type not in ("Boolean", "String")
+        numeric = len(groups) == 1 and groups[0].fmi_type not in ("Boolean", "String", "Binary")
         selection.plain = numeric and not partial and positions == [(0, i) for i in range(groups[0].n_values)]
         if numeric and len(positions) > 1:
             selection.pick = operator.itemgetter(*[i for _, i in positions])
@@ -148,7 +151,7 @@ class FmiInstance(Unit):
             return sel.groups[0].values[:]
         if sel.pick is not None:
             return list(sel.pick(sel.groups[0].values))
-        return [self._convert(sel.groups[g], sel.groups[g].values[i]) for g, i in sel.positions]
+        return [self._convert(sel.groups[g], sel.groups[g].values[i], i) for g, i in sel.positions]
 
     def reader(self, selection: Selection) -> Callable[[], Sequence[Any]]:
         sel: FmiSelection = selection  # type: ignore[assignment]
@@ -177,18 +180,28 @@ class FmiInstance(Unit):
                         raise self.fail_status(f"get{group.fmi_type}", status)
             for (g, i), value in zip(sel.positions, values):
                 group = sel.groups[g]
-                group.values[i] = value.encode("utf-8") if group.fmi_type == "String" else value
+                if group.fmi_type == "String":
+                    group.values[i] = value.encode("utf-8")
+                elif group.fmi_type == "Binary":
+                    data = bytes(value)
+                    group.keep[i] = ctypes.create_string_buffer(data, len(data) or 1)
+                    group.values[i] = ctypes.cast(group.keep[i], group.values._type_)
+                    group.sizes[i] = len(data)
+                else:
+                    group.values[i] = value
         for group in sel.groups:
             status = group.write()
             if status > 1:
                 raise self.fail_status(f"set{group.fmi_type}", status)
 
     @staticmethod
-    def _convert(group: _TypeGroup, value: Any) -> Any:
+    def _convert(group: _TypeGroup, value: Any, index: int) -> Any:
         if group.fmi_type == "Boolean":
             return bool(value)
         if group.fmi_type == "String":
             return value.decode("utf-8") if value is not None else ""
+        if group.fmi_type == "Binary":  # copied out: the FMU's buffer is only valid until its next call
+            return ctypes.string_at(value, group.sizes[index]) if value else b""
         return value
 
     # Lifecycle shared by both versions ------------------------------------

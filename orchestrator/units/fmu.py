@@ -38,7 +38,7 @@ _FMI3_TYPE = {
     "Float64": "Real", "Float32": "Real",
     "Int8": "Integer", "UInt8": "Integer", "Int16": "Integer", "UInt16": "Integer",
     "Int32": "Integer", "UInt32": "Integer", "Int64": "Integer", "UInt64": "Integer",
-    "Enumeration": "Integer", "Boolean": "Boolean", "String": "String",
+    "Enumeration": "Integer", "Boolean": "Boolean", "String": "String", "Binary": "Binary", "Clock": "Clock",
     "Real": "Real", "Integer": "Integer",
 }
 
@@ -189,17 +189,19 @@ class FmuUnitType(UnitType):
     worker on another machine can use it without a shared filesystem.
     """
 
-    def __init__(self, path: str | Path, reference: str | None = None):
+    def __init__(self, path: str | Path, reference: str | None = None, structural: dict[str, int] | None = None):
         self.path = str(path)
         self.reference = reference or self.path
+        # values of structural parameters set by the spec: they size arrays (FMI 3.0 <Dimension valueReference>)
+        self.structural = dict(structural or {})
         self._md: Any = None
         self._description: UnitDescription | None = None
         self._elements: dict[str, list[FmiElement]] = {}
         self._digest: str | None = None
 
     def __getstate__(self) -> dict:
-        return {"path": self.path, "reference": self.reference, "_md": None, "_description": None,
-                "_elements": {}, "_digest": self._digest}
+        return {"path": self.path, "reference": self.reference, "structural": self.structural, "_md": None,
+                "_description": None, "_elements": {}, "_digest": self._digest}
 
     @property
     def digest(self) -> str:
@@ -237,8 +239,12 @@ class FmuUnitType(UnitType):
             problems.append(Problem(self.path, "modelDescription.xml", f"FMI version {md.fmiVersion} is not "
                                     "supported", "export the FMU as FMI 2.0 or 3.0"))
         if md.coSimulation is None:
+            offered = [name for name, interface in (("model exchange", md.modelExchange),
+                                                    ("scheduled execution (FMI 3.0 clocks)",
+                                                     getattr(md, "scheduledExecution", None))) if interface]
             problems.append(Problem(self.path, "modelDescription.xml", "the FMU does not support co-simulation "
-                                    "(model exchange only)", "export the FMU for co-simulation (FMI 2.0 or 3.0)"))
+                                    f"({' and '.join(offered) or 'no interface'} only); cosim runs co-simulation "
+                                    "FMUs", "export the FMU for co-simulation (FMI 2.0 or 3.0)"))
         else:
             folder2, folder3 = platform_folders()
             folder = folder3 if md.fmiVersion == "3.0" else folder2
@@ -261,7 +267,7 @@ class FmuUnitType(UnitType):
 
     def describe(self) -> UnitDescription:
         if self._description is None:
-            self._description, self._elements = _describe(self.model_description(), self.reference)
+            self._description, self._elements = _describe(self.model_description(), self.reference, self.structural)
         return self._description
 
     def elements(self) -> dict[str, list[FmiElement]]:
@@ -293,9 +299,11 @@ def _number(text: Any, kind: str) -> Any:
     if kind == "Real":
         values = [float(t) for t in text.split()]
     elif kind == "Integer":
-        values = [int(float(t)) for t in text.split()]
+        values = [int(t) if t.lstrip("+-").isdigit() else int(float(t)) for t in text.split()]  # exact for 64 bits
     elif kind == "Boolean":
         values = [t in ("true", "1") for t in text.split()]
+    elif kind == "Binary":
+        values = [bytes.fromhex(t[2:] if t[:2] in ("0x", "0X") else t) for t in text.split()]
     else:
         return text
     return values[0] if len(values) == 1 else tuple(values)
@@ -308,7 +316,21 @@ def _unit_of(v: Any) -> str | None:
     return getattr(declared, "unit", None) if declared is not None else None
 
 
-def _describe(md: Any, reference: str) -> tuple[UnitDescription, dict[str, list[FmiElement]]]:
+def _dimension_size(dimension: Any, structural: dict[str, int]) -> int:
+    """One FMI 3.0 <Dimension>: a fixed ``start``, or the value of a structural parameter
+    (the spec's value when it sets one, else the parameter's start value)."""
+    if dimension.start is not None:
+        return int(dimension.start)
+    variable = dimension.variable
+    if variable is None:
+        return 0
+    if variable.name in structural:
+        return int(structural[variable.name])
+    return int(variable.start) if variable.start is not None else 0
+
+
+def _describe(md: Any, reference: str, structural: dict[str, int] | None = None
+              ) -> tuple[UnitDescription, dict[str, list[FmiElement]]]:
     """Translate fmpy's model description into ours (grouping FMI 2.0 indexed scalars)."""
     fmi3 = md.fmiVersion == "3.0"
     variables: list[Variable] = []
@@ -317,16 +339,19 @@ def _describe(md: Any, reference: str) -> tuple[UnitDescription, dict[str, list[
         kind = _FMI3_TYPE.get(v.type, "Real")
         shape: tuple[int, ...] = ()
         if fmi3 and v.dimensions:
-            shape = tuple(int(d.start) if d.start is not None else 0 for d in v.dimensions)
+            shape = tuple(_dimension_size(d, structural or {}) for d in v.dimensions)
         size = 1
         for n in shape:
             size *= n
+        start = _number(v.start, kind)
+        if shape and isinstance(start, tuple) and len(start) != size:
+            start = None  # a structural parameter set in the spec resized the array: its listed start no longer fits
         variables.append(Variable(
             name=v.name, causality=v.causality or "local", type=kind, unit=_unit_of(v),
-            start=_number(v.start, kind), description=v.description or "", shape=shape,
+            start=start, description=v.description or "", shape=shape,
             min=_number(v.min, "Real") if v.min is not None else None,
             max=_number(v.max, "Real") if v.max is not None else None,
-            variability=v.variability or "continuous",
+            variability=v.variability or "continuous", fmi_type=v.type,
         ))
         elements[v.name] = [FmiElement(v.type, v.valueReference, i, size) for i in range(size)] if shape \
             else [FmiElement(v.type, v.valueReference)]
