@@ -169,7 +169,10 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     for name, unit in system.units.items():
         d = unit.description
         kind = f"FMI {d.fmi_version}" if d.kind == "fmu" else d.kind
-        print(f"  {name}: {kind} {unit.spec.source} ({len(d.inputs())} inputs, {len(d.outputs())} outputs)")
+        ports = _listed_variables(d)  # FMI 2.0 scalars x[1]..x[n] count once, as their array x
+        inputs = sum(v.causality == "input" for v in ports)
+        outputs = sum(v.causality == "output" for v in ports)
+        print(f"  {name}: {kind} {unit.spec.source} ({inputs} inputs, {outputs} outputs)")
     print("connections:")
     for c in system.connections:
         print(f"  {c.source.text} -> {c.target.text}")
@@ -191,23 +194,35 @@ def _inspect_fmu(reference: str) -> int:
           + (f", default step {d.default_step:g} s" if d.default_step else ""))
     if d.description:
         print(f"  {d.description}")
+    if getattr(unit_type.model_description().coSimulation, "needsExecutionTool", False):
+        print("  needsExecutionTool: the FMU drives its exporting tool, which must be installed and licensed "
+              "on every machine that runs it (also every Dask worker)")
     rows = [("name", "causality", "type", "unit", "start", "range", "description")]
-    arrays = {v.name for v in d.variables if v.is_array}
-    for v in d.variables:
-        if v.causality == "local" or (d.fmi_version == "2.0" and v.name.split("[")[0] in arrays and not v.is_array):
-            continue  # FMI 2.0 scalars x[1]..x[n] are listed once, as their array x[n]
+    for v in _listed_variables(d):
+        if v.causality == "local":
+            continue
         shape = f"[{','.join(map(str, v.shape))}]" if v.shape else ""
-        rng = "" if v.min is None and v.max is None else f"[{_fmt(v.min)}, {_fmt(v.max)}]"
-        rows.append((v.name + shape, v.causality, v.type, v.unit or "", _fmt(v.start), rng, v.description[:50]))
+        rng = "" if v.min is None and v.max is None else f"[{_fmt(v.min) or '-inf'}, {_fmt(v.max) or 'inf'}]"
+        rows.append((v.name + shape, v.causality, v.fmi_type or v.type, v.unit or "", _fmt(v.start), rng,
+                     v.description[:50]))
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     for row in rows:
         print("  " + "  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip())
     return EXIT_OK
 
 
+def _listed_variables(d: Any) -> list:
+    """The variables to show: FMI 2.0 scalars x[1]..x[n] that are also offered as the array x are left out."""
+    arrays = {v.name for v in d.variables if v.is_array}
+    return [v for v in d.variables
+            if not (d.fmi_version == "2.0" and not v.is_array and v.name.split("[")[0] in arrays)]
+
+
 def _fmt(value: Any) -> str:
     if value is None:
         return ""
+    if isinstance(value, bytes):
+        return value.hex() or '""'  # FMI 3.0 Binary: the bytes in hex, as the trace columns hold them
     if isinstance(value, tuple):
         return "(" + ", ".join(_fmt(v) for v in value[:4]) + (", ..." if len(value) > 4 else "") + ")"
     return f"{value:g}" if isinstance(value, float) else str(value)

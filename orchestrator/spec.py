@@ -266,7 +266,7 @@ def _build(raw: dict, path: Path) -> Spec:
     units = []
     for name, u in raw["units"].items():
         kind = next(k for k in ("fmu", "python", "player") if k in u)
-        options = {k: u[k] for k in ("columns", "interpolation", "extrapolation", "units") if k in u}
+        options = {k: u[k] for k in ("columns", "interpolation", "extrapolation", "units", "feedthrough") if k in u}
         units.append(UnitSpec(name=name, kind=kind, source=u[kind], parameters=dict(u.get("parameters", {})),
                               start=dict(u.get("start", {})), ports=dict(u.get("ports", {})), options=options))
     # None marks an entry set aside by orchestrator.validate; indices stay those of the file

@@ -21,7 +21,7 @@ from .design import size_problems
 from .expressions import Expression, ExpressionError
 from .problems import Problem, SpecError, did_you_mean, json_path
 from .spec import Spec, UnitSpec
-from .unit import ElementRef, UnitDescription, UnitType, Variable, flatten_value, parse_port, resolve_port
+from .unit import NUMERIC_TYPES, ElementRef, UnitDescription, UnitType, Variable, flatten_value, parse_port, resolve_port
 from .units.fmu import FmuProblems, FmuUnitType, resolve_fmu_path
 from .units.player import PlayerUnitType
 from .units.python import PythonUnitType
@@ -140,7 +140,10 @@ class System:
 def make_unit_type(spec: UnitSpec, folder: str) -> UnitType:
     """The blueprint for one unit of a spec (no file is opened yet except builtin FMU builds)."""
     if spec.kind == "fmu":
-        return FmuUnitType(resolve_fmu_path(spec.source, folder), reference=spec.source)
+        # whole-number parameters may be structural parameters that size FMI 3.0 arrays: the description needs them
+        structural = {spec.ports.get(k, k): v for k, v in spec.parameters.items()
+                      if isinstance(v, int) and not isinstance(v, bool)}
+        return FmuUnitType(resolve_fmu_path(spec.source, folder), reference=spec.source, structural=structural)
     if spec.kind == "python":
         return PythonUnitType(spec.source, folder)
     from pathlib import Path
@@ -191,7 +194,12 @@ def build_system(spec: Spec, broken_units: frozenset[str] = frozenset()) -> Syst
     for o in spec.objectives:
         if o.signal:
             s = _resolve_signal(o.signal, units, problems, file, json_path(["objectives", o.name, "signal"]))
-            if s is not None:
+            if s is not None and s.variable.type not in NUMERIC_TYPES:
+                problems.append(Problem(file, json_path(["objectives", o.name, "signal"]),
+                                        f"'{o.signal}' is {s.variable.type}: only numeric signals (Real, Integer, "
+                                        "Boolean) reduce to an objective", "choose a numeric signal; String and "
+                                        "Binary signals can be recorded under 'record'"))
+            elif s is not None:
                 probes.setdefault(s.text, s)
     if spec.experiment.stop_when:
         s = _resolve_signal(spec.experiment.stop_when, units, problems, file, "$.experiment.stop_when")
@@ -215,7 +223,10 @@ def _add_recorded(texts: Sequence[tuple[str, str]], units: Mapping[str, SystemUn
     for text, path in texts:
         for expanded in _expand_wildcard(text, units):
             s = _resolve_signal(expanded, units, problems, file, path)
-            if s is not None:
+            if s is not None and s.variable.type == "Clock":
+                problems.append(Problem(file, path, f"'{expanded}' is an FMI 3.0 Clock, which has no value to record",
+                                        "record value variables only"))
+            elif s is not None:
                 probes.setdefault(s.text, s)
                 recorded.extend(c for c in s.columns if c not in recorded)
 
@@ -252,12 +263,36 @@ def _load_unit(u: UnitSpec, folder: str, file: str, problems: list[Problem]) -> 
                                 "fix the error in the unit's source"))
         return None
     names = {v.name for v in description.variables}
+    if u.options.get("feedthrough"):
+        description = _declared_feedthrough(u, description, file, problems)
     for port, actual in u.ports.items():
         if actual not in names:
             problems.append(Problem(file, json_path(["units", u.name, "ports", port]),
                                     f"unit '{u.name}' has no variable '{actual}'.{did_you_mean(actual, names)}",
                                     "map the spec's port name to one of the unit's variables"))
     return SystemUnit(u, unit_type, description)
+
+
+def _declared_feedthrough(u: UnitSpec, description: UnitDescription, file: str,
+                          problems: list[Problem]) -> UnitDescription:
+    """The description with the spec's ``feedthrough`` (output -> inputs it depends on directly) applied."""
+    declared: dict[str, tuple[str, ...]] = {}
+    outputs = {v.name for v in description.outputs()}
+    inputs = {v.name for v in description.inputs()}
+    for output, depends in u.options["feedthrough"].items():
+        path = json_path(["units", u.name, "feedthrough", output])
+        name = u.ports.get(output, output)
+        if name not in outputs:
+            problems.append(Problem(file, path, f"'{output}' is not an output of unit '{u.name}'."
+                                                f"{did_you_mean(name, outputs)}", "name an output of the unit"))
+            continue
+        wrong = [d for d in depends if u.ports.get(d, d) not in inputs]
+        if wrong:
+            problems.append(Problem(file, path, f"not inputs of unit '{u.name}': {', '.join(wrong)}",
+                                    "list the inputs this output depends on directly ([] for none)"))
+            continue
+        declared[name] = tuple(u.ports.get(d, d) for d in depends)
+    return replace(description, feedthrough={**description.feedthrough, **declared})
 
 
 def _port_names(unit: SystemUnit) -> list[str]:
@@ -306,7 +341,7 @@ def _expand_wildcard(text: str, units: Mapping[str, SystemUnit]) -> list[str]:
     grouped = {v.name for v in unit.description.variables if v.is_array}
     out = []
     for v, port_name in zip(unit.description.variables, _port_names(unit)):
-        if v.causality != "output":
+        if v.causality != "output" or v.type == "Clock":  # clocks carry no value to record
             continue
         base, index = parse_port(v.name)
         if index is not None and base in grouped:
@@ -337,10 +372,16 @@ def _check_connections(spec: Spec, units: Mapping[str, SystemUnit], problems: li
                                     "a connection goes from an output to an input; swap 'from' and 'to' if "
                                     "they are reversed"))
             ok = False
-        if not _types_fit(source.variable.type, target.variable.type):
+        if "Clock" in (source.variable.type, target.variable.type):
+            problems.append(Problem(file, json_path(base), f"'{c.source}' -> '{c.target}' connects an FMI 3.0 "
+                                    "Clock; cosim does not run clocked partitions or events",
+                                    "remove the connection; connect value variables only"))
+            ok = False
+        elif not _types_fit(source.variable.type, target.variable.type):
             problems.append(Problem(file, json_path(base), f"type mismatch: '{c.source}' is "
                                     f"{source.variable.type}, '{c.target}' is {target.variable.type}",
-                                    "connect variables of the same type (Integer may feed Real)"))
+                                    "connect variables of the same type (Integer may feed Real; Binary "
+                                    "connects only to Binary)"))
             ok = False
         if len(source.refs) != len(target.refs):
             problems.append(Problem(file, json_path(base), f"size mismatch: '{c.source}' has {len(source.refs)} "
@@ -401,6 +442,11 @@ def _assignment(unit: SystemUnit, port: str, value: Any, field_name: str | None,
         problems.append(Problem(file, path, f"'{port}' of unit '{unit.name}' is {_article(var.causality)}; "
                                             "only parameters and inputs can be set", "choose a parameter"))
         return None
+    if field_name is None and var.causality == "structuralParameter":
+        problems.append(Problem(file, path, f"'{port}' of unit '{unit.name}' is a structural parameter: it may "
+                                            "size arrays, which are fixed when the spec is checked",
+                                f"set it under units.{unit.name}.parameters (one value per spec)"))
+        return None
     try:
         flat = flatten_value(var, value) if len(refs) > 1 else [value]
     except ValueError as exc:
@@ -412,7 +458,8 @@ def _assignment(unit: SystemUnit, port: str, value: Any, field_name: str | None,
         if message:
             problems.append(Problem(file, path, message[0], message[1]))
             return None
-        checked.append(float(v) if var.type == "Real" else int(v) if var.type == "Integer" else v)
+        checked.append(float(v) if var.type == "Real" else int(v) if var.type == "Integer"
+                       else bytes.fromhex(v) if var.type == "Binary" else v)
     return Assignment(unit.name, tuple(refs), tuple(checked))
 
 
@@ -427,12 +474,20 @@ def _value_problem(var: Variable, value: Any) -> tuple[str, str] | None:
         return f"'{var.name}' is Boolean, got {type(value).__name__} {value!r}", "write true or false"
     if kind == "String" and not isinstance(value, str):
         return f"'{var.name}' is String, got {type(value).__name__} {value!r}", "write a string in quotes"
+    if kind == "Binary":
+        try:
+            bytes.fromhex(value if isinstance(value, str) else "?")
+        except ValueError:
+            return (f"'{var.name}' is Binary, got {type(value).__name__} {value!r}",
+                    "write the bytes as a hex string, e.g. \"0a0bfe\"")
+    if kind == "Clock":
+        return f"'{var.name}' is an FMI 3.0 Clock; cosim does not set clocks", "remove it"
     if kind in ("Real", "Integer"):
         if isinstance(value, float) and not math.isfinite(value):
             return f"'{var.name}' must be finite, got {value}", "write a finite number"
         low, high = _scalar_bound(var.min), _scalar_bound(var.max)
         if low is not None and value < low or high is not None and value > high:
-            return (f"{value} is outside the range of '{var.name}' [{_fmt(low)}, {_fmt(high)}]",
+            return (f"{value} is outside the range of '{var.name}' [{_fmt(low, '-inf')}, {_fmt(high, 'inf')}]",
                     "choose a value inside the declared range")
     return None
 
@@ -445,8 +500,8 @@ def _scalar_bound(bound: Any) -> float | None:
     return float(bound)
 
 
-def _fmt(bound: float | None) -> str:
-    return "-inf" if bound is None else f"{bound:g}"
+def _fmt(bound: float | None, unbounded: str) -> str:
+    return unbounded if bound is None else f"{bound:g}"
 
 
 def _stepping_order(names: list[str], connections: list[Connection]) -> list[str]:
@@ -560,10 +615,16 @@ def _check_algebraic_loops(units: Mapping[str, SystemUnit], connections: list[Co
         if len(comp) > 1 or comp[0] in edges.get(comp[0], set()):
             involved = sorted({u for u, _ in comp})
             ports = ", ".join(sorted(f"{u}.{v}" for u, v in comp))
+            # outputs whose dependencies nobody declared are assumed to depend on every input (FMI's rule)
+            assumed = sorted({u for u, v in comp if u in units and v in {o.name for o in units[u].description.outputs()}
+                              and v not in units[u].description.feedthrough})
+            why = (f"; unit(s) {', '.join(assumed)} declare no dependencies for their outputs, so every output "
+                   "is assumed to depend directly on every input" if assumed else "")
+            fix = ("break the loop: connect through a unit without direct feed-through, or change one connection"
+                   + (f"; if an output does not depend on an input directly, declare it in the spec, e.g. "
+                      f"\"units\": {{\"{assumed[0]}\": {{\"feedthrough\": {{\"<output>\": []}}}}}}" if assumed else ""))
             problems.append(Problem(file, "$.connections",
-                                    f"algebraic loop through units {', '.join(involved)} (ports {ports})",
-                                    "break the loop: connect through a unit without direct feed-through, "
-                                    "or change one connection"))
+                                    f"algebraic loop through units {', '.join(involved)} (ports {ports}){why}", fix))
     rank: dict[tuple[str, str], int] = {}
     for i, comp in enumerate(reversed(_strongly_connected(nodes, edges))):
         for n in comp:

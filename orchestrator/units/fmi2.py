@@ -31,6 +31,7 @@ class Fmi2Unit(FmiInstance):
     _c_types = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Enumeration": ctypes.c_int,
                 "Boolean": ctypes.c_int, "String": ctypes.c_char_p}
     _vr_type = ctypes.c_uint
+    _call_types = {"Enumeration": "Integer"}
     _prefix = "fmi2"
 
     def __init__(self, name: str, unit_type: Any):

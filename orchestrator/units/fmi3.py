@@ -27,6 +27,7 @@ class Fmi3Unit(FmiInstance):
         "Binary": ctypes.POINTER(ctypes.c_uint8),
     }
     _vr_type = ctypes.c_uint
+    _call_types = {"Enumeration": "Int64"}
     _prefix = "fmi3"
 
     def __init__(self, name: str, unit_type: Any):

@@ -106,6 +106,13 @@ class FmiInstance(Unit):
         except Exception as exc:
             raise self.fail(call, exc) from None
 
+    # FMI type -> the type in the name of its get/set call (an Enumeration is read as an Integer / Int64)
+    _call_types: dict[str, str] = {}
+
+    def call_name(self, verb: str, fmi_type: str) -> str:
+        """The FMI function that gets/sets ``fmi_type``: ``fmi2GetInteger`` for an FMI 2.0 Enumeration."""
+        return f"{self._prefix}{verb}{self._call_types.get(fmi_type, fmi_type)}"
+
     # Selections -------------------------------------------------------------
 
     def select(self, refs: Sequence[ElementRef]) -> FmiSelection:
@@ -146,7 +153,7 @@ class FmiInstance(Unit):
         for group in sel.groups:
             status = group.read()
             if status > 1:  # above fmiWarning
-                raise self.fail_status(f"get{group.fmi_type}", status)
+                raise self.fail_status(self.call_name("Get", group.fmi_type), status)
         if sel.plain:
             return sel.groups[0].values[:]
         if sel.pick is not None:
@@ -163,7 +170,7 @@ class FmiInstance(Unit):
         def read_into_view() -> np.ndarray:
             status = read()
             if status > 1:
-                raise fail(f"get{group.fmi_type}", status)
+                raise fail(self.call_name("Get", group.fmi_type), status)
             return view  # a numpy view of the buffer the FMU just filled: no copy
 
         return read_into_view
@@ -177,7 +184,7 @@ class FmiInstance(Unit):
                 for group in sel.groups:
                     status = group.read()
                     if status > 1:
-                        raise self.fail_status(f"get{group.fmi_type}", status)
+                        raise self.fail_status(self.call_name("Get", group.fmi_type), status)
             for (g, i), value in zip(sel.positions, values):
                 group = sel.groups[g]
                 if group.fmi_type == "String":
@@ -192,7 +199,7 @@ class FmiInstance(Unit):
         for group in sel.groups:
             status = group.write()
             if status > 1:
-                raise self.fail_status(f"set{group.fmi_type}", status)
+                raise self.fail_status(self.call_name("Set", group.fmi_type), status)
 
     @staticmethod
     def _convert(group: _TypeGroup, value: Any, index: int) -> Any:

@@ -52,6 +52,12 @@ def read_table(path: str | Path) -> Any:
     return frame
 
 
+def _is_numeric(column: Any) -> bool:
+    import pandas as pd
+
+    return bool(pd.api.types.is_numeric_dtype(column) or pd.api.types.is_bool_dtype(column))
+
+
 class _IndexSelection(Selection):
     def __init__(self, refs: Sequence[ElementRef], columns: np.ndarray):
         self.refs = tuple(refs)
@@ -82,10 +88,17 @@ class PlayerUnitType(UnitType):
         """(time, values[samples, columns], column names); raises as :func:`read_table`."""
         if self._table is None:
             frame = read_table(self.path)
-            names = self.columns or [str(c) for c in frame.columns if c != "time"]
+            # A player plays numbers: String and Binary (hex) columns of a recorded table are left out
+            # unless named in 'columns', where they are refused.
+            numeric = [str(c) for c in frame.columns if c != "time" and _is_numeric(frame[c])]
+            names = self.columns or numeric
             missing = [c for c in names if c not in frame.columns]
             if missing:
                 raise ValueError(f"{self.path} has no column(s) {', '.join(missing)}")
+            not_numbers = [c for c in names if c not in numeric]
+            if not_numbers:
+                raise ValueError(f"{self.path}: column(s) {', '.join(not_numbers)} are not numbers (a player plays "
+                                 "numeric and Boolean columns only); leave them out of 'columns'")
             self._table = (frame["time"].to_numpy(dtype=float), frame[names].to_numpy(dtype=float), names)
         return self._table
 
