@@ -296,3 +296,11 @@ def test_fmi_call_names_follow_the_fmi_version():
     assert Fmi2Unit.call_name(Fmi2Unit, "Set", "Enumeration") == "fmi2SetInteger"
     assert Fmi3Unit.call_name(Fmi3Unit, "Set", "Enumeration") == "fmi3SetInt64"
     assert Fmi3Unit.call_name(Fmi3Unit, "Get", "Binary") == "fmi3GetBinary"
+
+
+def test_a_python_unit_can_end_the_run_early(write_spec):
+    spec = {"units": {"e": {"python": python_unit("EndsAtHalf")}}, "experiment": {"stop": 1.0, "step": 0.1},
+            "record": ["e.n"], "objectives": {"n": {"signal": "e.n", "reduce": "final"}}}
+    result = orchestrator.run(str(write_spec(spec)), record=True)
+    assert result.ok and result.message == "stopped early: unit 'e' reached its end at t=0.5 (stop time 1)"
+    assert list(result.traces["e.n"]) == [0, 1, 2, 3, 4, 5] and result.objectives["n"] == 5.0

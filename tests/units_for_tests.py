@@ -154,3 +154,16 @@ class TwoBowls(PythonUnit):
             os._exit(3)
         self.f1 = self.x ** 2 + self.y ** 2
         self.f2 = (self.x - 2.0) ** 2 + self.y ** 2
+
+
+class EndsAtHalf(PythonUnit):
+    """Counts steps and ends the whole simulation at t = 0.5 (a Python unit's early stop)."""
+
+    variables = (Variable("n", "output", type="Integer", start=0),)
+
+    def do_step(self, t, h):
+        from orchestrator.unit import SimulationEnded
+
+        self.n += 1
+        if t + h >= 0.5 - 1e-12:
+            raise SimulationEnded(self.name, t + h, "reached its end")

@@ -28,7 +28,7 @@ from typing import Any, ClassVar, Mapping, Sequence
 
 import numpy as np
 
-from ..unit import ElementRef, Selection, Unit, UnitDescription, UnitError, UnitType, Variable
+from ..unit import ElementRef, Selection, SimulationEnded, Unit, UnitDescription, UnitError, UnitType, Variable
 
 
 class _AttributeSelection(Selection):
@@ -169,7 +169,7 @@ class PythonUnit(Unit):
     def _call(self, hook: str, t: float | None) -> None:
         try:
             getattr(self, hook)()
-        except UnitError:
+        except (UnitError, SimulationEnded):  # SimulationEnded: the unit ends the run, not an error
             raise
         except Exception as exc:  # a unit's own bug becomes a named unit error
             raise UnitError(self.name, f"{hook}() raised {type(exc).__name__}: {exc}", t) from exc
