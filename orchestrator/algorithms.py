@@ -28,7 +28,12 @@ def step_unit(unit: Unit, t: float, h: float) -> None:
 
 
 class Transfer:
-    """Copies a group of output elements of one unit to input elements of another."""
+    """Copies a group of output elements of one unit to input elements of another.
+
+    Connections with a factor or offset (SSP transformations, unit
+    conversions) deliver ``factor * value + offset``; a group without any
+    keeps the plain copy.
+    """
 
     __slots__ = ("source", "source_selection", "target", "target_selection", "read", "_set")
 

@@ -58,11 +58,13 @@ def _parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(title="commands")
 
     p = sub.add_parser("validate", help="check a spec and report every problem at once")
-    p.add_argument("spec", help="path to spec.json")
+    p.add_argument("spec", help="path to spec.json, or an SSP (.ssp, .ssd, or a folder with SystemStructure.ssd)")
+    add_experiment_options(p)
     p.set_defaults(handler=cmd_validate)
 
     p = sub.add_parser("run", help="run one point of a spec and print its objectives")
-    p.add_argument("spec", help="path to spec.json")
+    p.add_argument("spec", help="path to spec.json, or an SSP (.ssp, .ssd, or a folder with SystemStructure.ssd)")
+    add_experiment_options(p)
     p.add_argument("--set", dest="sets", action="append", default=[], metavar="UNIT.PARAM=VALUE",
                    help="set a parameter (VALUE as JSON: 2.5, true, [1,2,3]); repeatable")
     p.add_argument("--out", help="write the recorded signals to this .parquet or .csv file")
@@ -71,8 +73,11 @@ def _parser() -> argparse.ArgumentParser:
     p.set_defaults(handler=cmd_run)
 
     p = sub.add_parser("inspect", help="list an FMU's variables, or a spec's units, connections and order")
-    p.add_argument("target", help="an .fmu file or a spec.json")
+    p.add_argument("target", help="an .fmu file, a spec.json or an SSP")
+    add_experiment_options(p)
     p.set_defaults(handler=cmd_inspect)
+    from .export_cli import add_export_parsers
+    add_export_parsers(sub)
     from .sweep_cli import add_sweep_parser
     add_sweep_parser(sub)
     from .optimize_cli import add_optimize_parser
@@ -80,6 +85,20 @@ def _parser() -> argparse.ArgumentParser:
     from .analysis_cli import add_analysis_parsers
     add_analysis_parsers(sub)
     return parser
+
+
+def add_experiment_options(p: argparse.ArgumentParser) -> None:
+    """--start/--stop/--step/--algorithm: override the experiment (what an SSP often lacks)."""
+    group = p.add_argument_group("experiment (overrides the spec's; needed for an SSP without them)")
+    group.add_argument("--start", type=float, metavar="S", help="start time (s)")
+    group.add_argument("--stop", type=float, metavar="S", help="stop time (s)")
+    group.add_argument("--step", type=float, metavar="S", help="communication step size (s)")
+    group.add_argument("--algorithm", choices=("gauss-seidel", "jacobi"), help="master algorithm")
+
+
+def experiment_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """The experiment fields given on the command line."""
+    return {k: getattr(args, k) for k in ("start", "stop", "step", "algorithm") if getattr(args, k, None) is not None}
 
 
 def _print_problems(problems: Sequence[Any]) -> None:
@@ -96,7 +115,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
     """``cosim validate spec.json``: 0 when the spec is usable, 2 with every problem otherwise."""
     from .validate import check_spec
 
-    system = check_spec(args.spec)
+    system = check_spec(args.spec, experiment_overrides(args))
     spec = system.spec
     print(f"{args.spec}: ok: {len(spec.units)} unit(s), {len(spec.connections)} connection(s), "
           f"{len(spec.objectives)} objective(s); {spec.experiment.algorithm}, step {spec.experiment.step:g} s, "
@@ -130,7 +149,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if out is not None and out.suffix.lower() not in (".parquet", ".csv"):
         raise UsageError(f"--out {out}: use a .parquet or .csv file name")
     sets = dict(parse_assignment(text) for text in args.sets)
-    system = check_spec(args.spec)
+    system = check_spec(args.spec, experiment_overrides(args))
     values: dict[str, Any] = {}
     if args.point:  # values from the sweep's table; traces by default to <results>/points/<ID>.parquet
         from .analysis.rerun import prepare_point_run
@@ -163,7 +182,7 @@ def cmd_inspect(args: argparse.Namespace) -> int:
         return _inspect_fmu(args.target)
     from .validate import check_spec
 
-    system = check_spec(target)
+    system = check_spec(target, experiment_overrides(args))
     print(f"spec {target}: {system.spec.name}")
     print("units:")
     for name, unit in system.units.items():
@@ -175,7 +194,8 @@ def cmd_inspect(args: argparse.Namespace) -> int:
         print(f"  {name}: {kind} {unit.spec.source} ({inputs} inputs, {outputs} outputs)")
     print("connections:")
     for c in system.connections:
-        print(f"  {c.source.text} -> {c.target.text}")
+        scaled = f" (x {c.factor:.17g} + {c.offset:.17g})" if c.transforms else ""
+        print(f"  {c.source.text} -> {c.target.text}{scaled}")
     exp = system.spec.experiment
     print(f"experiment: {exp.start:g} .. {exp.stop:g} s, step {exp.step:g} s, {exp.algorithm}")
     print(f"stepping order: {' -> '.join(system.order)}")

@@ -49,6 +49,8 @@ class ConnectionSpec:
     target: str
     index: int
     convert: bool = True  # False: pass values unchanged even when the two ends' units differ
+    factor: float = 1.0  # the input receives factor * output + offset (Real only)
+    offset: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -120,17 +122,37 @@ class Spec:
         raise KeyError(name)
 
 
-def load_spec(path: str | Path) -> Spec:
-    """Read and check a spec file.
+def load_spec(path: str | Path, experiment: Mapping[str, Any] | None = None) -> Spec:
+    """Read and check a spec: a spec.json, or an SSP (see :mod:`orchestrator.ssp`).
 
-    Raises SpecError listing every problem of form found: unreadable file,
-    malformed JSON (with line and column), values JSON does not allow (NaN,
-    Infinity), keys given twice, too deep nesting, missing or unknown fields, wrong
-    types, bad reduction or algorithm names.
+    ``experiment`` fields (e.g. ``{"step": 0.01}`` from the command line)
+    override the file's.  Raises SpecError listing every problem of form
+    found: unreadable file, malformed JSON (with line and column), values JSON
+    does not allow (NaN, Infinity), keys given twice, too deep nesting, missing
+    or unknown fields, wrong types, bad reduction or algorithm names, and every
+    problem of an SSP the spec names.
     """
+    return spec_from_dict(read_raw(path, experiment), path)
+
+
+def read_raw(path: str | Path, experiment: Mapping[str, Any] | None = None) -> Any:
+    """The content of a spec as parsed JSON, not yet checked.
+
+    An SSP (``.ssp``, ``.ssd`` or a folder with SystemStructure.ssd) becomes
+    the spec of its flattened system; a spec.json with ``"system"`` gets that
+    SSP's units and connections merged under its own.  Raises SpecError.
+    """
+    from .ssp import is_ssp, merge_system, ssp_raw_spec
+
     path = Path(path)
+    if is_ssp(path):
+        return ssp_raw_spec(path, experiment)
     raw = read_spec_json(path)
-    return spec_from_dict(raw, path)
+    if isinstance(raw, dict) and isinstance(raw.get("system"), str):
+        raw = merge_system(raw, path)
+    if experiment and isinstance(raw, dict):
+        raw["experiment"] = {**(raw.get("experiment") or {}), **experiment}
+    return raw
 
 
 def spec_from_dict(raw: Any, path: str | Path = "spec.json") -> Spec:
@@ -270,7 +292,8 @@ def _build(raw: dict, path: Path) -> Spec:
         units.append(UnitSpec(name=name, kind=kind, source=u[kind], parameters=dict(u.get("parameters", {})),
                               start=dict(u.get("start", {})), ports=dict(u.get("ports", {})), options=options))
     # None marks an entry set aside by orchestrator.validate; indices stay those of the file
-    connections = tuple(ConnectionSpec(c["from"], c["to"], i, c.get("convert", True))
+    connections = tuple(ConnectionSpec(c["from"], c["to"], i, c.get("convert", True), float(c.get("factor", 1.0)),
+                                       float(c.get("offset", 0.0)))
                         for i, c in enumerate(raw.get("connections", [])) if c is not None)
     e = raw["experiment"]
     experiment = ExperimentSpec(start=float(e.get("start", 0.0)), stop=float(e["stop"]), step=float(e["step"]),

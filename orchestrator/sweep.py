@@ -182,7 +182,7 @@ class Sweep:
     def __init__(self, spec_path: str | Path, workers: int | None = None, out: str | Path | None = None,
                  scheduler: str | None = None, timeout: float | None = None, resume: bool = False,
                  batch_size: int | None = None, csv: bool = False, progress: TextIO | None = None,
-                 quiet: bool = False):
+                 quiet: bool = False, experiment: dict | None = None):
         from .results import ResultsStore  # pandas and pyarrow only when a sweep is made
         from .validate import check_spec
 
@@ -190,7 +190,7 @@ class Sweep:
             raise SweepError(f"the timeout must be positive, got {timeout}")
         if workers is not None and workers < 1:
             raise SweepError(f"workers must be at least 1, got {workers}")
-        self.system = check_spec(spec_path)
+        self.system = check_spec(spec_path, experiment)  # experiment: command-line overrides
         self.spec = self.system.spec
         self.space = DesignSpace.from_spec(self.spec)
         self.workers = workers or os.cpu_count() or 1

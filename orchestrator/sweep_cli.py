@@ -18,7 +18,7 @@ from .errors import EXIT_OK, EXIT_RUN_FAILED, UsageError
 def add_sweep_parser(sub: Any) -> None:
     """Register the ``sweep`` subcommand on an argparse sub-parser collection."""
     p = sub.add_parser("sweep", help="evaluate every design point of a spec on Dask; write a results table")
-    p.add_argument("spec", help="path to spec.json")
+    p.add_argument("spec", help="path to spec.json, or an SSP (.ssp, .ssd, or a folder with SystemStructure.ssd)")
     p.add_argument("--out", metavar="DIR", help="results folder (default: results/<spec name> in the current folder)")
     p.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: one per core)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="use a running Dask scheduler, e.g. tcp://host:8786")
@@ -26,6 +26,8 @@ def add_sweep_parser(sub: Any) -> None:
     p.add_argument("--resume", action="store_true", help="run only the points missing in --out")
     p.add_argument("--csv", action="store_true", help="also write DIR/results.csv")
     p.add_argument("--batch-size", type=int, metavar="N", help="points per Dask task (default: automatic)")
+    from .cli import add_experiment_options
+    add_experiment_options(p)
     p.add_argument("--dry-run", action="store_true",
                    help="print the number of points, a few of them and a time estimate from sample runs")
     p.set_defaults(handler=cmd_sweep)
@@ -33,6 +35,7 @@ def add_sweep_parser(sub: Any) -> None:
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     """Run (or dry-run) a sweep; returns the exit code. SpecError, SweepError and UsageError reach cli.main."""
+    from .cli import experiment_overrides
     from .sweep import Sweep
 
     if args.batch_size is not None and args.batch_size < 1:
@@ -43,7 +46,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if args.dry_run:
         return _dry_run(args)
     sweep = Sweep(args.spec, workers=args.workers, out=out, scheduler=args.scheduler, timeout=args.timeout,
-                  resume=args.resume, batch_size=args.batch_size, csv=args.csv)
+                  resume=args.resume, batch_size=args.batch_size, csv=args.csv, experiment=experiment_overrides(args))
     counts = sweep.run(load=False)  # the table stays on disk: a huge sweep never sits in memory
     total = sum(counts.values())
     summary = ", ".join(f"{n} {s}" for s, n in sorted(counts.items()) if n)
@@ -70,10 +73,12 @@ def _dry_run(args: argparse.Namespace) -> int:
     import os
     import tempfile
 
+    from .cli import experiment_overrides
     from .sweep import Sweep
 
     with tempfile.TemporaryDirectory(prefix="cosim_dry_") as scratch:
-        sweep = Sweep(args.spec, workers=args.workers, out=scratch, timeout=args.timeout, quiet=True)
+        sweep = Sweep(args.spec, workers=args.workers, out=scratch, timeout=args.timeout, quiet=True,
+                      experiment=experiment_overrides(args))
         total = len(sweep.space)
         print(f"{sweep.spec.name}: {total} points ({sweep.space.method}; parameters: "
               f"{', '.join(sweep.space.targets) or 'none'})")

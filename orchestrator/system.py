@@ -62,14 +62,20 @@ class Signal:
 class Connection:
     """A checked connection between element lists of equal length.
 
-    The master sets ``target = factor * source + offset`` (units of measure
-    converted, see :mod:`orchestrator.connection_units`); (1, 0) passes values unchanged.
+    The master sets ``target = factor * source + offset``: the connection's own
+    factor and offset (e.g. an SSP LinearTransformation) applied after the units
+    of measure are converted (see :mod:`orchestrator.connection_units`); (1, 0)
+    passes values unchanged.
     """
 
     source: Signal
     target: Signal
     factor: float = 1.0
     offset: float = 0.0
+
+    @property
+    def transforms(self) -> bool:
+        return self.factor != 1.0 or self.offset != 0.0
 
 
 @dataclass(frozen=True)
@@ -109,7 +115,7 @@ class System:
         Raises SpecError when the target does not exist or the value does not fit.
         """
         problems: list[Problem] = []
-        unit_name, _, port = target.partition(".")
+        unit_name, _, port = split_unit_name(target, self.units)
         if unit_name not in self.units:
             raise SpecError([Problem(self.spec.path, "$", f"unknown unit '{unit_name}' in '{target}'."
                                      f"{did_you_mean(unit_name, self.units)}", "use 'unit.parameter'")])
@@ -135,6 +141,22 @@ class System:
     def recording_all_outputs(self) -> "System":
         """This system recording every output of every unit besides its own record list (for re-runs)."""
         return self.recording([f"{name}.*" for name in self.units])
+
+
+def split_unit_name(text: str, unit_names: Any) -> tuple[str, str, str]:
+    """``('unit', '.', 'port')`` from ``'unit.port'``.
+
+    Units flattened from an SSP are named by their path (``SuT.motor``), so a
+    unit name may contain dots: the longest known unit name followed by a dot
+    wins; without one, the text splits at its first dot.
+    """
+    best = ""
+    for name in unit_names:
+        if len(name) > len(best) and text.startswith(name) and text[len(name):len(name) + 1] == ".":
+            best = name
+    if not best:
+        return text.partition(".")
+    return best, ".", text[len(best) + 1:]
 
 
 def make_unit_type(spec: UnitSpec, folder: str) -> UnitType:
@@ -302,7 +324,7 @@ def _port_names(unit: SystemUnit) -> list[str]:
 
 def _resolve_signal(text: str, units: Mapping[str, SystemUnit], problems: list[Problem], file: str,
                     path: str) -> Signal | None:
-    unit_name, dot, port = text.partition(".")
+    unit_name, dot, port = split_unit_name(text, [*units, *getattr(units, "failed", ())])
     if not dot or not port:
         problems.append(Problem(file, path, f"'{text}' is not 'unit.port'", "write 'unit.port' or 'unit.port[i]'"))
         return None
@@ -334,7 +356,7 @@ def _resolve_signal(text: str, units: Mapping[str, SystemUnit], problems: list[P
 
 
 def _expand_wildcard(text: str, units: Mapping[str, SystemUnit]) -> list[str]:
-    unit_name, _, port = text.partition(".")
+    unit_name, _, port = split_unit_name(text, units)
     if port != "*" or unit_name not in units:
         return [text]
     unit = units[unit_name]
@@ -403,8 +425,12 @@ def _check_connections(spec: Spec, units: Mapping[str, SystemUnit], problems: li
         if unit_problem is not None:
             problems.append(unit_problem)
             ok = False
-        if ok:
-            connections.append(Connection(source, target, factor, offset))
+        if (c.factor != 1.0 or c.offset != 0.0) and target.variable.type != "Real":
+            problems.append(Problem(file, json_path(base), f"'{c.target}' is {target.variable.type}: only Real "
+                                    "connections take a factor or offset", "remove 'factor' and 'offset'"))
+            ok = False
+        if ok:  # the connection's own transformation after the unit conversion
+            connections.append(Connection(source, target, c.factor * factor, c.factor * offset + c.offset))
     return connections
 
 
@@ -664,7 +690,7 @@ def _check_objective_expressions(spec: Spec, problems: list[Problem]) -> None:
 def _check_design(spec: Spec, units: _LoadedUnits, problems: list[Problem]) -> None:
     for p in spec.design.parameters:
         path = json_path(["design", "parameters", p.target])
-        unit_name, _, port = p.target.partition(".")
+        unit_name, _, port = split_unit_name(p.target, [*units, *units.failed])
         if unit_name not in units:
             if unit_name not in units.failed:
                 problems.append(Problem(spec.path, path, f"unknown unit '{unit_name}'."

@@ -14,8 +14,7 @@ from typing import Any
 
 from .problems import Problem, SpecError
 from .spec import _build as build_spec
-from .spec import load_spec, schema_problems
-from .spec_json import read_spec_json
+from .spec import load_spec, read_raw, schema_problems
 from .system import System, build_system
 
 # Where an error's JSON path points into one of these, the whole entry is set
@@ -23,18 +22,19 @@ from .system import System, build_system
 _ENTRY_DEPTH = {"units": 2, "connections": 2, "record": 2, "objectives": 2}
 
 
-def check_spec(path: str | Path) -> System:
-    """Load and check the spec at ``path``; returns the System when it is usable.
+def check_spec(path: str | Path, experiment: dict | None = None) -> System:
+    """Load and check the spec (or SSP) at ``path``; returns the System when it is usable.
 
+    ``experiment`` fields override the file's (see :func:`load_spec`).
     Raises SpecError with every problem of form and fit found.
     """
     try:
-        return build_system(load_spec(path))
+        return build_system(load_spec(path, experiment))
     except SpecError as first:
         problems = list(first.problems)
         if any("malformed JSON" in p.message or p.path == "$" for p in problems):
             raise
-        raw = read_spec_json(path)
+        raw = read_raw(path, experiment)
         if not schema_problems(raw, str(path)):
             raise  # the spec's form is fine: these already are all the problems
         sanitized, broken_units = _set_aside_broken_entries(raw, str(path))

@@ -72,7 +72,7 @@ def test_every_subcommand_maps_errors_through_main(tmp_path, capsys, monkeypatch
 
     from orchestrator import validate
 
-    def broken(path):
+    def broken(path, experiment=None):  # check_spec's signature (experiment: command-line overrides)
         raise KeyError("an assumption of ours")
 
     monkeypatch.setattr(validate, "check_spec", broken)

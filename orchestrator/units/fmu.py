@@ -159,7 +159,8 @@ def resolve_fmu_path(reference: str, base_dir: str | Path | None = None) -> Path
     """The file an FMU reference in a spec points to.
 
     ``builtin:NAME_fmiN`` names an FMU we ship as C source (built on first use,
-    see :mod:`fmus.build`); anything else is a path, relative to ``base_dir``.
+    see :mod:`fmus.build`); ``archive.ssp!/resources/m.fmu`` a file inside an
+    SSP archive; anything else is a path, relative to ``base_dir``.
     Raises FileNotFoundError for an unknown builtin name and FmuProblems when
     a built-in FMU cannot be built (e.g. no C compiler).
     """
@@ -176,6 +177,10 @@ def resolve_fmu_path(reference: str, base_dir: str | Path | None = None) -> Path
         except FmuBuildError as exc:  # no compiler, or our C sources do not build here
             raise FmuProblems(reference, [Problem(reference, "", f"cannot build the built-in FMU: {exc}",
                                                   "install gcc (apt-get install gcc), or set CC to a C compiler")]) from None
+    if "!/" in reference:  # a member of an SSP archive (orchestrator.ssp names FMUs so)
+        from ..ssp.archive import member_file
+
+        return member_file(reference)
     path = Path(reference)
     if not path.is_absolute() and base_dir is not None:
         path = Path(base_dir) / path

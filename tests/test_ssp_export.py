@@ -1,0 +1,139 @@
+"""SSP export and Python units as FMUs: export, import again, compare bit for bit."""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from lxml import etree
+
+from orchestrator.cli import main
+from orchestrator.execution import Execution
+from orchestrator.problems import SpecError
+from orchestrator.ssp.writer import export_ssp
+from orchestrator.ssp.xml import NS
+from orchestrator.validate import check_spec
+
+from .conftest import python_unit
+from .ssp_fixtures import nested_expected, nested_files, write_archive
+
+ROOT = Path(__file__).resolve().parent.parent
+DRIVE_ENERGY = ROOT / "examples" / "drive_energy" / "spec.json"
+
+
+def _traces(path, **experiment):
+    result = Execution(check_spec(path, experiment or None), record=True).run()
+    assert result.ok, result.message
+    return result
+
+
+@pytest.mark.parametrize("algorithm", ["jacobi", "gauss-seidel"])
+def test_nested_ssp_exported_and_read_back_is_bit_identical(tmp_path, algorithm):
+    original = write_archive(tmp_path / "nested.ssp", nested_files())
+    system = check_spec(original, {"algorithm": algorithm})
+    exported = export_ssp(system, tmp_path / "flat.ssp")
+    again = _traces(exported)  # the algorithm travels in the org.cosim annotation
+    first = _traces(original, algorithm=algorithm)
+    assert list(again.traces.columns) == list(first.traces.columns)
+    assert np.array_equal(again.traces.to_numpy(), first.traces.to_numpy())
+    assert again.traces["sink.y"].iloc[-1] == pytest.approx(nested_expected(algorithm)["sink.y"], rel=1e-12)
+
+
+def test_exported_archive_layout_and_parameter_files(tmp_path, built_fmu):
+    spec = {
+        "name": "ring",
+        "units": {"a": {"fmu": str(built_fmu("linear_ode", 2)), "parameters": {"a": -1.0, "x0": 0.1 + 0.2}},
+                  "g": {"fmu": str(built_fmu("gain_array", 3)), "parameters": {"k": 1 / 3}}},
+        "connections": [{"from": "a.y", "to": "g.u[2]", "factor": 3.0, "offset": -1.0}],
+        "experiment": {"stop": 0.5, "step": 0.1, "algorithm": "jacobi"},
+        "objectives": {"y": {"signal": "g.y[2]", "reduce": "final"}},
+    }
+    (tmp_path / "spec.json").write_text(json.dumps(spec))
+    assert main(["export", str(tmp_path / "spec.json"), "-o", str(tmp_path / "out" / "ring.ssp")]) == 0
+    archive = tmp_path / "out" / "ring.ssp"
+    with zipfile.ZipFile(archive) as zf:
+        names = sorted(zf.namelist())
+        ssd = etree.fromstring(zf.read("SystemStructure.ssd"))
+        ssv = etree.fromstring(zf.read("resources/a.ssv"))
+    assert names == ["SystemStructure.ssd", "resources/a.ssv", "resources/g.ssv", "resources/gain_array_fmi3.fmu",
+                     "resources/linear_ode_fmi2.fmu"]
+    assert ssd.get("version") == "2.0"
+    values = {p.get("name"): p[0].get("value") for p in ssv.iter(f"{{{NS['ssv']}}}Parameter")}
+    assert values == {"a": "-1.0", "x0": repr(0.1 + 0.2)}  # 17 digits: reads back bit for bit
+    steps = [e.get("stepSize") for e in ssd.iter() if isinstance(e.tag, str) and e.tag.endswith("FixedStepMaster")]
+    assert steps == ["0.1"]
+    default = ssd.find(f"{{{NS['ssd']}}}DefaultExperiment")
+    assert (default.get("startTime"), default.get("stopTime")) == ("0.0", "0.5")
+    [connection] = ssd.iter(f"{{{NS['ssd']}}}Connection")
+    assert (connection.get("endElement"), connection.get("endConnector")) == ("g", "u[2]")
+    companion = json.loads((tmp_path / "out" / "ring.spec.json").read_text())
+    assert companion["system"] == "ring.ssp" and companion["objectives"] == spec["objectives"]
+    from orchestrator import run
+
+    direct, again = run(tmp_path / "spec.json"), run(tmp_path / "out" / "ring.spec.json")
+    assert direct.objectives == again.objectives
+    # Jacobi: the last step's input was set from a.y at t = 0.4 (4 steps); g.y = k * u[2] is feed-through
+    expected = 1 / 3 * (3.0 * _linear_ode_final(-1.0, 1.0, 0.1 + 0.2, 0.0, 0.1, 4) - 1.0)
+    assert direct.objectives["y"] == pytest.approx(expected, rel=1e-12)
+
+
+def _linear_ode_final(a, b, x0, u, h, n):
+    """linear_ode's output after n exact steps with a held input (its own formula, evaluated here)."""
+    x = x0
+    for _ in range(n):
+        x = np.exp(a * h) * x + (np.exp(a * h) - 1) / a * b * u
+    return x
+
+
+def test_python_units_are_exported_as_fmus_and_read_back_bit_identical(tmp_path):
+    spec = json.loads(DRIVE_ENERGY.read_text())
+    spec["units"]["drive"]["python"] = str(DRIVE_ENERGY.parent / "drive_profile.py") + ":DriveProfile"
+    spec["experiment"]["stop"] = 0.3
+    spec.pop("design")
+    (tmp_path / "spec.json").write_text(json.dumps(spec))
+    out = tmp_path / "drive.ssp"
+    assert main(["export", str(tmp_path / "spec.json"), "-o", str(out)]) == 0
+    again = check_spec(tmp_path / "drive.spec.json")
+    assert again.units["drive"].description.kind == "fmu"
+    assert again.units["drive"].description.fmi_version == "2.0"
+    first = Execution(check_spec(tmp_path / "spec.json"), record=True).run()
+    second = Execution(again, record=True).run()
+    assert first.ok and second.ok, (first.message, second.message)
+    assert first.objectives == second.objectives
+    assert np.array_equal(first.traces.to_numpy(), second.traces.to_numpy())
+
+
+def test_player_units_are_refused(tmp_path, write_spec):
+    import pandas as pd
+
+    pd.DataFrame({"time": [0.0, 1.0], "y": [0.0, 1.0]}).to_csv(tmp_path / "rec.csv", index=False)
+    path = write_spec({"units": {"p": {"player": "rec.csv"}}, "experiment": {"stop": 1, "step": 0.5}})
+    with pytest.raises(SpecError) as caught:
+        export_ssp(check_spec(path), tmp_path / "x.ssp")
+    assert caught.value.problems[0].path == "$.units.p"
+    assert not (tmp_path / "x.ssp").exists()
+
+
+@pytest.mark.parametrize("cls", ["Gain", "Clock"])
+def test_export_fmu_keeps_ports_units_parameters_and_feedthrough(tmp_path, capsys, cls):
+    from orchestrator.units.fmu import FmuUnitType
+    from orchestrator.units.python import PythonUnitType
+
+    target = python_unit(cls)
+    assert main(["export-fmu", target, "-o", str(tmp_path / "gain.fmu")]) == 0
+    assert "runs where Python" in capsys.readouterr().out
+    python = PythonUnitType(target).describe()
+    fmu = FmuUnitType(tmp_path / "gain.fmu", "gain.fmu").describe()
+    assert fmu.fmi_version == "2.0"
+    by_name = fmu.by_name
+    for variable in python.variables:
+        exported = by_name[variable.name]
+        assert (exported.causality, exported.type, exported.shape, exported.unit) == \
+               (variable.causality, variable.type, variable.shape, variable.unit), variable.name
+        if variable.causality in ("parameter", "input"):  # outputs are calculated: no start in FMI 2.0
+            assert np.allclose(exported.start, variable.start), variable.name
+    for output in python.outputs():
+        assert set(fmu.depends_on(output.name)) >= set(python.depends_on(output.name))
