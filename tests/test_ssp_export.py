@@ -137,3 +137,20 @@ def test_export_fmu_keeps_ports_units_parameters_and_feedthrough(tmp_path, capsy
             assert np.allclose(exported.start, variable.start), variable.name
     for output in python.outputs():
         assert set(fmu.depends_on(output.name)) >= set(python.depends_on(output.name))
+
+
+def test_port_mappings_survive_the_export(tmp_path):
+    spec = {
+        "units": {"src": {"fmu": "builtin:linear_ode_fmi3", "parameters": {"a": 0.0, "b": 0.0, "x0": 2.0}},
+                  "ode": {"fmu": "builtin:linear_ode_fmi3", "ports": {"state": "y", "drive": "u"},
+                          "parameters": {"a": 0.0, "x0": 0.0}}},
+        "connections": [{"from": "src.y", "to": "ode.drive"}],
+        "experiment": {"stop": 1.0, "step": 0.25},
+        "objectives": {"state": {"signal": "ode.state", "reduce": "final"}},
+    }
+    (tmp_path / "spec.json").write_text(json.dumps(spec))
+    export_ssp(check_spec(tmp_path / "spec.json"), tmp_path / "mapped.ssp")
+    from orchestrator import run
+
+    direct, again = run(tmp_path / "spec.json"), run(tmp_path / "mapped.spec.json")
+    assert direct.objectives == again.objectives == {"state": 2.0}  # 4 steps of 0.25 s, b = 1, u = 2

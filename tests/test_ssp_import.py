@@ -56,6 +56,24 @@ def test_bindings_mappings_and_transformations_are_flattened(tmp_path):
     assert raw["experiment"] == {"start": 0.0, "stop": 1.0, "step": 0.01}
 
 
+def test_a_value_bound_to_a_system_connector_reaches_the_connected_parameter(tmp_path):
+    # the root system gets a parameter connector 'sink_gain' = 2 (bound at the root), connected to sink.b;
+    # sink's own binding no longer sets b
+    ssd = nested_ssd().replace('<ssv:Parameter name="b"><ssv:Real value="1"/></ssv:Parameter>', '')
+    ssd = ssd.replace('<ssv:Parameter name="source.x0"><ssv:Real value="3"/></ssv:Parameter>',
+                      '<ssv:Parameter name="source.x0"><ssv:Real value="3"/></ssv:Parameter>'
+                      '<ssv:Parameter name="sink_gain"><ssv:Real value="2"/></ssv:Parameter>')
+    ssd = ssd.replace('  <ssd:System name="Root">\n', '  <ssd:System name="Root">\n    <ssd:Connectors><ssd:Connector '
+                      'name="sink_gain" kind="parameter"><ssc:Real/></ssd:Connector></ssd:Connectors>\n', 1)
+    ssd = ssd.replace('<ssd:Connection startElement="source" startConnector="y"',
+                      '<ssd:Connection startConnector="sink_gain" endElement="sink" endConnector="b"/>'
+                      '<ssd:Connection startElement="source" startConnector="y"')
+    raw = read_ssp(write_archive(tmp_path / "param.ssp", nested_files(ssd))).raw
+    assert raw["units"]["sink"]["parameters"]["b"] == 2.0
+    _, result = _run(write_archive(tmp_path / "param2.ssp", nested_files(ssd)))
+    assert _final(result, "sink.y") == pytest.approx(nested_expected("jacobi", sink_b=2.0)["sink.y"], rel=1e-12)
+
+
 def test_folder_ssd_file_and_archive_agree(tmp_path):
     members = nested_files()
     archive = write_archive(tmp_path / "nested.ssp", members)

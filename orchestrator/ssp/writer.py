@@ -105,6 +105,9 @@ def _write_companion_spec(system: System, out: Path) -> None:
     experiment = {k: v for k, v in (raw.get("experiment") or {}).items() if k in ("algorithm", "stop_when")}
     if experiment:
         companion["experiment"] = experiment
+    ports = {u.name: {"ports": dict(u.ports)} for u in system.spec.units if u.ports}
+    if ports:  # the SSP names ports as the units do; the spec's own names map onto them again
+        companion["units"] = ports
     for key in ("record", "objectives", "design"):
         if raw.get(key):
             companion[key] = raw[key]
