@@ -203,7 +203,8 @@ def cmd_inspect(args: argparse.Namespace) -> int:
 
 
 def _inspect_fmu(reference: str) -> int:
-    from .units.fmu import FmuUnitType, resolve_fmu_path
+    from .unit_kinds import resolve_fmu_path
+    from .units.fmu import FmuUnitType
 
     try:
         unit_type = FmuUnitType(resolve_fmu_path(reference), reference)

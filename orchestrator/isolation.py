@@ -16,9 +16,10 @@ and a fresh child takes the remaining points.  So :meth:`IsolatedRunner.run`
 always returns exactly one row per point it was given.
 
 The *payload* (:func:`make_payload`) carries the pickled
-:class:`~orchestrator.system.System` together with the bytes of its FMU files
-and Python unit files; the child writes them into its own temporary folder and
-points the unit types there, so no shared filesystem is assumed.
+:class:`~orchestrator.system.System` together with the bytes of the files its
+unit types read (FMUs, ``file.py`` units, played tables); the child writes them
+into its own temporary folder and points the unit types there, so no shared
+filesystem is assumed.
 """
 
 from __future__ import annotations
@@ -49,59 +50,40 @@ def make_payload(system: Any) -> dict[str, Any]:
     """Everything a child needs to run points of ``system``, with no file shared with this process.
 
     Keys: ``key`` (a digest of the whole payload), ``system`` (pickled System),
-    ``files`` (unit name -> (file name, bytes)) for FMUs and ``file.py:Class`` units.
-    Raises OSError when a unit's file cannot be read.
+    ``files`` (unit name -> [(file name, bytes), ...]): the files each unit
+    type reads (:meth:`~orchestrator.unit.UnitType.files`: FMUs, ``file.py``
+    units, played tables, a plug-in kind's files).  Raises OSError when a
+    unit's file cannot be read.
     """
-    from .units.fmu import FmuUnitType
-    from .units.python import PythonUnitType
-
-    files: dict[str, tuple[str, bytes]] = {}
+    files: dict[str, list[tuple[str, bytes]]] = {}
     for name, system_unit in system.units.items():
-        unit_type = system_unit.unit_type
-        if isinstance(unit_type, FmuUnitType):
-            unit_type.digest  # computed here so the child need not hash its copy
-            files[name] = (Path(unit_type.path).name, Path(unit_type.path).read_bytes())
-        elif isinstance(unit_type, PythonUnitType):
-            path = _python_file(unit_type)
-            if path is not None:
-                files[name] = (path.name, path.read_bytes())
+        paths = system_unit.unit_type.files()
+        if paths:
+            files[name] = [(Path(p).name, Path(p).read_bytes()) for p in paths]
     blob = pickle.dumps(system, protocol=pickle.HIGHEST_PROTOCOL)
     h = hashlib.sha256(system.spec.digest.encode())
     for name in sorted(files):
         h.update(name.encode())
-        h.update(hashlib.sha256(files[name][1]).digest())
+        for _, data in files[name]:
+            h.update(hashlib.sha256(data).digest())
     from .limits import settings
 
     # the client's limits hold in every worker child, wherever it runs (orchestrator.limits)
     return {"key": h.hexdigest()[:16], "system": blob, "files": files, "limits": settings()}
 
 
-def _python_file(unit_type: Any) -> Path | None:
-    module, sep, _ = unit_type.target.rpartition(":")
-    if not sep or not module.endswith(".py"):
-        return None  # an importable module: it must be installed where the worker runs
-    path = Path(module)
-    if not path.is_absolute() and unit_type.base_dir:
-        path = Path(unit_type.base_dir) / path
-    return path
-
-
 def load_payload(payload: dict[str, Any], folder: str) -> Any:
     """The System of ``payload``, its unit files written under ``folder`` and used from there."""
-    from .units.fmu import FmuUnitType
-    from .units.python import PythonUnitType
-
     system = pickle.loads(payload["system"])
-    for name, (file_name, data) in payload["files"].items():
-        unit_folder = Path(folder) / name  # one folder per unit: file names may repeat
-        unit_folder.mkdir(parents=True, exist_ok=True)
-        local = unit_folder / file_name
-        local.write_bytes(data)
-        unit_type = system.units[name].unit_type
-        if isinstance(unit_type, FmuUnitType):
-            unit_type.path = str(local)
-        elif isinstance(unit_type, PythonUnitType):
-            unit_type.target = f"{local}:{unit_type.target.rpartition(':')[2]}"
+    for name, unit_files in payload["files"].items():
+        copies = []
+        for i, (file_name, data) in enumerate(unit_files):
+            unit_folder = Path(folder) / name / str(i)  # one folder per unit and file: names may repeat
+            unit_folder.mkdir(parents=True, exist_ok=True)
+            local = unit_folder / file_name
+            local.write_bytes(data)
+            copies.append(local)
+        system.units[name].unit_type.relocate(copies)
     return system
 
 

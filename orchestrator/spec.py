@@ -33,7 +33,7 @@ class UnitSpec:
     """One unit of the system as the spec declares it."""
 
     name: str
-    kind: str  # "fmu" | "python" | "player"
+    kind: str  # a registered unit kind: "fmu", "python", "player" or a plug-in's (orchestrator.unit_kinds)
     source: str
     parameters: Mapping[str, Any] = field(default_factory=dict)
     start: Mapping[str, Any] = field(default_factory=dict)
@@ -164,16 +164,24 @@ def spec_from_dict(raw: Any, path: str | Path = "spec.json") -> Spec:
     problems = schema_problems(raw, str(path))
     if problems:
         raise SpecError(problems)
-    return _build(raw, path)
+    return build_spec(raw, path)
 
 
-def _schema() -> dict:
-    return json.loads(SCHEMA_PATH.read_text(encoding="utf-8"))
+def spec_schema() -> dict:
+    """The JSON Schema of a spec: specs/spec.schema.json with the fields of every registered unit kind."""
+    from .unit_kinds import unit_schema
+
+    schema = json.loads(SCHEMA_PATH.read_text(encoding="utf-8"))
+    schema["$defs"]["unit"] = unit_schema(schema["$defs"]["unit"])
+    return schema
+
+
+_schema = spec_schema  # the old private name, for callers not yet moved
 
 
 def schema_problems(raw: Any, file: str) -> list[Problem]:
     """Every way ``raw`` breaks the JSON Schema or the field-level rules, as problems."""
-    schema = _schema()
+    schema = spec_schema()
     validator = jsonschema.Draft202012Validator(schema)
     problems: list[Problem] = []
     seen: set[tuple[str, str]] = set()
@@ -221,9 +229,7 @@ def _value_problems(raw: dict, file: str, seen: set[tuple[str, str]]) -> list[Pr
     return [p for p in problems if (p.path, p.message) not in seen]
 
 
-_ONE_OF_HINTS = {
-    "unit": ("a unit needs exactly one of 'fmu', 'python' or 'player'",
-             "give one: \"fmu\": \"model.fmu\", \"python\": \"module:Class\" or \"player\": \"traces.parquet\""),
+_ONE_OF_HINTS = {  # the unit's hint names the registered kinds (orchestrator.unit_kinds.one_kind_hint)
     "objective": ("an objective needs either 'signal' and 'reduce', or 'expr'",
                   "e.g. {\"signal\": \"energy.e_total\", \"reduce\": \"final\"} or {\"expr\": \"a / b\"}"),
     "design_parameter": ("a design parameter needs 'min' and 'max' (with 'step' for a grid), or 'values', "
@@ -245,7 +251,12 @@ def _explain(error: jsonschema.ValidationError, schema: dict, file: str) -> list
         return [Problem(file, path, f"missing field '{missing}'", f"add '{missing}'")]
     if validator == "oneOf":
         kind = _def_name(error.schema, schema)
-        message, fix = _ONE_OF_HINTS.get(kind, (error.message, ""))
+        if kind == "unit":
+            from .unit_kinds import one_kind_hint
+
+            message, fix = one_kind_hint()
+        else:
+            message, fix = _ONE_OF_HINTS.get(kind, (error.message, ""))
         return [Problem(file, path, message, fix)]
     if validator == "type":
         expected = error.validator_value
@@ -283,13 +294,20 @@ def _def_name(sub_schema: dict, schema: dict) -> str:
     return ""
 
 
-def _build(raw: dict, path: Path) -> Spec:
+def build_spec(raw: dict, path: Path) -> Spec:
+    """The Spec of a parsed spec whose form is already checked (see :func:`spec_from_dict`).
+
+    Relative paths resolve against ``path``'s folder.  Entries set to None
+    (set aside by :mod:`orchestrator.validate`) are skipped.
+    """
+    from .unit_kinds import COMMON_OPTIONS, kind_of
+
     folder = str(path.resolve().parent)
     units = []
     for name, u in raw["units"].items():
-        kind = next(k for k in ("fmu", "python", "player") if k in u)
-        options = {k: u[k] for k in ("columns", "interpolation", "extrapolation", "units", "feedthrough") if k in u}
-        units.append(UnitSpec(name=name, kind=kind, source=u[kind], parameters=dict(u.get("parameters", {})),
+        kind = kind_of(u)  # the schema check made sure there is exactly one
+        options = {k: u[k] for k in (*kind.options, *COMMON_OPTIONS) if k in u}
+        units.append(UnitSpec(name=name, kind=kind.name, source=u[kind.name], parameters=dict(u.get("parameters", {})),
                               start=dict(u.get("start", {})), ports=dict(u.get("ports", {})), options=options))
     # None marks an entry set aside by orchestrator.validate; indices stay those of the file
     connections = tuple(ConnectionSpec(c["from"], c["to"], i, c.get("convert", True), float(c.get("factor", 1.0)),
@@ -317,3 +335,6 @@ def _build(raw: dict, path: Path) -> Spec:
                 description=raw.get("description", ""), units=tuple(units), connections=connections,
                 experiment=experiment, record=tuple(r for r in raw.get("record", []) if r is not None), objectives=objectives,
                 design=design, digest=hashlib.sha256(canonical.encode()).hexdigest(), raw=raw)
+
+
+_build = build_spec  # the old private name, for callers not yet moved

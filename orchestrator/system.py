@@ -19,12 +19,12 @@ from typing import Any, Mapping, Sequence
 from .connection_units import connection_conversion
 from .design import size_problems
 from .expressions import Expression, ExpressionError
+from .errors import UserError
 from .problems import Problem, SpecError, did_you_mean, json_path
 from .spec import Spec, UnitSpec
 from .unit import NUMERIC_TYPES, ElementRef, UnitDescription, UnitType, Variable, flatten_value, parse_port, resolve_port
-from .units.fmu import FmuProblems, FmuUnitType, resolve_fmu_path
-from .units.player import PlayerUnitType
-from .units.python import PythonUnitType
+from .unit_kinds import unit_kind
+from .units.fmu import FmuProblems
 
 SETTABLE_AS_PARAMETER = ("parameter", "structuralParameter")
 SETTABLE_AS_START = ("input", "local", "output", "independent", "calculatedParameter")
@@ -160,20 +160,11 @@ def split_unit_name(text: str, unit_names: Any) -> tuple[str, str, str]:
 
 
 def make_unit_type(spec: UnitSpec, folder: str) -> UnitType:
-    """The blueprint for one unit of a spec (no file is opened yet except builtin FMU builds)."""
-    if spec.kind == "fmu":
-        # whole-number parameters may be structural parameters that size FMI 3.0 arrays: the description needs them
-        structural = {spec.ports.get(k, k): v for k, v in spec.parameters.items()
-                      if isinstance(v, int) and not isinstance(v, bool)}
-        return FmuUnitType(resolve_fmu_path(spec.source, folder), reference=spec.source, structural=structural)
-    if spec.kind == "python":
-        return PythonUnitType(spec.source, folder)
-    from pathlib import Path
+    """The blueprint for one unit of a spec, made by its kind (see :mod:`orchestrator.unit_kinds`).
 
-    path = Path(spec.source)
-    path = path if path.is_absolute() else Path(folder) / path
-    return PlayerUnitType(path, spec.options.get("columns"), spec.options.get("interpolation", "linear"),
-                          spec.options.get("extrapolation", "hold"), spec.options.get("units"))
+    No file is opened yet except builtin FMU builds.
+    """
+    return unit_kind(spec.kind).create(spec, folder)
 
 
 def build_system(spec: Spec, broken_units: frozenset[str] = frozenset()) -> System:
@@ -272,6 +263,10 @@ def _load_unit(u: UnitSpec, folder: str, file: str, problems: list[Problem]) -> 
             where = f" ({p.path})" if p.path else ""
             problems.append(Problem(file, path, f"FMU '{u.source}'{where}: {p.message}",
                                     p.fix or "re-export the FMU from its tool"))
+        return None
+    except UserError as exc:  # e.g. a plug-in kind's own check of its source
+        for p in exc.problems:
+            problems.append(Problem(file, path, f"{u.kind} '{u.source}': {p.message}", p.fix))
         return None
     except FileNotFoundError as exc:
         problems.append(Problem(file, path, str(exc), "check the path; relative paths start at the spec's folder"))

@@ -22,6 +22,7 @@ import abc
 import math
 import re
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 from .errors import UnitError  # noqa: F401  (re-exported: units raise it from here)
@@ -312,3 +313,14 @@ class UnitType(abc.ABC):
     @abc.abstractmethod
     def instantiate(self, name: str) -> Unit:
         """A new live instance called ``name``."""
+
+    def files(self) -> list[Path]:
+        """Local files this blueprint reads to describe or instantiate its units (default: none).
+
+        A sweep ships their bytes to its workers, so no shared filesystem is
+        needed, and calls :meth:`relocate` there with the copies.
+        """
+        return []
+
+    def relocate(self, copies: Sequence[Path]) -> None:
+        """Use ``copies`` (in the order of :meth:`files`) instead of the original files."""

@@ -13,8 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from .problems import Problem, SpecError
-from .spec import _build as build_spec
-from .spec import load_spec, read_raw, schema_problems
+from .spec import build_spec, load_spec, read_raw, schema_problems, spec_schema
 from .system import System, build_system
 
 # Where an error's JSON path points into one of these, the whole entry is set
@@ -52,12 +51,10 @@ def check_spec(path: str | Path, experiment: dict | None = None) -> System:
 def _set_aside_broken_entries(raw: Any, file: str) -> tuple[dict, set[str]]:
     import jsonschema
 
-    from .spec import _schema
-
     sanitized = copy.deepcopy(raw)
     broken_units: set[str] = set()
     removals: set[tuple] = set()
-    validator = jsonschema.Draft202012Validator(_schema())
+    validator = jsonschema.Draft202012Validator(spec_schema())
     for error in validator.iter_errors(raw):
         parts = list(error.absolute_path)
         if not parts:

@@ -18,7 +18,6 @@ import atexit
 import hashlib
 import os
 import platform
-import re
 import shutil
 import tempfile
 import threading
@@ -31,8 +30,7 @@ from ..archive import ArchiveError, check_archive, extract_to_new_folder
 from ..errors import Problem, UserError
 from ..quantities import fmi_unit_definitions
 from ..unit import Unit, UnitDescription, UnitType, Variable, indexed_runs, parse_port
-
-BUILTIN_PREFIX = "builtin:"
+from ..unit_kinds import BUILTIN_PREFIX  # noqa: F401  (re-exported from its old place)
 
 _FMI3_TYPE = {
     "Float64": "Real", "Float32": "Real",
@@ -156,35 +154,14 @@ def file_digest(path: str | Path) -> str:
 
 
 def resolve_fmu_path(reference: str, base_dir: str | Path | None = None) -> Path:
-    """The file an FMU reference in a spec points to.
+    """The file an FMU reference points to; see :func:`orchestrator.unit_kinds.resolve_fmu_path`.
 
-    ``builtin:NAME_fmiN`` names an FMU we ship as C source (built on first use,
-    see :mod:`fmus.build`); ``archive.ssp!/resources/m.fmu`` a file inside an
-    SSP archive; anything else is a path, relative to ``base_dir``.
-    Raises FileNotFoundError for an unknown builtin name and FmuProblems when
-    a built-in FMU cannot be built (e.g. no C compiler).
+    Kept here for callers of the old place: ``builtin:`` names are resolved
+    by the ``fmu`` unit kind, not by the FMU unit.
     """
-    if reference.startswith(BUILTIN_PREFIX):
-        from fmus.build import FmuBuildError, available_models, ensure_built  # local: compiling only when asked
+    from ..unit_kinds import resolve_fmu_path as resolve
 
-        stem = reference[len(BUILTIN_PREFIX):]
-        m = re.match(r"^(?P<name>.+)_fmi(?P<version>[23])$", stem)
-        if not m or m.group("name") not in available_models():
-            names = ", ".join(f"builtin:{n}_fmi3" for n in sorted(available_models()))
-            raise FileNotFoundError(f"no built-in FMU '{stem}'; available: {names} (or _fmi2)")
-        try:
-            return Path(ensure_built(m.group("name"), int(m.group("version"))))
-        except FmuBuildError as exc:  # no compiler, or our C sources do not build here
-            raise FmuProblems(reference, [Problem(reference, "", f"cannot build the built-in FMU: {exc}",
-                                                  "install gcc (apt-get install gcc), or set CC to a C compiler")]) from None
-    if "!/" in reference:  # a member of an SSP archive (orchestrator.ssp names FMUs so)
-        from ..ssp.archive import member_file
-
-        return member_file(reference)
-    path = Path(reference)
-    if not path.is_absolute() and base_dir is not None:
-        path = Path(base_dir) / path
-    return path
+    return resolve(reference, base_dir)
 
 
 class FmuUnitType(UnitType):
@@ -283,6 +260,13 @@ class FmuUnitType(UnitType):
     def extracted_folder(self) -> str:
         """The folder this process extracted the FMU into (extracting once)."""
         return EXTRACTED.folder(self.path, self.digest)
+
+    def files(self) -> list[Path]:
+        self.digest  # hashed here, from the original, so a worker need not hash its copy
+        return [Path(self.path)]
+
+    def relocate(self, copies: Sequence[Path]) -> None:
+        self.path = str(copies[0])
 
     def instantiate(self, name: str) -> Unit:
         md = self.model_description()

@@ -84,6 +84,12 @@ class PlayerUnitType(UnitType):
         state["_table"] = state["_aliases"] = None
         return state
 
+    def files(self) -> list[Path]:
+        return [Path(self.path)]
+
+    def relocate(self, copies: Sequence[Path]) -> None:
+        self.path = str(copies[0])
+
     def table(self) -> tuple[np.ndarray, np.ndarray, list[str]]:
         """(time, values[samples, columns], column names); raises as :func:`read_table`."""
         if self._table is None:

@@ -190,6 +190,18 @@ class PythonUnitType(UnitType):
     def __getstate__(self) -> dict:
         return {"target": self.target, "base_dir": self.base_dir, "_cls": None}
 
+    def files(self) -> list[Path]:
+        """The unit's ``file.py``; none for an importable module (it must be installed where units run)."""
+        module, sep, _ = self.target.rpartition(":")
+        if not sep or not module.endswith(".py"):
+            return []
+        path = Path(module)
+        return [path if path.is_absolute() or not self.base_dir else Path(self.base_dir) / path]
+
+    def relocate(self, copies: Sequence[Path]) -> None:
+        if copies:
+            self.target = f"{copies[0]}:{self.target.rpartition(':')[2]}"
+
     def load_class(self) -> type[PythonUnit]:
         """Import and return the class.
 
