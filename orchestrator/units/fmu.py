@@ -18,6 +18,7 @@ import atexit
 import hashlib
 import os
 import platform
+import re
 import shutil
 import tempfile
 import threading
