@@ -38,7 +38,7 @@ def cmd_optimize(args: argparse.Namespace) -> int:
     """Run an optimisation; returns the exit code. SpecError, OptimizeError and UsageError reach cli.main."""
     from .optimize import Optimization
     from .results import default_folder
-    from .sweep_cli import _first_not_ok
+    from .sweep_cli import first_not_ok
 
     for option in ("budget", "batch", "workers"):
         value = getattr(args, option)
@@ -55,6 +55,6 @@ def cmd_optimize(args: argparse.Namespace) -> int:
     print(f"front: cosim pareto {run.store.table_path}; report: cosim report {out} -o report.html")
     not_ok = total - counts.get("ok", 0)
     if not_ok:
-        for row in _first_not_ok(run.store.table_path, 5):
+        for row in first_not_ok(run.store.table_path, 5):
             print(f"  {row['point_id']} {row['status']}: {str(row['message'])[:120]}", file=sys.stderr)
     return EXIT_OK if not_ok == 0 else EXIT_RUN_FAILED

@@ -53,15 +53,15 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     print(f"{total} points: {summary or 'none'}; table: {sweep.store.table_path}")
     not_ok = total - counts.get("ok", 0)
     if not_ok:
-        for row in _first_not_ok(sweep.store.table_path, 5):
+        for row in first_not_ok(sweep.store.table_path, 5):
             print(f"  {row['point_id']} {row['status']}: {str(row['message'])[:120]}", file=sys.stderr)
         if not_ok > 5:
             print(f"  ... and {not_ok - 5} more (see the 'message' column)", file=sys.stderr)
     return EXIT_OK if not_ok == 0 else EXIT_RUN_FAILED
 
 
-def _first_not_ok(table: Path, n: int) -> list[dict]:
-    """The first ``n`` rows whose status is not ok, reading only three columns."""
+def first_not_ok(table: Path, n: int) -> list[dict]:
+    """The first ``n`` rows whose status is not ok, reading only three columns (also for ``cosim optimize``)."""
     import pyarrow.compute as pc
     import pyarrow.parquet as pq
 
