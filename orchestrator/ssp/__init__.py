@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from ..problems import Problem, SpecError
+from ..unit_kinds import unit_kinds
 from .archive import is_ssp
 from .reader import SspSystem, read_ssp
 
@@ -67,8 +68,9 @@ def merge_system(spec: dict, spec_path: Path) -> dict:
     for name, own in (spec.get("units") or {}).items():
         if name in units and isinstance(own, dict):
             base = units[name]
-            if any(k in own for k in ("fmu", "python", "player")):
-                base = {k: v for k, v in base.items() if k not in ("fmu", "python", "player")}
+            kinds = unit_kinds()  # the spec's own kind replaces the SSP's (fmu, python, player or a plug-in's)
+            if any(k in own for k in kinds):
+                base = {k: v for k, v in base.items() if k not in kinds}
             for key, value in own.items():
                 if key in ("parameters", "start") and isinstance(value, dict):
                     base[key] = {**base.get(key, {}), **value}
