@@ -199,7 +199,16 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
 _LIVE: set["IsolatedRunner"] = set()
 
 
-@atexit.register
+_kill_children_registered = False
+
+
+def _register_exit_hook() -> None:
+    """At the first child process, not at import: importing cosim leaves no exit hook."""
+    global _kill_children_registered
+    atexit.register(_kill_children)
+    _kill_children_registered = True
+
+
 def _kill_children() -> None:
     for runner in list(_LIVE):
         runner.close()
@@ -237,6 +246,8 @@ class IsolatedRunner:
         os.close(from_child_w)
         self._outbox = Connection(to_child_w, readable=False)
         self._inbox = Connection(from_child_r, writable=False)
+        if not _kill_children_registered:
+            _register_exit_hook()
         _LIVE.add(self)
         try:
             self._outbox.send(("load", self.payload))

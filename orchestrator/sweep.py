@@ -102,8 +102,8 @@ def _worker_name() -> str:
 class Progress:
     """One status line: points done, failed, rate, time left (rewritten in place on a terminal)."""
 
-    def __init__(self, total: int, stream: TextIO | None = None, already: int = 0):
-        self.total, self.done, self.failed, self.already = total, 0, 0, already
+    def __init__(self, total: int, stream: TextIO | None = None):
+        self.total, self.done, self.failed = total, 0, 0
         self.stream = stream if stream is not None else sys.stderr
         self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
         self.started = time.perf_counter()
@@ -234,14 +234,31 @@ class Sweep:
             "ended": None, "counts": previous.get("counts"),
         }
 
-    def run(self, load: bool = True) -> pd.DataFrame | dict[str, int]:
+    def run(self) -> pd.DataFrame:
         """Evaluate every missing point; returns the whole table (every point once, in design order).
 
-        With ``load=False`` it returns only the counts by status and never
-        holds the table in memory (the command line's way, for huge sweeps).
         Raises SweepError when no Dask workers are reachable.  Ctrl-C stops the
         sweep; the rows written so far stay and ``resume`` finishes the rest.
         """
+        self._run()
+        table = self.store.table()
+        self._remove_temporary()
+        return table
+
+    def run_to_disk(self) -> dict[str, int]:
+        """Like :meth:`run`, but returns only the counts by status: the table stays on disk, never in memory.
+
+        The command line's way, for sweeps of any size.
+        """
+        counts = self._run()
+        self._remove_temporary()
+        return counts
+
+    def _remove_temporary(self) -> None:
+        if self._temporary:
+            shutil.rmtree(self.out, ignore_errors=True)
+
+    def _run(self) -> dict[str, int]:
         from .evaluator import ClusterError, dask_client
 
         started = _now()
@@ -250,7 +267,7 @@ class Sweep:
         todo = total - len(done & {p.id for p in self.space}) if done else total
         if todo == 0:
             self._say(f"cosim sweep {self.spec.name}: all {total} points already in {self.out}")
-            return self._finish(started, load)
+            return self._finish()
         try:
             with dask_client(self.workers, self.scheduler) as (client, n_workers, link):
                 info = {"started": started, "scheduler": client.scheduler.address, "workers": n_workers,
@@ -264,19 +281,16 @@ class Sweep:
         except KeyboardInterrupt:
             self._say(f"interrupted: the rows so far are in {self.out}; run again with --resume to finish")
             raise
-        return self._finish(started, load)
+        return self._finish()
 
-    def _finish(self, started: str, load: bool) -> "pd.DataFrame | dict[str, int]":
+    def _finish(self) -> dict[str, int]:
         counts = self.store.compact(order=(p.id for p in self.space), csv=self.csv)
         meta = self.store.metadata() or {}
         meta.update(ended=_now(), counts=counts)
         if meta.get("runs"):
             meta["runs"][-1]["ended"] = meta["ended"]
         self.store.write_metadata(meta)
-        result = self.store.table() if load or self._temporary else counts
-        if self._temporary:
-            shutil.rmtree(self.out, ignore_errors=True)
-        return result
+        return counts
 
     def _evaluate(self, client: Any, done: set[str], todo: int, n_workers: int) -> None:
         from distributed import as_completed
@@ -284,7 +298,7 @@ class Sweep:
         size = self.batch_size or max(1, min(64, math.ceil(todo / (n_workers * 8))))
         batches = _batched((p for p in self.space if p.id not in done), size)
         payload = client.scatter(self.payload, broadcast=True, hash=False)
-        progress = Progress(todo, self.progress_stream, already=len(done)) if not self.quiet else None
+        progress = Progress(todo, self.progress_stream) if not self.quiet else None
         in_flight: dict[str, list[Point]] = {}
         pending = as_completed()
 
@@ -340,7 +354,8 @@ def _user() -> str:
         return ""
 
 
-def sweep(spec_path: str | Path, workers: int = 2, out: str | Path | None = None, scheduler: str | None = None,
+def sweep(spec_path: str | Path, workers: int | None = None, out: str | Path | None = None,
+          scheduler: str | None = None,
           timeout: float | None = None, resume: bool = False, **options: Any) -> pd.DataFrame:
     """Evaluate every point of the spec's design space on Dask; returns the results table.
 
@@ -348,7 +363,8 @@ def sweep(spec_path: str | Path, workers: int = 2, out: str | Path | None = None
     timeout, crashed), message, run_time, worker.  ``out`` keeps the results
     folder (results.parquet, metadata.json); without it the table is only
     returned.  ``scheduler`` is the address of a running Dask scheduler
-    (default: a local cluster of ``workers`` processes).  ``timeout``: seconds
+    (default: a local cluster of ``workers`` processes, one per core like
+    ``cosim sweep``).  ``timeout``: seconds
     a point may run.  ``resume`` runs only the points missing in ``out``.
     Further options: ``batch_size``, ``csv``, ``progress`` (a stream), ``quiet``.
 

@@ -47,7 +47,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         return _dry_run(args)
     sweep = Sweep(args.spec, workers=args.workers, out=out, scheduler=args.scheduler, timeout=args.timeout,
                   resume=args.resume, batch_size=args.batch_size, csv=args.csv, experiment=experiment_overrides(args))
-    counts = sweep.run(load=False)  # the table stays on disk: a huge sweep never sits in memory
+    counts = sweep.run_to_disk()  # a huge sweep's table never sits in memory
     total = sum(counts.values())
     summary = ", ".join(f"{n} {s}" for s, n in sorted(counts.items()) if n)
     print(f"{total} points: {summary or 'none'}; table: {sweep.store.table_path}")

@@ -124,11 +124,14 @@ class _ExtractionCache:
     def __init__(self) -> None:
         self._folders: dict[str, str] = {}
         self._lock = threading.Lock()
-        atexit.register(self.clear)
+        self._registered = False
 
     def folder(self, path: str, digest: str) -> str:
         key = f"{path}:{digest}"
         with self._lock:
+            if not self._registered:  # at the first extraction, not at import: importing cosim leaves no hook
+                atexit.register(self.clear)
+                self._registered = True
             if key not in self._folders:
                 folder = tempfile.mkdtemp(prefix="cosim_fmu_")
                 safe_extract(path, folder)  # removes the folder when the FMU is refused
