@@ -304,3 +304,15 @@ def test_a_python_unit_can_end_the_run_early(write_spec):
     result = orchestrator.run(str(write_spec(spec)), record=True)
     assert result.ok and result.message == "stopped early: unit 'e' reached its end at t=0.5 (stop time 1)"
     assert list(result.traces["e.n"]) == [0, 1, 2, 3, 4, 5] and result.objectives["n"] == 5.0
+
+
+def test_reference_check_script_on_our_own_fmus(tmp_path):
+    """fmus/conformance/reference_check.py (used on the Modelica Reference FMUs, see docs/fmi-support.md)."""
+    from fmus.conformance.reference_check import check
+
+    stair = check(ensure_built("stair", 3), tmp_path)
+    assert stair["result"] == "exact" and "to t=9, stopped early" in stair["detail"]
+    structural = check(ensure_built("structural", 3), tmp_path)
+    assert structural["result"] == "exact" and structural["detail"].startswith("2 outputs, 11 samples")
+    clocks = check(ensure_built("clocks", 3), tmp_path)
+    assert clocks["result"] == "refused" and "scheduled execution (FMI 3.0 clocks) only" in clocks["detail"]

@@ -69,8 +69,13 @@ class Fmi3Unit(FmiInstance):
         self._guard("fmi3EnterConfigurationMode", self._slave.enterConfigurationMode)
         try:
             super().set(selection, values)
-        finally:
-            self._guard("fmi3ExitConfigurationMode", self._slave.exitConfigurationMode)
+        except Exception:
+            try:  # leave Configuration Mode if the FMU lets us, but report the set that failed
+                self._slave.exitConfigurationMode()
+            except Exception:
+                pass
+            raise
+        self._guard("fmi3ExitConfigurationMode", self._slave.exitConfigurationMode)
 
     def setup(self, start_time: float, stop_time: float | None) -> None:
         self.time = start_time
