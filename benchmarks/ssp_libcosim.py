@@ -13,9 +13,11 @@ exported by ``cosim export`` and run
 * by libcosim: ``CosimExecution.from_ssp_file`` (reads the SSD, loads the
   FMUs) and ``simulate_until(stop)`` with its fixed-step algorithm.
 
-It prints the largest difference of the final outputs and the median time
-per run of each, and their ratio.  Run it on a quiet machine: both engines
-are single-threaded here, but other processes change the figures.
+It prints the largest difference of the final outputs and, per engine, the
+median wall-clock and CPU time per run (CPU time of every thread of the
+process: libcosim steps its units on a thread pool) and their ratios to
+libcosim.  Wall-clock figures need a quiet machine; CPU time suffers less
+from other processes.
 """
 
 from __future__ import annotations
@@ -77,14 +79,16 @@ def main() -> None:
         index = {s.name.decode(): s.index for s in execution.slave_infos()}
         return [observer.last_real_values(index[n], [5])[0] for n in "abc"]  # y is value reference 5
 
-    timings: dict[str, list[float]] = {"cosim": [], "cosim incl. reading the SSP": [], "libcosim": []}
+    names = ("cosim", "cosim incl. reading the SSP", "libcosim")
+    timings: dict[str, list[float]] = {name: [] for name in names}
+    cpu: dict[str, list[float]] = {name: [] for name in names}
     results = {}
     for _ in range(args.repeat):
-        for name, fn in (("cosim", cosim_run), ("cosim incl. reading the SSP", cosim_with_reading),
-                         ("libcosim", libcosim_run)):
-            started = time.perf_counter()
+        for name, fn in zip(names, (cosim_run, cosim_with_reading, libcosim_run)):
+            started, started_cpu = time.perf_counter(), time.process_time()
             results[name] = fn()
             timings[name].append(time.perf_counter() - started)
+            cpu[name].append(time.process_time() - started_cpu)  # all threads of this process
     ours = [results["cosim"].objectives[n] for n in "abc"]
     theirs = results["libcosim"]
     n_steps = round(args.stop / args.step)
@@ -93,10 +97,12 @@ def main() -> None:
     print(f"largest difference: {max(abs(a - b) for a, b in zip(ours, theirs)):.3g} "
           f"(relative {max(abs(a - b) / max(abs(a), 1e-300) for a, b in zip(ours, theirs)):.3g})")
     base = statistics.median(timings["libcosim"])
-    for name, values in timings.items():
-        median = statistics.median(values)
-        print(f"{name:30s} median {median * 1e3:8.1f} ms per run, {median / n_steps / 3 * 1e6:6.2f} µs per unit "
-              f"per step, {median / base:5.2f} x libcosim")
+    base_cpu = statistics.median(cpu["libcosim"])
+    for name in names:
+        median, median_cpu = statistics.median(timings[name]), statistics.median(cpu[name])
+        print(f"{name:28s} wall {median * 1e3:7.1f} ms per run ({median / n_steps / 3 * 1e6:5.2f} µs per unit "
+              f"per step, {median / base:4.2f} x libcosim); CPU {median_cpu * 1e3:7.1f} ms "
+              f"({median_cpu / base_cpu:4.2f} x libcosim)")
 
 
 if __name__ == "__main__":

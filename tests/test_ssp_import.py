@@ -74,6 +74,18 @@ def test_a_value_bound_to_a_system_connector_reaches_the_connected_parameter(tmp
     assert _final(result, "sink.y") == pytest.approx(nested_expected("jacobi", sink_b=2.0)["sink.y"], rel=1e-12)
 
 
+def test_parameter_values_are_converted_to_the_connector_unit(tmp_path):
+    # integrator.ssv gives b = 120 1/min; the SSD declares the connector b in 1/s: b = 2 1/s as before
+    members = nested_files(nested_ssd().replace(
+        '<ssd:Connector name="u" kind="input"><ssc:Real unit="rad/s"/></ssd:Connector>',
+        '<ssd:Connector name="u" kind="input"><ssc:Real unit="rad/s"/></ssd:Connector>'
+        '<ssd:Connector name="b" kind="parameter"><ssc:Real unit="1/s"/></ssd:Connector>'))
+    members["resources/integrator.ssv"] = members["resources/integrator.ssv"].replace(
+        b'<ssv:Real value="2"/>', b'<ssv:Real value="120" unit="1/min"/>')
+    raw = read_ssp(write_archive(tmp_path / "units.ssp", members)).raw
+    assert raw["units"]["SuT.integrator"]["parameters"]["b"] == pytest.approx(2.0, rel=1e-15)
+
+
 def test_folder_ssd_file_and_archive_agree(tmp_path):
     members = nested_files()
     archive = write_archive(tmp_path / "nested.ssp", members)
