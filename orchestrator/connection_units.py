@@ -7,7 +7,8 @@ decides what the master does with the values:
 
 * no unit at one end, or equal units: values pass unchanged;
 * convertible units (rpm -> rad/s, degC -> K, mm -> m): the master applies
-  ``target = factor * source + offset`` at every transfer;
+  ``target = factor * source + offset`` at every transfer (without the offset
+  when either end is an FMI ``relativeQuantity``, e.g. a temperature difference);
 * different quantities, or a unit cosim cannot read: a Problem naming the file,
   the connection, both ends with their units, and the fix;
 * ``"convert": false`` on the connection: values pass unchanged, unchecked.
@@ -38,6 +39,8 @@ def connection_conversion(source_text: str, source: Variable, source_unit: UnitD
                         f"'{target.unit}': {exc}",
             "connect ports of the same quantity, correct the unit where it is declared, or add "
             "\"convert\": false to this connection to pass the values unchanged")
+    if source.relative_quantity or target.relative_quantity:
+        offset = 0.0  # a difference of temperatures converts by the factor alone (FMI relativeQuantity)
     if (factor, offset) != IDENTITY and target.type != "Real":
         return IDENTITY, Problem(
             file, path, f"'{source_text}' in '{source.unit}' would need converting to '{target.unit}' "

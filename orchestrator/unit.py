@@ -70,6 +70,8 @@ class Variable:
     max: float | None = None
     variability: str = "continuous"
     fmi_type: str | None = None  # an FMU variable's own FMI type (Float32, UInt64, Enumeration, Binary ...)
+    # FMI relativeQuantity: the value is a difference (e.g. of temperatures), so unit offsets do not apply
+    relative_quantity: bool = False
 
     @property
     def size(self) -> int:

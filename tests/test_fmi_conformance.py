@@ -21,7 +21,7 @@ from fmpy import read_model_description, simulate_fmu
 from fmpy.fmi3 import FMU3Slave
 
 import orchestrator
-from fmus.conformance import ensure_built
+from fmus.conformance import available, ensure_built
 from orchestrator.cli import main
 
 from .conftest import python_unit
@@ -316,3 +316,12 @@ def test_reference_check_script_on_our_own_fmus(tmp_path):
     assert structural["result"] == "exact" and structural["detail"].startswith("2 outputs, 11 samples")
     clocks = check(ensure_built("clocks", 3), tmp_path)
     assert clocks["result"] == "refused" and "scheduled execution (FMI 3.0 clocks) only" in clocks["detail"]
+
+
+@pytest.mark.parametrize("name, version", [(n, v) for n, versions in sorted(available().items()) for v in versions])
+def test_every_conformance_fmu_goes_through_cosim_inspect(capsys, name, version):
+    code, text = cli(capsys, "inspect", str(ensure_built(name, version)))
+    if name == "clocks":  # scheduled execution only: refused, with the reason
+        assert code == 2 and "scheduled execution (FMI 3.0 clocks) only" in text
+    else:
+        assert code == 0 and f"FMI {version}.0 co-simulation" in text and "Traceback" not in text

@@ -139,3 +139,12 @@ def test_player_units_naming_no_column_is_refused(write_spec, tmp_path):
     spec = {"units": {"play": {"player": "t.csv", "units": {"speed": "rpm"}}}, "experiment": {"stop": 1, "step": 0.5}}
     with pytest.raises(orchestrator.SpecError, match=r"\$\.units\.play\.player: .*'units' names speed"):
         orchestrator.build_system(orchestrator.load_spec(write_spec(spec)))
+
+
+def test_a_relative_quantity_converts_without_the_offset(write_spec):
+    spec = {"units": {"src": {"python": python_unit("TemperatureRise")}, "sink": {"python": python_unit("SiSink")}},
+            "connections": [{"from": "src.rise", "to": "sink.temperature"}],
+            "experiment": {"stop": 0.2, "step": 0.1}, "record": ["sink.temperature_seen"]}
+    result = orchestrator.run(str(write_spec(spec)))
+    assert result.ok, result.message
+    assert list(result.traces["sink.temperature_seen"])[1:] == [2.0, 2.0]  # a rise of 2 degC is 2 K, not 275.15 K

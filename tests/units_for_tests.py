@@ -167,3 +167,12 @@ class EndsAtHalf(PythonUnit):
         self.n += 1
         if t + h >= 0.5 - 1e-12:
             raise SimulationEnded(self.name, t + h, "reached its end")
+
+
+class TemperatureRise(PythonUnit):
+    """A temperature difference in degC (FMI relativeQuantity): 2 degC after the first step."""
+
+    variables = (Variable("rise", "output", start=0.0, unit="degC", relative_quantity=True),)
+
+    def do_step(self, t, h):
+        self.rise = 2.0

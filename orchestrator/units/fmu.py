@@ -302,6 +302,14 @@ def _number(text: Any, kind: str) -> Any:
     return values[0] if len(values) == 1 else tuple(values)
 
 
+def _relative(v: Any) -> bool:
+    """FMI relativeQuantity of a variable, or of its declared type when the variable does not say."""
+    if getattr(v, "relativeQuantity", None) is not None:
+        return bool(v.relativeQuantity)
+    declared = getattr(v, "declaredType", None)
+    return bool(getattr(declared, "relativeQuantity", False)) if declared is not None else False
+
+
 def _unit_of(v: Any) -> str | None:
     if v.unit:
         return v.unit
@@ -344,7 +352,7 @@ def _describe(md: Any, reference: str, structural: dict[str, int] | None = None
             start=start, description=v.description or "", shape=shape,
             min=_number(v.min, "Real") if v.min is not None else None,
             max=_number(v.max, "Real") if v.max is not None else None,
-            variability=v.variability or "continuous", fmi_type=v.type,
+            variability=v.variability or "continuous", fmi_type=v.type, relative_quantity=_relative(v),
         ))
         elements[v.name] = [FmiElement(v.type, v.valueReference, i, size) for i in range(size)] if shape \
             else [FmiElement(v.type, v.valueReference)]
