@@ -255,8 +255,12 @@ def test_explorer_animates_the_arm_of_a_rerun_robot_design(xvfb, tmp_path):
         assert win.animation is not None
         arm = next(line for line in win.arm_figure.axes[0].get_lines() if line.get_gid() == "arm")
         first = np.array(arm.get_data_3d())
-        # the animation runs on Tk's timer: after a while the arm has moved (generous: CI machines get busy)
-        assert pump(root, lambda: not np.allclose(np.array(arm.get_data_3d()), first), timeout=90)
+        # The animation runs on Tk's timer.  Look at the arm at every draw, not only when root.update()
+        # returns: on a busy machine a draw takes longer than the 50 ms frame interval, so update() keeps
+        # finding a due timer and returns only at the end of a loop, back at the first frame.
+        poses = []
+        win.arm_figure.canvas.mpl_connect("draw_event", lambda event: poses.append(np.array(arm.get_data_3d())))
+        assert pump(root, lambda: any(not np.allclose(p, first) for p in poses), timeout=90)
     finally:
         root.destroy()
 
