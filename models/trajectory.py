@@ -267,10 +267,16 @@ class TrajectoryGenerator(PythonUnit):
             wp = thesis_to_urdf(wp)
         if self.sampling not in SAMPLINGS:
             raise ValueError(f"sampling must be one of {SAMPLINGS}, got {self.sampling!r}")
-        self.trajectory = plan_parabolic_blend(wp, self.v_max, self.a_max)
+        self.trajectory = self.plan(wp)
         self.duration = self.trajectory.duration
         self._midpoint = self.sampling == "step_midpoint"
         self._write(self.start_time, 0.0)
+
+    def plan(self, waypoints: np.ndarray):
+        """The trajectory through ``waypoints`` (URDF radians, n x 7): anything with
+        ``sample(t) -> (q, qd, qdd)`` and ``duration``.  Subclasses re-time it
+        (models.optimal_timing)."""
+        return plan_parabolic_blend(waypoints, self.v_max, self.a_max)
 
     def do_step(self, t: float, h: float) -> None:
         self._write(t + h, h)
