@@ -331,7 +331,9 @@ def plan_optimal_timing(blend: ParabolicBlendTrajectory, model: pin.Model, v_max
     # start from the blend, uniformly slowed down to the duration bound if that is longer (s_dot constant)
     b = np.full(n + 1, min(1.0, blend.duration / max_duration) ** 2 if max_duration else 1.0)
     cap = ubx[: n + 1].copy()
-    feasible = _within_limits(path, b, cap, a_max, tau_max) and (max_duration is None or _duration(path, b) <= max_duration)
+    # (the slowed blend lasts the bound exactly: compare with a rounding tolerance)
+    feasible = _within_limits(path, b, cap, a_max, tau_max) and (
+        max_duration is None or _duration(path, b) <= max_duration * (1 + 1e-9))
     best = (_energy(path, drive, b) + time_weight * _duration(path, b), b) if feasible else (math.inf, b)
     x0 = np.concatenate([b, np.sqrt(b), np.zeros(NJ * n)])
     radius, passes, result = TRUST_RADIUS, 0, None

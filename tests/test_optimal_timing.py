@@ -23,7 +23,7 @@ from models.trajectory import plan_parabolic_blend
 
 from .test_pick_and_place import FOLDER, electric_power, thesis_waypoints
 
-DESIGNS = [(-45.0, 70.0), (20.0, 0.0), (-100.0, 0.0)]  # thesis q2[2], q2[4] (degrees)
+DESIGNS = [(-45.0, 70.0), (20.0, 0.0), (-100.0, 0.0), (-100.0, 140.0)]  # thesis q2[2], q2[4] (degrees)
 MODES = {"1.25 x the blend's duration": dict(factor=1.25), "energy + 20 J/s x duration": dict(time_weight=20.0)}
 DT = 5e-4  # dense sampling (s)
 
@@ -151,3 +151,22 @@ def test_unit_plays_the_slowed_blend_as_the_reference_when_not_optimizing(tmp_pa
     slowed = blend_of((-45.0, 70.0), 1.25)
     assert result.objectives["duration"] == pytest.approx(slowed.duration, rel=1e-12)
     assert result.objectives["duration"] == pytest.approx(1.25 * blend_of((-45.0, 70.0)).duration, rel=1e-12)
+
+
+def test_study_specs_are_up_to_date_and_validate():
+    import importlib.util
+
+    from orchestrator.design import DesignSpace
+    from orchestrator.spec import load_spec
+    from orchestrator.system import build_system
+
+    folder = FOLDER.parent / "optimal_timing"
+    module_spec = importlib.util.spec_from_file_location("make_specs_optimal", folder / "make_specs.py")
+    make_specs = importlib.util.module_from_spec(module_spec)
+    module_spec.loader.exec_module(make_specs)
+    base = json.loads((FOLDER / "spec_coarse.json").read_text())
+    for name, raw in {"spec.json": make_specs.main_study(base), "spec_tradeoff.json": make_specs.tradeoff(base)}.items():
+        assert json.loads((folder / name).read_text()) == raw, f"{name} is stale: run make_specs.py"
+        assert list(build_system(load_spec(folder / name)).order) == ["traj", "robot", "energy"]
+    assert len(DesignSpace.from_spec(load_spec(folder / "spec.json"))) == 7 * 11 * 2
+    assert len(DesignSpace.from_spec(load_spec(folder / "spec_tradeoff.json"))) == 9 * 8 * 2

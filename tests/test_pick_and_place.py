@@ -79,7 +79,9 @@ def test_specs_validate_and_variants_are_up_to_date():
     module_spec.loader.exec_module(make_specs)
     base = json.loads(SPEC.read_text())
     expected = {"spec_exudyn.json": make_specs.exudyn_level(base), "spec_coarse.json": make_specs.coarse(base),
-                "spec_coarse_exudyn.json": make_specs.coarse(make_specs.exudyn_level(base))}
+                "spec_coarse_exudyn.json": make_specs.coarse(make_specs.exudyn_level(base)),
+                "spec_datasheet.json": make_specs.datasheet_speeds(base),
+                "spec_coarse_datasheet.json": make_specs.coarse(make_specs.datasheet_speeds(base))}
     for name, raw in expected.items():
         assert json.loads((FOLDER / name).read_text()) == raw, f"{name} is stale: run make_specs.py"
     for name in ["spec.json", *expected]:
@@ -89,6 +91,9 @@ def test_specs_validate_and_variants_are_up_to_date():
 
     assert len(DesignSpace.from_spec(load_spec(SPEC))) == 121 * 141 == 17061
     assert len(DesignSpace.from_spec(load_spec(FOLDER / "spec_coarse.json"))) == 273
+    from models.panda_model import DATASHEET_VELOCITY
+
+    assert make_specs.DATASHEET_VELOCITY == pytest.approx(DATASHEET_VELOCITY, rel=1e-15)
 
 
 def test_objectives_agree_with_traces_and_an_independent_computation():

@@ -10,7 +10,11 @@ objectives and the design space cannot drift apart:
   points and known to be the step end's);
 - ``spec_coarse.json`` / ``spec_coarse_exudyn.json``: the same on a coarse
   grid of 13 x 21 = 273 points (q2[2] every 10 deg, q2[4] every 7 deg; both
-  include 0, the thesis's optimum, and the corners).
+  include 0, the thesis's optimum, and the corners);
+- ``spec_datasheet.json``: the thesis replication with the Panda datasheet's
+  joint speeds (150 deg/s joints 1-4, 180 deg/s joints 5-7) instead of Franka's
+  documentation limits, for the trajectory and the robot's limit checks, and
+  ``spec_coarse_datasheet.json`` on the coarse grid.
 
 Run ``python examples/pick_and_place/make_specs.py`` after editing spec.json.
 """
@@ -19,6 +23,7 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -40,6 +45,20 @@ def exudyn_level(spec: dict) -> dict:
     return s
 
 
+# Franka Emika Panda datasheet joint speeds (models/panda_model.py DATASHEET_VELOCITY), rad/s
+DATASHEET_VELOCITY = [math.radians(v) for v in (150.0, 150.0, 150.0, 150.0, 180.0, 180.0, 180.0)]
+
+
+def datasheet_speeds(spec: dict) -> dict:
+    """``spec`` with the datasheet's joint speeds for the trajectory and the robot's limit checks."""
+    s = copy.deepcopy(spec)
+    s["units"]["traj"]["parameters"]["v_max"] = list(DATASHEET_VELOCITY)
+    s["units"]["robot"].setdefault("parameters", {})["qd_max"] = list(DATASHEET_VELOCITY)
+    s["description"] += (" Variant: the Panda datasheet's joint speeds (150 deg/s joints 1-4, 180 deg/s joints 5-7) "
+                         "for the trajectory and the robot's limit checks (thesis replication of table 8-1's times).")
+    return s
+
+
 def coarse(spec: dict) -> dict:
     """``spec`` on the 273-point coarse grid."""
     s = copy.deepcopy(spec)
@@ -54,6 +73,8 @@ def main() -> None:
         "spec_exudyn.json": exudyn_level(base),
         "spec_coarse.json": coarse(base),
         "spec_coarse_exudyn.json": coarse(exudyn_level(base)),
+        "spec_datasheet.json": datasheet_speeds(base),
+        "spec_coarse_datasheet.json": coarse(datasheet_speeds(base)),
     }
     for name, spec in variants.items():
         (HERE / name).write_text(json.dumps(spec, indent=2) + "\n")
