@@ -325,3 +325,16 @@ def test_every_conformance_fmu_goes_through_cosim_inspect(capsys, name, version)
         assert code == 2 and "scheduled execution (FMI 3.0 clocks) only" in text
     else:
         assert code == 0 and f"FMI {version}.0 co-simulation" in text and "Traceback" not in text
+
+
+def test_trace_figures_leave_text_columns_out(write_spec):
+    from matplotlib.figure import Figure
+
+    from orchestrator.analysis.traces import trace_groups, traces_figure
+
+    spec = {"units": {"t": {"fmu": str(ensure_built("types", 3))}}, "experiment": {"stop": 0.3, "step": 0.1},
+            "record": ["t.*"]}
+    traces = orchestrator.run(str(write_spec(spec)), record=True).traces
+    names = [c for _, cols in trace_groups(traces) for c in cols]
+    assert "t.label" not in names and "t.data_out" not in names and "t.y_int8" in names
+    assert len(traces_figure(Figure(), traces)) == len(trace_groups(traces))

@@ -49,7 +49,8 @@ def trace_groups(traces: pd.DataFrame) -> list[tuple[str, list[str]]]:
         return groups
     ports: dict[str, list[str]] = {}
     for c in traces.columns:
-        if str(c) != "time":
+        # only numbers and Booleans plot over time; String and Binary (hex) columns are left out
+        if str(c) != "time" and (pd.api.types.is_numeric_dtype(traces[c]) or pd.api.types.is_bool_dtype(traces[c])):
             ports.setdefault(_port(str(c)), []).append(str(c))
     return [(name, cols) for name, cols in list(ports.items())[:8]]
 
