@@ -94,6 +94,13 @@ def test_folder_ssd_file_and_archive_agree(tmp_path):
     assert values[0] == values[1] == values[2]
 
 
+def test_a_system_connector_without_unit_passes_the_unit_through(tmp_path):
+    ssd = nested_ssd().replace('<ssd:Connector name="speed" kind="input"><ssc:Real unit="rad/s"/></ssd:Connector>',
+                               '<ssd:Connector name="speed" kind="input"><ssc:Real/></ssd:Connector>')
+    raw = read_ssp(write_archive(tmp_path / "through.ssp", nested_files(ssd))).raw
+    assert {c["to"]: c for c in raw["connections"]}["SuT.integrator.u"]["factor"] == pytest.approx(RPM, rel=1e-15)
+
+
 def test_suppress_unit_conversion_keeps_the_raw_value(tmp_path):
     ssd = nested_ssd().replace('endElement="SuT" endConnector="speed"/>',
                                'endElement="SuT" endConnector="speed" suppressUnitConversion="true"/>')

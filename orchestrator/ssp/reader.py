@@ -5,7 +5,8 @@ FMU) becomes a unit named by its path below the root system, e.g.
 ``SuT.edrive_mass``; nested systems only contribute their connectors.  A
 connection chain ``A.y -> system connector -> ... -> B.u`` becomes one
 connection ``A.y -> B.u`` whose factor and offset compose the unit
-conversions (from ``ssd:Units``, unless ``suppressUnitConversion``) and
+conversions (from ``ssd:Units``, unless ``suppressUnitConversion``; a system
+connector without a unit passes the unit through) and
 ``LinearTransformation``s along the chain (SSP: target = factor * converted
 source + offset).  Parameter bindings (inline or .ssv, with ``prefix`` and
 .ssm mappings) become unit parameters and start values; bindings of a higher
@@ -70,10 +71,13 @@ class Node:
 
 @dataclass
 class Edge:
+    """One ssd:Connection: its ends (element path, connector), LinearTransformation and suppressUnitConversion."""
+
     start: tuple[tuple[str, ...], str]
     end: tuple[tuple[str, ...], str]
-    factor: float  # value at end = factor * value at start + offset (unit conversion, then transformation)
+    factor: float  # LinearTransformation: end = factor * (start converted to the end's unit) + offset
     offset: float
+    suppress: bool
     element: Any
 
 
@@ -309,10 +313,7 @@ class _Reader:
                               f"use one of: {', '.join(known[:12])}" if known else "declare the connector")
                 return
             ends.append((owner.path, connector))
-        start_unit = self._unit_of(*ends[0])
-        end_unit = self._unit_of(*ends[1])
         suppress = element.get("suppressUnitConversion", "false") in ("true", "1")
-        a, b = (1.0, 0.0) if suppress else self._conversion(start_unit, end_unit, element)
         linear = element.find(tag("ssc", "LinearTransformation"))
         f, o = 1.0, 0.0
         if linear is not None:
@@ -321,7 +322,7 @@ class _Reader:
                       tag("ssc", "EnumerationMappingTransformation")):
             if element.find(other) is not None:
                 self._problem(element, f"{short_name(other)} is not supported", "map the values inside an FMU")
-        self.edges.append(Edge(ends[0], ends[1], f * a, f * b + o, element))
+        self.edges.append(Edge(ends[0], ends[1], f, o, suppress, element))
 
     def _unit_of(self, path: tuple[str, ...], connector: str) -> tuple[str | None, dict]:
         """The unit of a connector: as the SSD declares it, else the FMU variable's; with the FMU's definitions."""
@@ -370,9 +371,11 @@ class _Reader:
             variable = _variable(node, end[1])
             if variable is None or variable.causality != "input":
                 continue  # parameters fed from system connectors are handled with the bindings
-            source, factor, offset, through = self._trace(end)
-            if source is None:
-                continue
+            chain = self._chain(end)
+            source, through = chain[0].start, chain[0]
+            if self.nodes[source[0]].kind != "component":
+                continue  # a system connector fed by nothing (or a loop): no connection
+            factor, offset = self._compose(chain, self._unit_of(*source))
             source_node = self.nodes[source[0]]
             source_variable = _variable(source_node, source[1])
             if source_variable is None or source_variable.causality != "output":
@@ -388,20 +391,33 @@ class _Reader:
             connections.append(entry)
         return connections
 
-    def _trace(self, end: tuple) -> tuple[tuple | None, float, float, Edge]:
-        """Follow connections back from ``end`` to a component; the composed factor and offset."""
-        factor, offset = 1.0, 0.0
-        edge = self._into[end]
-        visited = set()
+    def _chain(self, end: tuple) -> list[Edge]:
+        """The connections from a component (or a system connector fed by nothing) to ``end``, in flow order."""
+        chain = [self._into[end]]
+        visited = {end}
         while True:
-            factor, offset = factor * edge.factor, factor * edge.offset + offset
-            start = edge.start
-            if self.nodes[start[0]].kind == "component":
-                return start, factor, offset, edge
-            if start in visited or start not in self._into:
-                return None, factor, offset, edge  # a system connector fed by nothing (or a loop)
+            start = chain[0].start
+            if self.nodes[start[0]].kind == "component" or start in visited or start not in self._into:
+                return chain
             visited.add(start)
-            edge = self._into[start]
+            chain.insert(0, self._into[start])
+
+    def _compose(self, chain: list[Edge], unit: tuple) -> tuple[float, float]:
+        """(factor, offset) of a chain: per connection, units converted (unless suppressed), then its transformation.
+
+        ``unit`` is the (name, definitions) of the value entering the chain.  A
+        system connector that declares no unit passes the unit through, so a
+        chain rpm -> (no unit) -> rad/s still converts.
+        """
+        factor, offset = 1.0, 0.0
+        for edge in chain:
+            end_unit = self._unit_of(*edge.end)
+            a, b = (1.0, 0.0) if edge.suppress else self._conversion(unit, end_unit, edge.element)
+            f, o = edge.factor * a, edge.factor * b + edge.offset
+            factor, offset = f * factor, f * offset + o
+            if end_unit[0] or edge.suppress:
+                unit = end_unit  # after a suppressed conversion only a declared unit is known
+        return factor, offset
 
     # --- experiment -----------------------------------------------------------
 
@@ -587,38 +603,39 @@ class _Reader:
             if node.kind == "component" and node.fmu is not None:
                 self._assign(units, unit_names, target, value, unit, extra, label, node)
         # system connectors with values feed the component variables they are connected to
-        for end, edge in getattr(self, "_into", {}).items():
+        for end in getattr(self, "_into", {}):
             node = self.nodes[end[0]]
-            if node.kind != "component" or node.fmu is None or end in chosen:
+            if node.kind != "component" or node.fmu is None or end in chosen or _variable(node, end[1]) is None:
                 continue
-            if _variable(node, end[1]) is None:
+            chain = self._chain(end)
+            start = chain[0].start
+            if start not in system_values:
                 continue
-            factor, offset, start = 1.0, 0.0, end
-            walk = edge
-            while True:
-                factor, offset = factor * walk.factor, factor * walk.offset + offset
-                start = walk.start
-                if start in system_values or start not in self._into:
-                    break
-                walk = self._into[start]
-            if start in system_values:
-                depth, order, value, unit, extra, label = system_values[start]
-                if isinstance(value, float):
-                    value = factor * value + offset
-                self._assign(units, unit_names, end, value, unit, extra, label, node)
+            depth, order, value, unit, extra, label = system_values[start]
+            if isinstance(value, float):  # into the system connector's unit, then along the chain
+                value = self._converted(value, unit, extra, label, self._unit_of(*start))
+                factor, offset = self._compose(chain, self._unit_of(*start))
+                value = factor * value + offset
+            self._assign(units, unit_names, end, value, None, (None, {}, extra[2], extra[3]), label, node)
+
+    def _converted(self, value: float, unit: str | None, extra: tuple, label: str, target_unit: tuple) -> float:
+        """A bound Real value in the target's unit: the .ssv unit converted (unless the mapping suppresses it),
+        then the mapping entry's LinearTransformation."""
+        transform, ssv_units, _, where = extra
+        if not (transform is not None and transform[1]):
+            a, b = self._conversion((unit, {}), target_unit, where, ssv_units, label)
+            value = a * value + b
+        if transform is not None and transform[0] is not None:
+            f, o = transform[0]
+            value = f * value + o
+        return value
 
     def _assign(self, units: dict, unit_names: dict, target: tuple, value: Any, unit: str | None,
                 extra: tuple, label: str, node: Node) -> None:
-        transform, ssv_units, type_, where = extra
+        where = extra[3]
         variable = _variable(node, target[1])
         if isinstance(value, float):
-            suppress = transform is not None and transform[1]
-            if not suppress:
-                a, b = self._conversion((unit, {}), self._unit_of(*target), where, ssv_units, label)
-                value = a * value + b
-            if transform is not None and transform[0] is not None:
-                f, o = transform[0]
-                value = f * value + o
+            value = self._converted(value, unit, extra, label, self._unit_of(*target))
         if variable.causality in ("parameter", "structuralParameter"):
             field_name = "parameters"
         elif variable.causality in ("input", "local", "output", "calculatedParameter"):
