@@ -84,6 +84,7 @@ class Probe:
     def __init__(self, system: System, units: Mapping[str, Unit]):
         self.columns: list[str] = []
         self.types: dict[str, tuple[str, str | None]] = {}
+        self.units: dict[str, str] = {}  # column -> unit of measure, for the recorded table's metadata
         per_unit: dict[str, list] = {}
         positions: dict[str, list[int]] = {}
         exact: dict[str, list] = {}
@@ -94,6 +95,8 @@ class Probe:
                     continue
                 variable = signal.variable
                 self.types[column] = (variable.type, variable.fmi_type)
+                if variable.unit:
+                    self.units[column] = variable.unit
                 if variable.type not in NUMERIC_TYPES or variable.fmi_type in ("Int64", "UInt64"):
                     exact.setdefault(signal.unit, []).append(ref)
                     self.exact_columns.append(column)
@@ -161,7 +164,7 @@ class Execution:
             probe = Probe(self.system, units)
             exact = ExactColumns(probe.exact_columns, probe.read_exact) if probe.exact_columns else None
             recorder = TraceRecorder(probe.columns, self.system.recorded, n_steps + 1, exact,
-                                     probe.types) if self.record else None
+                                     probe.types, probe.units) if self.record else None
             reducer = ObjectiveReducer(probe.columns, [(o, self._columns_of(o.signal)) for o in
                                                        self.system.spec.objectives if o.signal])
             observers = [o for o in (recorder, reducer) if o is not None] + self.extra_observers

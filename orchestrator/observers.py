@@ -39,7 +39,8 @@ class TraceRecorder(Observer):
     """
 
     def __init__(self, all_columns: Sequence[str], recorded: Sequence[str], capacity: int = 1024,
-                 exact: "ExactColumns | None" = None, types: Mapping[str, tuple[str, str | None]] | None = None):
+                 exact: "ExactColumns | None" = None, types: Mapping[str, tuple[str, str | None]] | None = None,
+                 units: Mapping[str, str] | None = None):
         self.columns = list(recorded)
         # Strings, bytes and 64-bit integers are kept as Python objects (``exact``), the rest in one float array.
         self._exact = exact if exact is not None and any(c in exact.columns for c in recorded) else None
@@ -48,6 +49,7 @@ class TraceRecorder(Observer):
         self._exact_index = [self._exact.columns.index(c) for c in recorded if c in exact_names] if self._exact else []
         self._exact_rows: list[list[Any]] = []
         self._types = dict(types or {})
+        self._units = {c: u for c, u in (units or {}).items() if c in self.columns}
         index = [list(all_columns).index(c) for c in self._float_columns]
         # recording every probed column in order is a plain copy, not fancy indexing
         self._index = slice(None) if index == list(range(len(all_columns))) else np.array(index, dtype=int)
@@ -91,7 +93,10 @@ class TraceRecorder(Observer):
         for name in self.columns:
             kind, fmi_type = self._types.get(name, ("Real", None))
             frame[name] = _typed(frame[name], kind, fmi_type)
-        return frame[["time", *self.columns]]
+        frame = frame[["time", *self.columns]]
+        if self._units:
+            frame.attrs["units"] = dict(self._units)  # kept by Parquet (pandas attrs), read back by players
+        return frame
 
 
 def _typed(column: Any, kind: str, fmi_type: str | None) -> Any:

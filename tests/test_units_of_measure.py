@@ -148,3 +148,19 @@ def test_a_relative_quantity_converts_without_the_offset(write_spec):
     result = orchestrator.run(str(write_spec(spec)))
     assert result.ok, result.message
     assert list(result.traces["sink.temperature_seen"])[1:] == [2.0, 2.0]  # a rise of 2 degC is 2 K, not 275.15 K
+
+
+def test_a_recorded_parquet_table_keeps_its_units_for_a_player(write_spec, tmp_path):
+    from orchestrator.cli import main
+
+    recording = measured_spec()
+    recording["record"] = ["src.speed"]
+    assert main(["run", str(write_spec(recording, "record.json")), "--out", str(tmp_path / "rec.parquet")]) == 0
+    assert pd.read_parquet(tmp_path / "rec.parquet").attrs["units"] == {"src.speed": "rpm"}
+    spec = {"units": {"src": {"player": "rec.parquet"}, "sink": {"python": python_unit("SiSink")}},
+            "connections": [{"from": "src.speed", "to": "sink.omega"}],
+            "experiment": {"stop": 1.0, "step": 0.1}, "record": ["src.speed", "sink.omega_seen"]}
+    result = orchestrator.run(str(write_spec(spec, "replay.json")))
+    assert result.ok, result.message
+    tr = result.traces
+    np.testing.assert_array_equal(tr["sink.omega_seen"].to_numpy()[1:], tr["src.speed"].to_numpy()[1:] * RPM)

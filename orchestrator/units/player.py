@@ -13,9 +13,10 @@ Interpolation between samples: ``linear`` (default), ``hold`` (the last
 sample at or before t) or ``nearest``.  Beyond the recorded range:
 ``hold`` the end values (default) or ``error``.
 
-Units of measure: a table has none, so the spec may give them per column,
-alias or array (``"units": {"speed": "rpm"}``); an element ``x[2]`` has the
-unit of its array ``x`` unless given its own.  Connections then convert them
+Units of measure: a Parquet table written by ``cosim run --out`` carries
+the recorded signals' units in its metadata; the spec may give or override
+them per column, alias or array (``"units": {"speed": "rpm"}``; a CSV table
+has none); an element ``x[2]`` has the unit of its array ``x`` unless given its own.  Connections then convert them
 like an FMU's (see :mod:`orchestrator.quantities`).
 """
 
@@ -76,6 +77,7 @@ class PlayerUnitType(UnitType):
         self.interpolation = interpolation
         self.extrapolation = extrapolation
         self.units = dict(units or {})
+        self._recorded_units: dict[str, str] = {}
         self._table: tuple[np.ndarray, np.ndarray, list[str]] | None = None
         self._aliases: dict[str, str] | None = None
 
@@ -106,6 +108,8 @@ class PlayerUnitType(UnitType):
                 raise ValueError(f"{self.path}: column(s) {', '.join(not_numbers)} are not numbers (a player plays "
                                  "numeric and Boolean columns only); leave them out of 'columns'")
             self._table = (frame["time"].to_numpy(dtype=float), frame[names].to_numpy(dtype=float), names)
+            # units written by 'cosim run --out' into a Parquet table's metadata (CSV has none)
+            self._recorded_units = dict(frame.attrs.get("units") or {})
         return self._table
 
     def aliases(self) -> dict[str, str]:
@@ -132,16 +136,23 @@ class PlayerUnitType(UnitType):
         variables = [Variable(n, "output", "Real", unit=self._unit_of(n), start=float(values[0, index[n]]),
                               description=f"played from {self.path}") for n in names]
         for base, members in runs.items():
-            variables.append(Variable(base, "output", "Real", unit=self.units.get(base), shape=(len(members),),
+            variables.append(Variable(base, "output", "Real", unit=self._unit_of(base), shape=(len(members),),
                                       description=f"array of {base}[1..{len(members)}] played from {self.path}"))
         return UnitDescription(name=Path(self.path).name, variables=tuple(variables), kind="player",
                                feedthrough={v.name: () for v in variables}, source=self.path)
 
     def _unit_of(self, name: str) -> str | None:
+        """The spec's unit for a column, alias or array (an element has its array's), else the recorded one."""
         if name in self.units:
             return self.units[name]
         base, index = parse_port(name)
-        return self.units.get(base) if index is not None else None
+        if index is not None and base in self.units:
+            return self.units[base]
+        column = self.aliases().get(name, name)
+        recorded = self._recorded_units.get(column)
+        if recorded is None and column not in self.table()[2]:  # an array: its first element's recorded unit
+            recorded = self._recorded_units.get(f"{self.aliases().get(f'{name}[1]', f'{name}[1]')}")
+        return recorded
 
     def column_index(self, ref: ElementRef) -> int:
         """The table column of one element (scalar column, alias, or array element)."""
