@@ -248,6 +248,22 @@ def test_spec_takes_its_system_from_an_ssp_and_overrides_it(tmp_path):
         assert by_b[b] == pytest.approx(nested_expected("jacobi", sink_b=b)["sink.y"], rel=1e-12)
 
 
+def test_sweep_of_an_ssp_resumes_in_a_new_process(tmp_path):
+    # the spec read from an archive names its FMUs inside the archive, not by this process's temporary
+    # folder, so a second process finds the same spec digest and accepts --resume
+    import subprocess
+    import sys
+
+    path = write_archive(tmp_path / "nested.ssp", nested_files())
+    command = [sys.executable, "-m", "orchestrator.cli", "sweep", str(path), "--out", str(tmp_path / "out"),
+               "--workers", "1", "--step", "0.1"]
+    first = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert first.returncode == 0, first.stderr
+    again = subprocess.run(command + ["--resume"], capture_output=True, text=True, timeout=300)
+    assert again.returncode == 0, again.stderr
+    assert "all 1 points already in" in again.stderr
+
+
 def test_spec_naming_a_missing_ssp(tmp_path, capsys):
     (tmp_path / "spec.json").write_text(json.dumps({"system": "gone.ssp", "experiment": {"stop": 1, "step": 1}}))
     assert main(["validate", str(tmp_path / "spec.json")]) == 2
