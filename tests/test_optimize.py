@@ -169,3 +169,10 @@ def test_bad_optimize_section_is_exit_2_naming_the_field(write_spec, tmp_path, c
     spec = write_spec(bowls_spec(sampler="annealing"), "e.json")
     assert main(["validate", str(spec)]) == 2
     assert "$.optimize.sampler" in capsys.readouterr().err
+
+
+def test_default_results_folder_is_named_after_the_spec(write_spec, tmp_path, local_cluster, monkeypatch):
+    spec = write_spec(bowls_spec(budget=4, batch=4))
+    monkeypatch.chdir(tmp_path)
+    assert main(["optimize", str(spec), "--scheduler", local_cluster]) == 0
+    assert len(pd.read_parquet(tmp_path / "results" / "bowls_optimize" / "results.parquet")) == 4
