@@ -82,6 +82,8 @@ def _parser() -> argparse.ArgumentParser:
     add_sweep_parser(sub)
     from .optimize_cli import add_optimize_parser
     add_optimize_parser(sub)
+    from .sensitivity_cli import add_sensitivity_parser
+    add_sensitivity_parser(sub)
     from .analysis_cli import add_analysis_parsers
     add_analysis_parsers(sub)
     return parser

@@ -334,7 +334,8 @@ class Optimization:
     OptimizeError when ``out`` cannot be used as asked.
     """
 
-    def __init__(self, spec_path: str | Path, out: str | Path, budget: int | None = None, sampler: str | None = None,
+    def __init__(self, spec_path: str | Path, out: str | Path, objectives: Mapping[str, str] | None = None,
+                 budget: int | None = None, sampler: str | None = None,
                  batch: int | None = None, seed: int | None = None, resume: bool = False, workers: int | None = None,
                  scheduler: str | None = None, timeout: float | None = None, progress: TextIO | None = None,
                  quiet: bool = False):
@@ -357,8 +358,8 @@ class Optimization:
         self.store = ResultsStore(self.out)
         previous = self.store.metadata() if resume else None
         stored = (previous or {}).get("optimize", {})
-        given = {"budget": budget, "sampler": sampler, "batch": batch, "seed": seed}
-        for key in ("sampler", "batch", "seed"):  # a resume replays the stored run: these must not change
+        given = {"budget": budget, "sampler": sampler, "batch": batch, "seed": seed, "objectives": objectives}
+        for key in ("sampler", "batch", "seed", "objectives"):  # a resume replays the stored run: these must not change
             if stored.get(key) is not None and given[key] is not None and given[key] != stored[key]:
                 raise OptimizeError(f"{self.out} was optimised with {key} {stored[key]}; resume with the same "
                                     f"{key} (or leave it out), or start afresh in another --out")
@@ -435,11 +436,13 @@ class Optimization:
         study.tell(trial, values)
 
     # -- the run ------------------------------------------------------------------
-    def run(self) -> dict[str, int]:
+    def run(self, evaluator: Any = None) -> dict[str, int]:
         """Optimise until ``budget`` evaluations are in the table; returns the counts by status.
 
         Ctrl-C stops it; the rows so far stay and ``resume`` continues.
-        Raises OptimizeError when no Dask workers are reachable.
+        Raises OptimizeError when no Dask workers are reachable.  ``evaluator``
+        replaces the Dask evaluator (anything with Evaluator's ``evaluate``;
+        benchmarks answer from a stored table with it).
         """
         import optuna
 
@@ -456,6 +459,10 @@ class Optimization:
             directions=list(s.objectives.values()),
             sampler=make_sampler(s.sampler, s.seed, s.batch))
         dists = distributions(self.space)
+        if evaluator is not None:
+            self.store.write_metadata(self._metadata(started, "", 0))
+            self._loop(study, dists, evaluator, stored)
+            return self._finish()
         try:
             with dask_client(self.workers, self.scheduler) as (client, n_workers, link):
                 self.store.write_metadata(self._metadata(started, client.scheduler.address, n_workers))

@@ -15,6 +15,13 @@ from typing import Any
 from .errors import EXIT_OK, EXIT_RUN_FAILED, UsageError
 
 
+class _Objective(argparse.Action):
+    """``--min A --max B``: (name, 'min' | 'max') pairs in the order given."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        setattr(namespace, self.dest, list(getattr(namespace, self.dest) or []) + [(values, option_string[2:])])
+
+
 def add_optimize_parser(sub: Any) -> None:
     """Register the ``optimize`` subcommand on an argparse sub-parser collection."""
     from .optimize import SAMPLERS
@@ -22,6 +29,9 @@ def add_optimize_parser(sub: Any) -> None:
     p = sub.add_parser("optimize", help="search a spec's design space for the Pareto front (Optuna, on Dask)")
     p.add_argument("spec", help="path to spec.json")
     p.add_argument("--out", metavar="DIR", help="results folder (default: results/<spec name>_optimize)")
+    p.add_argument("--min", dest="objectives", action=_Objective, metavar="OBJ",
+                   help="minimize OBJ (repeatable; replaces optimize.objectives and the spec's senses)")
+    p.add_argument("--max", dest="objectives", action=_Objective, metavar="OBJ", help="maximize OBJ (repeatable)")
     p.add_argument("--budget", type=int, metavar="N", help="evaluations in all (default: optimize.budget, or 200)")
     p.add_argument("--sampler", choices=SAMPLERS, help="Optuna sampler (default: optimize.sampler, or tpe)")
     p.add_argument("--batch", type=int, metavar="K",
@@ -45,7 +55,8 @@ def cmd_optimize(args: argparse.Namespace) -> int:
         if value is not None and value < 1:
             raise UsageError(f"--{option} must be at least 1")
     out = Path(args.out) if args.out else Path(f"{default_folder(args.spec)}_optimize")
-    run = Optimization(args.spec, out, budget=args.budget, sampler=args.sampler, batch=args.batch,
+    objectives = {name: f"{sense}imize" for name, sense in args.objectives} if args.objectives else None
+    run = Optimization(args.spec, out, objectives=objectives, budget=args.budget, sampler=args.sampler, batch=args.batch,
                        seed=args.seed, resume=args.resume, workers=args.workers, scheduler=args.scheduler,
                        timeout=args.timeout)
     counts = run.run()

@@ -177,12 +177,16 @@ class Sweep:
     The constructor reads everything a sweep needs from disk (spec, units, FMU
     bytes) and checks the results folder.  Raises SpecError for a bad spec or
     design space, SweepError when ``out`` cannot be used as asked.
+    ``space_of`` builds the points from the checked Spec (default: its design
+    space); a driver such as ``cosim sensitivity`` passes its own sample (an
+    object with DesignSpace's ``__iter__``, ``__len__``, ``head``, ``columns``,
+    ``targets`` and ``method``).
     """
 
     def __init__(self, spec_path: str | Path, workers: int | None = None, out: str | Path | None = None,
                  scheduler: str | None = None, timeout: float | None = None, resume: bool = False,
                  batch_size: int | None = None, csv: bool = False, progress: TextIO | None = None,
-                 quiet: bool = False, experiment: dict | None = None):
+                 quiet: bool = False, experiment: dict | None = None, space_of: Any = None):
         from .results import ResultsStore  # pandas and pyarrow only when a sweep is made
         from .validate import check_spec
 
@@ -192,7 +196,7 @@ class Sweep:
             raise SweepError(f"workers must be at least 1, got {workers}")
         self.system = check_spec(spec_path, experiment)  # experiment: command-line overrides
         self.spec = self.system.spec
-        self.space = DesignSpace.from_spec(self.spec)
+        self.space = (space_of or DesignSpace.from_spec)(self.spec)
         self.workers = workers or os.cpu_count() or 1
         self.scheduler, self.timeout, self.resume = scheduler, timeout, resume
         self.batch_size, self.csv, self.quiet = batch_size, csv, quiet

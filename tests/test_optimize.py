@@ -176,3 +176,16 @@ def test_default_results_folder_is_named_after_the_spec(write_spec, tmp_path, lo
     monkeypatch.chdir(tmp_path)
     assert main(["optimize", str(spec), "--scheduler", local_cluster]) == 0
     assert len(pd.read_parquet(tmp_path / "results" / "bowls_optimize" / "results.parquet")) == 4
+
+
+def test_objectives_from_the_command_line_drive_the_search_and_the_front(write_spec, tmp_path, local_cluster):
+    spec = write_spec(bowls_spec(budget=16))
+    out = tmp_path / "out"
+    assert main(["optimize", str(spec), "--max", "f1", "--min", "f2", "--out", str(out),
+                 "--scheduler", local_cluster]) == 0
+    meta = json.loads((out / "metadata.json").read_text())
+    assert meta["optimize"]["objectives"] == {"f1": "maximize", "f2": "minimize"}
+    assert main(["pareto", str(out), "--csv", str(tmp_path / "front.csv")]) == 0  # senses from the metadata
+    df = pd.read_parquet(out / "results.parquet")
+    expected = pareto_mask(df[["f1", "f2"]].to_numpy(), ["max", "min"])
+    assert sorted(pd.read_csv(tmp_path / "front.csv")["point_id"]) == sorted(df.loc[expected, "point_id"])

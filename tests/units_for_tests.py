@@ -176,3 +176,21 @@ class TemperatureRise(PythonUnit):
 
     def do_step(self, t, h):
         self.rise = 2.0
+
+
+class Ishigami(PythonUnit):
+    """y = sin(x1) + a sin(x2)^2 + b x3^4 sin(x1) (Ishigami & Homma 1990), and lin = 3 x1 + x2 (for Morris)."""
+
+    variables = (
+        Variable("x1", "parameter", start=0.0),
+        Variable("x2", "parameter", start=0.0),
+        Variable("x3", "parameter", start=0.0),
+        Variable("a", "parameter", start=7.0),
+        Variable("b", "parameter", start=0.1),
+        Variable("y", "output", start=0.0),
+        Variable("lin", "output", start=0.0),
+    )
+
+    def do_step(self, t, h):
+        self.y = math.sin(self.x1) + self.a * math.sin(self.x2) ** 2 + self.b * self.x3 ** 4 * math.sin(self.x1)
+        self.lin = 3.0 * self.x1 + self.x2

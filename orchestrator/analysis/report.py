@@ -84,6 +84,7 @@ def build_report(table: ResultsTable) -> str:
              f"<h1>Sweep report: {html.escape(_name(table))}</h1>", _overview(table, parameters, objectives),
              _status_section(table), _objective_section(table, parameters, objectives, ok),
              _pareto_section(table, parameters, ok & table.feasible_mask()), _optimization_section(table),
+             _sobol_section(table),
              _sensitivity_section(table, parameters, objectives, ok),
              _figure_section(table, parameters, objectives, ok), "</body></html>"]
     return "\n".join(parts)
@@ -205,6 +206,39 @@ def _optimization_section(table: ResultsTable) -> str:
                    f"over the feasible ok rows, reference point {HV_REFERENCE} in each (the largest possible "
                    f"value is {HV_REFERENCE ** len(names):.4g}); final {final:.4f}.</p>"
                    f"<figure>{png_base64(fig)}<figcaption>Hypervolume against evaluations.</figcaption></figure>")
+
+
+def _sobol_section(table: ResultsTable) -> str:
+    """For a ``cosim sensitivity`` run: its indices with confidence half-widths, and their figure."""
+    meta = table.metadata or {}
+    settings = meta.get("sensitivity") or {}
+    if meta.get("kind") != "sensitivity":
+        return ""
+    import pandas as pd
+
+    head = (f"<h2>Sensitivity indices ({html.escape(str(settings.get('method')))}, n={settings.get('n')}, "
+            f"{settings.get('samples')} samples, seed {settings.get('seed')})</h2>")
+    path = table.path.parent / str(settings.get("table", "sensitivity.csv"))
+    if not path.exists():
+        return head + f"<p class='note'>{html.escape(str(path))} is missing; run cosim sensitivity again.</p>"
+    indices = pd.read_csv(path)
+    wide = indices.pivot_table(index=["objective", "parameter"], columns="index", values=["value", "conf"],
+                               sort=False)
+    names = list(dict.fromkeys(indices["index"]))
+    rows = [[objective, parameter] + [Raw(f"{fmt(wide.loc[(objective, parameter), ('value', n)])} ± "
+                                          f"{fmt(wide.loc[(objective, parameter), ('conf', n)])}") for n in names]
+            for objective, parameter in wide.index]
+    text = head + ("<p>Sobol: S1 is the share of the objective's variance due to the parameter alone, ST that "
+                   "including all its interactions; Morris: mu* the mean absolute elementary effect (per unit of "
+                   "the parameter's range), sigma their spread (interactions, non-linearity). ± is the 95 % "
+                   "confidence half-width (bootstrap).</p>")
+    text += _table(["objective", "parameter", *names], rows, left=2)
+    figure = table.path.parent / str(settings.get("figure", "sensitivity.png"))
+    if figure.exists():
+        data = base64.b64encode(figure.read_bytes()).decode()
+        text += f"<figure><img alt='indices' src='data:image/png;base64,{data}'><figcaption>Indices with " \
+                "their confidence intervals.</figcaption></figure>"
+    return text
 
 
 def _sensitivity_section(table: ResultsTable, parameters: list[str], objectives: list[str], ok: np.ndarray) -> str:

@@ -112,9 +112,10 @@ class ResultsTable:
         return f"{column} [{unit}]" if unit else column
 
     def objective_senses(self) -> dict[str, str]:
-        """Flat objective columns with a ``sense`` -> 'min' or 'max': those of the spec's ``optimize``
-        section when it names them (the objectives an optimisation ran on), else the spec's, in spec order."""
-        optimized = ((self.spec or {}).get("optimize") or {}).get("objectives")
+        """Flat objective columns with a ``sense`` -> 'min' or 'max': those an optimisation ran on (its
+        metadata, or the spec's ``optimize`` section) when given, else the spec's, in spec order."""
+        optimized = ((self.metadata or {}).get("optimize") or {}).get("objectives") \
+            or ((self.spec or {}).get("optimize") or {}).get("objectives")
         if isinstance(optimized, Mapping) and optimized:
             return {c: ("max" if str(s).startswith("max") else "min")
                     for name, s in optimized.items() for c in self._columns_of(name)}
