@@ -210,7 +210,8 @@ class TrajectoryGenerator(PythonUnit):
     numbers.  Outputs are always URDF radians.
 
     Limits ``v_max``, ``a_max`` default to Franka's documentation values
-    (:data:`models.panda_model.FRANKA_DOC_LIMITS`).  Outputs at time ``t`` are the
+    (:data:`models.panda_model.FRANKA_DOC_LIMITS`); ``velocity_scale`` (a
+    speed override in (0, 1], default 1) plans with ``velocity_scale * v_max``.  Outputs at time ``t`` are the
     trajectory at ``t - start_time``; after the end it rests at the last waypoint
     with ``finished`` true.
 
@@ -237,6 +238,9 @@ class TrajectoryGenerator(PythonUnit):
                  description="joint velocity limits (Franka documentation)", variability="fixed"),
         Variable("a_max", "parameter", unit="rad/s2", start=tuple(FRANKA_DOC_LIMITS.qdd_max), shape=(N_JOINTS,),
                  description="joint acceleration limits (Franka documentation)", variability="fixed"),
+        Variable("velocity_scale", "parameter", start=1.0, min=0.0, max=1.0,
+                 description="speed override: the trajectory is planned with velocity_scale * v_max, in (0, 1]",
+                 variability="fixed"),
         Variable("sampling", "parameter", type="String", start="instant",
                  description="'instant': outputs at the communication point t+h; 'step_midpoint': q_ref and qd_ref "
                              "at the middle of the step just taken, qdd_ref its mean over the step (see the class docstring)",
@@ -267,6 +271,8 @@ class TrajectoryGenerator(PythonUnit):
             wp = thesis_to_urdf(wp)
         if self.sampling not in SAMPLINGS:
             raise ValueError(f"sampling must be one of {SAMPLINGS}, got {self.sampling!r}")
+        if not 0.0 < float(self.velocity_scale) <= 1.0:
+            raise ValueError(f"velocity_scale must be in (0, 1], got {self.velocity_scale}")
         self.trajectory = self.plan(wp)
         self.duration = self.trajectory.duration
         self._midpoint = self.sampling == "step_midpoint"
@@ -276,7 +282,7 @@ class TrajectoryGenerator(PythonUnit):
         """The trajectory through ``waypoints`` (URDF radians, n x 7): anything with
         ``sample(t) -> (q, qd, qdd)`` and ``duration``.  Subclasses re-time it
         (models.optimal_timing)."""
-        return plan_parabolic_blend(waypoints, self.v_max, self.a_max)
+        return plan_parabolic_blend(waypoints, float(self.velocity_scale) * self.v_max, self.a_max)
 
     def do_step(self, t: float, h: float) -> None:
         self._write(t + h, h)

@@ -158,6 +158,26 @@ def test_unit_rejects_bad_parameters():
     u.setup(0.0, None)
     with pytest.raises(UnitError, match="convention"):
         u.exit_initialization()
+    u = TrajectoryGenerator("traj")
+    u.set_values({"velocity_scale": 0.0})
+    u.setup(0.0, None)
+    with pytest.raises(UnitError, match="velocity_scale"):
+        u.exit_initialization()
+
+
+def test_velocity_scale_plans_with_scaled_velocity_limits():
+    wp_deg = [[0, 0, 0, 0, 0, 0, 0], [-90, -45, 0, 70, 0, 0, 0], [-180, 0, 0, 0, 0, 0, 0]]
+    flat = np.zeros((N_MAX_WAYPOINTS, 7))
+    flat[:3] = wp_deg
+    slow = plan_parabolic_blend(thesis_to_urdf(wp_deg), 0.4 * VMAX, AMAX)
+    u = TrajectoryGenerator("traj")
+    u.set_values({"waypoints": flat.ravel(), "n_waypoints": 3, "convention": "thesis_deg", "velocity_scale": 0.4})
+    u.setup(0.0, None)
+    u.exit_initialization()
+    assert u.get_values(["duration"])["duration"] == pytest.approx(slow.duration)
+    assert slow.duration > plan_parabolic_blend(thesis_to_urdf(wp_deg), VMAX, AMAX).duration * 2
+    peak = max(np.max(np.abs(slow.sample(t)[1]) / VMAX) for t in np.linspace(0, slow.duration, 400))
+    assert 0.39 < peak <= 0.4 + 1e-12
 
 
 # --- thesis (Unity) angles -> URDF angles -------------------------------------------------
