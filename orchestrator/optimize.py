@@ -272,14 +272,19 @@ def hypervolume(losses: np.ndarray, reference: float = HV_REFERENCE) -> float:
 
 
 def hypervolume_history(values: np.ndarray, senses: Sequence[str], usable: np.ndarray) -> np.ndarray:
-    """Hypervolume of the front after each row (rows in evaluation order), objectives scaled to [0, 1]
-    over the ``usable`` rows (ok and feasible), reference point HV_REFERENCE."""
+    """Hypervolume of the front after each row (rows in evaluation order) of the ``usable`` rows (ok and
+    feasible), objectives scaled to [0, 1] between the ideal and nadir points of the final front, reference
+    point HV_REFERENCE: it rises to the final front's value as the search converges."""
     from .analysis.pareto import pareto_mask
 
     out = np.zeros(len(values))
     if not usable.any():
         return out
-    losses = normalised_losses(values[usable], senses)
+    signs = np.array([1.0 if s.startswith("min") else -1.0 for s in senses])
+    final = values[usable][pareto_mask(values[usable] * signs)]
+    ideal = np.where(signs > 0, final.min(axis=0), final.max(axis=0))
+    nadir = np.where(signs > 0, final.max(axis=0), final.min(axis=0))
+    losses = normalised_losses(values[usable], senses, ideal, nadir)
     front: np.ndarray = np.zeros((0, losses.shape[1]))
     index = np.flatnonzero(usable)
     current, k = 0.0, 0

@@ -189,3 +189,45 @@ def test_objectives_from_the_command_line_drive_the_search_and_the_front(write_s
     df = pd.read_parquet(out / "results.parquet")
     expected = pareto_mask(df[["f1", "f2"]].to_numpy(), ["max", "min"])
     assert sorted(pd.read_csv(tmp_path / "front.csv")["point_id"]) == sorted(df.loc[expected, "point_id"])
+
+
+def staircase_area(points: np.ndarray, reference: float) -> float:
+    """2-D hypervolume by the staircase: sort by the first loss, add each point's rectangle up to the last one."""
+    pts = points[np.all(points < reference, axis=1)]
+    pts = pts[np.argsort(pts[:, 0])]
+    area, best_y = 0.0, reference
+    for x, y in pts:
+        if y < best_y:
+            area += (reference - x) * (best_y - y)
+            best_y = y
+    return area
+
+
+def test_hypervolume_and_its_history_in_the_report(tmp_path):
+    from orchestrator.analysis.report import build_report
+    from orchestrator.analysis.table import load_results
+    from orchestrator.optimize import hypervolume_history
+
+    rng = np.random.default_rng(4)
+    losses = rng.random((40, 2))
+    assert hypervolume(losses) == pytest.approx(staircase_area(losses, 1.1), rel=1e-12)
+    values = rng.random((30, 2)) * [10.0, 2.0] + [1.0, 5.0]
+    usable = np.ones(30, dtype=bool)
+    usable[[3, 17]] = False
+    history = hypervolume_history(values, ["min", "max"], usable)
+    assert np.all(np.diff(history) >= -1e-12)  # a front never loses hypervolume
+    final = values[usable][pareto_mask(values[usable], ["min", "max"])]
+    scaled = normalised_losses(values[usable], ["min", "max"], final.min(axis=0) * [1, 0] + final.max(axis=0) * [0, 1],
+                               final.max(axis=0) * [1, 0] + final.min(axis=0) * [0, 1])
+    assert history[-1] == pytest.approx(staircase_area(scaled, 1.1), rel=1e-12)
+    # an optimisation's table: the report plots that history
+    df = pd.DataFrame({"point_id": [f"p{i}" for i in range(30)], "a": values[:, 0], "b": values[:, 1],
+                       "trial": np.arange(30), "feasible": usable, "status": "ok"})
+    (tmp_path / "o").mkdir()
+    df.to_parquet(tmp_path / "o" / "results.parquet")
+    meta = {"kind": "optimization", "optimize": {"objectives": {"a": "minimize", "b": "maximize"}, "sampler": "tpe"},
+            "spec": {"objectives": {"a": {"signal": "u.a", "reduce": "final"}, "b": {"signal": "u.b", "reduce": "final"}}}}
+    (tmp_path / "o" / "metadata.json").write_text(json.dumps(meta))
+    page = build_report(load_results(tmp_path / "o"))
+    assert "<h2>Optimisation</h2>" in page and f"final {history[-1]:.4f}" in page
+    assert f"{int(pareto_mask(values[usable], ['min', 'max']).sum())} non-dominated of 28 ok, feasible rows" in page

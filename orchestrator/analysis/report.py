@@ -203,8 +203,8 @@ def _optimization_section(table: ResultsTable) -> str:
     ax.grid(alpha=0.3)
     final = float(history[-1]) if len(history) else 0.0
     return text + (f"<p>Hypervolume of the feasible front after each evaluation: objectives scaled to [0, 1] "
-                   f"over the feasible ok rows, reference point {HV_REFERENCE} in each (the largest possible "
-                   f"value is {HV_REFERENCE ** len(names):.4g}); final {final:.4f}.</p>"
+                   f"between the ideal and nadir points of the final front, reference point {HV_REFERENCE} in "
+                   f"each; final {final:.4f}.</p>"
                    f"<figure>{png_base64(fig)}<figcaption>Hypervolume against evaluations.</figcaption></figure>")
 
 
