@@ -197,7 +197,7 @@ class SensitivityStudy:
         """Run the sample (as a sweep) and write the indices; returns (counts by status, indices DataFrame)."""
         import pandas as pd
 
-        counts = self.sweep.run(load=False)
+        counts = self.sweep.run_to_disk()
         table = self.sweep.store.table()
         indices = self.indices(table)
         indices.to_csv(self.out / TABLE_NAME, index=False)
