@@ -6,9 +6,10 @@ they share the cluster set-up, the payload (system + unit files, scattered
 once), the per-worker child processes of :mod:`orchestrator.isolation` with
 their timeouts, and the rule that a fault is a row, never an exception:
 
-- :func:`dask_client` connects to a running scheduler or starts a local
-  cluster of worker processes (one thread each, 127.0.0.1) and closes what it
-  started.
+- :func:`dask_client` starts the cluster of a cluster file, connects to a
+  running scheduler (given, or from Dask's configuration) or starts a local
+  cluster of worker processes (one thread each, 127.0.0.1), and closes what
+  it started (see :mod:`orchestrator.cluster`).
 - :class:`Evaluator` runs a list of points on that client in parallel and
   returns one row per point in the order given (``evaluate``).
 - :func:`lost_rows` are the rows of points whose task was lost with its
@@ -41,36 +42,58 @@ def _thread_count(client: Any) -> int:
 
 
 @contextmanager
-def dask_client(workers: int, scheduler: str | None = None) -> Iterator[tuple[Any, int, str]]:
+def dask_client(workers: int, scheduler: str | None = None,
+                cluster_file: str | None = None) -> Iterator[tuple[Any, int, str]]:
     """Yields ``(client, worker threads, dashboard link)``; closes the client and any cluster it started.
 
-    Without ``scheduler`` a ``LocalCluster`` of ``workers`` processes is
-    started.  Raises ClusterError when the scheduler cannot be reached or has
-    no workers within 60 s.
+    ``cluster_file`` (a path, see :mod:`orchestrator.cluster`) comes first,
+    then ``scheduler``, then Dask's configured scheduler address; without any
+    a ``LocalCluster`` of ``workers`` processes is started.  Raises
+    ClusterError when the scheduler cannot be reached or has no workers within
+    60 s (a cluster file's jobs: 10 min), ClusterFileError for a bad cluster file.
     """
+    import dask
     from distributed import Client, LocalCluster
 
+    from .cluster import ALLOWED_FAILURES, configured_scheduler, read_cluster_file, start_cluster
+
     cluster = None
-    if scheduler is None:
+    wait, hint, origin = 60, "start some with: dask worker ADDRESS --nthreads 1", ""
+    if scheduler is None and cluster_file is None and (scheduler := configured_scheduler()) is not None:
+        origin = "DASK_SCHEDULER_ADDRESS (or Dask's scheduler-address setting)"
+        hint = f"start workers, or unset {origin} to use a local cluster"
+        origin = f" (from {origin})"
+    if cluster_file is not None:
+        config = read_cluster_file(cluster_file)  # checked before anything starts
+        cluster = start_cluster(config)
+        try:
+            client = Client(cluster)
+        except BaseException:
+            cluster.close()
+            raise
+        link = cluster.dashboard_link if _dashboard_available() else "unavailable (install bokeh to get it)"
+        scheduler = f"{cluster.scheduler_address} ({config.type} of {cluster_file})"
+        wait, hint = 600, f"check that the jobs of {config.type} start (its scale/adapt and job system)"
+    elif scheduler is None:
         dashboard = _dashboard_available()
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address="127.0.0.1:0", silence_logs=40)
+        with dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES}):
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                   dashboard_address="127.0.0.1:0", silence_logs=40)
         client = Client(cluster)
         link = cluster.dashboard_link if dashboard else "unavailable (install bokeh to get it)"
     else:
         try:
             client = Client(scheduler, timeout=10)
         except OSError as exc:
-            raise ClusterError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
+            raise ClusterError(f"cannot reach the Dask scheduler at {scheduler}{origin}: {exc}") from None
         link = client.dashboard_link
     try:
         n_workers = _thread_count(client)
         if n_workers == 0:
             try:
-                client.wait_for_workers(1, timeout=60)
+                client.wait_for_workers(1, timeout=wait)
             except TimeoutError:
-                raise ClusterError(f"the scheduler at {scheduler} has no workers (waited 60 s); "
-                                   "start some with: dask worker ADDRESS --nthreads 1") from None
+                raise ClusterError(f"the scheduler at {scheduler} has no workers (waited {wait} s); {hint}") from None
             n_workers = _thread_count(client)
         yield client, n_workers, link
     finally:

@@ -343,9 +343,10 @@ class Optimization:
                  budget: int | None = None, sampler: str | None = None,
                  batch: int | None = None, seed: int | None = None, resume: bool = False, workers: int | None = None,
                  scheduler: str | None = None, timeout: float | None = None, progress: TextIO | None = None,
-                 quiet: bool = False):
+                 quiet: bool = False, cluster: str | Path | None = None):
         import os
 
+        from .cluster import read_cluster_file
         from .design import DesignSpace, expression_name
         from .isolation import make_payload
         from .results import ResultsStore
@@ -353,6 +354,11 @@ class Optimization:
 
         if timeout is not None and timeout <= 0:
             raise OptimizeError(f"the timeout must be positive, got {timeout}")
+        if cluster is not None and scheduler is not None:
+            raise OptimizeError("give either a cluster file or a scheduler address, not both")
+        self.cluster = None if cluster is None else str(cluster)
+        if cluster is not None:
+            read_cluster_file(cluster)  # a bad cluster file is reported before any work (ClusterFileError)
         self.system = check_spec(spec_path)
         self.spec = self.system.spec
         self.space = DesignSpace.dimensions_of(self.spec)
@@ -469,7 +475,7 @@ class Optimization:
             self._loop(study, dists, evaluator, stored)
             return self._finish()
         try:
-            with dask_client(self.workers, self.scheduler) as (client, n_workers, link):
+            with dask_client(self.workers, self.scheduler, self.cluster) as (client, n_workers, link):
                 self.store.write_metadata(self._metadata(started, client.scheduler.address, n_workers))
                 self._say(f"cosim optimize {self.spec.name}: {s.sampler}, budget {s.budget}, batch {s.batch}, "
                           f"seed {s.seed}, {len(stored)} evaluations stored; {n_workers} worker(s); dashboard: "
@@ -615,7 +621,7 @@ def optimize(spec_path: str | Path, out: str | Path, **options: Any) -> "Any":
     """Optimise the spec's design space; returns the results table (one row per evaluation).
 
     Options as :class:`Optimization` (budget, sampler, batch, seed, resume,
-    workers, scheduler, timeout, progress, quiet).  Raises SpecError for a bad
+    workers, scheduler, cluster, timeout, progress, quiet).  Raises SpecError for a bad
     spec, OptimizeError when ``out`` or the cluster cannot be used.
     """
     run = Optimization(spec_path, out, **options)

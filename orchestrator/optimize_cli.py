@@ -25,6 +25,7 @@ class _Objective(argparse.Action):
 def add_optimize_parser(sub: Any) -> None:
     """Register the ``optimize`` subcommand on an argparse sub-parser collection."""
     from .optimize import SAMPLERS
+    from .sweep_cli import add_cluster_options
 
     p = sub.add_parser("optimize", help="search a spec's design space for the Pareto front (Optuna, on Dask)")
     p.add_argument("spec", help="path to spec.json")
@@ -39,7 +40,7 @@ def add_optimize_parser(sub: Any) -> None:
     p.add_argument("--seed", type=int, metavar="S", help="sampler seed (default: optimize.seed, or a random one)")
     p.add_argument("--resume", action="store_true", help="continue the optimisation stored in --out to the budget")
     p.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: one per core)")
-    p.add_argument("--scheduler", metavar="ADDRESS", help="use a running Dask scheduler, e.g. tcp://host:8786")
+    add_cluster_options(p)
     p.add_argument("--timeout", type=float, metavar="S", help="seconds an evaluation may run before it is stopped")
     p.set_defaults(handler=cmd_optimize)
 
@@ -58,7 +59,7 @@ def cmd_optimize(args: argparse.Namespace) -> int:
     objectives = {name: f"{sense}imize" for name, sense in args.objectives} if args.objectives else None
     run = Optimization(args.spec, out, objectives=objectives, budget=args.budget, sampler=args.sampler, batch=args.batch,
                        seed=args.seed, resume=args.resume, workers=args.workers, scheduler=args.scheduler,
-                       timeout=args.timeout)
+                       cluster=args.cluster, timeout=args.timeout)
     counts = run.run()
     total = sum(counts.values())
     summary = ", ".join(f"{n} {s}" for s, n in sorted(counts.items()) if n)

@@ -6,7 +6,9 @@ evaluates the points on Dask:
 
 - Cluster: by default a ``distributed.LocalCluster`` of worker *processes*
   (one per core, one thread each, bound to 127.0.0.1; FMUs cannot safely
-  share a process), or any running scheduler by address.
+  share a process), any running scheduler by address (also from
+  ``DASK_SCHEDULER_ADDRESS``), or any Dask cluster class named in a cluster
+  file (Slurm, PBS, Kubernetes ...; :mod:`orchestrator.cluster`).
 - The payload is scattered to the workers once; FMU and ``file.py`` unit bytes
   travel inside it, so workers need no shared filesystem (Python units named
   ``package.module:Class`` must be installed where the workers run).
@@ -186,7 +188,9 @@ class Sweep:
     def __init__(self, spec_path: str | Path, workers: int | None = None, out: str | Path | None = None,
                  scheduler: str | None = None, timeout: float | None = None, resume: bool = False,
                  batch_size: int | None = None, csv: bool = False, progress: TextIO | None = None,
-                 quiet: bool = False, experiment: dict | None = None, space_of: Any = None):
+                 quiet: bool = False, experiment: dict | None = None, space_of: Any = None,
+                 cluster: str | Path | None = None):
+        from .cluster import read_cluster_file
         from .results import ResultsStore  # pandas and pyarrow only when a sweep is made
         from .validate import check_spec
 
@@ -194,6 +198,11 @@ class Sweep:
             raise SweepError(f"the timeout must be positive, got {timeout}")
         if workers is not None and workers < 1:
             raise SweepError(f"workers must be at least 1, got {workers}")
+        if cluster is not None and scheduler is not None:
+            raise SweepError("give either a cluster file or a scheduler address, not both")
+        self.cluster = None if cluster is None else str(cluster)
+        if cluster is not None:
+            read_cluster_file(cluster)  # a bad cluster file is reported before any work (ClusterFileError)
         self.system = check_spec(spec_path, experiment)  # experiment: command-line overrides
         self.spec = self.system.spec
         self.space = (space_of or DesignSpace.from_spec)(self.spec)
@@ -273,7 +282,7 @@ class Sweep:
             self._say(f"cosim sweep {self.spec.name}: all {total} points already in {self.out}")
             return self._finish()
         try:
-            with dask_client(self.workers, self.scheduler) as (client, n_workers, link):
+            with dask_client(self.workers, self.scheduler, self.cluster) as (client, n_workers, link):
                 info = {"started": started, "scheduler": client.scheduler.address, "workers": n_workers,
                         "timeout": self.timeout}
                 self.store.write_metadata(self._metadata(started, info))

@@ -21,7 +21,7 @@ def add_sweep_parser(sub: Any) -> None:
     p.add_argument("spec", help="path to spec.json, or an SSP (.ssp, .ssd, or a folder with SystemStructure.ssd)")
     p.add_argument("--out", metavar="DIR", help="results folder (default: results/<spec name> in the current folder)")
     p.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: one per core)")
-    p.add_argument("--scheduler", metavar="ADDRESS", help="use a running Dask scheduler, e.g. tcp://host:8786")
+    add_cluster_options(p)
     p.add_argument("--timeout", type=float, metavar="S", help="seconds a point may run before it is stopped")
     p.add_argument("--resume", action="store_true", help="run only the points missing in --out")
     p.add_argument("--csv", action="store_true", help="also write DIR/results.csv")
@@ -31,6 +31,17 @@ def add_sweep_parser(sub: Any) -> None:
     p.add_argument("--dry-run", action="store_true",
                    help="print the number of points, a few of them and a time estimate from sample runs")
     p.set_defaults(handler=cmd_sweep)
+
+
+def add_cluster_options(p: argparse.ArgumentParser) -> None:
+    """--scheduler and --cluster, shared by ``sweep`` and ``optimize`` (see :mod:`orchestrator.cluster`)."""
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="use a running Dask scheduler, e.g. tcp://host:8786 (default: $DASK_SCHEDULER_ADDRESS, "
+                            "else a local cluster)")
+    where.add_argument("--cluster", metavar="FILE",
+                       help="start the Dask cluster a YAML/JSON file names (type, kwargs, scale or adapt), "
+                            "e.g. Slurm or Kubernetes")
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
@@ -45,7 +56,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else default_folder(args.spec)
     if args.dry_run:
         return _dry_run(args)
-    sweep = Sweep(args.spec, workers=args.workers, out=out, scheduler=args.scheduler, timeout=args.timeout,
+    sweep = Sweep(args.spec, workers=args.workers, out=out, scheduler=args.scheduler, cluster=args.cluster,
+                  timeout=args.timeout,
                   resume=args.resume, batch_size=args.batch_size, csv=args.csv, experiment=experiment_overrides(args))
     counts = sweep.run_to_disk()  # a huge sweep's table never sits in memory
     total = sum(counts.values())
@@ -96,7 +108,7 @@ def _dry_run(args: argparse.Namespace) -> int:
         steady = sorted(times[1:] or times)
         per_point = steady[len(steady) // 2]
         workers = args.workers or os.cpu_count() or 1
-        if args.scheduler:
+        if args.scheduler or args.cluster:
             print(f"estimate: {per_point:.3f} s per point; {total * per_point:.0f} s of work in total "
                   "(divide by the scheduler's worker count)")
         else:
