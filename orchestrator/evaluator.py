@@ -12,8 +12,10 @@ their timeouts, and the rule that a fault is a row, never an exception:
   it started (see :mod:`orchestrator.cluster`).
 - :class:`Evaluator` runs a list of points on that client in parallel and
   returns one row per point in the order given (``evaluate``).
-- :func:`lost_rows` are the rows of points whose task was lost with its
-  worker (``crashed``).
+- A task lost with its worker process is run again by the scheduler on
+  another worker; a batch lost twice is split and its points run one per task,
+  so only a point that kills its workers gets ``crashed`` (:func:`lost_rows`)
+  and every other point its true row.
 """
 
 from __future__ import annotations
@@ -102,9 +104,74 @@ def dask_client(workers: int, scheduler: str | None = None,
             cluster.close()
 
 
+MAX_RERUNS = 3  # times the points of one failed task are submitted again before they get ``crashed`` rows
+
+
+def worker_died(exc: BaseException) -> bool:
+    """Whether a task failed because every worker process that ran it died (Dask's KilledWorker).
+
+    The scheduler has then already run it again elsewhere (``allowed-failures``
+    times, 1 on the clusters cosim starts).
+    """
+    from distributed import KilledWorker
+
+    return isinstance(exc, KilledWorker)
+
+
+def rerun(points: Sequence[Any], exc: BaseException, attempt: int) -> list[list[Any]] | None:
+    """The point lists to submit again after a task of ``points`` failed with ``exc``, or None: give up.
+
+    - Its worker processes died (KilledWorker) and the task held several
+      points: each point runs again on its own, so only a point that kills its
+      workers itself ends ``crashed``, never the innocent points of its batch.
+    - It was cancelled because the scattered payload died with the last
+      worker holding it: the same points run again (with the payload scattered
+      anew, see :class:`ScatteredPayload`).
+
+    ``attempt`` counts the reruns so far; after MAX_RERUNS, None.
+    """
+    from concurrent.futures import CancelledError
+
+    if attempt >= MAX_RERUNS:
+        return None
+    if worker_died(exc) and len(points) > 1:
+        return [[point] for point in points]
+    if isinstance(exc, CancelledError):
+        return [list(points)]
+    return None
+
+
+class ScatteredPayload:
+    """The payload scattered to every worker; scattered anew when the workers holding it are all gone.
+
+    Scattered data lives only on workers: when every worker that held it
+    dies (a cluster of two both killed, a lost node), its tasks are cancelled.
+    """
+
+    def __init__(self, client: Any, payload: dict[str, Any]):
+        self.client, self.payload, self._future = client, payload, None
+
+    def future(self, stale: Any = None) -> Any:
+        """The payload's future; scattered anew if it is lost or is ``stale`` (a task using it was cancelled)."""
+        if self._future is None or self._future is stale or not _alive(self._future):
+            self._future = self.client.scatter(self.payload, broadcast=True, hash=False)
+        return self._future
+
+
+def _alive(scattered: Any) -> bool:
+    """Whether every future of a scattered object (a dict is scattered value by value) still holds its data."""
+    futures = scattered.values() if isinstance(scattered, dict) else [scattered]
+    return all(f.status == "finished" for f in futures)
+
+
 def lost_rows(point_ids: Sequence[str], exc: BaseException) -> list[dict[str, Any]]:
     """Rows for points whose task died with its worker process (KilledWorker) or broke on the way."""
-    return [{"point_id": pid, "status": "crashed", "message": f"lost with its worker: {type(exc).__name__}: {exc}",
+    if worker_died(exc):
+        message = (f"every Dask worker process that ran this point died (most likely the point kills it, e.g. "
+                   f"by using up the memory); Dask: {exc}")
+    else:
+        message = f"lost with its worker: {type(exc).__name__}: {exc}"
+    return [{"point_id": pid, "status": "crashed", "message": message,
              "run_time": float("nan"), "worker": "", "objectives": {}} for pid in point_ids]
 
 
@@ -118,7 +185,7 @@ class Evaluator:
 
     def __init__(self, client: Any, payload: dict[str, Any], n_workers: int, timeout: float | None = None):
         self.client, self.n_workers, self.timeout = client, max(1, n_workers), timeout
-        self._payload = client.scatter(payload, broadcast=True, hash=False)
+        self._payload = ScatteredPayload(client, payload)
 
     def evaluate(self, points: Sequence[tuple[str, dict[str, Any]]]) -> list[dict[str, Any]]:
         """One row per ``(point_id, values)``, in the order given; never raises for a failing point.
@@ -129,20 +196,34 @@ class Evaluator:
         """
         from distributed import wait
 
-        from .sweep import run_batch
-
         if not points:
             return []
         size = math.ceil(len(points) / self.n_workers)
         chunks = [list(points[i:i + size]) for i in range(0, len(points), size)]
-        futures = [self.client.submit(run_batch, self._payload, chunk, self.timeout, pure=False, retries=0)
-                   for chunk in chunks]
-        wait(futures)
+        tasks = [self._submit(chunk) for chunk in chunks]
+        wait([future for future, _ in tasks])
         rows: list[dict[str, Any]] = []
-        for chunk, future in zip(chunks, futures):
-            try:
-                rows.extend(future.result())
-            except Exception as exc:  # the worker process itself died, or the task could not run
-                rows.extend(lost_rows([pid for pid, _ in chunk], exc))
-            future.release()
+        for chunk, task in zip(chunks, tasks):
+            rows.extend(self._rows(chunk, task))
         return rows
+
+    def _submit(self, chunk: list[tuple[str, dict[str, Any]]], stale: Any = None) -> tuple[Any, Any]:
+        """(task future, payload future it uses)."""
+        from .sweep import run_batch
+
+        payload = self._payload.future(stale)
+        return self.client.submit(run_batch, payload, chunk, self.timeout, pure=False, retries=0), payload
+
+    def _rows(self, chunk: list[tuple[str, dict[str, Any]]], submitted: tuple[Any, Any],
+              attempt: int = 0) -> list[dict[str, Any]]:
+        future, payload = submitted
+        try:
+            return future.result()
+        except Exception as exc:  # the worker process itself died, or the task could not run
+            again = rerun(chunk, exc, attempt)
+            if again is None:
+                return lost_rows([pid for pid, _ in chunk], exc)
+            tasks = [self._submit(points, stale=payload) for points in again]
+            return [row for points, task in zip(again, tasks) for row in self._rows(points, task, attempt + 1)]
+        finally:
+            future.release()

@@ -16,8 +16,10 @@ evaluates the points on Dask:
   runs a batch in a child process that keeps the loaded system and live unit
   instances between batches, with a per-point watchdog: a point that hangs
   (``timeout``) or kills its process (``crashed``) gets a row and the other
-  points go on.  A batch lost with its whole worker (KilledWorker) gets
-  ``crashed`` rows.  Rows out = points in.
+  points go on.  A batch lost with its whole worker process (killed, out of
+  memory, a lost node) is run again on another worker by the scheduler; lost
+  a second time (KilledWorker) it is split and each point run on its own, so
+  only a point that kills its workers gets ``crashed``.  Rows out = points in.
 - The client streams: a bounded number of batches in flight, each completed
   batch appended to the :class:`~orchestrator.results.ResultsStore` at once,
   so its memory does not grow with the number of points, and a kill -9 loses
@@ -44,7 +46,7 @@ from typing import TYPE_CHECKING, Any, Iterable, Iterator, Sequence, TextIO
 
 from .design import DesignSpace, Point
 from .errors import UserError
-from .evaluator import lost_rows
+from .evaluator import ScatteredPayload, lost_rows, rerun
 from .isolation import IsolatedRunner, make_payload
 
 if TYPE_CHECKING:
@@ -310,18 +312,19 @@ class Sweep:
 
         size = self.batch_size or max(1, min(64, math.ceil(todo / (n_workers * 8))))
         batches = _batched((p for p in self.space if p.id not in done), size)
-        payload = client.scatter(self.payload, broadcast=True, hash=False)
+        payload = ScatteredPayload(client, self.payload)
         progress = Progress(todo, self.progress_stream) if not self.quiet else None
-        in_flight: dict[str, list[Point]] = {}
+        in_flight: dict[str, tuple[list[Point], int, Any]] = {}  # task key -> points, reruns so far, payload
         pending = as_completed()
 
-        def submit() -> bool:
-            batch = next(batches, None)
+        def submit(batch: list[Point] | None = None, attempt: int = 0, stale: Any = None) -> bool:
+            batch = batch or next(batches, None)
             if batch is None:
                 return False
-            future = client.submit(run_batch, payload, [(p.id, p.values) for p in batch], self.timeout,
+            used = payload.future(stale)
+            future = client.submit(run_batch, used, [(p.id, p.values) for p in batch], self.timeout,
                                    pure=False, retries=0)
-            in_flight[future.key] = batch
+            in_flight[future.key] = batch, attempt, used
             pending.add(future)
             return True
 
@@ -329,10 +332,16 @@ class Sweep:
             if not submit():
                 break
         for future in pending:
-            batch = in_flight.pop(future.key)
+            batch, attempt, used = in_flight.pop(future.key)
             try:
                 rows = future.result()
             except Exception as exc:  # the worker process itself died (KilledWorker) or the task broke
+                again = rerun(batch, exc, attempt)  # see evaluator.rerun: innocent points are never crashed
+                if again is not None:
+                    future.release()
+                    for points in again:
+                        submit(points, attempt + 1, stale=used)
+                    continue
                 rows = lost_rows([p.id for p in batch], exc)
             future.release()
             self.store.append([self._row(p, r) for p, r in zip(batch, rows)])

@@ -76,7 +76,8 @@ def test_dask_jobqueue_in_its_test_mode_and_a_slurm_job_script(write_spec, tmp_p
     spec = write_spec(ode_spec())
     # the same classes as on a real queue: jobs are bash scripts here instead of sbatch submissions
     cluster = write(tmp_path, "jobqueue.yaml", "type: dask_jobqueue.local.LocalCluster\n"
-                    "kwargs: {cores: 1, memory: 1GB, processes: 1}\nscale: {jobs: 2}\n")
+                    "kwargs: {cores: 1, memory: 1GB, processes: 1, scheduler_options: {dashboard_address: ':0'}}\n"
+                    "scale: {jobs: 2}\n")
     df = orchestrator.sweep(str(spec), cluster=cluster, quiet=True)
     assert_exact(df)
     # the README's Slurm recipe: a real SLURMCluster renders its sbatch script from the file's kwargs

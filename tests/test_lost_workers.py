@@ -1,0 +1,74 @@
+"""Lost workers cost nothing: a Dask worker process killed mid-sweep (kill -9, as the OOM killer or a lost node
+would) loses no point and gives no innocent point a wrong status; a point that kills its workers is `crashed`.
+
+Real LocalCluster worker processes (started by the sweep itself, which sets the scheduler's allowed-failures
+to 1) and a real SIGKILL; the units are tests/units_for_cluster.py.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+
+import pytest
+
+import orchestrator
+
+from .conftest import TESTS
+
+UNIT = f"{TESTS / 'units_for_cluster.py'}:SlowSquare"
+
+
+def square_spec(n: int, delay: float, kill_at: float = -1.0) -> dict:
+    return {
+        "name": "lost_workers",
+        "units": {"sq": {"python": UNIT, "parameters": {"delay": delay, "kill_at": kill_at}}},
+        "experiment": {"stop": 0.5, "step": 0.1},
+        "objectives": {"y_end": {"signal": "sq.y", "reduce": "final"}},
+        "design": {"parameters": {"sq.x": {"values": [float(i) for i in range(n)]}}},
+    }
+
+
+def test_kill_9_of_a_worker_mid_sweep_loses_nothing(write_spec, tmp_path, monkeypatch):
+    markers = tmp_path / "markers"
+    markers.mkdir()
+    monkeypatch.setenv("SLOW_SQUARE_MARKERS", str(markers))
+    killed: list[int] = []
+
+    def kill_a_busy_worker() -> None:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            busy = list(markers.iterdir())
+            if busy:  # a point is running on this worker right now (its step wrote the marker)
+                pid = int(busy[0].name)
+                os.kill(pid, signal.SIGKILL)
+                killed.append(pid)
+                return
+            time.sleep(0.05)
+
+    killer = threading.Thread(target=kill_a_busy_worker, daemon=True)
+    killer.start()
+    # 5 steps of 0.1 s: each point runs 0.5 s, so the kill lands inside a batch of 3 points
+    df = orchestrator.sweep(str(write_spec(square_spec(8, 0.1))), workers=2, batch_size=3, quiet=True)
+    killer.join(timeout=5)
+    assert len(killed) == 1
+    with pytest.raises(ProcessLookupError):
+        os.kill(killed[0], 0)  # the worker really died
+    assert len(df) == 8 and df["point_id"].is_unique  # rows in = rows out
+    assert (df["status"] == "ok").all(), df[["status", "message"]]
+    assert (df["y_end"] == df["sq.x"] ** 2).all()
+
+
+def test_a_point_that_kills_its_workers_is_crashed_and_the_others_are_ok(write_spec):
+    df = orchestrator.sweep(str(write_spec(square_spec(6, 0.0, kill_at=3.0))), workers=2, batch_size=3,
+                            quiet=True)
+    assert len(df) == 6 and df["point_id"].is_unique
+    killer = df[df["sq.x"] == 3.0].iloc[0]
+    assert killer["status"] == "crashed"
+    assert "every Dask worker process that ran this point died" in killer["message"]
+    assert "KilledWorker" in killer["message"] or "workers died" in killer["message"]
+    innocent = df[df["sq.x"] != 3.0]
+    assert (innocent["status"] == "ok").all(), innocent[["status", "message"]]
+    assert (innocent["y_end"] == innocent["sq.x"] ** 2).all()

@@ -1,0 +1,38 @@
+"""Python units for the cluster tests: a slow unit whose points can be caught in flight, one that kills its worker."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+
+from orchestrator import PythonUnit, Variable
+
+
+class SlowSquare(PythonUnit):
+    """y = x**2 after ``delay`` seconds of wall time per step.
+
+    The point with x == ``kill_at`` kills the Dask worker process running it
+    (the parent of cosim's child process) at its first step, as the OOM killer
+    would.  With the environment variable SLOW_SQUARE_MARKERS set to a folder,
+    each step writes a file named after the worker's process id there, so a test
+    knows which worker has a point in flight.
+    """
+
+    variables = (
+        Variable("x", "parameter", start=0.0),
+        Variable("delay", "parameter", start=0.05),
+        Variable("kill_at", "parameter", start=-1.0),
+        Variable("y", "output", start=0.0),
+    )
+
+    def do_step(self, t, h):
+        markers = os.environ.get("SLOW_SQUARE_MARKERS")
+        if markers:
+            with open(os.path.join(markers, str(os.getppid())), "w") as marker:
+                marker.write(str(self.x))
+        if self.x == self.kill_at:
+            os.kill(os.getppid(), signal.SIGKILL)
+            time.sleep(60)  # cosim's child stops itself when it sees its parent gone
+        time.sleep(self.delay)
+        self.y = self.x ** 2
