@@ -29,7 +29,8 @@ def add_sensitivity_parser(sub: Any) -> None:
                    help="objective to analyse (repeatable; default: those with a sense, else all)")
     p.add_argument("--out", metavar="DIR", help="results folder (default: results/<spec name>_<method>)")
     p.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: one per core)")
-    p.add_argument("--scheduler", metavar="ADDRESS", help="use a running Dask scheduler, e.g. tcp://host:8786")
+    from .sweep_cli import add_cluster_options
+    add_cluster_options(p)
     p.add_argument("--timeout", type=float, metavar="S", help="seconds a run may take before it is stopped")
     p.add_argument("--resume", action="store_true", help="run only the sample points missing in --out")
     p.set_defaults(handler=cmd_sensitivity)
@@ -45,6 +46,7 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path(f"{default_folder(args.spec)}_{args.method}")
     study = SensitivityStudy(args.spec, out, method=args.method, n=args.n, seed=args.seed,
                              objectives=args.objective, workers=args.workers, scheduler=args.scheduler,
+                             cluster=args.cluster,
                              timeout=args.timeout, resume=args.resume)
     counts, indices = study.run()
     total = sum(counts.values())

@@ -9,9 +9,10 @@ evaluates the points on Dask:
   share a process), any running scheduler by address (also from
   ``DASK_SCHEDULER_ADDRESS``), or any Dask cluster class named in a cluster
   file (Slurm, PBS, Kubernetes ...; :mod:`orchestrator.cluster`).
-- The payload is scattered to the workers once; FMU and ``file.py`` unit bytes
-  travel inside it, so workers need no shared filesystem (Python units named
-  ``package.module:Class`` must be installed where the workers run).
+- The payload is scattered to the workers once; FMU, ``file.py`` unit and
+  played-table bytes travel inside it, and the source of a Python unit named
+  ``module:Class`` from the spec's folder (zipped), so workers need no shared
+  filesystem (installed modules must be installed where the workers run too).
 - Points go in batches.  On a worker, :class:`~orchestrator.isolation.IsolatedRunner`
   runs a batch in a child process that keeps the loaded system and live unit
   instances between batches, with a per-point watchdog: a point that hangs

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+import os
 import sys
 from pathlib import Path
 from typing import Any, ClassVar, Mapping, Sequence
@@ -185,22 +186,46 @@ class PythonUnitType(UnitType):
     def __init__(self, target: str, base_dir: str | Path | None = None):
         self.target = target
         self.base_dir = str(base_dir) if base_dir is not None else None
+        self._source_zip: str | None = None  # set on a worker: the module's shipped source
         self._cls: type[PythonUnit] | None = None
 
     def __getstate__(self) -> dict:
-        return {"target": self.target, "base_dir": self.base_dir, "_cls": None}
+        return {"target": self.target, "base_dir": self.base_dir, "_source_zip": self._source_zip, "_cls": None}
 
     def files(self) -> list[Path]:
-        """The unit's ``file.py``; none for an importable module (it must be installed where units run)."""
+        """The unit's ``file.py``, or the source of a module named from the spec's folder (as a zip).
+
+        A module beside the spec (``my_units:Gain`` with ``my_units.py`` or the
+        package ``my_units/`` in the spec's folder) travels as source, so the
+        workers need not have it installed; any other module must be importable
+        where units run.
+        """
         module, sep, _ = self.target.rpartition(":")
-        if not sep or not module.endswith(".py"):
+        if not sep:
             return []
+        if not module.endswith(".py"):
+            source = self._local_source(module)
+            return [zip_source(source)] if source is not None else []
         path = Path(module)
         return [path if path.is_absolute() or not self.base_dir else Path(self.base_dir) / path]
 
+    def _local_source(self, module: str) -> Path | None:
+        """The file or package folder of ``module``'s top-level name in the spec's folder, if there is one."""
+        if not self.base_dir or self._source_zip or _installed(module.split(".")[0], self.base_dir):
+            return None
+        top = Path(self.base_dir) / module.split(".")[0]
+        if top.with_suffix(".py").is_file():
+            return top.with_suffix(".py")
+        return top if (top / "__init__.py").is_file() else None
+
     def relocate(self, copies: Sequence[Path]) -> None:
-        if copies:
-            self.target = f"{copies[0]}:{self.target.rpartition(':')[2]}"
+        if not copies:
+            return
+        module, _, class_name = self.target.rpartition(":")
+        if module.endswith(".py"):
+            self.target = f"{copies[0]}:{class_name}"
+        else:
+            self._source_zip = str(copies[0])  # imported from the zip of its source (zipimport)
 
     def load_class(self) -> type[PythonUnit]:
         """Import and return the class.
@@ -238,17 +263,71 @@ class PythonUnitType(UnitType):
         return cls
 
     def _import_module(self, module_name: str):
-        """Import ``module_name``, also looking in the spec's folder (for modules beside the spec)."""
-        if self.base_dir and self.base_dir not in sys.path:
-            sys.path.insert(0, self.base_dir)
+        """Import ``module_name``, also looking in its shipped source or the spec's folder (modules beside the spec)."""
+        folder = self._source_zip or self.base_dir
+        if folder and folder not in sys.path:
+            sys.path.insert(0, folder)
             try:
                 return importlib.import_module(module_name)
             finally:
-                sys.path.remove(self.base_dir)
+                sys.path.remove(folder)
         return importlib.import_module(module_name)
+
 
     def describe(self) -> UnitDescription:
         return self.load_class().describe_class()
 
     def instantiate(self, name: str) -> Unit:
         return self.load_class()(name)
+
+
+def zip_source(source: Path) -> Path:
+    """A zip of the ``.py`` files of ``source`` (a module file or a package folder), importable by zipimport.
+
+    Written once per content into the temporary folder; the same sources give
+    the same bytes (fixed dates, sorted members), so a sweep's payload key and
+    resume stay stable.
+    """
+    import hashlib
+    import tempfile
+    import zipfile
+
+    files = [source] if source.is_file() else sorted(p for p in source.rglob("*.py") if "__pycache__" not in p.parts)
+    root = source.parent
+    digest = hashlib.sha256()
+    for path in files:
+        digest.update(str(path.relative_to(root)).encode() + b"\0" + path.read_bytes())
+    target = Path(tempfile.gettempdir()) / "cosim_sources" / f"{source.name.removesuffix('.py')}_{digest.hexdigest()[:16]}.zip"
+    if not target.is_file():
+        target.parent.mkdir(parents=True, exist_ok=True)
+        partial = target.with_suffix(f".{os.getpid()}.part")
+        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as archive:
+            for path in files:
+                info = zipfile.ZipInfo(str(path.relative_to(root)), date_time=(1980, 1, 1, 0, 0, 0))
+                archive.writestr(info, path.read_bytes(), zipfile.ZIP_DEFLATED)
+        partial.replace(target)
+    return target
+
+
+def _installed(name: str, folder: str) -> bool:
+    """Whether ``name`` imports without the spec's folder or the current folder (then workers have it too).
+
+    An installed package (the project's own ``models``, say) is not shipped,
+    even when the spec lies beside it: it may read data files next to its code.
+    """
+    import importlib.machinery
+
+    hidden = {"", os.getcwd(), str(Path(folder).resolve())}
+    path = [p for p in sys.path if p not in hidden and str(Path(p).resolve()) not in hidden]
+    for finder in sys.meta_path:
+        try:
+            if finder is importlib.machinery.PathFinder:
+                found = importlib.machinery.PathFinder.find_spec(name, path)
+            else:
+                find = getattr(finder, "find_spec", None)
+                found = find(name, None) if find is not None else None
+        except Exception:  # a finder that cannot answer does not make the module installed
+            found = None
+        if found is not None:
+            return True
+    return False
