@@ -27,7 +27,7 @@ from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 
-from fmus.build import ensure_built
+from cosim.fmus.build import ensure_built
 from orchestrator import Execution, build_system, load_spec
 
 

@@ -81,9 +81,9 @@ def grid_points() -> list[tuple[float, float]]:
 
 def robot_alone(repeat: int = 2000) -> dict[str, float]:
     """Microseconds per output evaluation of the robot alone: set the three inputs, read tau."""
-    from fmus.build import ensure_built
-    from fmus.testing import FmuInstance
-    from models.panda_inverse_dynamics import PandaInverseDynamics
+    from cosim.fmus.build import ensure_built
+    from cosim.fmus.testing import FmuInstance
+    from cosim.models.panda_inverse_dynamics import PandaInverseDynamics
 
     rng = np.random.default_rng(1)
     states = rng.uniform(-1.0, 1.0, (repeat, 3, 7))

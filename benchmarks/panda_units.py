@@ -18,9 +18,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from models.panda_exudyn import PandaExudyn  # noqa: E402
-from models.panda_inverse_dynamics import PandaInverseDynamics  # noqa: E402
-from models.trajectory import N_MAX_WAYPOINTS, TrajectoryGenerator  # noqa: E402
+from cosim.models.panda_exudyn import PandaExudyn  # noqa: E402
+from cosim.models.panda_inverse_dynamics import PandaInverseDynamics  # noqa: E402
+from cosim.models.trajectory import N_MAX_WAYPOINTS, TrajectoryGenerator  # noqa: E402
 from orchestrator.unit import resolve_port  # noqa: E402
 
 H = 1e-3

@@ -184,7 +184,7 @@ def part_bag(folder: Path, repeat: int, n_points: int) -> dict:
     import dask.bag as db
     from distributed import Client
 
-    from fmus.build import ensure_built
+    from cosim.fmus.build import ensure_built
     from orchestrator.design import DesignSpace
     from orchestrator.spec import load_spec
 

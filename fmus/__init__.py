@@ -1,5 +1,5 @@
-"""C sources of the FMUs cosim ships, and the builder (:mod:`fmus.build`).
+"""C sources of the FMUs cosim ships, and the builder (:mod:`cosim.fmus.build`).
 
-``from fmus.build import ensure_built; ensure_built("motor_gear_energy", 3)``
+``from cosim.fmus.build import ensure_built; ensure_built("motor_gear_energy", 3)``
 returns the path of a compiled FMU (built on first use, cached by source digest).
 """

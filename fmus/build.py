@@ -14,7 +14,7 @@ flags and the platform), so an edit rebuilds and nothing else does.
 
 Command line (rebuilds, no traceback on errors)::
 
-    python -m fmus.build [--out DIR] [--fmi {2,3}] [NAME ...]
+    python -m cosim.fmus.build [--out DIR] [--fmi {2,3}] [NAME ...]
 
 Without ``--out`` the FMUs are rebuilt into the cache; without names every
 model is built, for both FMI versions.
@@ -183,8 +183,8 @@ def ensure_built(name: str, fmi_version: int) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """The ``python -m fmus.build`` command; returns the exit code."""
-    parser = argparse.ArgumentParser(prog="python -m fmus.build", description="Build cosim's FMUs from fmus/<name>/.")
+    """The ``python -m cosim.fmus.build`` command; returns the exit code."""
+    parser = argparse.ArgumentParser(prog="python -m cosim.fmus.build", description="Build cosim's FMUs from fmus/<name>/.")
     parser.add_argument("names", nargs="*", metavar="NAME", help=f"models to build (default: all: {', '.join(available_models())})")
     parser.add_argument("--out", type=Path, help="write the .fmu files here (default: rebuild into the cache)")
     parser.add_argument("--fmi", type=int, choices=FMI_VERSIONS, action="append", help="FMI version (default: 2 and 3)")

@@ -23,7 +23,7 @@ Plant geometry
     :class:`models.plant.Obstacle` boxes (``coal.Box``), fixed to the world
     (joint 0), given in the robot's base frame.
 
-The fingers are locked closed, as in :mod:`models.panda_model`; the pendulum
+The fingers are locked closed, as in :mod:`cosim.models.panda_model`; the pendulum
 payload is not part of the geometry (see ``examples/bin_picking/README.md``).
 """
 

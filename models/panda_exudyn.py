@@ -3,7 +3,7 @@
 Plant
     An Exudyn ``ObjectKinematicTree`` (minimal coordinates, 7 revolute joints)
     built from the pinocchio model's joint placements and link inertias (see
-    :mod:`models.panda_model`), so its forward dynamics equal pinocchio's ABA
+    :mod:`cosim.models.panda_model`), so its forward dynamics equal pinocchio's ABA
     to round-off (checked in ``tests/test_panda_units.py``).  The
     ``exudyn.robotics`` Panda model is not used: it does not match the URDF.
     A rigid payload (parameters ``payload_*``) is part of link 7's inertia

@@ -3,14 +3,14 @@
 The pinocchio wheel we use has no ``pinocchio.casadi``, so the recursive
 Newton-Euler algorithm (RNEA, Featherstone's formulation, the one
 ``pinocchio.rnea`` implements) is written here once more, on CasADi ``SX``
-symbols, from the numbers of the pinocchio model of :mod:`models.panda_model`:
+symbols, from the numbers of the pinocchio model of :mod:`cosim.models.panda_model`:
 joint placements, link inertias, the TCP frame and gravity.  The result is a
 :class:`casadi.Function` that
 
 * generates C (``fmus/panda_inverse_dynamics``, through
-  ``python -m fmus.panda_inverse_dynamics_codegen``), and
+  ``python -m cosim.fmus.panda_inverse_dynamics_codegen``), and
 * gives exact derivatives and path coefficients to the optimal-timing planner
-  (:mod:`models.optimal_timing`).
+  (:mod:`cosim.models.optimal_timing`).
 
 Conventions are pinocchio's: a spatial motion is (linear, angular) at a frame's
 origin in that frame's axes, ``liMi`` places joint ``i``'s frame in its

@@ -14,7 +14,7 @@ What :func:`plan_cartesian_path` does, after MoveIt's ``computeCartesianPath``:
   when a joint moves more than ``max_joint_step`` between samples
   (``joint jump``, an absolute form of MoveIt's ``jump_threshold``; the
   relative MoveIt form is applied afterwards when ``jump_threshold > 0``), or
-  when the arm collides with the plant or itself (coal, :mod:`models.collision`);
+  when the arm collides with the plant or itself (coal, :mod:`cosim.models.collision`);
 * the result says which fraction of the path was planned (MoveIt's
   definition: completed segments plus the completed share of the blocked one,
   divided by the number of segments) and what blocked it.
@@ -327,7 +327,7 @@ def time_parameterize(path: CartesianPath, v_max, a_max, tolerance: float = 0.01
 def _plant_parameters():
     return (
         Variable("plant_file", "parameter", type="String", start="",
-                 description="plant JSON (models/plant.py); '' = examples/bin_picking/plant.json", variability="fixed"),
+                 description="plant JSON (models/plant.py); '' = the bin-picking cell, models/bin_picking_plant.json", variability="fixed"),
         Variable("box_variant", "parameter", type="String", start="simple",
                  description="which box_variants entry of the plant file is added ('simple' or 'complex')", variability="fixed"),
         Variable("offset_x", "parameter", unit="m", start=0.0,

@@ -1,6 +1,6 @@
 """A robot cell as data: box-shaped obstacles, task waypoints, gripper orientation.
 
-The plant file (JSON, e.g. ``examples/bin_picking/plant.json``) describes the
+The plant file (JSON, e.g. ``models/bin_picking_plant.json``) describes the
 cell in a world frame ``W``: the robot's base frame at zero offset,
 right-handed, z up.  Moving the robot's base by an offset is the same as
 moving every obstacle and waypoint by the opposite offset relative to the
@@ -15,6 +15,7 @@ cell ``x_U -> -y_W`` (toward the conveyor), ``y_U -> z_W`` (up),
 from __future__ import annotations
 
 import functools
+import importlib.resources
 import json
 import math
 import os
@@ -23,7 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DEFAULT_PLANT = os.path.join(REPO_ROOT, "examples", "bin_picking", "plant.json")
+# The bin-picking cell ships with the units (package data), so an installed cosim plans without the repository.
+DEFAULT_PLANT = str(importlib.resources.files(__package__).joinpath("bin_picking_plant.json"))
 
 
 @dataclass(frozen=True)

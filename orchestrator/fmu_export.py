@@ -152,7 +152,7 @@ def _file_to_pack(module_name: str, cls: type, base_dir: str | Path | None) -> P
     if module_name.endswith(".py"):
         path = Path(module_name)
         return (Path(base_dir) / path if base_dir and not path.is_absolute() else path).resolve()
-    top = module_name.split(".")[0]
+    top = cls.__module__.split(".")[0]  # where it was loaded from: a spec's models.X is cosim.models.X
     # PathFinder looks at sys.path only: a module imported from the spec's folder is in sys.modules too
     if any(importlib.machinery.PathFinder.find_spec(top, [p]) for p in sys.path if p):
         return None  # an installed package (or on sys.path): imported by name on the target

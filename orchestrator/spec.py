@@ -10,6 +10,7 @@ Relative paths in a spec are relative to the spec's folder.
 from __future__ import annotations
 
 import hashlib
+import importlib.resources
 import json
 import math
 from dataclasses import dataclass, field
@@ -22,7 +23,8 @@ from . import limits
 from .problems import Problem, SpecError, did_you_mean, json_path
 from .spec_json import read_spec_json  # strict JSON: no NaN, no key twice, bounded nesting
 
-SCHEMA_PATH = Path(__file__).resolve().parent.parent / "specs" / "spec.schema.json"
+# Shipped as package data (cosim.specs, the repository's specs/ folder), so an installed cosim finds it too.
+SCHEMA_RESOURCE = ("cosim.specs", "spec.schema.json")
 REDUCTIONS = ("final", "initial", "min", "max", "mean", "integral", "integral_abs", "rms",
               "time_of_max", "time_of_min")
 ALGORITHMS = ("gauss-seidel", "jacobi")
@@ -171,7 +173,8 @@ def spec_schema() -> dict:
     """The JSON Schema of a spec: specs/spec.schema.json with the fields of every registered unit kind."""
     from .unit_kinds import unit_schema
 
-    schema = json.loads(SCHEMA_PATH.read_text(encoding="utf-8"))
+    package, name = SCHEMA_RESOURCE
+    schema = json.loads(importlib.resources.files(package).joinpath(name).read_text(encoding="utf-8"))
     schema["$defs"]["unit"] = unit_schema(schema["$defs"]["unit"])
     return schema
 

@@ -197,7 +197,7 @@ def resolve_fmu_path(reference: str, base_dir: str | Path | None = None) -> Path
     """The file an FMU reference in a spec points to.
 
     ``builtin:NAME_fmiN`` names an FMU cosim ships as C source (built on first
-    use, see :mod:`fmus.build`); ``archive.ssp!/resources/m.fmu`` a file inside
+    use, see :mod:`cosim.fmus.build`); ``archive.ssp!/resources/m.fmu`` a file inside
     an SSP archive; anything else is a path, relative to ``base_dir``.  Raises
     FileNotFoundError for an unknown builtin name and FmuProblems when a
     built-in FMU cannot be built (e.g. no C compiler).
@@ -215,7 +215,7 @@ def resolve_fmu_path(reference: str, base_dir: str | Path | None = None) -> Path
 
 
 def _built_in_fmu(reference: str) -> Path:
-    from fmus.build import FmuBuildError, available_models, ensure_built  # local: compiling only when asked
+    from cosim.fmus.build import FmuBuildError, available_models, ensure_built  # local: compiling only when asked
 
     from .units.fmu import FmuProblems
 

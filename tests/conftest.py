@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+import shutil
 from pathlib import Path
 
 import pytest
@@ -10,10 +12,24 @@ import pytest
 TESTS = Path(__file__).resolve().parent
 
 
+def require_tool(program: str, package: str) -> str:
+    """The path of ``program``; without it the test is skipped, or FAILS under ``CI=true`` (.ci/run sets it).
+
+    A skip would let CI pass without ever running the test, so CI must install ``package``.
+    """
+    path = shutil.which(program)
+    if path is None:
+        why = f"{program} is not installed (Debian package '{package}'; .ci/run installs it)"
+        if os.environ.get("CI", "").lower() in ("1", "true", "yes"):
+            pytest.fail(f"{why}; CI=true, so this test must run")
+        pytest.skip(why)
+    return path
+
+
 @pytest.fixture(scope="session")
 def built_fmu():
     """A function (name, fmi_version) -> path of the FMU built from fmus/<name> (cached)."""
-    from fmus.build import ensure_built
+    from cosim.fmus.build import ensure_built
 
     return lambda name, version: Path(ensure_built(name, version))
 

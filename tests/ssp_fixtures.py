@@ -6,7 +6,7 @@ import math
 import zipfile
 from pathlib import Path
 
-from fmus.build import ensure_built
+from cosim.fmus.build import ensure_built
 
 SSP_FILES = Path(__file__).resolve().parent / "ssp"
 RPM = 2 * math.pi / 60  # rad/s per rpm

@@ -24,7 +24,7 @@ from orchestrator.analysis.explorer import SLIDER_STEPS, ExplorerState
 from orchestrator.analysis.screen import xwd_to_rgb
 from orchestrator.analysis.table import AnalysisError, load_results
 
-from .conftest import python_unit
+from .conftest import python_unit, require_tool
 from .test_analysis_table import make_sweep_table
 
 # -- state, no window --------------------------------------------------------------------------------------
@@ -77,8 +77,7 @@ def test_state_works_for_a_foreign_table(tmp_path):
 @pytest.fixture(scope="module")
 def xvfb(tmp_path_factory):
     """A private Xvfb display; yields (display, framebuffer XWD file)."""
-    if shutil.which("Xvfb") is None:
-        pytest.skip("Xvfb is not installed (Debian package 'xvfb'; .ci/run installs it)")
+    require_tool("Xvfb", "xvfb")
     fbdir = tmp_path_factory.mktemp("xvfb")
     number = next(n for n in range(90, 200) if not Path(f"/tmp/.X11-unix/X{n}").exists()
                   and not Path(f"/tmp/.X{n}-lock").exists())

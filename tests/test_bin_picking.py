@@ -10,9 +10,9 @@ import pytest
 import orchestrator
 from orchestrator.design import DesignSpace
 from orchestrator.spec import load_spec
-from models.collision import CellCollision
-from models.planner import COLLISION_PLANT, CartesianPlanner, PlantCollisionChecker
-from models.plant import load_plant
+from cosim.models.collision import CellCollision
+from cosim.models.planner import COLLISION_PLANT, CartesianPlanner, PlantCollisionChecker
+from cosim.models.plant import load_plant
 
 SPEC = Path(__file__).resolve().parents[1] / "examples" / "bin_picking" / "spec.json"
 
@@ -122,7 +122,7 @@ def test_spec_grid_is_the_thesis_grid():
 
 
 def _planner_unit(**values):
-    from models.planner import BinPickingPlanner
+    from cosim.models.planner import BinPickingPlanner
 
     unit = BinPickingPlanner()
     unit.set_values(values)

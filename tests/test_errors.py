@@ -14,8 +14,8 @@ from orchestrator.errors import (EXIT_INTERNAL, EXIT_OK, EXIT_RUN_FAILED, EXIT_U
 
 def old_names():
     """Every error class cosim had before the family, importable where it always was."""
-    from fmus.build import FmuBuildError
-    from fmus.model_description import ModelJsonError
+    from cosim.fmus.build import FmuBuildError
+    from cosim.fmus.model_description import ModelJsonError
     from orchestrator.analysis.table import AnalysisError
     from orchestrator.cli import UsageError as CliUsageError
     from orchestrator.expressions import ExpressionError

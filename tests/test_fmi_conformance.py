@@ -21,7 +21,7 @@ from fmpy import read_model_description, simulate_fmu
 from fmpy.fmi3 import FMU3Slave
 
 import orchestrator
-from fmus.conformance import available, ensure_built
+from cosim.fmus.conformance import available, ensure_built
 from orchestrator.cli import main
 
 from .conftest import python_unit
@@ -308,7 +308,7 @@ def test_a_python_unit_can_end_the_run_early(write_spec):
 
 def test_reference_check_script_on_our_own_fmus(tmp_path):
     """fmus/conformance/reference_check.py (used on the Modelica Reference FMUs, see docs/fmi-support.md)."""
-    from fmus.conformance.reference_check import check
+    from cosim.fmus.conformance.reference_check import check
 
     stair = check(ensure_built("stair", 3), tmp_path)
     assert stair["result"] == "exact" and "to t=9, stopped early" in stair["detail"]

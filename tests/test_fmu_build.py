@@ -1,4 +1,4 @@
-"""fmus.build and the test FMUs: real gcc builds, checked and run with real FMPy."""
+"""cosim.fmus.build and the test FMUs: real gcc builds, checked and run with real FMPy."""
 
 from __future__ import annotations
 
@@ -18,9 +18,9 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi3 import FMU3Slave
 from fmpy.validation import validate_fmu
 
-import fmus.build as build
-from fmus.build import FmuBuildError, build_fmu, ensure_built
-from fmus.testing import FmuInstance
+import cosim.fmus.build as build
+from cosim.fmus.build import FmuBuildError, build_fmu, ensure_built
+from cosim.fmus.testing import FmuInstance
 
 REPO = Path(__file__).resolve().parents[1]
 MODELS = ["fault", "gain_array", "linear_ode", "motor_gear_energy", "panda_inverse_dynamics"]
@@ -104,7 +104,7 @@ def test_ensure_built_caches_by_source_digest(fresh_cache, fmus_copy):
 
 
 def test_concurrent_builds_do_not_collide(fresh_cache):
-    code = "from fmus.build import ensure_built; print(ensure_built('linear_ode', 2))"
+    code = "from cosim.fmus.build import ensure_built; print(ensure_built('linear_ode', 2))"
     env = {**os.environ, "COSIM_FMU_CACHE": str(fresh_cache)}
     procs = [subprocess.Popen([sys.executable, "-c", code], cwd=REPO, env=env, stdout=subprocess.PIPE,
                               stderr=subprocess.PIPE, text=True) for _ in range(3)]
@@ -120,7 +120,7 @@ def test_missing_compiler_is_a_clear_error(tmp_path, monkeypatch):
     monkeypatch.setenv("CC", "no-such-compiler-cosim")
     with pytest.raises(FmuBuildError, match=r"apt-get install gcc"):
         build_fmu("gain_array", 2, tmp_path)
-    result = subprocess.run([sys.executable, "-m", "fmus.build", "--out", str(tmp_path), "gain_array"], cwd=REPO,
+    result = subprocess.run([sys.executable, "-m", "cosim.fmus.build", "--out", str(tmp_path), "gain_array"], cwd=REPO,
                             env={**os.environ, "CC": "no-such-compiler-cosim"}, capture_output=True, text=True)
     assert result.returncode == 1
     assert "apt-get install gcc" in result.stderr and "Traceback" not in result.stderr
@@ -128,7 +128,7 @@ def test_missing_compiler_is_a_clear_error(tmp_path, monkeypatch):
 
 
 def test_cli_builds_into_a_folder(tmp_path):
-    result = subprocess.run([sys.executable, "-m", "fmus.build", "--out", str(tmp_path), "--fmi", "3", "gain_array"],
+    result = subprocess.run([sys.executable, "-m", "cosim.fmus.build", "--out", str(tmp_path), "--fmi", "3", "gain_array"],
                             cwd=REPO, capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
     assert [p.name for p in tmp_path.iterdir()] == ["gain_array_fmi3.fmu"]
@@ -262,7 +262,7 @@ def test_wrong_instantiation_token_is_refused(tmp_path):
 @pytest.mark.parametrize("mode", [1, 2])
 def test_fault_modes_1_and_2_crash_or_hang_a_separate_process(mode, tmp_path):
     """Run in a child process: mode 1 dies of SIGSEGV, mode 2 never returns from doStep."""
-    code = (f"from fmus.testing import FmuInstance\n"
+    code = (f"from cosim.fmus.testing import FmuInstance\n"
             f"f = FmuInstance({str(ensure_built('fault', 3))!r}, unzip_parent={str(tmp_path)!r})\n"
             f"f.instantiate(); f.initialize(mode={mode}, trigger_time=0.1)\n"
             f"f.step(0.0, 0.1); print('stepped', flush=True); f.step(0.1, 0.1); print('survived', flush=True)\n")

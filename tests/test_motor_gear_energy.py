@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 from fmpy.fmi1 import FMICallException
 
-from fmus.build import ensure_built
-from fmus.testing import FmuInstance
+from cosim.fmus.build import ensure_built
+from cosim.fmus.testing import FmuInstance
 
 N = 7
 OUTPUTS = ("n_motor", "eta_gear", "tau_motor", "i_motor", "p_el")
@@ -234,7 +234,7 @@ def test_bad_parameters_are_refused_at_initialization(fmu, name, value, expected
 
 
 def test_python_unit_agrees_with_the_fmu(tmp_path):
-    from models.motor_gear_energy import MotorGearEnergy
+    from cosim.models.motor_gear_energy import MotorGearEnergy
 
     rng = np.random.default_rng(3)
     with FmuInstance(ensure_built("motor_gear_energy", 3), unzip_parent=tmp_path) as fmu:
@@ -266,7 +266,7 @@ def test_python_unit_agrees_with_the_fmu(tmp_path):
 def test_python_unit_has_the_fmu_ports():
     from fmpy import read_model_description
 
-    from models.motor_gear_energy import MotorGearEnergy
+    from cosim.models.motor_gear_energy import MotorGearEnergy
 
     md = read_model_description(str(ensure_built("motor_gear_energy", 3)))
     fmu_ports = {(v.name, v.causality, v.type.replace("Float64", "Real"),
@@ -282,7 +282,7 @@ def test_python_unit_has_the_fmu_ports():
 def test_python_unit_refuses_bad_values():
     from orchestrator.unit import UnitError
 
-    from models.motor_gear_energy import MotorGearEnergy
+    from cosim.models.motor_gear_energy import MotorGearEnergy
 
     unit = MotorGearEnergy("e")
     unit.set_values({"r_terminal": -1.0})
@@ -300,7 +300,7 @@ def test_swapping_fmu_and_python_unit_through_the_engine(version):
     """The engine's FMU unit and the Python unit answer the same calls with the same values."""
     from orchestrator.units.fmu import FmuUnitType
 
-    from models.motor_gear_energy import MotorGearEnergy
+    from cosim.models.motor_gear_energy import MotorGearEnergy
 
     rng = np.random.default_rng(5)
     units = [FmuUnitType(str(ensure_built("motor_gear_energy", version))).instantiate("e"), MotorGearEnergy("e")]

@@ -11,8 +11,8 @@ import psutil
 import pytest
 from fmpy.fmi3 import FMU3Slave
 
-from fmus.build import ensure_built
-from fmus.testing import FmuInstance
+from cosim.fmus.build import ensure_built
+from cosim.fmus.testing import FmuInstance
 
 N = 7
 H = 1e-3

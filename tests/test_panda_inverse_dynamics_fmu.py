@@ -17,11 +17,11 @@ import pinocchio as pin
 import pytest
 from fmpy.fmi1 import FMICallException
 
-from fmus.build import ensure_built
-from fmus.testing import FmuInstance
-from models.panda_model import FRANKA_DOC_LIMITS, ee_position, panda_model, thesis_to_urdf
-from models.panda_symbolic import symbolic_inverse_dynamics
-from models.trajectory import plan_parabolic_blend
+from cosim.fmus.build import ensure_built
+from cosim.fmus.testing import FmuInstance
+from cosim.models.panda_model import FRANKA_DOC_LIMITS, ee_position, panda_model, thesis_to_urdf
+from cosim.models.panda_symbolic import symbolic_inverse_dynamics
+from cosim.models.trajectory import plan_parabolic_blend
 
 from .test_pick_and_place import FOLDER, run_points
 
@@ -61,9 +61,9 @@ def test_symbolic_rnea_matches_pinocchio_at_1000_random_states():
 
 
 def test_generated_c_is_up_to_date_with_the_urdf_and_the_symbolic_model():
-    from fmus.panda_inverse_dynamics_codegen import stale_files
+    from cosim.fmus.panda_inverse_dynamics_codegen import stale_files
 
-    assert stale_files() == [], "run python -m fmus.panda_inverse_dynamics_codegen"
+    assert stale_files() == [], "run python -m cosim.fmus.panda_inverse_dynamics_codegen"
 
 
 @pytest.mark.parametrize("version", [2, 3])

@@ -5,10 +5,10 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from models.panda_exudyn import PandaExudyn, build_kinematic_tree
-from models.panda_inverse_dynamics import PandaInverseDynamics
-from models.panda_model import FRANKA_DOC_LIMITS, cached_model, panda_model, thesis_to_urdf
-from models.trajectory import plan_parabolic_blend
+from cosim.models.panda_exudyn import PandaExudyn, build_kinematic_tree
+from cosim.models.panda_inverse_dynamics import PandaInverseDynamics
+from cosim.models.panda_model import FRANKA_DOC_LIMITS, cached_model, panda_model, thesis_to_urdf
+from cosim.models.trajectory import plan_parabolic_blend
 
 H = 1e-3
 

@@ -21,8 +21,8 @@ from orchestrator.execution import Execution
 from orchestrator.spec import load_spec, spec_from_dict
 from orchestrator.system import build_system
 
-from models.panda_model import FRANKA_DOC_LIMITS, cached_model, ee_frame_id, thesis_to_urdf
-from models.trajectory import plan_parabolic_blend
+from cosim.models.panda_model import FRANKA_DOC_LIMITS, cached_model, ee_frame_id, thesis_to_urdf
+from cosim.models.trajectory import plan_parabolic_blend
 
 FOLDER = Path(__file__).resolve().parents[1] / "examples" / "pick_and_place"
 SPEC = FOLDER / "spec.json"
@@ -213,7 +213,7 @@ def test_exudyn_follows_the_reference_of_the_step_end_under_gauss_seidel():
 
 
 def test_trajectory_step_midpoint_sampling_reports_the_step_just_taken():
-    from models.trajectory import TrajectoryGenerator
+    from cosim.models.trajectory import TrajectoryGenerator
     from orchestrator.unit import UnitError
 
     unit = TrajectoryGenerator("traj")

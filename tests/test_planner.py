@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from models.collision import READY_POSE, CellCollision
-from models.panda_model import FRANKA_DOC_LIMITS as L
-from models.planner import (COLLISION_PLANT, JOINT_JUMP, JOINT_LIMIT, OK, UNREACHABLE, CartesianPlanner,
+from cosim.models.collision import READY_POSE, CellCollision
+from cosim.models.panda_model import FRANKA_DOC_LIMITS as L
+from cosim.models.planner import (COLLISION_PLANT, JOINT_JUMP, JOINT_LIMIT, OK, UNREACHABLE, CartesianPlanner,
                             PlannerSettings, keyframes, time_parameterize)
-from models.plant import Obstacle, tcp_down_rotation
+from cosim.models.plant import Obstacle, tcp_down_rotation
 
 DOWN = tcp_down_rotation(0.0)
 

@@ -4,8 +4,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from models.panda_model import FRANKA_DOC_LIMITS, panda_model, thesis_to_urdf, urdf_to_thesis
-from models.trajectory import N_MAX_WAYPOINTS, TrajectoryGenerator, plan_parabolic_blend
+from cosim.models.panda_model import FRANKA_DOC_LIMITS, panda_model, thesis_to_urdf, urdf_to_thesis
+from cosim.models.trajectory import N_MAX_WAYPOINTS, TrajectoryGenerator, plan_parabolic_blend
 
 VMAX = FRANKA_DOC_LIMITS.qd_max
 AMAX = FRANKA_DOC_LIMITS.qdd_max

@@ -23,9 +23,9 @@ import numpy as np  # noqa: E402
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parents[1]))
 
-from models.collision import CellCollision  # noqa: E402
-from models.planner import CartesianPlanner  # noqa: E402
-from models.plant import load_plant  # noqa: E402
+from cosim.models.collision import CellCollision  # noqa: E402
+from cosim.models.planner import CartesianPlanner  # noqa: E402
+from cosim.models.plant import load_plant  # noqa: E402
 
 OFFSETS = ["planner.offset_x", "planner.offset_y", "planner.offset_z"]
 

@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pandas as pd
 
-from models.planner import CODE_NAMES
+from cosim.models.planner import CODE_NAMES
 
 X, Y, Z = "planner.offset_x", "planner.offset_y", "planner.offset_z"
 

@@ -27,7 +27,7 @@ import pandas as pd  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parents[1]))
-from models.panda_model import FRANKA_DOC_LIMITS  # noqa: E402
+from cosim.models.panda_model import FRANKA_DOC_LIMITS  # noqa: E402
 
 Q22, Q24 = "traj.waypoints[9]", "traj.waypoints[11]"
 

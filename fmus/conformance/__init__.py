@@ -80,6 +80,6 @@ def build(name: str, fmi_version: int, out_dir: str | os.PathLike) -> Path:
 
 
 def ensure_built(name: str, fmi_version: int) -> Path:
-    """Path of an up-to-date conformance FMU, built on first use (cache shared with fmus.build)."""
+    """Path of an up-to-date conformance FMU, built on first use (cache shared with cosim.fmus.build)."""
     target = cache_dir() / ("conformance-" + _digest(name, fmi_version)[:20]) / f"{name}_fmi{fmi_version}.fmu"
     return target if target.is_file() else build(name, fmi_version, target.parent)

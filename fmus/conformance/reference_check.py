@@ -1,6 +1,6 @@
 """Run FMUs built elsewhere (e.g. the Modelica Reference FMUs) through cosim and compare with fmpy.
 
-    python -m fmus.conformance.reference_check FMU_OR_FOLDER ... [--markdown]
+    python -m cosim.fmus.conformance.reference_check FMU_OR_FOLDER ... [--markdown]
 
 For each FMU: ``cosim inspect`` must succeed (or, for an FMU cosim does not run, ``cosim validate`` must refuse
 it with exit code 2); ``cosim run`` of a one-unit spec over the FMU's default experiment, recording every output,
@@ -76,7 +76,7 @@ def check(path: Path, work: Path, stop_override: float | None = None, step_overr
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m fmus.conformance.reference_check", description=__doc__)
+    parser = argparse.ArgumentParser(prog="python -m cosim.fmus.conformance.reference_check", description=__doc__)
     parser.add_argument("paths", nargs="+", type=Path, help=".fmu files or folders holding them")
     parser.add_argument("--markdown", action="store_true", help="print a Markdown table")
     parser.add_argument("--stop", type=float, help="stop time instead of the default experiment's")

@@ -5,7 +5,7 @@ torques (``*.tau[i]``) and electric power (``*p_el*``, ``*p_total*``) when the
 traces have them, else every recorded signal grouped by port.
 :func:`arm_points` turns joint angles (URDF radians, 7 per sample) into the
 3-D positions of the joints and the tool point with pinocchio's forward
-kinematics of the model in :mod:`models.panda_model`.
+kinematics of the model in :mod:`cosim.models.panda_model`.
 """
 
 from __future__ import annotations
@@ -80,7 +80,7 @@ def arm_points(q: np.ndarray) -> np.ndarray:
     """Positions (samples, 9, 3): base, the 7 joints and the tool point, for joint angles q (samples, 7)."""
     import pinocchio as pin
 
-    from models.panda_model import cached_model, ee_frame_id
+    from cosim.models.panda_model import cached_model, ee_frame_id
 
     model = cached_model()
     data = model.createData()

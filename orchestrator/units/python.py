@@ -263,7 +263,15 @@ class PythonUnitType(UnitType):
         return cls
 
     def _import_module(self, module_name: str):
-        """Import ``module_name``, also looking in its shipped source or the spec's folder (modules beside the spec)."""
+        """Import ``module_name``, also looking in its shipped source or the spec's folder (modules beside the spec).
+
+        ``models.NAME`` names a built-in unit: it is imported as ``cosim.models.NAME``, the one name under
+        which cosim's built-in units exist in every installation (see ``cosim/__init__.py``), so that a
+        source checkout never loads the same class a second time as ``models.NAME``.
+        """
+        builtin = _builtin_module(module_name)
+        if builtin is not None:
+            return importlib.import_module(builtin)
         folder = self._source_zip or self.base_dir
         if folder and folder not in sys.path:
             sys.path.insert(0, folder)
@@ -272,7 +280,6 @@ class PythonUnitType(UnitType):
             finally:
                 sys.path.remove(folder)
         return importlib.import_module(module_name)
-
 
     def describe(self) -> UnitDescription:
         return self.load_class().describe_class()
@@ -331,3 +338,15 @@ def _installed(name: str, folder: str) -> bool:
         if found is not None:
             return True
     return False
+
+
+def _builtin_module(module_name: str) -> str | None:
+    """``cosim.models.NAME`` for a spec's ``models.NAME`` when cosim ships that module, else None."""
+    if not module_name.startswith("models."):
+        return None
+    canonical = "cosim." + module_name
+    try:
+        found = importlib.util.find_spec(canonical)
+    except ModuleNotFoundError:  # a parent package of the name does not exist
+        return None
+    return canonical if found is not None else None
