@@ -17,7 +17,7 @@ Plant
 Servo
     Runs inside this unit, at every internal solver step, because a joint PD
     outside the physics unit with torques held over a 1 ms communication step
-    went unstable with realistic gains (DESIGN.md).  Per joint::
+    went unstable with realistic gains (the model has no rotor inertia).  Per joint::
 
         tau = tau_ff + kp * (q_r - q) + kd * (qd_r - qd),
         tau_ff = RNEA(q_r, qd_r, qdd_r)          (pinocchio, same model as the plant)
@@ -29,7 +29,7 @@ Servo
     communication step ``[t, t+h]`` is extrapolated from the inputs sampled at
     ``t`` (exact inside a parabolic-blend phase) and evaluated at
     ``t_k + ref_phase * dt`` of each internal step ``[t_k, t_k + dt]``; the default
-    0.5 is the middle of the step as DESIGN.md prescribes.  ``ref_timing``
+    0.5 is the middle of the step.  ``ref_timing``
     says when the inputs were sampled: at ``t`` (``"step_start"``, default:
     Jacobi) or at ``t + h`` (``"step_end"``: Gauss-Seidel with the trajectory
     stepped first), in which case the reference is extrapolated backwards, so

@@ -70,8 +70,8 @@ def _spec_option(p: argparse.ArgumentParser) -> None:
 
 
 def _filters(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--where", help="keep rows where this expression is true, e.g. \"e_el_1 < 20 and "
-                                   "traj_q_via_2 > -50\" (names: non-identifier characters become '_')")
+    p.add_argument("--where", help="keep rows where this expression is true, e.g. \"e_el[1] < 20 and "
+                                   "traj.q_via[2] > -50\" (columns named as in the table)")
     p.add_argument("--only-ok", action="store_true", help="leave out rows whose status is not 'ok'")
 
 

@@ -35,11 +35,23 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_USAGE
     try:
         return args.handler(args)
+    except BrokenPipeError:  # the reader stopped early (`cosim pareto ... | head`): not an error of ours
+        _discard_stdout()
+        return EXIT_OK
     except BaseException as exc:  # noqa: BLE001 - every outcome gets its exit code here, and only here
         if isinstance(exc, SystemExit):
             raise
         report_error(exc)
         return exit_code(exc)
+
+
+def _discard_stdout() -> None:
+    """Point stdout at /dev/null, so the interpreter's final flush into the closed pipe raises nothing."""
+    import os
+
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
 
 
 def report_error(exc: BaseException) -> None:
@@ -54,7 +66,10 @@ def report_error(exc: BaseException) -> None:
 
 
 def _parser() -> argparse.ArgumentParser:
+    from . import __version__
+
     parser = argparse.ArgumentParser(prog="cosim", description="FMI co-simulation orchestrator.")
+    parser.add_argument("--version", action="version", version=f"cosim {__version__}")
     sub = parser.add_subparsers(title="commands")
 
     p = sub.add_parser("validate", help="check a spec and report every problem at once")
@@ -115,9 +130,10 @@ def _print_problems(problems: Sequence[Any]) -> None:
 
 def cmd_validate(args: argparse.Namespace) -> int:
     """``cosim validate spec.json``: 0 when the spec is usable, 2 with every problem otherwise."""
-    from .validate import check_spec
+    from .validate import check_design, check_spec
 
     system = check_spec(args.spec, experiment_overrides(args))
+    check_design(system)  # what `cosim sweep` would refuse, validate refuses too
     spec = system.spec
     print(f"{args.spec}: ok: {len(spec.units)} unit(s), {len(spec.connections)} connection(s), "
           f"{len(spec.objectives)} objective(s); {spec.experiment.algorithm}, step {spec.experiment.step:g} s, "

@@ -19,12 +19,12 @@ by ``seed``).  A sampler draws each range uniformly in ``[min, max]`` (snapped
 to ``step`` when one is given) and picks list and boolean values with equal
 chances.
 
-A ``constraint`` keeps only points where it is true.  It names parameters by
-their target with every run of characters that are not letters, digits or
-``_`` replaced by a single ``_``, trailing ones dropped: ``motor.k_m`` is
-``motor_k_m``, ``traj.q_via[2]`` is ``traj_q_via_2``.  The bare parameter name
-(``k_m``) works too when no other parameter has it.  An array parameter's
-elements are ``name[i]`` (from 1), e.g. ``traj_q_via[2]``.
+A ``constraint`` keeps only points where it is true.  It names parameters as
+the spec does (``motor.k_m``, ``traj.q_via[2]``), or by the identifier made by
+replacing every run of characters that are not letters, digits or ``_`` by a
+single ``_``, trailing ones dropped (``motor_k_m``, ``traj_q_via_2``).  The bare
+parameter name (``k_m``) works too when no other parameter has it.  An array
+parameter's elements are ``name[i]`` (from 1), e.g. ``traj.q_via[2]``.
 
 Point ids are the first 16 hex digits of SHA-256 over the spec digest and the
 point's values, so the same point of the same spec always has the same id.
@@ -273,24 +273,36 @@ class DesignSpace:
         names: dict[str, str] = {}
         short: dict[str, list[str]] = {}
         for target in self.targets:
-            names[expression_name(target)] = target
-            short.setdefault(expression_name(target.partition(".")[2]), []).append(target)
+            names[target] = names[expression_name(target)] = target
+            bare = target.partition(".")[2]
+            short.setdefault(bare, []).append(target)
+            if expression_name(bare) != bare:
+                short.setdefault(expression_name(bare), []).append(target)
         for name, targets in short.items():
             if len(targets) == 1 and name not in names:
                 names[name] = targets[0]
         if not text:
             return None, names
-        fix = ("name parameters like motor_k_m for 'motor.k_m' (non-identifier characters become '_'); "
-               "known: " + ", ".join(sorted(names)))
+        fix = ("name parameters as the spec does ('motor.k_m', 'traj.q_via[2]') or as identifiers (motor_k_m, "
+               "traj_q_via_2); known: " + ", ".join(sorted(self.targets)))
         try:
             expression = Expression(text)
         except ExpressionError as exc:
             raise SpecError([Problem(self.spec.path, "$.design.constraint", str(exc), fix)]) from None
-        unknown = sorted(expression.free_names - set(names))
+        unknown = expression.unknown_names(names)
         if unknown:
             raise SpecError([Problem(self.spec.path, "$.design.constraint",
                                      f"unknown name(s) in the constraint: {', '.join(unknown)}", fix)])
         return expression, names
+
+    def check(self) -> None:
+        """Evaluate the constraint on the first candidate point: a bad index shows before any point runs.
+
+        ``cosim validate`` calls it so that it refuses what a sweep would. Raises SpecError like iterating.
+        """
+        first = next(self._raw(), None)
+        if first is not None and self.parameters:
+            self._accepts(self._values(first))
 
     # -- points ---------------------------------------------------------------
     def _raw(self) -> Iterator[tuple[Any, ...]]:
@@ -358,6 +370,24 @@ class DesignSpace:
     def head(self, n: int) -> list[Point]:
         """The first ``n`` points."""
         return list(itertools.islice(iter(self), n))
+
+    def spread(self, n: int) -> list[Point]:
+        """``n`` points evenly spaced over the whole space: the first, the last and between (all when fewer).
+
+        For estimates from a few runs: the first points of a grid differ only in the fastest-varying
+        parameter and may all be cheap (or all dear), so the sample is taken across the enumeration.
+        """
+        total = len(self)
+        if total <= n:
+            return list(self)
+        wanted = sorted({round(k * (total - 1) / (n - 1)) for k in range(n)}) if n > 1 else [0]
+        picked = []
+        for point in self:
+            if point.index == wanted[len(picked)]:
+                picked.append(point)
+                if len(picked) == len(wanted):
+                    break
+        return picked
 
     def columns(self, values: dict[str, Any]) -> dict[str, Any]:
         """A point's values as flat table columns (arrays as ``target[i]``)."""

@@ -15,6 +15,11 @@ digits).  Any failure while evaluating (division of whole numbers by zero,
 overflow, a bad index) is an :class:`ExpressionError` with one line of text;
 ``strict=True`` also turns float division by zero and invalid results into
 errors (design constraints use it).
+
+Names may be dotted, as a spec and a results table write them: ``move.v_max``
+is one name, and ``traj.waypoints[9]`` is the value named ``traj.waypoints[9]``
+when there is one (a table column, a design parameter of one element), else
+element 9 of the array ``traj.waypoints``.
 """
 
 from __future__ import annotations
@@ -76,6 +81,8 @@ class Expression:
                                   f"({type(exc).__name__})") from None
         self._check_depth(self._tree)
         self.names: set[str] = set()
+        self._elements: set[tuple[str, int]] = set()  # (name, i) of every name[i]
+        self._bare: set[str] = set()  # names used without [i]
         self._check(self._tree)
 
     def _check_depth(self, tree: ast.AST) -> None:
@@ -94,6 +101,20 @@ class Expression:
         """Names that must come from the values (all but the built-in constants)."""
         return self.names - CONSTANTS.keys()
 
+    @property
+    def lookups(self) -> set[str]:
+        """Every name evaluation may look up: the names, and ``name[i]`` for each element used."""
+        return self.names | {f"{name}[{i}]" for name, i in self._elements}
+
+    def unknown_names(self, known: set[str] | Mapping[str, Any]) -> list[str]:
+        """The names this expression needs that ``known`` lacks, sorted.
+
+        ``name[i]`` is satisfied by a value ``name[i]`` or by an array ``name``.
+        """
+        missing = {n for n in self._bare if n not in known and n not in CONSTANTS}
+        missing |= {f"{n}[{i}]" for n, i in self._elements if n not in known and f"{n}[{i}]" not in known}
+        return sorted(missing)
+
     def _check(self, node: ast.AST) -> None:
         if isinstance(node, ast.Constant):
             if not isinstance(node.value, (int, float, bool)):
@@ -101,8 +122,9 @@ class Expression:
             if not isinstance(node.value, bool) and abs(node.value) > MAX_LITERAL:
                 raise ExpressionError(f"'{self._shown}': the number {str(node.value)[:20]}... is too large "
                                       f"(at most {MAX_LITERAL:g})")
-        elif isinstance(node, ast.Name):
-            self.names.add(node.id)  # may also be a constant; a value of that name takes precedence
+        elif isinstance(node, (ast.Name, ast.Attribute)):
+            self.names.add(self._dotted(node))  # may also be a constant; a value of that name takes precedence
+            self._bare.add(self._dotted(node))
         elif isinstance(node, ast.BinOp) and type(node.op) in _BINARY:
             self._check(node.left)
             self._check(node.right)
@@ -128,12 +150,21 @@ class Expression:
             for arg in node.args:
                 self._check(arg)
         elif isinstance(node, ast.Subscript):
-            if not (isinstance(node.value, ast.Name) and isinstance(node.slice, ast.Constant)
+            if not (isinstance(node.value, (ast.Name, ast.Attribute)) and isinstance(node.slice, ast.Constant)
                     and isinstance(node.slice.value, int)):
                 raise ExpressionError(f"'{self._shown}': only name[i] with a whole number i is allowed")
-            self.names.add(node.value.id)
+            self.names.add(self._dotted(node.value))
+            self._elements.add((self._dotted(node.value), node.slice.value))
         else:
             raise ExpressionError(f"'{self._shown}': '{ast.unparse(node)}' is not allowed in an expression")
+
+    def _dotted(self, node: ast.AST) -> str:
+        """'a.b.c' for the attribute chain a.b.c of plain names (a spec's 'unit.port'); raises otherwise."""
+        if isinstance(node, ast.Name):
+            return node.id
+        if isinstance(node, ast.Attribute) and not node.attr.startswith("__"):  # a name, never an attribute
+            return f"{self._dotted(node.value)}.{node.attr}"
+        raise ExpressionError(f"'{self._shown}': '{ast.unparse(node)}' is not allowed in a name")
 
     def evaluate(self, values: Mapping[str, Any], strict: bool = False) -> Any:
         """The value of the expression.
@@ -155,12 +186,13 @@ class Expression:
     def _eval(self, node: ast.AST, values: Mapping[str, Any]) -> Any:
         if isinstance(node, ast.Constant):
             return node.value
-        if isinstance(node, ast.Name):
-            if node.id not in values:
-                if node.id in CONSTANTS:
-                    return CONSTANTS[node.id]
-                raise ExpressionError(f"'{self._shown}': unknown name '{node.id}'")
-            value = values[node.id]
+        if isinstance(node, (ast.Name, ast.Attribute)):
+            name = self._dotted(node)
+            if name not in values:
+                if name in CONSTANTS:
+                    return CONSTANTS[name]
+                raise ExpressionError(f"'{self._shown}': unknown name '{name}'")
+            value = values[name]
             return np.asarray(value, dtype=float) if isinstance(value, (list, tuple)) else value
         if isinstance(node, ast.BinOp):
             left, right = self._eval(node.left, values), self._eval(node.right, values)
@@ -185,8 +217,11 @@ class Expression:
         if isinstance(node, ast.Call):
             return FUNCTIONS[node.func.id](*[self._eval(a, values) for a in node.args])  # type: ignore[attr-defined]
         if isinstance(node, ast.Subscript):
-            array = np.atleast_1d(self._eval(node.value, values))
             index = node.slice.value  # type: ignore[attr-defined]
+            element = f"{self._dotted(node.value)}[{index}]"
+            if element in values:  # a value named like the element: a table column, a one-element parameter
+                return values[element]
+            array = np.atleast_1d(self._eval(node.value, values))
             if not 1 <= index <= array.size:
                 raise ExpressionError(f"'{self._shown}': index {index} outside 1..{array.size}")
             return array.flat[index - 1]

@@ -206,6 +206,8 @@ class Sweep:
         self.cluster = None if cluster is None else str(cluster)
         if cluster is not None:
             read_cluster_file(cluster)  # a bad cluster file is reported before any work (ClusterFileError)
+        if scheduler is not None:
+            check_scheduler_address(scheduler)
         self.system = check_spec(spec_path, experiment)  # experiment: command-line overrides
         self.spec = self.system.spec
         self.space = (space_of or DesignSpace.from_spec)(self.spec)
@@ -361,13 +363,29 @@ class Sweep:
         return out
 
     def sample_runs(self, n: int = 3) -> list[dict[str, Any]]:
-        """Run the first ``n`` points locally (in a child process, so a crash cannot hit the caller)."""
+        """Run ``n`` points spread over the space locally (in a child process, so a crash cannot hit the caller)."""
         runner = IsolatedRunner(self.payload)
         try:
-            points = self.space.head(n)
+            points = self.space.spread(n)
             return runner.run([(p.id, p.values) for p in points], self.timeout)
         finally:
             runner.close()
+
+
+def check_scheduler_address(address: str) -> None:
+    """Raise SweepError unless ``address`` has the form of a Dask scheduler address (tcp://host:port)."""
+    from distributed.comm.addressing import parse_address, parse_host_port
+    from distributed.comm.registry import backends
+
+    try:
+        scheme, location = parse_address(address)
+        if scheme not in backends:
+            raise ValueError(f"unknown protocol '{scheme}'")
+        if scheme in ("tcp", "tls"):
+            parse_host_port(location)
+    except (ValueError, TypeError) as exc:
+        raise SweepError(f"--scheduler '{address}' is not a Dask scheduler address ({exc}); write it as "
+                         "tcp://HOST:PORT, as `dask scheduler` prints it, e.g. tcp://127.0.0.1:8786") from None
 
 
 def _user() -> str:

@@ -29,7 +29,8 @@ def add_sweep_parser(sub: Any) -> None:
     from .cli import add_experiment_options
     add_experiment_options(p)
     p.add_argument("--dry-run", action="store_true",
-                   help="print the number of points, a few of them and a time estimate from sample runs")
+                   help="print the number of points, the first few and a time estimate from sample runs of "
+                        "points spread over the whole space (the first, the last and between)")
     p.set_defaults(handler=cmd_sweep)
 
 

@@ -48,6 +48,15 @@ def check_spec(path: str | Path, experiment: dict | None = None) -> System:
         raise SpecError(problems) from None
 
 
+def check_design(system: System) -> None:
+    """The checks ``cosim sweep`` makes of the design section: ranges and steps, repeated values, samplers, and
+    the constraint's names and indices. Raises SpecError with the problem found.
+    """
+    from .design import DesignSpace
+
+    DesignSpace.from_spec(system.spec).check()
+
+
 def _set_aside_broken_entries(raw: Any, file: str) -> tuple[dict, set[str]]:
     import jsonschema
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 
 import matplotlib
 import numpy as np
@@ -86,20 +85,18 @@ def test_cli_plot_writes_each_format(tmp_path, capsys, suffix, magic):
         assert "traj.q_via[2] [deg]" in text and "energy [J]" in text
 
 
-def test_17061_points_draw_fast_with_one_scatter_per_group(tmp_path):
+def test_17061_points_draw_with_one_scatter_per_group(tmp_path):
+    """Two artists, not one per point (the drawing time is measured by benchmarks/analysis_speed.py)."""
     n2, n4 = 121, 141  # the thesis's grid: 17 061 points
     path = make_sweep_table(tmp_path / "big", n2=n2, n4=n4, failed=0)
     table = load_results(path)
     assert len(table.df) == 17061
-    started = time.perf_counter()
     fig = new_figure()
     ax, counts = scatter_cloud(fig, table, "traj.q_via[2]", "traj.q_via[4]", color="energy",
                                active=table.where("energy < 60"))
     save(fig, tmp_path / "big.png")
-    elapsed = time.perf_counter() - started
     assert counts.coloured + counts.greyed == 17061
     assert len(ax.collections) == 2  # greyed + coloured: no per-point artists
-    assert elapsed < 5.0, f"17061 points took {elapsed:.2f} s"
 
 
 def test_pareto_plot_marks_the_front_over_the_cloud(tmp_path, capsys):

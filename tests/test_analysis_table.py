@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 
 import numpy as np
@@ -87,6 +86,11 @@ def test_where_maps_names_and_combines_columns(tmp_path):
     chained = table.where("-50 < traj_q_via_2 <= 0")
     assert np.array_equal(chained, (q2 > -50) & (q2 <= 0))
     assert np.array_equal(table.where("not (traj_q_via_4 > 10)"), ~(q4 > 10))
+    # the names as the table writes them
+    assert np.array_equal(table.where("traj.q_via[2] > -50 and traj.q_via[4] <= 70 or e_el[1] > 1e9"), mask)
+    assert np.array_equal(table.where("traj.q_via[2] < traj.q_via[4] - 100"), q2 < q4 - 100)
+    with pytest.raises(AnalysisError, match=r"unknown name 'traj.q_via\[3\]'.*known: .*traj.q_via\[2\]"):
+        table.where("traj.q_via[3] > 0")
     # a missing value never passes a comparison
     assert not table.where("energy > 0")[~table.ok_mask()].any()
     assert table.where(None).all()
@@ -160,20 +164,19 @@ def test_pareto_matches_the_pairwise_reference_on_random_data_with_ties(k):
     assert np.array_equal(pareto_mask(v, senses[:k]), pareto_naive(v, senses[:k]))
 
 
-def test_pareto_is_fast_for_a_large_table():
+def test_pareto_of_a_large_table():
+    """Correct on 200k rows (its time is measured by benchmarks/analysis_speed.py, not asserted here)."""
     rng = np.random.default_rng(0)
     v = rng.random((200_000, 2))
-    started = time.perf_counter()
     mask = pareto_mask(v)
-    assert time.perf_counter() - started < 2.0
     # spot check: no front point is dominated by any other point
     front = v[mask]
     for p in front[:20]:
         assert not np.any(np.all(v <= p, axis=1) & np.any(v < p, axis=1))
     v3 = rng.random((17_061, 3))
-    started = time.perf_counter()
-    pareto_mask(v3)
-    assert time.perf_counter() - started < 5.0
+    mask3 = pareto_mask(v3)
+    for p in v3[mask3][:20]:
+        assert not np.any(np.all(v3 <= p, axis=1) & np.any(v3 < p, axis=1))
 
 
 def test_pareto_cli_uses_spec_senses_table_and_csv(tmp_path, capsys):

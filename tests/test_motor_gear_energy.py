@@ -1,7 +1,7 @@
 """The motor_gear_energy FMU (FMI 2 and 3) and Python unit against an independent implementation.
 
-The reference below is written from the thesis (section 7.2.2) and
-DESIGN.md, scalar by scalar, deliberately unlike the C and numpy code: the
+The reference below is written from the thesis (section 7.2.2) and the unit's
+documentation (fmus/README.md), scalar by scalar, deliberately unlike the C and numpy code: the
 gear table is searched by hand and the mechanical power is computed from the
 motor speed in rpm converted back to rad/s (n * 2 pi / 60), the unit the
 thesis's eq. 7-16 gets wrong when read literally.

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import re
+import shutil
 import subprocess
 import sys
 import tomllib
@@ -84,8 +85,12 @@ def test_schema_and_plant_are_read_as_package_data():
 def wheel(tmp_path_factory) -> Path:
     """The wheel built from this checkout (no network: the installed setuptools builds it)."""
     out = tmp_path_factory.mktemp("wheel")
+    # built from a copy: setuptools writes build/ and *.egg-info into the tree it builds
+    source = out / "source"
+    shutil.copytree(REPO, source, ignore=shutil.ignore_patterns(".git", "build", "*.egg-info", "results", "examples",
+                                                                "__pycache__", ".pytest_cache"))
     result = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
-                             "-w", str(out), str(REPO)], capture_output=True, text=True, timeout=300,
+                             "-w", str(out), str(source)], capture_output=True, text=True, timeout=300,
                             cwd=out)
     assert result.returncode == 0, result.stderr
     (path,) = out.glob("cosim-*.whl")

@@ -112,6 +112,10 @@ def test_cli_exit_codes_and_dry_run(write_spec, tmp_path, capsys, local_cluster)
     assert main(["sweep", spec_path, "--dry-run"]) == 0
     text = capsys.readouterr().out
     assert "10 points" in text and "ode.a=-2.0, ode.x0=1.0" in text and "estimate:" in text
+    # the sample runs are spread over the space: points 0, 3, 6 and 9 of 10, not the first four
+    space = list(Sweep(spec_path, out=tmp_path / "z", quiet=True).space)
+    sampled = [line.split()[1].rstrip(":") for line in text.splitlines() if line.startswith("sample ")]
+    assert sampled == [space[i].id for i in (0, 3, 6, 9)]
     assert main(["sweep", spec_path, "--out", str(tmp_path / "x"), "--timeout", "-1"]) == 2
     bad = write_spec({**ode_spec(), "design": {"parameters": {"ode.nope": {"values": [1]}}}}, "bad.json")
     assert main(["sweep", str(bad), "--out", str(tmp_path / "y")]) == 2

@@ -172,3 +172,21 @@ def test_valid_spec_prints_the_order(tmp_path, capsys):
         "connections": [{"from": "c.time", "to": "g.u"}], "experiment": {"stop": 1, "step": 0.1}}))
     code, text = validate(capsys, path)
     assert code == 0 and "order: c -> g" in text
+
+
+@pytest.mark.parametrize("design, path, fragment", [
+    ('{"parameters": {"ode.a": {"values": [1, 2, 1]}}}', "$.design.parameters.ode.a", "values repeat: 1"),
+    ('{"parameters": {"ode.a": {"min": 0, "max": 1, "step": NaN}}}', "$.design.parameters.ode.a", "NaN"),
+    ('{"parameters": {"ode.a": {"min": 0, "max": 1, "step": 0.5}}, "constraint": "ode.b < 1"}',
+     "$.design.constraint", "unknown name(s) in the constraint: ode.b"),
+    ('{"parameters": {"ode.a": {"min": 0, "max": 1, "step": 0.5}}, "constraint": "ode.a[3] < 1"}',
+     "$.design.constraint", "index 3 outside 1..1"),
+])
+def test_validate_refuses_the_design_a_sweep_refuses(tmp_path, capsys, design, path, fragment):
+    spec = tmp_path / "spec.json"
+    spec.write_text('{"units": {"ode": {"fmu": "builtin:linear_ode_fmi3"}}, "experiment": {"stop": 1, "step": 0.1},'
+                    f' "design": {design}}}')
+    code, text = validate(capsys, spec)
+    assert code == 2 and path in text and fragment in text, text
+    assert main(["sweep", str(spec), "--dry-run"]) == 2  # the same problem, found by the sweep
+    assert fragment in capsys.readouterr().err

@@ -8,13 +8,13 @@ without it every numeric column is just a column without a unit.
 Filtering with ``--where``
     A ``where`` text is an :class:`orchestrator.expressions.Expression`
     (numbers, ``+ - * / ** %``, comparisons, ``and or not``, ``abs sqrt min
-    max ...``) evaluated over whole columns at once.  Column names become
-    identifiers by the rule constraints use (see :mod:`orchestrator.design`):
+    max ...``) evaluated over whole columns at once.  Columns are named as the
+    table names them (``traj.waypoints[9] > -50``, ``e_el[1] < 3``), or by the
+    identifier rule constraints also accept (see :mod:`orchestrator.design`):
     every run of characters other than letters, digits and ``_`` becomes one
-    ``_`` and trailing ones are dropped.  ``traj.waypoints[9]`` is
-    ``traj_waypoints_9``, ``e_el[1]`` is ``e_el_1``, ``run_time`` stays.
-    A name that already is an identifier is used as it is.  A comparison with
-    a missing value (NaN) is false, so rows without a value drop out.
+    ``_`` and trailing ones are dropped, so ``traj.waypoints[9]`` is also
+    ``traj_waypoints_9``.  A comparison with a missing value (NaN) is false, so
+    rows without a value drop out.
 """
 
 from __future__ import annotations
@@ -171,17 +171,17 @@ class ResultsTable:
         """
         if not text:
             return np.ones(len(self.df), dtype=bool)
-        names = {identifier(c): c for c in self.numeric_columns()}
+        names = {identifier(c): c for c in self.numeric_columns()} | {c: c for c in self.numeric_columns()}
         try:
             expression = ColumnExpression(text)
         except ExpressionError as exc:
             raise AnalysisError(f"--where: {exc}") from None
-        unknown = sorted(expression.names - set(names))
+        unknown = expression.unknown_names(names)
         if unknown:
             hint = did_you_mean(unknown[0], names)
-            raise AnalysisError(f"--where '{text}': unknown name '{unknown[0]}'.{hint} Columns are named like "
-                                f"traj_waypoints_9 for 'traj.waypoints[9]'; known: {', '.join(sorted(names))}")
-        scope = {n: self.values(names[n]) for n in expression.names}
+            raise AnalysisError(f"--where '{text}': unknown name '{unknown[0]}'.{hint} Name columns as the table "
+                                f"does; known: {', '.join(map(str, self.numeric_columns()))}")
+        scope = {n: self.values(names[n]) for n in expression.lookups if n in names}
         try:
             result = expression.evaluate(scope)
         except (ExpressionError, TypeError, ValueError) as exc:

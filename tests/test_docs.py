@@ -1,0 +1,169 @@
+"""Every command and code block of README.md and the examples' READMEs, run as written.
+
+Commands run in a scratch folder that mirrors the repository (its ``examples/`` copied, so that scripts
+writing beside themselves never touch the committed files); ``cosim`` is this checkout's CLI
+(``python -m orchestrator.cli``). Commands that take minutes (the full studies, the interactive window) are
+run by the ``slow`` tests: ``python -m pytest -m slow``.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shlex
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from orchestrator.cli import _parser
+
+REPO = Path(__file__).resolve().parents[1]
+EXAMPLE_READMES = sorted((REPO / "examples").glob("*/README.md"))
+
+# Commands of the examples' READMEs that take minutes on 2 cores or open a window: run by the slow tests.
+LONG = ("run_study.py", "compare_fidelity.py", "cosim sweep examples/bin_picking", "cosim explore",
+        "explorer_screenshot.py")
+
+
+def fenced_blocks(path: Path, language: str) -> list[str]:
+    """The ```language blocks of a Markdown file."""
+    return re.findall(rf"^```{language}\n(.*?)^```", path.read_text(encoding="utf-8"), re.S | re.M)
+
+
+def indented_commands(path: Path) -> list[str]:
+    """Lines of indented (4-space) blocks that are commands: start with 'cosim ' or 'python '."""
+    lines = re.findall(r"^    ((?:cosim|python) .*)$", path.read_text(encoding="utf-8"), re.M)
+    return [re.sub(r"\s+#.*$", "", line).strip() for line in lines]
+
+
+def run_command(command: str, cwd: Path, timeout: float = 600) -> subprocess.CompletedProcess:
+    """Run a documented command line; ``cosim`` and ``python`` are this checkout's CLI and interpreter."""
+    argv = shlex.split(command)
+    if argv[0] == "cosim":
+        argv = [sys.executable, "-m", "orchestrator.cli", *argv[1:]]
+    elif argv[0] == "python":
+        argv = [sys.executable, *argv[1:]]
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]),
+               MPLBACKEND="Agg")
+    return subprocess.run(argv, cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def scratch(tmp_path_factory) -> Path:
+    """A folder laid out like the repository: its own copy of examples/, nothing else."""
+    root = tmp_path_factory.mktemp("docs")
+    shutil.copytree(REPO / "examples", root / "examples",
+                    ignore=shutil.ignore_patterns("sweep_full", "__pycache__"))
+    return root
+
+
+# -- README.md ---------------------------------------------------------------------------------------------
+
+
+def test_readme_main_job_and_the_commands_that_look_at_it(scratch):
+    first = fenced_blocks(REPO / "README.md", "bash")[0].splitlines()
+    install, main_job = (part.strip() for part in re.sub(r"\s+#.*$", "", first[0]).split("&&"))
+    assert install == 'pip install -e ".[test]"' and first[1].startswith("python -m pytest -q")
+    done = run_command(main_job, scratch)
+    assert done.returncode == 0, done.stderr[-2000:]
+    folder = scratch / main_job.split("--out")[1].split()[0]
+    table = pd.read_parquet(folder / "results.parquet")
+    assert len(table) == 273 and (table["status"] == "ok").all()
+    assert f"273 points: 273 ok; table: {folder.relative_to(scratch)}/results.parquet" in done.stdout
+    # the commands the README gives right after it (all but the interactive `cosim explore`)
+    text = (REPO / "README.md").read_text(encoding="utf-8")
+    follow_ups = re.findall(r"`(cosim (?:report|pareto) results/[^`]+)`", text.replace("\n", " "))
+    assert len(follow_ups) == 2
+    for command in follow_ups:
+        done = run_command(command, scratch)
+        assert done.returncode == 0, (command, done.stderr[-2000:])
+    assert (scratch / "report.html").stat().st_size > 10_000
+
+
+def test_readme_python_api_block_runs_as_a_script(scratch):
+    (api,) = [b for b in fenced_blocks(REPO / "README.md", "python") if "orchestrator.sweep" in b]
+    script = scratch / "api_example.py"
+    script.write_text(api)
+    done = run_command(f"python {script}", scratch)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout.startswith("ok ") and "[72 rows x 3 columns]" in done.stdout, done.stdout
+
+
+def test_readme_python_unit_block_is_a_working_unit(scratch):
+    (block,) = [b for b in fenced_blocks(REPO / "README.md", "python") if "class Gain" in b]
+    (scratch / "gain_unit.py").write_text(block)
+    spec = scratch / "gain_spec.json"
+    spec.write_text('{"units": {"g": {"python": "gain_unit.py:Gain", "start": {"u": 1.5}}},'
+                    ' "experiment": {"stop": 0.1, "step": 0.1},'
+                    ' "objectives": {"y": {"signal": "g.y", "reduce": "final"}}}')
+    done = run_command(f"cosim run {spec}", scratch)
+    assert done.returncode == 0, done.stderr
+    assert re.search(r"^y\s+3\s*$", done.stdout, re.M), done.stdout  # k = 2 times u = 1.5
+
+
+def test_readme_spec_block_and_its_one_line_replacement_validate(scratch):
+    (block,) = fenced_blocks(REPO / "README.md", "json")
+    folder = scratch / "spec_in_brief"
+    folder.mkdir()
+    shutil.copy(REPO / "examples" / "drive_energy" / "drive_profile.py", folder)
+    (folder / "spec.json").write_text(block)
+    done = run_command("cosim validate spec.json", folder)
+    assert done.returncode == 0, done.stderr
+    replacement = re.search(r'`("energy": \{"python": "[^`]+\})`', (REPO / "README.md").read_text()).group(1)
+    swapped = re.sub(r'"energy": \{"fmu": [^\n]*\}\}', replacement, block)
+    assert swapped != block
+    (folder / "spec.json").write_text(swapped)
+    done = run_command("cosim validate spec.json", folder)
+    assert done.returncode == 0, done.stderr
+
+
+def test_readme_command_table_names_real_subcommands_and_options():
+    """Each row of the Commands table: the subcommand exists and accepts every option the row shows."""
+    text = (REPO / "README.md").read_text(encoding="utf-8")
+    rows = re.findall(r"^\| `(cosim [^|]*?)`(?: / `[^|]*`)? \|", text, re.M)
+    assert len(rows) >= 8
+    subparsers = next(a for a in _parser()._actions if a.__class__.__name__ == "_SubParsersAction").choices
+    for row in rows:
+        sub = row.split()[1]
+        assert sub in subparsers, row
+        accepted = {o for a in subparsers[sub]._actions for o in a.option_strings}
+        for option in re.findall(r"(--[a-z][a-z-]*)", row):
+            assert option in accepted, (row, option)
+
+
+# -- the examples' READMEs -----------------------------------------------------------------------------------
+
+
+def quick_commands() -> list[tuple[str, str]]:
+    return [(path.parent.name, c) for path in EXAMPLE_READMES for c in indented_commands(path)
+            if not any(long in c for long in LONG)]
+
+
+def long_commands() -> list[tuple[str, str]]:
+    return [(path.parent.name, c) for path in EXAMPLE_READMES for c in indented_commands(path)
+            if any(long in c for long in LONG)]
+
+
+def test_every_example_command_is_either_quick_or_long():
+    assert len(quick_commands()) >= 8 and len(long_commands()) >= 5
+    assert {c for _, c in quick_commands()} | {c for _, c in long_commands()} == \
+        {c for path in EXAMPLE_READMES for c in indented_commands(path)}
+
+
+@pytest.mark.parametrize("example, command", quick_commands(), ids=lambda v: v[:70] if isinstance(v, str) else v)
+def test_example_readme_command_runs_as_written(scratch, example, command):
+    done = run_command(command, scratch)
+    assert done.returncode == 0, (command, done.stdout[-1000:], done.stderr[-2000:])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("example, command", long_commands(), ids=lambda v: v[:70] if isinstance(v, str) else v)
+def test_example_readme_long_command_runs_as_written(scratch, example, command):
+    if "cosim explore" in command or "explorer_screenshot" in command:
+        pytest.skip("the interactive window is run by tests/test_analysis_explorer.py under Xvfb")
+    done = run_command(command, scratch, timeout=3600)
+    assert done.returncode == 0, (command, done.stdout[-1000:], done.stderr[-2000:])
