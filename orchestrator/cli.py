@@ -87,8 +87,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--results", help="the sweep's results.parquet or folder for --point (default: results/<name>/)")
     p.set_defaults(handler=cmd_run)
 
-    p = sub.add_parser("inspect", help="list an FMU's variables, or a spec's units, connections and order")
-    p.add_argument("target", help="an .fmu file, a spec.json or an SSP")
+    p = sub.add_parser("inspect", help="list the ports of an FMU, a Python unit, a recorded table, or a spec's "
+                                       "(or an SSP's) units")
+    p.add_argument("target", help="spec.json, system.ssp, model.fmu, builtin:NAME_fmi3, file.py:Class, "
+                                  "package.module:Class, or a recorded .parquet/.csv table")
     add_experiment_options(p)
     p.set_defaults(handler=cmd_inspect)
     from .export_cli import add_export_parsers
@@ -194,77 +196,10 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_inspect(args: argparse.Namespace) -> int:
-    """``cosim inspect file.fmu|spec.json``: variables of an FMU, or the structure of a spec."""
-    target = Path(args.target)
-    if target.suffix.lower() == ".fmu" or args.target.startswith("builtin:"):
-        return _inspect_fmu(args.target)
-    from .validate import check_spec
+    """``cosim inspect TARGET``: the ports of an FMU, Python unit or recorded table, or of a spec's units."""
+    from .inspection import inspect_target
 
-    system = check_spec(target, experiment_overrides(args))
-    print(f"spec {target}: {system.spec.name}")
-    print("units:")
-    for name, unit in system.units.items():
-        d = unit.description
-        kind = f"FMI {d.fmi_version}" if d.kind == "fmu" else d.kind
-        ports = _listed_variables(d)  # FMI 2.0 scalars x[1]..x[n] count once, as their array x
-        inputs = sum(v.causality == "input" for v in ports)
-        outputs = sum(v.causality == "output" for v in ports)
-        print(f"  {name}: {kind} {unit.spec.source} ({inputs} inputs, {outputs} outputs)")
-    print("connections:")
-    for c in system.connections:
-        scaled = f" (x {c.factor:.17g} + {c.offset:.17g})" if c.transforms else ""
-        print(f"  {c.source.text} -> {c.target.text}{scaled}")
-    exp = system.spec.experiment
-    print(f"experiment: {exp.start:g} .. {exp.stop:g} s, step {exp.step:g} s, {exp.algorithm}")
-    print(f"stepping order: {' -> '.join(system.order)}")
-    return EXIT_OK
-
-
-def _inspect_fmu(reference: str) -> int:
-    from .unit_kinds import resolve_fmu_path
-    from .units.fmu import FmuUnitType
-
-    try:
-        unit_type = FmuUnitType(resolve_fmu_path(reference), reference)
-        d = unit_type.describe()
-    except FileNotFoundError as exc:
-        raise UsageError(str(exc)) from None
-    print(f"{reference}: {d.name}, FMI {d.fmi_version} co-simulation"
-          + (f", default step {d.default_step:g} s" if d.default_step else ""))
-    if d.description:
-        print(f"  {d.description}")
-    if getattr(unit_type.model_description().coSimulation, "needsExecutionTool", False):
-        print("  needsExecutionTool: the FMU drives its exporting tool, which must be installed and licensed "
-              "on every machine that runs it (also every Dask worker)")
-    rows = [("name", "causality", "type", "unit", "start", "range", "description")]
-    for v in _listed_variables(d):
-        if v.causality == "local":
-            continue
-        shape = f"[{','.join(map(str, v.shape))}]" if v.shape else ""
-        rng = "" if v.min is None and v.max is None else f"[{_fmt(v.min) or '-inf'}, {_fmt(v.max) or 'inf'}]"
-        rows.append((v.name + shape, v.causality, v.fmi_type or v.type, v.unit or "", _fmt(v.start), rng,
-                     v.description[:50]))
-    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
-    for row in rows:
-        print("  " + "  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip())
-    return EXIT_OK
-
-
-def _listed_variables(d: Any) -> list:
-    """The variables to show: FMI 2.0 scalars x[1]..x[n] that are also offered as the array x are left out."""
-    arrays = {v.name for v in d.variables if v.is_array}
-    return [v for v in d.variables
-            if not (d.fmi_version == "2.0" and not v.is_array and v.name.split("[")[0] in arrays)]
-
-
-def _fmt(value: Any) -> str:
-    if value is None:
-        return ""
-    if isinstance(value, bytes):
-        return value.hex() or '""'  # FMI 3.0 Binary: the bytes in hex, as the trace columns hold them
-    if isinstance(value, tuple):
-        return "(" + ", ".join(_fmt(v) for v in value[:4]) + (", ..." if len(value) > 4 else "") + ")"
-    return f"{value:g}" if isinstance(value, float) else str(value)
+    return inspect_target(args.target, experiment_overrides(args))
 
 
 if __name__ == "__main__":  # as orchestrator.cli, so that subcommand modules raise the UsageError caught here

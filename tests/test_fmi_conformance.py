@@ -46,8 +46,8 @@ def test_inspect_lists_every_fmi3_type_with_binary_start_in_hex(capsys, types_fm
     for kind in ("Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64", "Float32",
                  "Enumeration", "Boolean", "String", "Binary", "Clock"):
         assert re.search(rf"\s{kind}\s", text), kind
-    assert re.search(r"data_in\s+input\s+Binary\s+0a0bfe", text)
-    assert re.search(r"u_uint64\s+input\s+UInt64\s+18446744073709551613", text)  # exact, not via a float
+    assert re.search(r"data_in\s+input\s+Binary\s+scalar\s+0a0bfe", text)  # name causality type shape (unit) start
+    assert re.search(r"u_uint64\s+input\s+UInt64\s+scalar\s+18446744073709551613", text)  # exact, not via a float
 
 
 def test_every_type_runs_like_fmpy(write_spec, types_fmu):

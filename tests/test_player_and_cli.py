@@ -65,12 +65,12 @@ def test_inspect_lists_fmu_variables_and_spec_structure(write_spec, built_fmu, c
     assert main(["inspect", str(built_fmu("motor_gear_energy", 2))]) == 0
     text = capsys.readouterr().out
     assert "FMI 2.0 co-simulation" in text
-    row = next(line.split() for line in text.splitlines() if line.strip().startswith("k_m[7]"))
-    assert row[:4] == ["k_m[7]", "parameter", "Real", "N.m/A"]
+    row = next(line.split() for line in text.splitlines() if line.strip().startswith("k_m "))
+    assert row[:5] == ["k_m", "parameter", "Real", "7", "N.m/A"]  # the scalars k_m[1]..k_m[7] as one array
     path = write_spec(energy_spec({"fmu": "builtin:motor_gear_energy_fmi3"}))
     assert main(["inspect", str(path)]) == 0
     text = capsys.readouterr().out
-    assert "energy: FMI 3.0 builtin:motor_gear_energy_fmi3 (2 inputs" in text
+    assert "unit energy: FMI 3.0 builtin:motor_gear_energy_fmi3 (2 inputs" in text
     assert "drive.tau -> energy.tau" in text and "stepping order: drive -> energy" in text
 
 
