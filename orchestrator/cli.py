@@ -174,6 +174,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.point:  # values from the sweep's table; traces by default to <results>/points/<ID>.parquet
         from .analysis.rerun import prepare_point_run
         system, values, out = prepare_point_run(system, args.point, args.results, out)
+    elif out is not None and not system.spec.record:  # record-and-replay in one line: every output by default
+        system = system.recording_all_outputs()
+        print(f"recording every output of {', '.join(system.units)} (the spec has no 'record' list)")
     values.update(sets)  # --set wins over the point's value of the same parameter
     result = run_point(system, values, record=out is not None)
     units = {o.name: o.unit or "" for o in system.spec.objectives}
@@ -191,8 +194,13 @@ def cmd_run(args: argparse.Namespace) -> int:
             result.traces.to_csv(out, index=False)
         else:
             result.traces.to_parquet(out, index=False)
-        print(f"traces: {out} ({len(result.traces)} rows, {len(result.traces.columns) - 1} signals)")
+        signals = [str(c) for c in result.traces.columns if c != "time"]
+        print(f"traces: {out} ({len(result.traces)} rows, {len(signals)} signals: {_abbreviated(signals)})")
     return result.exit_code
+
+
+def _abbreviated(names: list[str], most: int = 8) -> str:
+    return ", ".join(names[:most]) + (f", ... ({len(names) - most} more)" if len(names) > most else "")
 
 
 def cmd_inspect(args: argparse.Namespace) -> int:

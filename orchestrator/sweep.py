@@ -210,6 +210,7 @@ class Sweep:
             check_scheduler_address(scheduler)
         self.system = check_spec(spec_path, experiment)  # experiment: command-line overrides
         self.spec = self.system.spec
+        _refuse_design_of_players(self.spec)
         self.space = (space_of or DesignSpace.from_spec)(self.spec)
         self.workers = workers or os.cpu_count() or 1
         self.scheduler, self.timeout, self.resume = scheduler, timeout, resume
@@ -370,6 +371,20 @@ class Sweep:
             return runner.run([(p.id, p.values) for p in points], self.timeout)
         finally:
             runner.close()
+
+
+def _refuse_design_of_players(spec: Any) -> None:
+    """A design parameter of a unit replaced by a player varies nothing: SweepError naming it and the fix."""
+    from .system import split_unit_name
+
+    players = {u.name: u.source for u in spec.units if u.kind == "player"}
+    for p in spec.design.parameters:
+        unit = split_unit_name(p.target, [u.name for u in spec.units])[0]
+        if unit in players:
+            raise SweepError(f"{spec.path}: $.design.parameters.{p.target}: unit '{unit}' is a player of "
+                             f"{players[unit]} (a recording made with one value of each parameter), so "
+                             f"'{p.target}' would vary nothing; remove it from design.parameters, or sweep the "
+                             "recorded unit itself")
 
 
 def check_scheduler_address(address: str) -> None:

@@ -187,7 +187,7 @@ def build_system(spec: Spec, broken_units: frozenset[str] = frozenset()) -> Syst
 
     assignments = []
     for u in spec.units:
-        if u.name not in units:
+        if u.name not in units or u.kind == "player":  # a player replaying a unit plays what that unit's values gave
             continue
         for field_name, values in (("parameters", u.parameters), ("start", u.start)):
             for port, value in values.items():
@@ -371,7 +371,10 @@ def _check_connections(spec: Spec, units: Mapping[str, SystemUnit], problems: li
     file = spec.path
     connections = []
     fed: dict[tuple[str, str, int], int] = {}
+    players = {u.name for u in spec.units if u.kind == "player"}
     for c in spec.connections:
+        if split_unit_name(str(c.target), units)[0] in players:
+            continue  # the input of a unit now replayed by a player: the recording already has what it caused
         base = ["connections", c.index]
         source = _resolve_signal(c.source, units, problems, file, json_path([*base, "from"]))
         target = _resolve_signal(c.target, units, problems, file, json_path([*base, "to"]))
@@ -683,9 +686,12 @@ def _check_objective_expressions(spec: Spec, problems: list[Problem]) -> None:
 
 
 def _check_design(spec: Spec, units: _LoadedUnits, problems: list[Problem]) -> None:
+    players = {u.name for u in spec.units if u.kind == "player"}
     for p in spec.design.parameters:
         path = json_path(["design", "parameters", p.target])
         unit_name, _, port = split_unit_name(p.target, [*units, *units.failed])
+        if unit_name in players:
+            continue  # a replayed unit: `cosim run` needs no design; a sweep refuses it (orchestrator.sweep)
         if unit_name not in units:
             if unit_name not in units.failed:
                 problems.append(Problem(spec.path, path, f"unknown unit '{unit_name}'."

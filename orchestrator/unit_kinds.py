@@ -252,7 +252,7 @@ def _create_player(spec: "UnitSpec", folder: str) -> "UnitType":
 
     o = spec.options
     return PlayerUnitType(_relative(spec.source, folder), o.get("columns"), o.get("interpolation", "linear"),
-                          o.get("extrapolation", "hold"), o.get("units"))
+                          o.get("extrapolation", "hold"), o.get("units"), unit_name=spec.name)
 
 
 FMU = UnitKind("fmu", {

@@ -9,9 +9,12 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pytest
 
 import orchestrator
 from orchestrator.cli import main
+
+from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -52,3 +55,26 @@ def test_a_malformed_scheduler_address_is_a_usage_error_naming_the_form(tmp_path
         assert f"--scheduler '{address}' is not a Dask scheduler address" in err and "tcp://HOST:PORT" in err
         assert "Traceback" not in err
     assert not (tmp_path / "out").exists()  # refused before anything was written
+
+
+def test_run_point_finds_the_sweep_written_with_out(tmp_path, monkeypatch, capsys, local_cluster):  # noqa: F811
+    """The README's `cosim sweep SPEC --out results/<any name>`, then `cosim run SPEC --point ID`: no --results."""
+    import json
+
+    spec = tmp_path / "study" / "spec.json"
+    spec.parent.mkdir()
+    spec.write_text(json.dumps({
+        "name": "not_the_folder_name", "units": {"ode": {"fmu": "builtin:linear_ode_fmi3"}},
+        "experiment": {"stop": 0.5, "step": 0.1}, "objectives": {"y_end": {"signal": "ode.y", "reduce": "final"}},
+        "design": {"parameters": {"ode.a": {"values": [-1.0, -2.0]}}}}))
+    monkeypatch.chdir(tmp_path)
+    assert main(["sweep", str(spec), "--out", "results/my_run", "--scheduler", local_cluster]) == 0
+    table = pd.read_parquet(tmp_path / "results" / "my_run" / "results.parquet")
+    point = table.loc[table["ode.a"] == -2.0, "point_id"].item()
+    capsys.readouterr()
+    assert main(["run", str(spec), "--point", point]) == 0
+    out = capsys.readouterr().out
+    assert f"point {point}: ode.a=-2.0" in out
+    assert (tmp_path / "results" / "my_run" / "points" / f"{point}.parquet").exists()
+    y_end = float(next(line.split()[1] for line in out.splitlines() if line.startswith("y_end")))
+    assert y_end == pytest.approx(table.loc[table["point_id"] == point, "y_end"].item(), rel=1e-5)  # printed %g

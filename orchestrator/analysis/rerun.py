@@ -10,6 +10,7 @@ besides the spec's ``record`` list (:meth:`~orchestrator.system.System.recording
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -101,11 +102,14 @@ def rerun(table: ResultsTable | None, row: int | None = None, spec_path: str | P
     return run_point(system, values, record=True), values
 
 
-def find_table_for(spec_path: str | Path, given: str | Path | None) -> Path:
-    """The results table of ``cosim run SPEC --point ID``: ``given``, else where ``cosim sweep`` writes by default.
+def find_table_for(spec_path: str | Path, given: str | Path | None, digest: str | None = None) -> Path:
+    """The results table of ``cosim run SPEC --point ID``: ``given``, else the sweep of this spec.
 
-    The default folder is ``results/<spec name>/`` under the current directory,
-    then under the spec's folder.  Raises AnalysisError when none exists.
+    First where ``cosim sweep`` writes by default, ``results/<spec name>/``
+    under the current directory, then under the spec's folder; else the newest
+    sweep folder ``results/*/`` (in the same two places) whose metadata names
+    this spec file or its ``digest``, e.g. one written with ``--out
+    results/my_run``.  Raises AnalysisError when there is none.
     """
     if given is not None:
         return Path(given)
@@ -116,8 +120,28 @@ def find_table_for(spec_path: str | Path, given: str | Path | None) -> Path:
     for c in candidates:
         if c.exists():
             return c
+    sweeps = _sweeps_of(Path(spec_path), digest)
+    if sweeps:
+        return sweeps[0]
     raise AnalysisError("--point: no results table found at " + " or ".join(map(str, candidates))
-                        + "; give it with --results DIR/results.parquet")
+                        + " nor a sweep of this spec in results/*/; give it with --results DIR")
+
+
+def _sweeps_of(spec_path: Path, digest: str | None) -> list[Path]:
+    """Tables of the sweep folders results/*/ (here and beside the spec) made from this spec, newest first."""
+    target = spec_path.resolve()
+    found = set()
+    for root in (Path("results"), target.parent / "results"):
+        for meta_path in root.glob("*/metadata.json"):
+            try:
+                meta = json.loads(meta_path.read_text(encoding="utf-8"))
+            except (OSError, ValueError):
+                continue
+            same_file = bool(meta.get("spec_path")) and Path(meta["spec_path"]) == target
+            if (same_file or (digest and meta.get("spec_digest") == digest)) \
+                    and (meta_path.parent / "results.parquet").exists():
+                found.add((meta_path.parent / "results.parquet").resolve())
+    return sorted(found, key=lambda p: p.stat().st_mtime, reverse=True)
 
 
 def prepare_point_run(system: Any, point_id: str, results: str | Path | None, out: Path | None):
@@ -132,7 +156,7 @@ def prepare_point_run(system: Any, point_id: str, results: str | Path | None, ou
     from .table import load_results
 
     spec_path = system.spec.path
-    table = load_results(find_table_for(spec_path, results))
+    table = load_results(find_table_for(spec_path, results, system.spec.digest))
     row = find_row(table, point_id)
     digest = (table.metadata or {}).get("spec_digest")
     if digest and digest != system.spec.digest:

@@ -9,6 +9,17 @@ offered as plain ``port`` when no other column ends the same way, so a player
 named like the recorded unit replaces it by changing one line of a spec.  With it, any unit can be run alone against
 signals recorded in the whole system.
 
+A player named like the recorded unit (``"move": {"player": "rec.parquet"}``
+over columns ``move.omega``) offers those columns by their port names only
+(``omega``), so the spec's ``move.omega`` means the same as before and a
+recording of the player again has the column ``move.omega``, not
+``move.move.omega``.
+
+Boolean and Integer columns (``cosim run --out`` writes them with their type)
+are played as Boolean and Integer outputs, always holding the last sample, so a
+recorded ``finished`` flag can end a replayed run (``stop_when``).  Columns that
+are not numbers (String, Binary) are not played.
+
 Interpolation between samples: ``linear`` (default), ``hold`` (the last
 sample at or before t) or ``nearest``.  Beyond the recorded range:
 ``hold`` the end values (default) or ``error``.
@@ -59,17 +70,33 @@ def _is_numeric(column: Any) -> bool:
     return bool(pd.api.types.is_numeric_dtype(column) or pd.api.types.is_bool_dtype(column))
 
 
+def _is_bool(column: Any) -> bool:
+    import pandas as pd
+
+    return bool(pd.api.types.is_bool_dtype(column))
+
+
+def _typed(value: float, kind: str) -> Any:
+    """A played sample as its recorded type."""
+    if kind == "Boolean":
+        return bool(value)
+    if kind == "Integer":
+        return int(round(value))
+    return float(value)
+
+
 class _IndexSelection(Selection):
-    def __init__(self, refs: Sequence[ElementRef], columns: np.ndarray):
+    def __init__(self, refs: Sequence[ElementRef], columns: np.ndarray, kinds: Sequence[str]):
         self.refs = tuple(refs)
         self.columns = columns
+        self.kinds = list(kinds) if any(k != "Real" for k in kinds) else None  # None: all Real, no conversion
 
 
 class PlayerUnitType(UnitType):
     """Blueprint of a signal player over the table at ``path``."""
 
     def __init__(self, path: str | Path, columns: Sequence[str] | None = None, interpolation: str = "linear",
-                 extrapolation: str = "hold", units: dict[str, str] | None = None):
+                 extrapolation: str = "hold", units: dict[str, str] | None = None, unit_name: str | None = None):
         if interpolation not in INTERPOLATIONS:
             raise ValueError(f"interpolation '{interpolation}' is not one of {', '.join(INTERPOLATIONS)}")
         self.path = str(path)
@@ -78,7 +105,9 @@ class PlayerUnitType(UnitType):
         self.extrapolation = extrapolation
         self.units = dict(units or {})
         self._recorded_units: dict[str, str] = {}
+        self.unit_name = unit_name  # the spec's name of this player: its own columns 'name.port' are offered as 'port'
         self._table: tuple[np.ndarray, np.ndarray, list[str]] | None = None
+        self._kinds: list[str] = []
         self._aliases: dict[str, str] | None = None
 
     def __getstate__(self) -> dict:
@@ -107,36 +136,60 @@ class PlayerUnitType(UnitType):
             if not_numbers:
                 raise ValueError(f"{self.path}: column(s) {', '.join(not_numbers)} are not numbers (a player plays "
                                  "numeric and Boolean columns only); leave them out of 'columns'")
+            self._kinds = ["Boolean" if _is_bool(frame[c]) else
+                           "Integer" if np.issubdtype(frame[c].dtype, np.integer) else "Real" for c in names]
             self._table = (frame["time"].to_numpy(dtype=float), frame[names].to_numpy(dtype=float), names)
             # units written by 'cosim run --out' into a Parquet table's metadata (CSV has none)
             self._recorded_units = dict(frame.attrs.get("units") or {})
         return self._table
 
+    def kinds(self) -> list[str]:
+        """The type of each played column as recorded: Real, Integer or Boolean."""
+        self.table()
+        return self._kinds
+
     def aliases(self) -> dict[str, str]:
-        """Short port name -> recorded column, for columns 'unit.port' whose 'port' is unique (computed once)."""
+        """Port name -> recorded column, for the ports not named like their column (computed once).
+
+        The player's own columns ``<unit_name>.port`` are offered as ``port`` (only); of the other columns
+        ``unit.port``, those whose ``port`` is unique are offered as ``port`` too.
+        """
         if self._aliases is None:
             _, _, names = self.table()
+            own = f"{self.unit_name}." if self.unit_name else None
+            aliases = {n[len(own):]: n for n in names if own and n.startswith(own)}
             short: dict[str, list[str]] = {}
             for n in names:
-                if "." in n:
+                if "." in n and not (own and n.startswith(own)):
                     short.setdefault(n.split(".", 1)[1], []).append(n)
-            self._aliases = {k: v[0] for k, v in short.items() if len(v) == 1 and k not in names}
+            aliases |= {k: v[0] for k, v in short.items() if len(v) == 1 and k not in names and k not in aliases}
+            self._aliases = aliases
         return self._aliases
+
+    def port_names(self) -> list[str]:
+        """Every scalar port the player offers (arrays x of x[1]..x[n] come on top)."""
+        _, _, columns = self.table()
+        own = f"{self.unit_name}." if self.unit_name else None
+        return [c for c in columns if not (own and c.startswith(own))] + list(self.aliases())
 
     def describe(self) -> UnitDescription:
         _, values, columns = self.table()
         aliases = self.aliases()
-        names = columns + list(aliases)
+        names = self.port_names()
         index = {n: i for i, n in enumerate(columns)} | {a: columns.index(c) for a, c in aliases.items()}
+        kinds = self.kinds()
         runs = indexed_runs(names)
         unknown = sorted(set(self.units) - set(names) - set(runs))
         if unknown:
             raise ValueError(f"'units' names {', '.join(unknown)}, not played by {self.path}; "
                              f"played: {', '.join(names[:8])}{' ...' if len(names) > 8 else ''}")
-        variables = [Variable(n, "output", "Real", unit=self._unit_of(n), start=float(values[0, index[n]]),
+        variables = [Variable(n, "output", kinds[index[n]], unit=self._unit_of(n),
+                              start=_typed(values[0, index[n]], kinds[index[n]]),
                               description=f"played from {self.path}") for n in names]
         for base, members in runs.items():
-            variables.append(Variable(base, "output", "Real", unit=self._unit_of(base), shape=(len(members),),
+            member_kinds = {kinds[index[m]] for m in members}
+            variables.append(Variable(base, "output", member_kinds.pop() if len(member_kinds) == 1 else "Real",
+                                      unit=self._unit_of(base), shape=(len(members),),
                                       description=f"array of {base}[1..{len(members)}] played from {self.path}"))
         return UnitDescription(name=Path(self.path).name, variables=tuple(variables), kind="player",
                                feedthrough={v.name: () for v in variables}, source=self.path)
@@ -175,14 +228,20 @@ class PlayerUnit(Unit):
         self.unit_type = unit_type
         self.description = unit_type.describe()
         self.time_points, self.values, _ = unit_type.table()
+        self.discrete = np.array([k != "Real" for k in unit_type.kinds()], dtype=bool)  # always held, never blended
         self.current = self.values[0].copy()
         self.t = float(self.time_points[0])
 
     def select(self, refs: Sequence[ElementRef]) -> Selection:
-        return _IndexSelection(refs, np.array([self.unit_type.column_index(r) for r in refs], dtype=int))
+        columns = np.array([self.unit_type.column_index(r) for r in refs], dtype=int)
+        kinds = self.unit_type.kinds()
+        return _IndexSelection(refs, columns, [kinds[c] for c in columns])
 
     def get(self, selection: Selection) -> list[Any]:
-        return self.current[selection.columns].tolist()  # type: ignore[attr-defined]
+        values = self.current[selection.columns].tolist()  # type: ignore[attr-defined]
+        if selection.kinds is None:  # type: ignore[attr-defined]
+            return values
+        return [_typed(v, k) for v, k in zip(values, selection.kinds)]  # type: ignore[attr-defined]
 
     def set(self, selection: Selection, values: Sequence[Any]) -> None:
         raise UnitError(self.name, "a signal player has only outputs; nothing can be set", self.t)
@@ -225,6 +284,11 @@ class PlayerUnit(Unit):
             return values[i].copy()
         t0, t1 = times[i], times[i + 1]
         if mode == "nearest":
-            return values[i if t - t0 <= t1 - t else i + 1].copy()
+            nearest = values[i if t - t0 <= t1 - t else i + 1].copy()
+            nearest[self.discrete] = values[i][self.discrete]
+            return nearest
         w = (t - t0) / (t1 - t0)
-        return (1.0 - w) * values[i] + w * values[i + 1]
+        blended = (1.0 - w) * values[i] + w * values[i + 1]
+        if self.discrete.any():
+            blended[self.discrete] = values[i][self.discrete]
+        return blended
