@@ -75,3 +75,20 @@ def test_report_without_metadata_still_works(tmp_path):
     for column in ("traj.q_via[2]", "energy", "e_el[1]"):
         assert f"<td class='l'>{column}</td>" in text
     assert "<td class='l'>run_time</td>" not in text
+
+
+def test_report_says_when_an_objective_is_the_same_for_every_design(tmp_path):
+    """E.g. `limit_violated` = 1 in every row of the README's main job: a finding the page must state."""
+    import pandas as pd
+
+    path = make_sweep_table(tmp_path / "flag")
+    df = pd.read_parquet(path)
+    df["reach"] = np.where(df["status"] == "ok", 1.0, np.nan)  # a flag set for every ok design
+    df.to_parquet(path, index=False)
+    out = tmp_path / "r.html"
+    assert main(["report", str(path), "-o", str(out)]) == 0
+    text = out.read_text()
+    ok = int((df["status"] == "ok").sum())
+    assert f"<p class='warn'>The same in every ok row ({ok} rows): <code>reach</code> = 1.</p>" in text
+    single = make_sweep_table(tmp_path / "one_sense")  # SPEC gives 'energy' and 't_exec' a sense: a front
+    assert main(["report", str(single), "-o", str(out)]) == 0 and "Needs two or more" not in out.read_text()

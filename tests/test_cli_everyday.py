@@ -78,3 +78,19 @@ def test_run_point_finds_the_sweep_written_with_out(tmp_path, monkeypatch, capsy
     assert (tmp_path / "results" / "my_run" / "points" / f"{point}.parquet").exists()
     y_end = float(next(line.split()[1] for line in out.splitlines() if line.startswith("y_end")))
     assert y_end == pytest.approx(table.loc[table["point_id"] == point, "y_end"].item(), rel=1e-5)  # printed %g
+
+
+def test_the_committed_full_study_is_a_sweep_folder_that_opens_without_spec(capsys):
+    from orchestrator.analysis.rerun import load_rerun_spec
+    from orchestrator.analysis.table import load_results
+    from orchestrator.spec import load_spec
+
+    study = REPO / "examples" / "pick_and_place" / "study"
+    table = load_results(study)
+    assert len(table.df) == 17061 and table.spec is not None
+    assert table.label("e_total") == "e_total [J]" and table.objective_senses() == {"e_total": "min"}
+    # the metadata is the spec the table was made with, and still the committed spec.json
+    assert table.metadata["spec_digest"] == load_spec(study.parent / "spec.json").digest
+    assert load_rerun_spec(table, None).digest == table.metadata["spec_digest"]  # re-runs (explore) need no --spec
+    assert main(["pareto", str(study), "--min", "e_total", "--min", "duration"]) == 0
+    assert "Pareto front (min e_total, min duration): 1 of 17061 rows" in capsys.readouterr().out

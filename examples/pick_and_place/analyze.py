@@ -1,6 +1,6 @@
 """Figures and the minima/maxima table of the pick-and-place study, beside the thesis's values.
 
-Reads ``results.parquet`` (the full study, written by run_study.py) and writes
+Reads ``study/results.parquet`` (the full study, written by run_study.py) and writes
 
 - ``figures/energy_grid.png``            total electric energy over the grid (thesis fig. 8-1)
 - ``figures/joint_energy_grid.png``      energy of joints 1, 2 and 4 (fig. 8-2, 8-3, 8-4)
@@ -10,7 +10,7 @@ Reads ``results.parquet`` (the full study, written by run_study.py) and writes
 - ``figures/peak_torque_and_limits.png``  what the thesis did not show: peak torque ratio, position limits
 - ``results_table.md``                   our minima and maxima, where they occur, and table 8-1
 
-    python examples/pick_and_place/analyze.py [results.parquet]
+    python examples/pick_and_place/analyze.py [study/results.parquet]
 """
 
 from __future__ import annotations
@@ -117,7 +117,7 @@ def table(df: pd.DataFrame) -> str:
 
 
 def main() -> None:
-    path = Path(sys.argv[1]) if len(sys.argv) > 1 else HERE / "results.parquet"
+    path = Path(sys.argv[1]) if len(sys.argv) > 1 else HERE / "study" / "results.parquet"
     df = pd.read_parquet(path)
     df = df[df["status"] == "ok"].reset_index(drop=True)
     out = HERE / "figures"

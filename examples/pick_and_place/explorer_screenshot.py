@@ -1,6 +1,6 @@
 """Screenshots of `cosim explore` on the full study, for the README.
 
-Starts a private Xvfb screen, opens the explorer on results.parquet with
+Starts a private Xvfb screen, opens the explorer on study/ (the full study) with
 x = q2[2], y = q2[4], colour = total energy, narrows the execution-time slider
 to the faster half (the slower designs turn grey), selects the least-energy
 design, re-runs it and lets the arm animation run; then saves the screen as
@@ -51,7 +51,7 @@ def main() -> None:
             from orchestrator.analysis.screen import xwd_to_rgb
             from orchestrator.analysis.table import load_results
 
-            table = load_results(HERE / "results.parquet", spec=HERE / "spec.json")
+            table = load_results(HERE / "study")
             root = tk.Tk()
             root.geometry("1000x980+0+0")
             window = ExplorerWindow(root, ExplorerState(table), spec_path=str(HERE / "spec.json"))

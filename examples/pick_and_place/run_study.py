@@ -2,7 +2,7 @@
 
 Uses the engine's sweep (``orchestrator.sweep``: Dask worker processes, units
 reused per worker, rows streamed to a results folder), then writes the table
-beside this file as ``results.parquet`` (zstd) and prints the wall time.
+as ``study/results.parquet`` (zstd) with the sweep's ``metadata.json`` and prints the wall time.
 
     python examples/pick_and_place/run_study.py                  # spec.json, 2 workers
     python examples/pick_and_place/run_study.py spec_coarse.json --out /tmp/coarse --table results_coarse.parquet
@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import time
 from pathlib import Path
 
@@ -25,7 +26,9 @@ def main() -> None:
     parser.add_argument("spec", nargs="?", default="spec.json", help="spec file in this folder (default spec.json)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", default=str(HERE / "sweep_full"), help="sweep results folder (not committed)")
-    parser.add_argument("--table", default="results.parquet", help="table written beside this file")
+    parser.add_argument("--table", default="study/results.parquet",
+                        help="table written under this folder; named results.parquet, it gets the sweep's "
+                             "metadata.json beside it (a sweep folder that report, pareto and explore open alone)")
     parser.add_argument("--resume", action="store_true")
     args = parser.parse_args()
 
@@ -34,12 +37,16 @@ def main() -> None:
     started = time.perf_counter()
     df = orchestrator.sweep(HERE / args.spec, workers=args.workers, out=args.out, resume=args.resume)
     wall = time.perf_counter() - started
-    df.to_parquet(HERE / args.table, index=False, compression="zstd")
+    table = HERE / args.table
+    table.parent.mkdir(parents=True, exist_ok=True)
+    df.to_parquet(table, index=False, compression="zstd")
+    if table.name == "results.parquet":  # its own folder: keep the sweep's metadata with it
+        shutil.copy(Path(args.out) / "metadata.json", table.parent / "metadata.json")
     summary = {"spec": args.spec, "points": len(df), "status": df["status"].value_counts().to_dict(),
                "wall_s": round(wall, 1), "workers": args.workers,
                "median_run_time_ms": round(float(df["run_time"].median()) * 1e3, 2)}
     print(json.dumps(summary))
-    (HERE / (Path(args.table).stem + "_run.json")).write_text(json.dumps(summary, indent=2) + "\n")
+    (table.parent / (table.stem + "_run.json")).write_text(json.dumps(summary, indent=2) + "\n")
 
 
 if __name__ == "__main__":

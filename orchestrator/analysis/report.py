@@ -34,7 +34,7 @@ CSS = """
 body{font-family:system-ui,sans-serif;margin:2em;max-width:70em;color:#222}
 table{border-collapse:collapse;margin:.5em 0 1.5em}td,th{border:1px solid #ccc;padding:.2em .6em;text-align:right}
 th{background:#f2f2f2}td.l,th.l{text-align:left}img{max-width:100%;border:1px solid #ddd;margin:.3em}
-.note{color:#666}figure{display:inline-block;margin:0 1em 1em 0;width:46%}figcaption{font-size:90%;color:#444}
+.note{color:#666}.warn{color:#a40000;font-weight:bold}figure{display:inline-block;margin:0 1em 1em 0;width:46%}figcaption{font-size:90%;color:#444}
 """
 
 
@@ -134,7 +134,7 @@ def _status_section(table: ResultsTable) -> str:
 
 def _objective_section(table: ResultsTable, parameters: list[str], objectives: list[str], ok: np.ndarray) -> str:
     show = [c for c in ["point_id", *parameters] if c in table.df.columns]
-    rows = []
+    rows, constant = [], []
     for o in objectives:
         v = np.where(ok, table.values(o), np.nan)
         if not np.isfinite(v).any():
@@ -143,7 +143,12 @@ def _objective_section(table: ResultsTable, parameters: list[str], objectives: l
         lo, hi = int(np.nanargmin(v)), int(np.nanargmax(v))
         rows.append((o, table.unit(o), v[lo], _design(table, lo, show), v[hi], _design(table, hi, show),
                      float(np.nanmean(v))))
-    return ("<h2>Objectives</h2><p>Range over the ok rows and the design at each extreme.</p>"
+        if v[lo] == v[hi] and np.isfinite(v).sum() > 1 and "[" not in o:  # elements: joints that never move
+            constant.append(f"<code>{html.escape(o)}</code> = {html.escape(fmt(v[lo]))}")
+    # a flag that is the same for every design (e.g. every design violates a limit) is a finding, not a detail
+    note = (f"<p class='warn'>The same in every ok row ({int(ok.sum())} rows): {', '.join(constant)}.</p>"
+            if constant else "")
+    return ("<h2>Objectives</h2><p>Range over the ok rows and the design at each extreme.</p>" + note
             + _table(["objective", "unit", "min", "design at min", "max", "design at max", "mean"], rows, left=2))
 
 
@@ -156,7 +161,10 @@ def _pareto_section(table: ResultsTable, parameters: list[str], ok: np.ndarray) 
     head = "<h2>Pareto front</h2>"
     if len(senses) < 2:
         why = "no sweep metadata" if not table.spec else f"{len(senses)} objective(s) with a sense in the spec"
-        return head + f"<p class='note'>Needs two or more objectives with a sense ({why}); see <code>cosim pareto</code>.</p>"
+        example = " ".join(f"--min {html.escape(o)}" for o in roles(table)[1][:2])
+        return head + (f"<p class='note'>Needs two or more objectives with a sense ({why}): give a second objective "
+                       f"a <code>sense</code> in the spec, or ask for a front with <code>cosim pareto TABLE "
+                       f"{example}</code>.</p>")
     names = list(senses)
     values = np.column_stack([np.where(ok, table.values(n), np.nan) for n in names])
     front = pareto_mask(values, [senses[n] for n in names])
