@@ -28,10 +28,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from models.optimal_timing import DEFAULT_GRID, plan_optimal_timing  # noqa: E402
-from models.panda_model import FRANKA_DOC_LIMITS as LIMITS  # noqa: E402
-from models.panda_model import panda_model, thesis_to_urdf  # noqa: E402
-from models.trajectory import plan_parabolic_blend  # noqa: E402
+from cosim.models.optimal_timing import DEFAULT_GRID, plan_optimal_timing  # noqa: E402
+from cosim.models.panda_model import FRANKA_DOC_LIMITS as LIMITS  # noqa: E402
+from cosim.models.panda_model import panda_model, thesis_to_urdf  # noqa: E402
+from cosim.models.trajectory import plan_parabolic_blend  # noqa: E402
 
 MODES = {"at most the blend's duration": dict(factor=1.0), "at most 1.25 x the blend's": dict(factor=1.25),
          "energy + 20 J/s x duration": dict(time_weight=20.0)}

@@ -24,7 +24,7 @@ is constant on each interval, ``b`` linear) the interval's duration is
 at the optimum).
 
 Objective: the electric energy of the energy unit's drive model
-(:mod:`models.motor_gear_energy`, thesis 7.2.2) plus ``time_weight`` times the
+(:mod:`cosim.models.motor_gear_energy`, thesis 7.2.2) plus ``time_weight`` times the
 duration.  Per joint and interval (midpoint torque) the energy is the copper
 loss ``R_T i^2 dt`` (convex: quadratic over linear in ``(b, c)``) plus the
 mechanical energy ``max(tau q' ds / eta, eta tau q' ds)`` -- motoring costs

@@ -16,10 +16,10 @@ import pinocchio as pin
 import pytest
 
 import orchestrator
-from models.optimal_timing import DriveParameters, TimingInfeasible, plan_optimal_timing
-from models.panda_model import FRANKA_DOC_LIMITS as LIMITS
-from models.panda_model import panda_model, thesis_to_urdf
-from models.trajectory import plan_parabolic_blend
+from cosim.models.optimal_timing import DriveParameters, TimingInfeasible, plan_optimal_timing
+from cosim.models.panda_model import FRANKA_DOC_LIMITS as LIMITS
+from cosim.models.panda_model import panda_model, thesis_to_urdf
+from cosim.models.trajectory import plan_parabolic_blend
 
 from .test_pick_and_place import FOLDER, electric_power, thesis_waypoints
 

@@ -91,7 +91,7 @@ def test_specs_validate_and_variants_are_up_to_date():
 
     assert len(DesignSpace.from_spec(load_spec(SPEC))) == 121 * 141 == 17061
     assert len(DesignSpace.from_spec(load_spec(FOLDER / "spec_coarse.json"))) == 273
-    from models.panda_model import DATASHEET_VELOCITY
+    from cosim.models.panda_model import DATASHEET_VELOCITY
 
     assert make_specs.DATASHEET_VELOCITY == pytest.approx(DATASHEET_VELOCITY, rel=1e-15)
 

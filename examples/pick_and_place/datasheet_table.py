@@ -24,8 +24,8 @@ sys.path.insert(0, str(HERE))
 from analyze import THESIS, fmt_loc, where  # noqa: E402
 
 sys.path.insert(0, str(HERE.parents[1]))
-from models.panda_model import DATASHEET_VELOCITY, FRANKA_DOC_LIMITS, thesis_to_urdf  # noqa: E402
-from models.trajectory import plan_parabolic_blend  # noqa: E402
+from cosim.models.panda_model import DATASHEET_VELOCITY, FRANKA_DOC_LIMITS, thesis_to_urdf  # noqa: E402
+from cosim.models.trajectory import plan_parabolic_blend  # noqa: E402
 
 
 def full_grid_durations(speeds) -> tuple[tuple[float, tuple], tuple[float, tuple]]:
