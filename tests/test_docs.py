@@ -25,8 +25,8 @@ REPO = Path(__file__).resolve().parents[1]
 EXAMPLE_READMES = sorted((REPO / "examples").glob("*/README.md"))
 
 # Commands of the examples' READMEs that take minutes on 2 cores or open a window: run by the slow tests.
-LONG = ("run_study.py", "compare_fidelity.py", "cosim sweep examples/bin_picking", "cosim explore",
-        "explorer_screenshot.py")
+LONG = ("run_study.py", "compare_fidelity.py", "cosim sweep", "cosim optimize", "cosim sensitivity",
+        "cosim explore", "explorer_screenshot.py")
 
 
 def fenced_blocks(path: Path, language: str) -> list[str]:

@@ -31,7 +31,7 @@ def test_specs_are_up_to_date_and_valid():
 
 
 def test_free_pose_dimensions_lie_within_the_joint_limits():
-    from models.panda_model import FRANKA_DOC_LIMITS, thesis_to_urdf
+    from cosim.models.panda_model import FRANKA_DOC_LIMITS, thesis_to_urdf
 
     system = check_spec(FOLDER / "spec.json")
     space = DesignSpace.dimensions_of(system.spec)
