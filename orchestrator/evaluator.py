@@ -166,9 +166,15 @@ def _alive(scattered: Any) -> bool:
 
 def lost_rows(point_ids: Sequence[str], exc: BaseException) -> list[dict[str, Any]]:
     """Rows for points whose task died with its worker process (KilledWorker) or broke on the way."""
-    if worker_died(exc):
-        message = (f"every Dask worker process that ran this point died (most likely the point kills it, e.g. "
-                   f"by using up the memory); Dask: {exc}")
+    from concurrent.futures import CancelledError
+
+    if worker_died(exc) or isinstance(exc, CancelledError):
+        # A cancelled task here means the workers holding its scattered data all died (see rerun): when a
+        # point kills every worker that runs it, Dask may report the last try as cancelled, not KilledWorker.
+        cause = (f"Dask: {exc}" if worker_died(exc) else
+                 f"its workers died and took the task's data with them; Dask: {type(exc).__name__}: {exc}")
+        message = ("every Dask worker process that ran this point died (most likely the point kills it, e.g. "
+                   f"by using up the memory); {cause}")
     else:
         message = f"lost with its worker: {type(exc).__name__}: {exc}"
     return [{"point_id": pid, "status": "crashed", "message": message,
