@@ -124,7 +124,7 @@ def memory_child(spec: str, out: str) -> None:
     thread = threading.Thread(target=sample, daemon=True)
     thread.start()
     started = time.perf_counter()
-    counts = sweep.run(load=False)  # as `cosim sweep` does: the table stays on disk
+    counts = sweep.run_to_disk()  # as `cosim sweep` does: the table stays on disk
     elapsed = time.perf_counter() - started
     stop.set()
     thread.join()
