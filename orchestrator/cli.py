@@ -190,6 +190,8 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     for name, unit in system.units.items():
         d = unit.description
         kind = f"FMI {d.fmi_version}" if d.kind == "fmu" else d.kind
+        if d.kind == "fmu" and unit.unit_type.interface == "model-exchange":
+            kind += " model-exchange"  # co-simulation, the usual case, goes without saying
         ports = _listed_variables(d)  # FMI 2.0 scalars x[1]..x[n] count once, as their array x
         inputs = sum(v.causality == "input" for v in ports)
         outputs = sum(v.causality == "output" for v in ports)
@@ -206,15 +208,18 @@ def cmd_inspect(args: argparse.Namespace) -> int:
 
 def _inspect_fmu(reference: str) -> int:
     from .unit_kinds import resolve_fmu_path
-    from .units.fmu import FmuUnitType
+    from .units.fmu import FmuUnitType, offered_interfaces
 
     try:
         unit_type = FmuUnitType(resolve_fmu_path(reference), reference)
         d = unit_type.describe()
     except FileNotFoundError as exc:
         raise UsageError(str(exc)) from None
-    print(f"{reference}: {d.name}, FMI {d.fmi_version} co-simulation"
+    offered = offered_interfaces(unit_type.model_description())
+    print(f"{reference}: {d.name}, FMI {d.fmi_version} {' and '.join(offered)}"
           + (f", default step {d.default_step:g} s" if d.default_step else ""))
+    if len(offered) > 1:
+        print(f"  runs as {unit_type.interface} unless the spec's unit sets \"interface\": \"model-exchange\"")
     if d.description:
         print(f"  {d.description}")
     if getattr(unit_type.model_description().coSimulation, "needsExecutionTool", False):
