@@ -301,3 +301,18 @@ def test_a_sweep_runs_a_model_exchange_unit_in_dask_workers(write_spec, tmp_path
     for h0, got in zip(df["ball.h0"], df["first_bounce"]):
         times = [t for t in bounce_times(h0, 9.81, 0.7, 0.1) if t <= 1.0]
         assert got == pytest.approx(times[-1], abs=1000 * RTOL)
+
+
+def test_without_cvode_an_me_unit_is_a_clear_spec_problem(write_spec, capsys, monkeypatch):
+    """fmpy ships SUNDIALS for x86_64 Linux/Windows and arm64 macOS only; elsewhere (e.g. aarch64 Linux,
+    which cannot be had here, hence the monkeypatch) an ME unit is refused when the spec is checked."""
+    import orchestrator.units.model_exchange as model_exchange
+
+    monkeypatch.setattr(model_exchange, "solver_problem", lambda: "model exchange needs CVode from fmpy (test)")
+    path = write_spec({"units": {"ball": {"fmu": "builtin:bouncing_ball_fmi3"}},
+                       "experiment": {"stop": 1.0, "step": 0.1}})
+    assert main(["validate", str(path)]) == 2
+    captured = capsys.readouterr()
+    text = captured.out + captured.err
+    assert "$.units.ball.fmu" in text and "needs CVode from fmpy (test)" in text
+    assert "use the FMU's co-simulation interface if it has one" in text and "Traceback" not in text

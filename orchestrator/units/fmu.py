@@ -275,6 +275,14 @@ class FmuUnitType(UnitType):
                    if MODEL_EXCHANGE in offered else "remove them: the FMU integrates itself")
             problems.append(Problem(self.path, "", "'tolerance' and 'max_step' configure the model-exchange solver, "
                                     "but this FMU runs as co-simulation", fix))
+        if chosen == MODEL_EXCHANGE and chosen in offered:
+            from .model_exchange import solver_problem
+
+            reason = solver_problem()
+            if reason:
+                problems.append(Problem(self.path, "", reason, "use the FMU's co-simulation interface if it has one, "
+                                        "or run on a platform fmpy ships SUNDIALS for (x86_64 Linux or Windows, "
+                                        "arm64 macOS)"))
         if chosen in offered:
             folder2, folder3 = platform_folders()
             folder = folder3 if md.fmiVersion == "3.0" else folder2

@@ -72,6 +72,15 @@ class SolverSettings:
             raise ValueError(f"max_step must be a positive number of seconds, not {self.max_step!r}")
 
 
+def solver_problem() -> str | None:
+    """Why CVode cannot run here (fmpy ships SUNDIALS for some platforms only), or None when it can."""
+    try:
+        import fmpy.sundials  # noqa: F401  (loads the SUNDIALS libraries)
+    except Exception as exc:  # ImportError, OSError from ctypes, fmpy's version check
+        return f"model exchange needs CVode from fmpy (fmpy.sundials), which does not load here: {exc}"
+    return None
+
+
 class _NoInputs:
     """fmpy's CVodeSolver applies input signals in its root function; ours are set by the master."""
 
@@ -101,13 +110,13 @@ class _ModelExchangeStepping:
         self._now = 0.0  # the time the FMU and the solver are at
         self._next_event: float | None = None
         self._inputs_changed = False
-        self._last_set: dict[int, tuple] = {}
+        self._last_set: dict[int, tuple[Selection, tuple]] = {}
         self._z = np.zeros(self._nz)
         self._z_buffer = (ctypes.c_double * max(self._nz, 1))()
         self._callback_error: BaseException | None = None
         self.events = {"time": 0, "state": 0, "step": 0, "input": 0}  # handled so far (for tests and reports)
 
-    # -- settings handed to the FMU ------------------------------------------
+    # -- lifecycle -----------------------------------------------------------
 
     def setup(self, start_time: float, stop_time: float | None) -> None:
         super().setup(start_time, stop_time)  # type: ignore[misc]
@@ -117,13 +126,12 @@ class _ModelExchangeStepping:
 
     def set(self, selection: Selection, values: Sequence[Any]) -> None:
         # Only a *changed* input restarts the solver: masters set every input every step.
-        key, new = id(selection), tuple(values)
-        if self._last_set.get(key) != new:
-            self._last_set[key] = new
+        # The selection is kept with its values so that a new selection reusing its id() is not mistaken for it.
+        new = tuple(values)
+        if self._last_set.get(id(selection)) != (selection, new):
+            self._last_set[id(selection)] = (selection, new)
             self._inputs_changed = True
         super().set(selection, values)  # type: ignore[misc]
-
-    # -- lifecycle -----------------------------------------------------------
 
     def exit_initialization(self) -> None:
         super().exit_initialization()  # type: ignore[misc]
@@ -151,11 +159,17 @@ class _ModelExchangeStepping:
             raise UnitError(self.name, "do_step before initialization", t)
         if self._inputs_changed:
             self._after_input_change()
+        events_in_place = 0  # events handled without time advancing: a bound against endless loops
         while not _reached(self._now, end):
             event_time = self._next_event
             # A time event inside the step, or on its end up to rounding, ends this stretch of integration.
             time_event_due = event_time is not None and (event_time < end or _close(event_time, end))
             target = max(min(event_time, end), self._now) if time_event_due else end
+            if _reached(self._now, target):
+                events_in_place += 1
+                if events_in_place > MAX_EVENT_ITERATIONS:
+                    raise UnitError(self.name, f"time stands still: the FMU keeps announcing its next event at "
+                                    f"t={event_time!r}, not after the current time", self._now)
             state_event = self._integrate(target) if not _reached(self._now, target) else False
             time_event = time_event_due and not state_event
             if time_event:
