@@ -316,3 +316,19 @@ def test_without_cvode_an_me_unit_is_a_clear_spec_problem(write_spec, capsys, mo
     text = captured.out + captured.err
     assert "$.units.ball.fmu" in text and "needs CVode from fmpy (test)" in text
     assert "use the FMU's co-simulation interface if it has one" in text and "Traceback" not in text
+
+
+def test_terminate_simulation_ends_the_run_cleanly_at_the_event(write_spec, version):
+    """bouncing_ball with stop_at_rest asks to end the simulation in the event where it comes to rest."""
+    spec = {"units": {"ball": {"fmu": f"builtin:bouncing_ball_fmi{version}", "tolerance": RTOL,
+                               "parameters": {"stop_at_rest": True}}},
+            "experiment": {"stop": 4.0, "step": 0.01}, "record": ["ball.h", "ball.bounces"]}
+    result = orchestrator.run(str(write_spec(spec)))
+    rest = bounce_times(h0=1.0, g=9.81, e=0.7, v_min=0.1)[-1]
+    update = "fmi3UpdateDiscreteStates" if version == 3 else "fmi2NewDiscreteStates"
+    assert result.ok and f"unit 'ball' ended the simulation ({update}: terminateSimulation)" in result.message
+    assert result.traces["time"].iloc[-1] == pytest.approx(rest, abs=1000 * RTOL)
+    assert result.traces["ball.bounces"].iloc[-1] == 11
+    spec["experiment"]["early_stop"] = "fail"
+    failed = orchestrator.run(str(write_spec(spec, "fail.json")))
+    assert not failed.ok and "experiment.early_stop is 'fail'" in failed.message

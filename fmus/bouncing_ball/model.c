@@ -4,7 +4,8 @@
  * moving down at h <= 0 bounces, v := -e*v (h := 0), and the bounce is counted
  * and timed.  A rebound slower than v_min leaves the ball resting (h = v = 0,
  * derivatives 0, indicator 1), which ends the otherwise infinite sequence of
- * ever shorter flights.
+ * ever shorter flights; with stop_at_rest the model then asks to end the
+ * simulation (terminateSimulation).
  * Dropped from h0 at rest: bounce k (1-based) happens at
  *   t_1 = sqrt(2 h0 / g),  t_{k+1} = t_k + 2 e^k v_1 / g  with v_1 = g t_1.
  */
@@ -52,6 +53,7 @@ Status model_event_update(ModelInstance *comp, EventInfo *info) {
     if (d->v < d->v_min) {
         d->v = 0.0;
         d->resting = true;
+        info->terminateSimulation = d->stop_at_rest;  /* nothing more will happen: may end the run */
     }
     info->valuesOfContinuousStatesChanged = true;
     return OK;
