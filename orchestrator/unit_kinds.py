@@ -1,8 +1,9 @@
 """The registry of unit kinds: what may stand under ``units`` in a spec.
 
 A *unit kind* is the word that says what a unit is made of: ``"fmu"``,
-``"python"``, ``"player"`` are built in; a plug-in adds its own (a model-exchange
-FMU, an SSP, a user's signal generator) without editing cosim.  A
+``"python"``, ``"player"`` are built in (a model-exchange FMU is an ``fmu`` unit
+with ``"interface": "model-exchange"``); a plug-in adds its own (a user's signal
+generator, say) without editing cosim.  A
 :class:`UnitKind` owns everything the engine needs to know about its units:
 
 - ``fields``: its JSON Schema fragment (the kind's key and its options), which
