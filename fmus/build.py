@@ -2,8 +2,8 @@
 
 Public API::
 
-    build_fmu(name, fmi_version, out_dir) -> Path   # always compiles
-    ensure_built(name, fmi_version) -> Path         # compiles once per source digest
+    build_fmu(name, fmi_version, out_dir, interfaces=None) -> Path   # always compiles
+    ensure_built(name, fmi_version, interfaces=None) -> Path         # compiles once per source digest
     available_models() -> list[str]
     cache_dir() -> Path                             # $COSIM_FMU_CACHE or ~/.cache/cosim/fmus
 
@@ -11,10 +11,13 @@ File names are ``<name>_fmi2.fmu`` and ``<name>_fmi3.fmu``.  ``ensure_built``
 keeps them in ``cache_dir()/<digest>/`` where the digest covers every input of
 the build (the model's files, ``fmus/common``, the generator, the compiler
 flags and the platform), so an edit rebuilds and nothing else does.
+``interfaces`` picks what the FMU offers, ``("CoSimulation",)``,
+``("ModelExchange",)`` or both; by default every interface the model's
+``model.json`` supports.
 
 Command line (rebuilds, no traceback on errors)::
 
-    python -m cosim.fmus.build [--out DIR] [--fmi {2,3}] [NAME ...]
+    python -m cosim.fmus.build [--out DIR] [--fmi {2,3}] [--interfaces cs|me|cs,me] [NAME ...]
 
 Without ``--out`` the FMUs are rebuilt into the cache; without names every
 model is built, for both FMI versions.
@@ -41,6 +44,7 @@ FMUS_DIR = Path(__file__).resolve().parent
 COMMON_DIR = FMUS_DIR / "common"
 CFLAGS = ("-shared", "-fPIC", "-O2", "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-fvisibility=hidden", "-Wall", "-Wextra")
 FMI_VERSIONS = (2, 3)
+INTERFACE_CHOICES = {"cs": ("CoSimulation",), "me": ("ModelExchange",), "cs,me": ("CoSimulation", "ModelExchange")}
 
 
 class FmuBuildError(UserError, RuntimeError):
@@ -111,29 +115,37 @@ def _sources(name: str) -> list[Path]:
     return files
 
 
-def source_digest(name: str, fmi_version: int) -> str:
-    """Hex digest of every input of the build of ``name`` for ``fmi_version``."""
+def source_digest(name: str, fmi_version: int, interfaces: tuple[str, ...] | None = None) -> str:
+    """Hex digest of every input of the build of ``name`` for ``fmi_version`` (and ``interfaces``, if chosen)."""
     _check_version(fmi_version)
     h = hashlib.sha256()
     for path in _sources(name):
         h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
     h.update(repr((fmi_version, CFLAGS, _platform(fmi_version), os.environ.get("CC", "gcc"))).encode())
+    if interfaces is not None:  # the default build keeps the digest it had before interfaces could be chosen
+        h.update(repr(sorted(interfaces)).encode())
     return h.hexdigest()
 
 
-def build_fmu(name: str, fmi_version: int, out_dir: str | os.PathLike) -> Path:
+def build_fmu(name: str, fmi_version: int, out_dir: str | os.PathLike,
+              interfaces: tuple[str, ...] | None = None) -> Path:
     """Compile ``fmus/<name>`` into ``out_dir/<name>_fmi<version>.fmu`` and return its path.
+
+    ``interfaces`` (``"CoSimulation"``, ``"ModelExchange"``) chooses what the
+    FMU offers; by default all the model supports.
 
     The file appears atomically (written under a temporary name, then
     renamed), so concurrent builders and readers never see half an FMU.
     Raises :class:`FmuBuildError` for an unknown model or version, a missing
-    compiler, a bad ``model.json`` or a compile error (with gcc's output).
+    compiler, a bad ``model.json``, an interface the model does not support
+    or a compile error (with gcc's output).
     """
     _check_version(fmi_version)
     folder = _model_dir(name)
-    digest = source_digest(name, fmi_version)
+    digest = source_digest(name, fmi_version, interfaces)
     try:
         model = load_model(folder / "model.json", digest=digest)
+        offered = model.offers(tuple(interfaces) if interfaces is not None else None)
     except ModelJsonError as exc:
         raise FmuBuildError(str(exc)) from exc
     if model.name != name:
@@ -147,12 +159,12 @@ def build_fmu(name: str, fmi_version: int, out_dir: str | os.PathLike) -> Path:
 
     with tempfile.TemporaryDirectory(prefix=f"build-{name}-", dir=out) as tmp:
         work = Path(tmp)
-        (work / "model_generated.h").write_text(generated_header(model))
+        (work / "model_generated.h").write_text(generated_header(model, offered))
         (work / "model_generated.c").write_text(generated_source(model))
-        xml = fmi2_model_description(model) if fmi_version == 2 else fmi3_model_description(model)
+        xml = fmi2_model_description(model, offered) if fmi_version == 2 else fmi3_model_description(model, offered)
         library = work / f"{name}{suffix}"
-        sources = [COMMON_DIR / "framework.c", COMMON_DIR / f"fmi{fmi_version}.c", folder / "model.c",
-                   work / "model_generated.c"]
+        sources = [COMMON_DIR / "framework.c", COMMON_DIR / f"fmi{fmi_version}.c", COMMON_DIR / "model_exchange.c",
+                   COMMON_DIR / f"fmi{fmi_version}_me.c", folder / "model.c", work / "model_generated.c"]
         command = [cc, *CFLAGS, f"-I{work}", f"-I{COMMON_DIR}", f"-I{folder}", f"-I{include}",
                    *map(str, sources), "-o", str(library), "-lm"]
         result = subprocess.run(command, capture_output=True, text=True)
@@ -166,20 +178,22 @@ def build_fmu(name: str, fmi_version: int, out_dir: str | os.PathLike) -> Path:
     return target
 
 
-def ensure_built(name: str, fmi_version: int) -> Path:
+def ensure_built(name: str, fmi_version: int, interfaces: tuple[str, ...] | None = None) -> Path:
     """Path of an up-to-date ``<name>_fmi<version>.fmu``, building it on first use.
+
+    ``interfaces`` as for :func:`build_fmu` (each choice has its own cache folder).
 
     The FMU lives in ``cache_dir()/<digest>/``; it is rebuilt only when its
     sources change.  Safe when several processes call this at once: each
     builds into a temporary file and renames it into place.
     Raises :class:`FmuBuildError` like :func:`build_fmu`.
     """
-    digest = source_digest(name, fmi_version)
+    digest = source_digest(name, fmi_version, interfaces)
     folder = cache_dir() / digest[:20]
     target = folder / fmu_filename(name, fmi_version)
     if target.is_file():
         return target
-    return build_fmu(name, fmi_version, folder)
+    return build_fmu(name, fmi_version, folder, interfaces)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -188,13 +202,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("names", nargs="*", metavar="NAME", help=f"models to build (default: all: {', '.join(available_models())})")
     parser.add_argument("--out", type=Path, help="write the .fmu files here (default: rebuild into the cache)")
     parser.add_argument("--fmi", type=int, choices=FMI_VERSIONS, action="append", help="FMI version (default: 2 and 3)")
+    parser.add_argument("--interfaces", choices=sorted(INTERFACE_CHOICES),
+                        help="cs (co-simulation), me (Model Exchange) or cs,me (default: what each model supports)")
     args = parser.parse_args(argv)
     names = args.names or available_models()
+    interfaces = INTERFACE_CHOICES[args.interfaces] if args.interfaces else None
     try:
         for name in names:
             for version in args.fmi or FMI_VERSIONS:
-                out = args.out if args.out else cache_dir() / source_digest(name, version)[:20]
-                print(build_fmu(name, version, out))
+                out = args.out if args.out else cache_dir() / source_digest(name, version, interfaces)[:20]
+                print(build_fmu(name, version, out, interfaces))
     except FmuBuildError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1

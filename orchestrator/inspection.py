@@ -77,9 +77,16 @@ def inspect_unit(target: str) -> int:
     """Print the ports of one unit; returns the exit code."""
     unit_type = unit_type_of(target)
     d = unit_type.describe()
-    kind = {"fmu": f"FMI {d.fmi_version} co-simulation FMU", "python": "Python unit",
+    offered: list[str] = []
+    if d.kind == "fmu":
+        from .units.fmu import offered_interfaces
+
+        offered = offered_interfaces(unit_type.model_description())
+    kind = {"fmu": f"FMI {d.fmi_version} {' and '.join(offered)} FMU", "python": "Python unit",
             "player": "player of a recorded table"}.get(d.kind, d.kind)
     print(f"{target}: {d.name}, {kind}" + (f", default step {d.default_step:g} s" if d.default_step else ""))
+    if len(offered) > 1:
+        print(f"  runs as {unit_type.interface} unless the spec's unit sets \"interface\": \"model-exchange\"")
     if d.description:
         print(f"  {d.description}")
     if d.kind == "fmu" and getattr(unit_type.model_description().coSimulation, "needsExecutionTool", False):
@@ -99,6 +106,8 @@ def inspect_spec(path: str, experiment: dict[str, Any] | None = None) -> int:
     for name, unit in system.units.items():
         d = unit.description
         kind = f"FMI {d.fmi_version}" if d.kind == "fmu" else d.kind
+        if d.kind == "fmu" and unit.unit_type.interface == "model-exchange":
+            kind += " model-exchange"  # co-simulation, the usual case, goes without saying
         ports = listed_variables(d)  # FMI 2.0 scalars x[1]..x[n] count once, as their array x
         inputs = sum(v.causality == "input" for v in ports)
         outputs = sum(v.causality == "output" for v in ports)

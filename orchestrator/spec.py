@@ -28,6 +28,7 @@ SCHEMA_RESOURCE = ("cosim.specs", "spec.schema.json")
 REDUCTIONS = ("final", "initial", "min", "max", "mean", "integral", "integral_abs", "rms",
               "time_of_max", "time_of_min")
 ALGORITHMS = ("gauss-seidel", "jacobi")
+FMU_ONLY = ("interface", "tolerance", "max_step")  # unit settings that only an FMU unit takes
 
 
 @dataclass(frozen=True)
@@ -211,6 +212,12 @@ def _value_problems(raw: dict, file: str, seen: set[tuple[str, str]]) -> list[Pr
                     problems.append(Problem(file, json_path(["objectives", name, "reduce"]),
                                             f"unknown reduction '{reduce}'.{did_you_mean(reduce, REDUCTIONS)}",
                                             "use one of: " + ", ".join(REDUCTIONS)))
+    units = raw.get("units")
+    for name, unit in (units.items() if isinstance(units, dict) else ()):
+        for key in FMU_ONLY if isinstance(unit, dict) and "fmu" not in unit else ():
+            if key in unit:
+                problems.append(Problem(file, json_path(["units", name, key]), f"'{key}' applies to FMU units only",
+                                        "remove it, or make the unit an FMU"))
     experiment = raw.get("experiment")
     if isinstance(experiment, dict):
         start, stop, step = experiment.get("start", 0), experiment.get("stop"), experiment.get("step")
@@ -276,6 +283,11 @@ def _explain(error: jsonschema.ValidationError, schema: dict, file: str) -> list
     if validator == "propertyNames":
         return [Problem(file, path, f"'{error.instance}' is not a valid name",
                         "names start with a letter or '_' and contain only letters, digits and '_'")]
+    if validator in ("exclusiveMinimum", "exclusiveMaximum", "minimum", "maximum"):
+        bound = {"exclusiveMinimum": "above", "exclusiveMaximum": "below", "minimum": "at least",
+                 "maximum": "at most"}[validator]
+        return [Problem(file, path, f"{json.dumps(error.instance)} is out of range",
+                        f"use a number {bound} {error.validator_value}")]
     if validator == "minProperties":
         return [Problem(file, path, "must not be empty", "add at least one entry")]
     return [Problem(file, path, error.message, "")]

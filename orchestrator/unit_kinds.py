@@ -1,8 +1,9 @@
 """The registry of unit kinds: what may stand under ``units`` in a spec.
 
 A *unit kind* is the word that says what a unit is made of: ``"fmu"``,
-``"python"``, ``"player"`` are built in; a plug-in adds its own (a model-exchange
-FMU, an SSP, a user's signal generator) without editing cosim.  A
+``"python"``, ``"player"`` are built in (a model-exchange FMU is an ``fmu`` unit
+with ``"interface": "model-exchange"``); a plug-in adds its own (a user's signal
+generator, say) without editing cosim.  A
 :class:`UnitKind` owns everything the engine needs to know about its units:
 
 - ``fields``: its JSON Schema fragment (the kind's key and its options), which
@@ -238,7 +239,13 @@ def _create_fmu(spec: "UnitSpec", folder: str) -> "UnitType":
     # whole-number parameters may be structural parameters that size FMI 3.0 arrays: the description needs them
     structural = {spec.ports.get(k, k): v for k, v in spec.parameters.items()
                   if isinstance(v, int) and not isinstance(v, bool)}
-    return FmuUnitType(resolve_fmu_path(spec.source, folder), reference=spec.source, structural=structural)
+    settings = None
+    if "tolerance" in spec.options or "max_step" in spec.options:  # the model-exchange solver (units/model_exchange)
+        from .units.model_exchange import SolverSettings
+
+        settings = SolverSettings(**{k: spec.options[k] for k in ("tolerance", "max_step") if k in spec.options})
+    return FmuUnitType(resolve_fmu_path(spec.source, folder), reference=spec.source, structural=structural,
+                       interface=spec.options.get("interface"), solver_settings=settings)
 
 
 def _create_python(spec: "UnitSpec", folder: str) -> "UnitType":
@@ -258,7 +265,17 @@ def _create_player(spec: "UnitSpec", folder: str) -> "UnitType":
 FMU = UnitKind("fmu", {
     "fmu": {"type": "string", "description": "Path to an .fmu (relative to the spec's folder) or "
                                              "'builtin:NAME_fmi3' / 'builtin:NAME_fmi2'."},
-}, _create_fmu, example='"fmu": "model.fmu"', description="an FMI 2.0 or 3.0 co-simulation FMU")
+    "interface": {"enum": ["co-simulation", "model-exchange"],
+                  "description": "fmu only: how the FMU runs. Default: co-simulation when the FMU offers it, else "
+                                 "model exchange (integrated by cosim with CVode inside each step)."},
+    "tolerance": {"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": 1,
+                  "description": "fmu, model exchange only: relative tolerance of the solver (CVode; absolute "
+                                 "tolerance = tolerance x nominal). Default 1e-6."},
+    "max_step": {"type": "number", "exclusiveMinimum": 0,
+                 "description": "fmu, model exchange only: largest internal solver step in seconds. Default: no "
+                                "limit (up to the communication step)."},
+}, _create_fmu, example='"fmu": "model.fmu"',
+    description="an FMI 2.0 or 3.0 FMU: co-simulation, or model exchange integrated by cosim")
 
 PYTHON = UnitKind("python", {
     "python": {"type": "string", "pattern": "^[^:]+:[A-Za-z_][A-Za-z0-9_.]*$",

@@ -53,7 +53,7 @@ def test_a_spec_with_many_mistakes_lists_each_with_its_path(tmp_path, capsys, bu
             #                                                                   3 outside [0, 1]
             "missing": {"fmu": "does_not_exist.fmu"},                         # 4 missing FMU file
             "nobin": {"fmu": "nobinary.fmu"},                                 # 5 no binary for this platform
-            "me": {"fmu": "me_only.fmu"},                                     # 6 no co-simulation
+            "me": {"fmu": "me_only.fmu", "interface": "co-simulation"},       # 6 an interface it does not offer
             "g1": {"fmu": "gain2.fmu"},
             "g2": {"fmu": "gain2.fmu"},
             "clock": {"python": python_unit("Clock"), "paramters": {}},      # 7 misspelt field
@@ -86,7 +86,7 @@ def test_a_spec_with_many_mistakes_lists_each_with_its_path(tmp_path, capsys, bu
         ("$.units.energy.parameters.eta_motor", "1.5 is outside the range of 'eta_motor' [0, 1]"),
         ("$.units.missing.fmu", "file not found"),
         ("$.units.nobin.fmu", "no binary for this platform"),
-        ("$.units.me.fmu", "does not support co-simulation"),
+        ("$.units.me.fmu", 'asks for "interface": "co-simulation" but the FMU offers only model-exchange'),
         ("$.units.clock.paramters", "unknown field 'paramters'. Did you mean 'parameters'?"),
         ("$.connections[0].from", "unit 'ode' has no variable 'yy'. Did you mean 'y'?"),
         ("$.connections[1].from", "unknown unit 'ghost'"),

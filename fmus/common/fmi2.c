@@ -1,4 +1,5 @@
-/* FMI 2.0 co-simulation interface on top of the framework (see framework.h).
+/* FMI 2.0 co-simulation interface on top of the framework (see framework.h);
+ * the Model Exchange functions are in fmi2_me.c.
  * Arrays appear as one scalar per element; VRs are the generated flat numbering. */
 #include <stdlib.h>
 #include <string.h>
@@ -44,13 +45,15 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     (void)fmuResourceLocation;
     (void)visible;
     if (!functions || !functions->logger) return NULL;
-    if (fmuType != fmi2CoSimulation) {
+    if ((fmuType == fmi2CoSimulation && !HAS_CO_SIMULATION) || (fmuType == fmi2ModelExchange && !HAS_MODEL_EXCHANGE)) {
         functions->logger(functions->componentEnvironment, instanceName, fmi2Error, "logStatusError",
-                          "only co-simulation is supported");
+                          fmuType == fmi2CoSimulation ? "this FMU was built without co-simulation"
+                                                      : "this FMU was built without Model Exchange");
         return NULL;
     }
     comp = framework_instantiate(instanceName, fmuGUID, functions->componentEnvironment,
                                  (AnyFunction)functions->logger, forward_log, loggingOn ? true : false);
+    if (comp) comp->modelExchange = fmuType == fmi2ModelExchange;
     return comp;
 }
 

@@ -1,4 +1,5 @@
-/* FMI 3.0 co-simulation interface on top of the framework (see framework.h).
+/* FMI 3.0 co-simulation interface on top of the framework (see framework.h);
+ * the Model Exchange functions are in fmi3_me.c.
  * Array variables have one value reference; VR k is VARIABLES[k]. */
 #include <stdlib.h>
 #include <string.h>
@@ -38,21 +39,18 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
                                          fmi3IntermediateUpdateCallback intermediateUpdate) {
     (void)resourcePath; (void)visible; (void)earlyReturnAllowed; (void)requiredIntermediateVariables;
     (void)nRequiredIntermediateVariables; (void)intermediateUpdate;
+    if (!HAS_CO_SIMULATION) {
+        if (logMessage)
+            logMessage(instanceEnvironment, fmi3Error, "logStatusError",
+                       "this FMU was built without co-simulation; instantiate it for Model Exchange");
+        return NULL;
+    }
     if (eventModeUsed) {
         if (logMessage) logMessage(instanceEnvironment, fmi3Error, "logStatusError", "event mode is not supported");
         return NULL;
     }
     return framework_instantiate(instanceName, instantiationToken, instanceEnvironment, (AnyFunction)logMessage, forward_log,
                                  loggingOn);
-}
-
-fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
-                                          fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
-                                          fmi3InstanceEnvironment instanceEnvironment,
-                                          fmi3LogMessageCallback logMessage) {
-    (void)instanceName; (void)instantiationToken; (void)resourcePath; (void)visible; (void)loggingOn;
-    if (logMessage) logMessage(instanceEnvironment, fmi3Error, "logStatusError", "only co-simulation is supported");
-    return NULL;
 }
 
 fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
@@ -76,7 +74,6 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
 }
 
 fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) { return (fmi3Status)framework_exit_initialization(COMP); }
-fmi3Status fmi3EnterEventMode(fmi3Instance instance) { NOT_SUPPORTED("fmi3EnterEventMode"); }
 fmi3Status fmi3Terminate(fmi3Instance instance) { return (fmi3Status)framework_terminate(COMP); }
 
 fmi3Status fmi3Reset(fmi3Instance instance) {
@@ -269,44 +266,6 @@ fmi3Status fmi3SetShiftFraction(fmi3Instance instance, const fmi3ValueReference 
     (void)vr; (void)nvr; (void)counters; (void)resolutions; NOT_SUPPORTED("fmi3SetShiftFraction");
 }
 fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance instance) { NOT_SUPPORTED("fmi3EvaluateDiscreteStates"); }
-fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discreteStatesNeedUpdate,
-                                    fmi3Boolean *terminateSimulation, fmi3Boolean *nominalsOfContinuousStatesChanged,
-                                    fmi3Boolean *valuesOfContinuousStatesChanged, fmi3Boolean *nextEventTimeDefined,
-                                    fmi3Float64 *nextEventTime) {
-    (void)discreteStatesNeedUpdate; (void)terminateSimulation; (void)nominalsOfContinuousStatesChanged;
-    (void)valuesOfContinuousStatesChanged; (void)nextEventTimeDefined; (void)nextEventTime;
-    NOT_SUPPORTED("fmi3UpdateDiscreteStates");
-}
-
-fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) { NOT_SUPPORTED("fmi3EnterContinuousTimeMode"); }
-fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
-                                       fmi3Boolean *enterEventMode, fmi3Boolean *terminateSimulation) {
-    (void)noSetFMUStatePriorToCurrentPoint; (void)enterEventMode; (void)terminateSimulation;
-    NOT_SUPPORTED("fmi3CompletedIntegratorStep");
-}
-fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time) { (void)time; NOT_SUPPORTED("fmi3SetTime"); }
-fmi3Status fmi3SetContinuousStates(fmi3Instance instance, const fmi3Float64 x[], size_t n) {
-    (void)x; (void)n; NOT_SUPPORTED("fmi3SetContinuousStates");
-}
-fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3Float64 dx[], size_t n) {
-    (void)dx; (void)n; NOT_SUPPORTED("fmi3GetContinuousStateDerivatives");
-}
-fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 z[], size_t n) {
-    (void)z; (void)n; NOT_SUPPORTED("fmi3GetEventIndicators");
-}
-fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 x[], size_t n) {
-    (void)x; (void)n; NOT_SUPPORTED("fmi3GetContinuousStates");
-}
-fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 x[], size_t n) {
-    (void)x; (void)n; NOT_SUPPORTED("fmi3GetNominalsOfContinuousStates");
-}
-fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *n) {
-    (void)n; NOT_SUPPORTED("fmi3GetNumberOfEventIndicators");
-}
-fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *n) {
-    (void)n; NOT_SUPPORTED("fmi3GetNumberOfContinuousStates");
-}
-
 fmi3Status fmi3EnterStepMode(fmi3Instance instance) {
     /* Without event mode the instance is in step mode after initialization already. */
     return COMP->state == STATE_STEP ? fmi3OK : fmi3Error;

@@ -67,6 +67,7 @@ void framework_reset(ModelInstance *comp) {
     comp->startTime = 0.0;
     comp->state = STATE_INSTANTIATED;
     comp->isDirty = true;
+    memset(&comp->event, 0, sizeof comp->event);
 }
 
 Status framework_enter_initialization(ModelInstance *comp, double startTime) {
@@ -93,14 +94,17 @@ Status framework_exit_initialization(ModelInstance *comp) {
         return status;
     }
     model_initialize(comp);
-    comp->state = STATE_STEP;
+    /* Model Exchange continues in Event Mode (FMI 2.0 and 3.0), co-simulation in Step Mode. */
+    comp->state = comp->modelExchange ? STATE_EVENT : STATE_STEP;
     comp->isDirty = true;
     return status;
 }
 
 Status framework_update(ModelInstance *comp) {
     Status status;
-    if (!comp->isDirty || (comp->state != STATE_INITIALIZATION && comp->state != STATE_STEP)) return OK;
+    if (!comp->isDirty || (comp->state != STATE_INITIALIZATION && comp->state != STATE_STEP &&
+                           comp->state != STATE_EVENT && comp->state != STATE_CONTINUOUS))
+        return OK;
     status = model_calculate(comp);
     if (status <= Warning) comp->isDirty = false;
     return status;

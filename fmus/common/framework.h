@@ -54,8 +54,21 @@ typedef enum {
     STATE_INITIALIZATION,
     STATE_STEP,
     STATE_TERMINATED,
-    STATE_ERROR
+    STATE_ERROR,
+    STATE_EVENT,     /* Model Exchange: Event Mode (also right after initialization) */
+    STATE_CONTINUOUS /* Model Exchange: Continuous-Time Mode */
 } ModelState;
+
+/* Model Exchange: what one event update found (fmi2EventInfo / the outputs of
+ * fmi3UpdateDiscreteStates); filled by model_event_update, see model_exchange.h. */
+typedef struct {
+    bool newDiscreteStatesNeeded;
+    bool terminateSimulation;
+    bool nominalsOfContinuousStatesChanged;
+    bool valuesOfContinuousStatesChanged;
+    bool nextEventTimeDefined;
+    double nextEventTime;
+} EventInfo;
 
 struct ModelInstance;
 /* Any function pointer: the FMI version's logger callback is stored as this
@@ -74,6 +87,8 @@ typedef struct ModelInstance {
     void *environment;  /* fmi2 componentEnvironment / fmi3 instanceEnvironment */
     AnyFunction logger; /* the FMI version's callback, called through log */
     LogFunction log;
+    bool modelExchange; /* instantiated as Model Exchange (else co-simulation) */
+    EventInfo event;    /* Model Exchange: the last event update's result */
     ModelData d;
 } ModelInstance;
 

@@ -3,10 +3,12 @@
  * doStep is exact for u held over the step:
  *   x(t+h) = e^{ah} x + (e^{ah} - 1)/a * b * u   (= x + h b u when a == 0),
  * so any error a co-simulation shows comes from the coupling alone.
+ * As Model Exchange the environment integrates der_y = a*y + b*u itself;
+ * the model has no events.
  */
 #include <math.h>
 
-#include "framework.h"
+#include "model_exchange.h"
 
 Status model_validate(ModelInstance *comp) {
     if (check_finite(comp, "a", SCALAR, comp->d.a) > Warning) return Error;
@@ -17,8 +19,20 @@ Status model_validate(ModelInstance *comp) {
 void model_initialize(ModelInstance *comp) { comp->d.y = comp->d.x0; }
 
 Status model_calculate(ModelInstance *comp) {
-    (void)comp;  /* y is the state: it changes in doStep only */
+    /* y is the state (doStep or the environment's solver changes it); its derivative: */
+    comp->d.der_y = comp->d.a * comp->d.y + comp->d.b * comp->d.u;
     return OK;
+}
+
+Status model_event_update(ModelInstance *comp, EventInfo *info) {
+    (void)comp;
+    (void)info;  /* no events: nothing changes, no next event time */
+    return OK;
+}
+
+bool model_step_event(ModelInstance *comp) {
+    (void)comp;
+    return false;
 }
 
 Status model_do_step(ModelInstance *comp, double t, double h) {

@@ -33,12 +33,16 @@ class Fmi2Unit(FmiInstance):
     _vr_type = ctypes.c_uint
     _call_types = {"Enumeration": "Integer"}
     _prefix = "fmi2"
+    _slave_class: Any = FMU2Slave
+    _interface = "coSimulation"  # the attribute of fmpy's ModelDescription naming the interface used
 
     def __init__(self, name: str, unit_type: Any):
         super().__init__(name, unit_type)
         md = unit_type.model_description()
-        self._slave = FMU2Slave(guid=md.guid, unzipDirectory=unit_type.extracted_folder(),
-                                modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
+        # The Model Exchange subclass (units/model_exchange.py) swaps the fmpy class and the interface.
+        self._slave = self._slave_class(guid=md.guid, unzipDirectory=unit_type.extracted_folder(),
+                                        modelIdentifier=getattr(md, self._interface).modelIdentifier,
+                                        instanceName=name)
         self._callbacks = fmi2CallbackFunctions()
         self._callbacks.logger = fmi2CallbackLoggerTYPE(
             lambda env, instance, status, category, message: self._record_log(status, category, message))
@@ -59,7 +63,7 @@ class Fmi2Unit(FmiInstance):
             "Boolean": (dll.fmi2GetBoolean, dll.fmi2SetBoolean),
             "String": (dll.fmi2GetString, dll.fmi2SetString),
         }
-        self._do_step = dll.fmi2DoStep
+        self._do_step = getattr(dll, "fmi2DoStep", None)  # absent from a Model-Exchange-only FMU
 
     def _bind(self, group: _TypeGroup) -> tuple[Callable[[], int], Callable[[], int]]:
         get, put = self._calls[group.fmi_type]

@@ -29,13 +29,18 @@ class Fmi3Unit(FmiInstance):
     _vr_type = ctypes.c_uint
     _call_types = {"Enumeration": "Int64"}
     _prefix = "fmi3"
+    _slave_class: Any = FMU3Slave
+    _interface = "coSimulation"  # the attribute of fmpy's ModelDescription naming the interface used
 
     def __init__(self, name: str, unit_type: Any):
         super().__init__(name, unit_type)
         md = unit_type.model_description()
-        self._slave = FMU3Slave(guid=md.guid, unzipDirectory=unit_type.extracted_folder(),
-                                modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
-        self._guard("fmi3InstantiateCoSimulation", lambda: self._slave.instantiate(logMessage=self._log_callback_py))
+        # The Model Exchange subclass (units/model_exchange.py) swaps the fmpy class and the interface.
+        self._slave = self._slave_class(guid=md.guid, unzipDirectory=unit_type.extracted_folder(),
+                                        modelIdentifier=getattr(md, self._interface).modelIdentifier,
+                                        instanceName=name)
+        self._guard(f"fmi3Instantiate{self._interface[0].upper()}{self._interface[1:]}",
+                    lambda: self._slave.instantiate(logMessage=self._log_callback_py))
         self._component = self._slave.component
         self._alive = True
         # Direct library calls in the stepping loop (see Fmi2Unit for why).
@@ -43,7 +48,7 @@ class Fmi3Unit(FmiInstance):
         self._calls = {t: (getattr(dll, f"fmi3Get{t if t != 'Enumeration' else 'Int64'}"),
                            getattr(dll, f"fmi3Set{t if t != 'Enumeration' else 'Int64'}"))
                        for t in self._c_types}
-        self._do_step = dll.fmi3DoStep
+        self._do_step = getattr(dll, "fmi3DoStep", None)  # absent from a Model-Exchange-only FMU
         self._event = ctypes.c_bool()
         self._terminate = ctypes.c_bool()
         self._early = ctypes.c_bool()

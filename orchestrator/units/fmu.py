@@ -4,7 +4,8 @@
 modelDescription.xml once (through fmpy), reports *every* reason the FMU cannot
 be used at once (:class:`FmuProblems`), describes its variables in the common
 :mod:`orchestrator.unit` terms and extracts the archive once per process.  The
-live instances are in :mod:`.fmi2` and :mod:`.fmi3`, one module per FMI version.
+live instances are in :mod:`.fmi2` and :mod:`.fmi3`, one module per FMI version,
+and in :mod:`.model_exchange` for Model Exchange FMUs (integrated by CVode).
 
 FMI 2.0 has no arrays; tools export an array ``x`` as scalars ``x[1]`` ..
 ``x[n]``.  Such a contiguous run of indexed scalars (same causality and type)
@@ -168,26 +169,59 @@ def resolve_fmu_path(reference: str, base_dir: str | Path | None = None) -> Path
     return resolve(reference, base_dir)
 
 
+CO_SIMULATION, MODEL_EXCHANGE = "co-simulation", "model-exchange"
+INTERFACES = (CO_SIMULATION, MODEL_EXCHANGE)  # as a spec's "interface" names them
+
+
+def offered_interfaces(md: Any) -> tuple[str, ...]:
+    """The interfaces an FMU's model description offers, co-simulation first."""
+    return tuple(i for i, part in ((CO_SIMULATION, md.coSimulation), (MODEL_EXCHANGE, md.modelExchange)) if part)
+
+
 class FmuUnitType(UnitType):
-    """Blueprint of an FMU unit (FMI 2.0 or 3.0 co-simulation).
+    """Blueprint of an FMU unit (FMI 2.0 or 3.0, co-simulation or Model Exchange).
+
+    ``interface`` (``"co-simulation"`` or ``"model-exchange"``) chooses how
+    the FMU runs; ``None`` means co-simulation when the FMU offers it, else
+    Model Exchange.  ``solver_settings`` (a
+    :class:`~orchestrator.units.model_exchange.SolverSettings`) configure the
+    integrator of a Model Exchange unit; they are refused for co-simulation.
 
     Pickles as its path, digest and (optionally) the FMU's bytes, so a Dask
     worker on another machine can use it without a shared filesystem.
     """
 
-    def __init__(self, path: str | Path, reference: str | None = None, structural: dict[str, int] | None = None):
+    def __init__(self, path: str | Path, reference: str | None = None, structural: dict[str, int] | None = None,
+                 interface: str | None = None, solver_settings: Any = None):
         self.path = str(path)
         self.reference = reference or self.path
         # values of structural parameters set by the spec: they size arrays (FMI 3.0 <Dimension valueReference>)
         self.structural = dict(structural or {})
+        self.requested_interface = interface
+        self._solver_settings = solver_settings
         self._md: Any = None
         self._description: UnitDescription | None = None
         self._elements: dict[str, list[FmiElement]] = {}
         self._digest: str | None = None
 
     def __getstate__(self) -> dict:
-        return {"path": self.path, "reference": self.reference, "structural": self.structural, "_md": None,
-                "_description": None, "_elements": {}, "_digest": self._digest}
+        return {"path": self.path, "reference": self.reference, "structural": self.structural,
+                "requested_interface": self.requested_interface, "_solver_settings": self._solver_settings,
+                "_md": None, "_description": None, "_elements": {}, "_digest": self._digest}
+
+    @property
+    def interface(self) -> str:
+        """How the FMU runs: the requested interface, or co-simulation when offered, else Model Exchange."""
+        if self.requested_interface:
+            return self.requested_interface
+        return CO_SIMULATION if self.model_description().coSimulation is not None else MODEL_EXCHANGE
+
+    @property
+    def solver_settings(self) -> Any:
+        """The Model Exchange solver settings (defaults when the spec gives none)."""
+        from .model_exchange import SolverSettings
+
+        return self._solver_settings or SolverSettings()
 
     @property
     def digest(self) -> str:
@@ -199,7 +233,8 @@ class FmuUnitType(UnitType):
         """fmpy's ModelDescription, after checking the FMU can run here.
 
         Raises FmuProblems listing every problem found (missing file, not a
-        zip, no co-simulation, no binary for this platform, unsupported version).
+        zip, the requested interface not offered, solver settings for a
+        co-simulation FMU, no binary for this platform, unsupported version).
         """
         if self._md is not None:
             return self._md
@@ -224,20 +259,38 @@ class FmuUnitType(UnitType):
         if md.fmiVersion not in ("2.0", "3.0"):
             problems.append(Problem(self.path, "modelDescription.xml", f"FMI version {md.fmiVersion} is not "
                                     "supported", "export the FMU as FMI 2.0 or 3.0"))
-        if md.coSimulation is None:
-            offered = [name for name, interface in (("model exchange", md.modelExchange),
-                                                    ("scheduled execution (FMI 3.0 clocks)",
-                                                     getattr(md, "scheduledExecution", None))) if interface]
-            problems.append(Problem(self.path, "modelDescription.xml", "the FMU does not support co-simulation "
-                                    f"({' and '.join(offered) or 'no interface'} only); cosim runs co-simulation "
-                                    "FMUs", "export the FMU for co-simulation (FMI 2.0 or 3.0)"))
-        else:
+        offered = offered_interfaces(md)
+        chosen = self.requested_interface or (offered[0] if offered else None)
+        if not offered:
+            others = "scheduled execution (FMI 3.0 clocks)" if getattr(md, "scheduledExecution", None) else "no interface"
+            problems.append(Problem(self.path, "modelDescription.xml", f"the FMU does not support co-simulation "
+                                    f"({others} only); cosim runs co-simulation and model-exchange FMUs",
+                                    "export the FMU for co-simulation or model exchange (FMI 2.0 or 3.0)"))
+        elif chosen not in offered:
+            problems.append(Problem(self.path, "modelDescription.xml", f"the spec asks for \"interface\": "
+                                    f"\"{chosen}\" but the FMU offers only {' and '.join(offered)}",
+                                    f"remove \"interface\" (or set it to \"{offered[0]}\")"))
+        elif chosen == CO_SIMULATION and self._solver_settings is not None:
+            fix = ("add \"interface\": \"model-exchange\" to integrate the FMU with cosim's solver"
+                   if MODEL_EXCHANGE in offered else "remove them: the FMU integrates itself")
+            problems.append(Problem(self.path, "", "'tolerance' and 'max_step' configure the model-exchange solver, "
+                                    "but this FMU runs as co-simulation", fix))
+        if chosen == MODEL_EXCHANGE and chosen in offered:
+            from .model_exchange import solver_problem
+
+            reason = solver_problem()
+            if reason:
+                problems.append(Problem(self.path, "", reason, "use the FMU's co-simulation interface if it has one, "
+                                        "or run on a platform fmpy ships SUNDIALS for (x86_64 Linux or Windows, "
+                                        "arm64 macOS)"))
+        if chosen in offered:
             folder2, folder3 = platform_folders()
             folder = folder3 if md.fmiVersion == "3.0" else folder2
-            identifier_problem = model_identifier_problem(self.path, md.coSimulation.modelIdentifier)
+            part = md.coSimulation if chosen == CO_SIMULATION else md.modelExchange
+            identifier_problem = model_identifier_problem(self.path, part.modelIdentifier)
             if identifier_problem:
                 raise FmuProblems(self.path, problems + [identifier_problem])
-            library = f"binaries/{folder}/{md.coSimulation.modelIdentifier}{shared_library_suffix()}"
+            library = f"binaries/{folder}/{part.modelIdentifier}{shared_library_suffix()}"
             with zipfile.ZipFile(self.path) as zf:
                 if library not in zf.namelist():
                     present = sorted({n.split("/")[1] for n in zf.namelist()
@@ -274,6 +327,10 @@ class FmuUnitType(UnitType):
 
     def instantiate(self, name: str) -> Unit:
         md = self.model_description()
+        if self.interface == MODEL_EXCHANGE:
+            from .model_exchange import Fmi2ModelExchangeUnit, Fmi3ModelExchangeUnit
+
+            return (Fmi2ModelExchangeUnit if md.fmiVersion == "2.0" else Fmi3ModelExchangeUnit)(name, self)
         if md.fmiVersion == "2.0":
             from .fmi2 import Fmi2Unit
 
