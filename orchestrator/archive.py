@@ -19,11 +19,15 @@ The limits (:class:`ArchiveLimits`) default to the settings of
 
 from __future__ import annotations
 
+import atexit
 import shutil
 import stat
+import tempfile
+import threading
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
+from typing import Callable
 
 from . import limits
 from .errors import Problem, UserError
@@ -154,6 +158,44 @@ def extract_to_new_folder(path: str | Path, folder: str | Path, limits_: Archive
     except BaseException:
         shutil.rmtree(folder, ignore_errors=True)
         raise
+
+
+class ExtractionCache:
+    """One unpacked copy of each archive per process, removed when the process exits.
+
+    ``extract(path, folder)`` unpacks into a new folder and removes it when
+    the archive is refused (default: :func:`extract_to_new_folder`); temporary
+    folders are named ``cosim_<prefix>_*``.  The exit hook is registered at
+    the first extraction, not at import, so importing cosim leaves no hook.
+    """
+
+    def __init__(self, prefix: str, extract: Callable[[str | Path, str], None] = extract_to_new_folder):
+        self.prefix, self._extract = prefix, extract
+        self._folders: dict[str, str] = {}
+        self._lock = threading.Lock()
+        self._registered = False
+
+    def folder(self, path: str | Path, key: str) -> str:
+        """The folder holding the archive at ``path`` unpacked, for the version ``key`` of it (e.g. a digest).
+
+        Raises what ``extract`` raises (leaving no folder behind) when the archive is refused.
+        """
+        with self._lock:
+            if not self._registered:
+                atexit.register(self.clear)
+                self._registered = True
+            if key not in self._folders:
+                folder = tempfile.mkdtemp(prefix=f"cosim_{self.prefix}_")
+                self._extract(path, folder)
+                self._folders[key] = folder
+            return self._folders[key]
+
+    def clear(self) -> None:
+        """Remove every folder unpacked so far."""
+        with self._lock:
+            for folder in self._folders.values():
+                shutil.rmtree(folder, ignore_errors=True)
+            self._folders.clear()
 
 
 def _mb(n: int) -> str:

@@ -9,15 +9,11 @@ are refused.
 
 from __future__ import annotations
 
-import atexit
-import shutil
-import tempfile
-import threading
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..archive import ArchiveError, safe_extract
+from ..archive import ArchiveError, ExtractionCache, extract_to_new_folder
 from ..problems import Problem, SpecError
 
 SSD_NAME = "SystemStructure.ssd"
@@ -65,36 +61,14 @@ class SspFiles:
         return resolved == root or root in resolved.parents
 
 
-class _Extractions:
-    """One extracted copy of each archive per process, removed at exit."""
-
-    def __init__(self) -> None:
-        self._folders: dict[tuple[str, float, int], Path] = {}
-        self._lock = threading.Lock()
-        atexit.register(self.clear)
-
-    def folder(self, archive: Path) -> Path:
-        stat = archive.stat()
-        key = (str(archive.resolve()), stat.st_mtime, stat.st_size)
-        with self._lock:
-            if key not in self._folders:
-                folder = Path(tempfile.mkdtemp(prefix="cosim_ssp_"))
-                try:  # refuses escaping members, links, special files, zip bombs (orchestrator.archive)
-                    safe_extract(archive, folder, kind="SSP")
-                except BaseException:
-                    shutil.rmtree(folder, ignore_errors=True)
-                    raise
-                self._folders[key] = folder
-            return self._folders[key]
-
-    def clear(self) -> None:
-        with self._lock:
-            for folder in self._folders.values():
-                shutil.rmtree(folder, ignore_errors=True)
-            self._folders.clear()
+def _extracted(archive: Path) -> Path:
+    """The folder holding the SSP at ``archive`` unpacked (once per process and version of the file)."""
+    stat = archive.stat()
+    return Path(_EXTRACTIONS.folder(archive, f"{archive.resolve()}:{stat.st_mtime}:{stat.st_size}"))
 
 
-_EXTRACTIONS = _Extractions()
+# unpacking refuses escaping members, links, special files, zip bombs (orchestrator.archive)
+_EXTRACTIONS = ExtractionCache("ssp", lambda archive, folder: extract_to_new_folder(archive, folder, kind="SSP"))
 
 
 def open_ssp(path: str | Path) -> SspFiles:
@@ -115,7 +89,7 @@ def open_ssp(path: str | Path) -> SspFiles:
         raise SpecError([Problem(given, "/", "not a zip archive", "an .ssp file is a zip archive with "
                                  f"{SSD_NAME} at its root; re-export it from its tool")])
     try:
-        folder = _EXTRACTIONS.folder(path)
+        folder = _extracted(path)
     except ArchiveError as exc:
         raise SpecError(exc.problems) from None
     except (zipfile.BadZipFile, OSError) as exc:
@@ -136,7 +110,7 @@ def member_file(reference: str) -> Path:
     archive_path = Path(archive)
     if not archive_path.is_file():
         raise FileNotFoundError(f"SSP archive not found: {archive}")
-    folder = _EXTRACTIONS.folder(archive_path)
+    folder = _extracted(archive_path)
     path = (folder / member).resolve()
     if folder.resolve() not in path.parents or not path.is_file():
         raise FileNotFoundError(f"'{member}' is not a file of the SSP archive {archive}")

@@ -15,20 +15,16 @@ FMI 3.0 FMU (or a Python unit) with an array port ``x`` are interchangeable.
 
 from __future__ import annotations
 
-import atexit
 import hashlib
 import os
 import platform
 import re
-import shutil
-import tempfile
-import threading
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
 
-from ..archive import ArchiveError, check_archive, extract_to_new_folder
+from ..archive import ArchiveError, ExtractionCache, check_archive, extract_to_new_folder
 from ..errors import Problem, UserError
 from ..quantities import fmi_unit_definitions
 from ..unit import Unit, UnitDescription, UnitType, Variable, indexed_runs, parse_port
@@ -119,34 +115,7 @@ def model_identifier_problem(archive: str, identifier: Any) -> Problem | None:
                    "re-export the FMU with a plain modelIdentifier")
 
 
-class _ExtractionCache:
-    """One extracted copy of each FMU per process, removed when the process exits."""
-
-    def __init__(self) -> None:
-        self._folders: dict[str, str] = {}
-        self._lock = threading.Lock()
-        self._registered = False
-
-    def folder(self, path: str, digest: str) -> str:
-        key = f"{path}:{digest}"
-        with self._lock:
-            if not self._registered:  # at the first extraction, not at import: importing cosim leaves no hook
-                atexit.register(self.clear)
-                self._registered = True
-            if key not in self._folders:
-                folder = tempfile.mkdtemp(prefix="cosim_fmu_")
-                safe_extract(path, folder)  # removes the folder when the FMU is refused
-                self._folders[key] = folder
-            return self._folders[key]
-
-    def clear(self) -> None:
-        with self._lock:
-            for folder in self._folders.values():
-                shutil.rmtree(folder, ignore_errors=True)
-            self._folders.clear()
-
-
-EXTRACTED = _ExtractionCache()
+EXTRACTED = ExtractionCache("fmu", safe_extract)  # one unpacked copy of each FMU per process
 
 
 def file_digest(path: str | Path) -> str:
@@ -316,7 +285,7 @@ class FmuUnitType(UnitType):
 
     def extracted_folder(self) -> str:
         """The folder this process extracted the FMU into (extracting once)."""
-        return EXTRACTED.folder(self.path, self.digest)
+        return EXTRACTED.folder(self.path, f"{self.path}:{self.digest}")
 
     def files(self) -> list[Path]:
         self.digest  # hashed here, from the original, so a worker need not hash its copy
