@@ -181,12 +181,14 @@ def test_the_project_cites_no_document_outside_it():
     files = sp.run(["git", "ls-files"], cwd=REPO, capture_output=True, text=True).stdout.split()
     if not files:  # not a git checkout (an unpacked sdist): every text file there is
         files = [str(p.relative_to(REPO)) for p in REPO.rglob("*") if p.is_file()]
+    # spelled in pieces so that this file does not cite the notes itself
+    TEAM_NOTE_CITATIONS = ("DESIGN" + ".md", "/work/" + "shared")
     offenders = []
     for name in files:
         path = REPO / name
         if path.suffix not in (".py", ".md", ".json", ".toml", ".c", ".h", ".txt", ".html") or not path.is_file():
             continue
         text = path.read_text(encoding="utf-8", errors="replace")
-        if name != "tests/test_docs.py" and ("DESIGN.md" in text or "/work/shared" in text):
+        if any(citation in text for citation in TEAM_NOTE_CITATIONS):
             offenders.append(name)
     assert offenders == []
