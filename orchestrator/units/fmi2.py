@@ -14,11 +14,11 @@ from fmpy.fmi2 import (
     fmi2CallbackLoggerTYPE,
     fmi2StepFinishedTYPE,
 )
-from fmpy.fmi2 import calloc, free  # the C allocator fmpy hands to FMUs
 from fmpy.fmi2 import fmi2LastSuccessfulTime, fmi2Terminated
 
 from ..unit import SimulationEnded
 from .fmi_instance import FmiInstance, _TypeGroup
+from .fmpy_internals import fmi2_allocator, instance_handle, library
 
 
 class Fmi2Unit(FmiInstance):
@@ -46,16 +46,17 @@ class Fmi2Unit(FmiInstance):
         self._callbacks = fmi2CallbackFunctions()
         self._callbacks.logger = fmi2CallbackLoggerTYPE(
             lambda env, instance, status, category, message: self._record_log(status, category, message))
+        calloc, free = fmi2_allocator()
         self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
         self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
         self._callbacks.stepFinished = fmi2StepFinishedTYPE()
         self._guard("fmi2Instantiate", lambda: self._slave.instantiate(callbacks=self._callbacks, loggingOn=False))
-        self._component = self._slave.component
+        self._component = instance_handle(self._slave)
         self._alive = True
         # The stepping loop calls the library's functions directly (fmpy has
         # set their ctypes signatures) and checks the status itself: fmpy's
         # wrappers cost more than the FMU's own work for small models.
-        dll = self._slave.dll
+        dll = library(self._slave)
         self._calls = {
             "Real": (dll.fmi2GetReal, dll.fmi2SetReal),
             "Integer": (dll.fmi2GetInteger, dll.fmi2SetInteger),

@@ -10,6 +10,7 @@ from fmpy.fmi3 import FMU3Slave
 
 from ..unit import Selection, SimulationEnded
 from .fmi_instance import FmiInstance, _TypeGroup
+from .fmpy_internals import instance_handle, library
 
 
 class Fmi3Unit(FmiInstance):
@@ -41,10 +42,10 @@ class Fmi3Unit(FmiInstance):
                                         instanceName=name)
         self._guard(f"fmi3Instantiate{self._interface[0].upper()}{self._interface[1:]}",
                     lambda: self._slave.instantiate(logMessage=self._log_callback_py))
-        self._component = self._slave.component
+        self._component = instance_handle(self._slave)
         self._alive = True
         # Direct library calls in the stepping loop (see Fmi2Unit for why).
-        dll = self._slave.dll
+        dll = library(self._slave)
         self._calls = {t: (getattr(dll, f"fmi3Get{t if t != 'Enumeration' else 'Int64'}"),
                            getattr(dll, f"fmi3Set{t if t != 'Enumeration' else 'Int64'}"))
                        for t in self._c_types}

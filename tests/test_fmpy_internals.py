@@ -1,0 +1,107 @@
+"""The fmpy internals behind orchestrator/units/fmpy_internals.py still mean what cosim assumes.
+
+Checked on real FMUs (built from fmus/linear_ode) with fmpy's own slave classes: the direct library calls
+give what fmpy's public wrappers give, within the fmpy version range pyproject.toml declares.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import math
+import re
+import shutil
+import tempfile
+import zipfile
+from importlib import metadata
+from pathlib import Path
+
+import pytest
+from packaging.requirements import Requirement
+
+from orchestrator.units import fmpy_internals
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def declared_fmpy() -> Requirement:
+    text = (ROOT / "pyproject.toml").read_text()
+    return Requirement(re.search(r'"(fmpy[^"]*)"', text).group(1))
+
+
+def test_the_installed_fmpy_is_in_the_declared_range():
+    declared = declared_fmpy()
+    assert declared == Requirement(fmpy_internals.FMPY_REQUIREMENT)
+    assert declared.specifier.contains(metadata.version("fmpy"))
+
+
+@pytest.fixture
+def unzipped(built_fmu):
+    folders = []
+
+    def unzip(version: int) -> tuple[object, str]:
+        from fmpy import read_model_description
+
+        path = built_fmu("linear_ode", version)
+        folder = tempfile.mkdtemp(prefix="cosim_fmpy_")
+        folders.append(folder)
+        with zipfile.ZipFile(path) as zf:
+            zf.extractall(folder)
+        return read_model_description(str(path)), folder
+
+    yield unzip
+    for folder in folders:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def test_fmi2_library_handle_and_allocator(unzipped):
+    from fmpy.fmi2 import FMU2Slave
+
+    md, folder = unzipped(2)
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    slave = FMU2Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
+                      instanceName="probe")
+    slave.instantiate()
+    try:
+        lib, handle = fmpy_internals.library(slave), fmpy_internals.instance_handle(slave)
+        assert isinstance(lib, ctypes.CDLL) and handle
+        assert lib.fmi2GetReal.restype is not None and lib.fmi2DoStep.argtypes  # signatures set by fmpy
+        slave.setupExperiment(startTime=0.0)
+        slave.setReal([vr["a"], vr["x0"]], [-2.0, 3.0])
+        slave.enterInitializationMode()
+        slave.exitInitializationMode()
+        assert lib.fmi2DoStep(handle, 0.0, 0.5, 1) == 0
+        values = (ctypes.c_double * 1)()
+        assert lib.fmi2GetReal(handle, (ctypes.c_uint * 1)(vr["y"]), 1, values) == 0
+        assert values[0] == slave.getReal([vr["y"]])[0] == pytest.approx(3.0 * math.exp(-1.0), rel=1e-12)
+        slave.terminate()
+    finally:
+        slave.freeInstance()
+    calloc, free = fmpy_internals.fmi2_allocator()
+    pointer = calloc(4, 8)
+    assert pointer and all(b == 0 for b in ctypes.string_at(pointer, 32))  # calloc: zeroed memory
+    free(pointer)
+
+
+def test_fmi3_library_and_handle(unzipped):
+    from fmpy.fmi3 import FMU3Slave
+
+    md, folder = unzipped(3)
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    slave = FMU3Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
+                      instanceName="probe")
+    slave.instantiate()
+    try:
+        lib, handle = fmpy_internals.library(slave), fmpy_internals.instance_handle(slave)
+        assert isinstance(lib, ctypes.CDLL) and handle and lib.fmi3GetFloat64.argtypes
+        slave.setFloat64([vr["a"], vr["x0"]], [-2.0, 3.0])
+        slave.enterInitializationMode(startTime=0.0)
+        slave.exitInitializationMode()
+        flags = [ctypes.c_bool() for _ in range(3)]
+        last = ctypes.c_double()
+        assert lib.fmi3DoStep(handle, 0.0, 0.5, True, *map(ctypes.byref, flags), ctypes.byref(last)) == 0
+        values = (ctypes.c_double * 1)()
+        assert lib.fmi3GetFloat64(handle, (ctypes.c_uint * 1)(vr["y"]), 1, values, 1) == 0
+        assert values[0] == slave.getFloat64([vr["y"]])[0] == pytest.approx(3.0 * math.exp(-1.0), rel=1e-12)
+        slave.terminate()
+    finally:
+        slave.freeInstance()
