@@ -9,12 +9,15 @@ long runs do not drift.
 
 from __future__ import annotations
 
-from typing import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
 import numpy as np
 
-from .system import Connection
+
 from .unit import SimulationEnded, Unit, UnitError
+
+if TYPE_CHECKING:  # annotations only: the spec imports the algorithm names from here
+    from .system import Connection
 
 
 def step_unit(unit: Unit, t: float, h: float) -> None:
@@ -121,7 +124,8 @@ class Jacobi(MasterAlgorithm):
             step_unit(unit, t, h)
 
 
-ALGORITHMS = {GaussSeidel.name: GaussSeidel, Jacobi.name: Jacobi}
+ALGORITHMS = {GaussSeidel.name: GaussSeidel, Jacobi.name: Jacobi}  # the one list of master algorithm names
+DEFAULT_ALGORITHM = GaussSeidel.name
 
 
 def make_algorithm(name: str) -> MasterAlgorithm:

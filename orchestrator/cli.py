@@ -112,7 +112,9 @@ def add_experiment_options(p: argparse.ArgumentParser) -> None:
     group.add_argument("--start", type=float, metavar="S", help="start time (s)")
     group.add_argument("--stop", type=float, metavar="S", help="stop time (s)")
     group.add_argument("--step", type=float, metavar="S", help="communication step size (s)")
-    group.add_argument("--algorithm", choices=("gauss-seidel", "jacobi"), help="master algorithm")
+    from .algorithms import ALGORITHMS
+
+    group.add_argument("--algorithm", choices=tuple(ALGORITHMS), help="master algorithm")
 
 
 def experiment_overrides(args: argparse.Namespace) -> dict[str, Any]:

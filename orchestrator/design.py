@@ -39,7 +39,6 @@ import hashlib
 import itertools
 import json
 import math
-import re
 import warnings
 from dataclasses import dataclass
 from decimal import Decimal
@@ -48,7 +47,7 @@ from typing import Any, Iterator, Sequence
 import numpy as np
 
 from . import limits
-from .expressions import Expression, ExpressionError
+from .expressions import Expression, ExpressionError, identifier
 from .problems import Problem, SpecError, json_path
 from .spec import DesignParameterSpec, Spec
 
@@ -64,9 +63,7 @@ class Point:
     values: dict[str, Any]
 
 
-def expression_name(target: str) -> str:
-    """The name a constraint uses for ``target`` ('traj.q_via[2]' -> 'traj_q_via_2')."""
-    return re.sub(r"[^A-Za-z0-9_]+", "_", target).strip("_")
+expression_name = identifier  # the name a constraint uses for a target ('traj.q_via[2]' -> 'traj_q_via_2')
 
 
 def flat_columns(target: str, value: Any) -> dict[str, Any]:

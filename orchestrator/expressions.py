@@ -27,12 +27,27 @@ from __future__ import annotations
 import ast
 import math
 import operator
+import re
 from typing import Any, Callable, Mapping
 
 import numpy as np
 
 from . import limits
 from .errors import UserError
+
+def identifier(name: str) -> str:
+    """The name an expression uses for a table column or a design parameter: the one rule of cosim.
+
+    A name that already is an identifier stays as it is.  Otherwise every run
+    of characters other than letters, digits and ``_`` becomes one ``_`` and
+    the ones at both ends are dropped (``traj.q_via[2]`` -> ``traj_q_via_2``);
+    a result that is empty or starts with a digit gets ``c_`` in front.
+    """
+    if name.isidentifier():
+        return name
+    text = re.sub(r"[^A-Za-z0-9_]+", "_", name).strip("_")
+    return text if text and not text[0].isdigit() else f"c_{text}"
+
 
 FUNCTIONS: dict[str, Callable[..., Any]] = {
     "abs": np.abs, "sqrt": np.sqrt, "exp": np.exp, "log": np.log, "log10": np.log10,

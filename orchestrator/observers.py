@@ -11,12 +11,45 @@ signals to numbers on the fly, so a sweep never holds a whole trace.
 
 from __future__ import annotations
 
-from typing import Any, Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 import numpy as np
 
 from .expressions import Expression
-from .spec import ObjectiveSpec
+
+if TYPE_CHECKING:  # annotations only: the spec imports the reduction names from here
+    from .spec import ObjectiveSpec
+
+
+def _integral(t: np.ndarray, x: np.ndarray) -> np.ndarray:
+    return np.trapezoid(x, t, axis=0) if len(t) > 1 else np.zeros(x.shape[1])
+
+
+def _time_average(t: np.ndarray, x: np.ndarray) -> np.ndarray:
+    duration = t[-1] - t[0]
+    return _integral(t, x) / duration if duration > 0 else x[-1]
+
+
+def _rms(t: np.ndarray, x: np.ndarray) -> np.ndarray:
+    duration = t[-1] - t[0]
+    return np.sqrt(_integral(t, x * x) / duration) if duration > 0 else np.abs(x[-1])
+
+
+# The reductions an objective may name ("reduce"): each maps the sample times t
+# and the samples x (one column per signal element) to one value per column.
+# This dict is the one list of reduction names (the spec check uses its keys).
+REDUCERS: dict[str, Callable[[np.ndarray, np.ndarray], np.ndarray]] = {
+    "final": lambda t, x: x[-1],
+    "initial": lambda t, x: x[0],
+    "min": lambda t, x: np.min(x, axis=0),
+    "max": lambda t, x: np.max(x, axis=0),
+    "mean": _time_average,
+    "integral": _integral,
+    "integral_abs": lambda t, x: _integral(t, np.abs(x)),
+    "rms": _rms,
+    "time_of_max": lambda t, x: t[np.argmax(x, axis=0)],
+    "time_of_min": lambda t, x: t[np.argmin(x, axis=0)],
+}
 
 
 class Observer:
@@ -153,20 +186,13 @@ class ObjectiveReducer(Observer):
         """Objective name -> value (float, or a numpy array for an array signal)."""
         data = self._samples.data()
         t, x = data[:, 0], data[:, 1:]
-        duration = t[-1] - t[0]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            integral = np.trapezoid(x, t, axis=0) if len(t) > 1 else np.zeros(x.shape[1])
-            table = {
-                "final": x[-1], "initial": x[0], "min": np.min(x, axis=0), "max": np.max(x, axis=0),
-                "integral": integral,
-                "integral_abs": np.trapezoid(np.abs(x), t, axis=0) if len(t) > 1 else integral,
-                "mean": integral / duration if duration > 0 else x[-1],
-                "rms": np.sqrt(np.trapezoid(x * x, t, axis=0) / duration) if duration > 0 else np.abs(x[-1]),
-                "time_of_max": t[np.argmax(x, axis=0)], "time_of_min": t[np.argmin(x, axis=0)],
-            }
+        reduced: dict[str, np.ndarray] = {}  # each reduction over every kept column at once, when first needed
         out: dict[str, Any] = {}
         for objective, part in zip(self.objectives, self._slices):
-            values = table[objective.reduce][part]  # type: ignore[index]
+            if objective.reduce not in reduced:
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    reduced[objective.reduce] = REDUCERS[objective.reduce](t, x)  # type: ignore[index]
+            values = reduced[objective.reduce][part]  # type: ignore[index]
             out[objective.name] = float(values[0]) if len(values) == 1 else values.copy()
         return out
 

@@ -55,6 +55,7 @@ import numpy as np
 
 from .errors import UserError
 from .problems import Problem, SpecError
+from .table_columns import TAIL_COLUMNS
 
 SAMPLERS = ("tpe", "nsga2", "gp", "random", "qmc")
 DEFAULT_BUDGET = 200
@@ -413,7 +414,7 @@ class Optimization:
         out.update(trial=trial, batch=batch, sampler=self.settings.sampler)
         values, violations = self._outcome({**out, "status": row.get("status")})
         out["feasible"] = values is not None and all(v <= 0 for v in violations)
-        for key in ("status", "message", "run_time", "worker"):
+        for key in TAIL_COLUMNS:
             out[key] = row.get(key, "")
         return out
 

@@ -34,8 +34,8 @@ import pyarrow as pa
 import pyarrow.csv as pa_csv
 import pyarrow.parquet as pq
 
-STATUSES = ("ok", "failed", "timeout", "crashed")
-TAIL_COLUMNS = ("status", "message", "run_time", "worker")
+from .table_columns import STATUSES, TAIL_COLUMNS  # noqa: F401  (defined once, for writers and readers)
+
 _PART = re.compile(r"^part-(\d+)\.parquet$")
 COMPACT_WINDOW = 10_000  # rows held at once while merging parts into the final table
 # Every MERGE_PARTS appended batches, the part files are merged into one: thousands of tiny files cost
@@ -277,15 +277,6 @@ def _conform(table: pa.Table, schema: pa.Schema) -> pa.Table:
     columns = [table.column(f.name).cast(f.type) if f.name in table.column_names else pa.nulls(len(table), f.type)
                for f in schema]
     return pa.Table.from_arrays(columns, schema=schema)
-
-
-def counts_by_status(df: pd.DataFrame) -> dict[str, int]:
-    """Number of rows per status (every status listed, zeros included)."""
-    counts = {s: 0 for s in STATUSES}
-    if len(df):
-        for status, n in df["status"].value_counts().items():
-            counts[str(status)] = int(n)
-    return counts
 
 
 def _order_columns(df: pd.DataFrame) -> pd.DataFrame:

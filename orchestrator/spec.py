@@ -20,14 +20,16 @@ from typing import Any, Mapping
 import jsonschema
 
 from . import limits
+from .algorithms import ALGORITHMS as MASTER_ALGORITHMS
+from .algorithms import DEFAULT_ALGORITHM
+from .observers import REDUCERS
 from .problems import Problem, SpecError, did_you_mean, json_path
 from .spec_json import read_spec_json  # strict JSON: no NaN, no key twice, bounded nesting
 
 # Shipped as package data (cosim.specs, the repository's specs/ folder), so an installed cosim finds it too.
 SCHEMA_RESOURCE = ("cosim.specs", "spec.schema.json")
-REDUCTIONS = ("final", "initial", "min", "max", "mean", "integral", "integral_abs", "rms",
-              "time_of_max", "time_of_min")
-ALGORITHMS = ("gauss-seidel", "jacobi")
+REDUCTIONS = tuple(REDUCERS)  # the names; the reductions themselves are in orchestrator.observers
+ALGORITHMS = tuple(MASTER_ALGORITHMS)  # the names; the algorithms are in orchestrator.algorithms
 FMU_ONLY = ("interface", "tolerance", "max_step")  # unit settings that only an FMU unit takes
 
 
@@ -61,7 +63,7 @@ class ExperimentSpec:
     start: float
     stop: float
     step: float
-    algorithm: str = "gauss-seidel"
+    algorithm: str = DEFAULT_ALGORITHM
     stop_when: str | None = None
     early_stop: str = "ok"  # a unit ending the simulation before 'stop': "ok" (status ok) or "fail"
 
@@ -177,6 +179,8 @@ def spec_schema() -> dict:
     package, name = SCHEMA_RESOURCE
     schema = json.loads(importlib.resources.files(package).joinpath(name).read_text(encoding="utf-8"))
     schema["$defs"]["unit"] = unit_schema(schema["$defs"]["unit"])
+    algorithm = schema["$defs"]["experiment"]["properties"]["algorithm"]
+    algorithm.update(enum=list(ALGORITHMS), default=DEFAULT_ALGORITHM)  # the file repeats them for editors
     return schema
 
 
@@ -330,7 +334,7 @@ def build_spec(raw: dict, path: Path) -> Spec:
                         for i, c in enumerate(raw.get("connections", [])) if c is not None)
     e = raw["experiment"]
     experiment = ExperimentSpec(start=float(e.get("start", 0.0)), stop=float(e["stop"]), step=float(e["step"]),
-                                algorithm=e.get("algorithm", "gauss-seidel"), stop_when=e.get("stop_when"),
+                                algorithm=e.get("algorithm", DEFAULT_ALGORITHM), stop_when=e.get("stop_when"),
                                 early_stop=e.get("early_stop", "ok"))
     objectives = tuple(
         ObjectiveSpec(name=n, signal=o.get("signal"), reduce=o.get("reduce"), expr=o.get("expr"),

@@ -49,6 +49,7 @@ from .design import DesignSpace, Point
 from .errors import UserError
 from .evaluator import ScatteredPayload, lost_rows, rerun
 from .isolation import IsolatedRunner, make_payload
+from .table_columns import TAIL_COLUMNS
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -359,7 +360,7 @@ class Sweep:
         out = {"point_id": point.id}
         out.update(self.space.columns(point.values))
         out.update(row.get("objectives", {}))
-        for key in ("status", "message", "run_time", "worker"):
+        for key in TAIL_COLUMNS:
             out[key] = row.get(key, "")
         return out
 

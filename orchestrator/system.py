@@ -99,7 +99,6 @@ class System:
     assignments: tuple[Assignment, ...]
     probes: tuple[Signal, ...]
     recorded: tuple[str, ...]
-    objectives: tuple[Any, ...] = field(default=())
 
     def signal(self, text: str) -> Signal:
         """Resolve a 'unit.port' text against this system; raises SpecError if it does not fit."""

@@ -21,7 +21,7 @@ import pandas as pd
 import pytest
 
 from orchestrator.analysis.explorer import SLIDER_STEPS, ExplorerState
-from orchestrator.analysis.screen import xwd_to_rgb
+from .xwd import xwd_to_rgb
 from orchestrator.analysis.table import AnalysisError, load_results
 
 from .conftest import python_unit, require_tool

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -48,7 +49,8 @@ def main() -> None:
             import tkinter as tk
 
             from orchestrator.analysis.explorer import ExplorerState, ExplorerWindow
-            from orchestrator.analysis.screen import xwd_to_rgb
+            sys.path.insert(0, str(HERE.parent.parent))  # the repository: the frame-buffer decoder is a test tool
+            from tests.xwd import xwd_to_rgb
             from orchestrator.analysis.table import load_results
 
             table = load_results(HERE / "study")

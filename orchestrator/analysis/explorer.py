@@ -378,7 +378,7 @@ class ExplorerWindow:
         return win
 
 
-def run_explorer(table: ResultsTable, spec_path: str | None = None) -> int:
+def run_explorer(table: ResultsTable) -> int:
     """Open the window and run the Tk main loop; returns the exit code (2 without a display)."""
     import tkinter as tk
 
@@ -387,6 +387,6 @@ def run_explorer(table: ResultsTable, spec_path: str | None = None) -> int:
         root = tk.Tk()
     except tk.TclError as exc:
         raise AnalysisError(f"cannot open a window ({exc}); set DISPLAY, or use cosim plot/report") from None
-    ExplorerWindow(root, state, spec_path)
+    ExplorerWindow(root, state)
     root.mainloop()
     return 0

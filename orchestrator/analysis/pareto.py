@@ -84,22 +84,3 @@ def _front_cull(unique: np.ndarray) -> np.ndarray:
     out = np.zeros(len(unique), dtype=bool)
     out[front] = True
     return out
-
-
-def pareto_naive(values: np.ndarray, senses: Sequence[str] | None = None) -> np.ndarray:
-    """The same mask by comparing every pair (O(n^2)); a reference for tests."""
-    values = np.asarray(values, dtype=float)
-    n, k = values.shape
-    signs = np.array([_sign(s) for s in (senses or ["min"] * k)])
-    v = values * signs
-    out = np.zeros(n, dtype=bool)
-    for i in range(n):
-        if np.isnan(v[i]).any():
-            continue
-        dominated = False
-        for j in range(n):
-            if j != i and not np.isnan(v[j]).any() and np.all(v[j] <= v[i]) and np.any(v[j] < v[i]):
-                dominated = True
-                break
-        out[i] = not dominated
-    return out

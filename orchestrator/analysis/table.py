@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import ast
 import json
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -29,23 +28,18 @@ from typing import Any, Mapping
 import numpy as np
 import pandas as pd
 
-from ..expressions import Expression, ExpressionError, COMPARISONS
+from ..expressions import COMPARISONS, Expression, ExpressionError, identifier
 from ..errors import UserError
 from ..problems import did_you_mean
+from ..table_columns import TAIL_COLUMNS
 
-TAIL = ("status", "message", "run_time", "worker")
+TAIL = TAIL_COLUMNS  # the old name
 
 
 class AnalysisError(UserError, ValueError):
     """A user mistake when analysing a table: a missing file, unknown column, bad filter."""
 
 
-def identifier(column: str) -> str:
-    """The name a ``where`` expression uses for ``column`` (see the module docstring)."""
-    if column.isidentifier():
-        return column
-    name = re.sub(r"[^A-Za-z0-9_]+", "_", column).strip("_")
-    return name if name and not name[0].isdigit() else f"c_{name}"
 
 
 def base_name(column: str) -> str:

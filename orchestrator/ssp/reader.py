@@ -30,6 +30,7 @@ from typing import Any
 
 from lxml import etree
 
+from ..algorithms import ALGORITHMS
 from ..problems import Problem, SpecError, did_you_mean
 from ..quantities import BASE_UNITS, IncompatibleUnits, UnitDefinition, UnknownUnit, conversion
 from .archive import SspFiles, open_ssp
@@ -445,7 +446,7 @@ class _Reader:
         for annotation in root.iter(tag("ssc", "Annotation")):
             if annotation.get("type") == "org.cosim":  # written by cosim export: its master algorithm
                 for child in annotation:
-                    if isinstance(child.tag, str) and child.get("algorithm") in ("gauss-seidel", "jacobi"):
+                    if isinstance(child.tag, str) and child.get("algorithm") in ALGORITHMS:
                         experiment["algorithm"] = child.get("algorithm")
         if "stop" not in experiment:
             self._note("no stop time (ssd:DefaultExperiment stopTime): take it from the spec or --stop")

@@ -1,6 +1,6 @@
 """Screenshots of a virtual X screen: decode the frame buffer Xvfb writes with ``-fbdir``.
 
-Used to capture the explorer window in tests and for the example's README
+Used to capture the explorer window in tests and by the example's README screenshot script
 (Xvfb keeps its screen as an XWD file in the ``-fbdir`` folder).
 """
 

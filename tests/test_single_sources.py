@@ -1,0 +1,62 @@
+"""Names defined once: algorithms, reductions, result tail columns, exit codes, the identifier rule."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def test_algorithm_names_come_from_the_algorithms_module():
+    from orchestrator import algorithms, spec
+    from orchestrator.cli import _parser
+
+    schema = json.loads((ROOT / "specs" / "spec.schema.json").read_text())
+    in_file = schema["$defs"]["experiment"]["properties"]["algorithm"]
+    assert in_file["enum"] == list(algorithms.ALGORITHMS) == list(spec.ALGORITHMS)  # the file repeats them
+    assert in_file["default"] == algorithms.DEFAULT_ALGORITHM == spec.ExperimentSpec(0, 1, 1).algorithm
+    run = _parser()._subparsers._group_actions[0].choices["run"]
+    assert next(a for a in run._actions if a.dest == "algorithm").choices == tuple(algorithms.ALGORITHMS)
+
+
+def test_reduction_names_are_the_reducers():
+    from orchestrator.observers import REDUCERS
+    from orchestrator.spec import REDUCTIONS
+
+    assert REDUCTIONS == tuple(REDUCERS)
+    t, x = np.array([0.0, 1.0, 3.0]), np.array([[1.0], [3.0], [-1.0]])
+    # trapezoids over the samples: x: (1+3)/2*1 + (3-1)/2*2 = 4; |x|: 2 + 4 = 6; x*x: (1+9)/2 + (9+1)/2*2 = 15
+    expected = {"final": -1.0, "initial": 1.0, "min": -1.0, "max": 3.0, "integral": 4.0, "integral_abs": 6.0,
+                "mean": 4.0 / 3.0, "rms": np.sqrt(15.0 / 3.0), "time_of_max": 1.0, "time_of_min": 3.0}
+    assert {name: float(reduce(t, x)[0]) for name, reduce in REDUCERS.items()} == pytest.approx(expected)
+
+
+def test_tail_columns_and_statuses_are_defined_once():
+    from orchestrator import results, table_columns
+    from orchestrator.analysis import table
+
+    assert results.TAIL_COLUMNS is table_columns.TAIL_COLUMNS is table.TAIL
+    assert results.STATUSES is table_columns.STATUSES
+    for path in (ROOT / "orchestrator").rglob("*.py"):
+        if path.name != "table_columns.py":
+            assert '"status", "message", "run_time", "worker"' not in path.read_text(), path
+
+
+def test_exit_codes_are_defined_once():
+    pattern = re.compile(r"^\s*EXIT_\w+\s*(,\s*EXIT_\w+\s*)*=", re.M)
+    defining = [p.name for p in (ROOT / "orchestrator").rglob("*.py") if pattern.search(p.read_text())]
+    assert defining == ["errors.py"]
+
+
+@pytest.mark.parametrize("name, expected", [("traj.q_via[2]", "traj_q_via_2"), ("e_el[1]", "e_el_1"),
+                                            ("run_time", "run_time"), ("1st.x", "c_1st_x"), ("[3]", "c_3")])
+def test_one_identifier_rule_for_columns_and_design_parameters(name, expected):
+    from orchestrator.analysis.table import identifier
+    from orchestrator.design import expression_name
+
+    assert identifier(name) == expression_name(name) == expected
