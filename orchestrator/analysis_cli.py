@@ -9,7 +9,6 @@ a UserError: exit code 2 and one line of text, never a traceback.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -188,9 +187,3 @@ def cmd_explore(args: argparse.Namespace) -> int:
     except ImportError as exc:  # tkinter missing from this Python
         raise AnalysisError(f"the explorer needs tkinter: {exc}") from None
     return run_explorer(table)
-
-
-if __name__ == "__main__":  # pragma: no cover - convenience
-    from .cli import main
-
-    sys.exit(main())

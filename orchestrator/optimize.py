@@ -459,10 +459,10 @@ class Optimization:
         import optuna
 
         from .evaluator import ClusterError, Evaluator, dask_client
-        from .sweep import _now
+        from .sweep import now_utc
 
         optuna.logging.set_verbosity(optuna.logging.WARNING)
-        started = _now()
+        started = now_utc()
         stored = {}
         if self.resume:
             stored = {r["point_id"]: r for r in self.store.read().to_dict("records")}
@@ -577,7 +577,7 @@ class Optimization:
     def _metadata(self, started: str, scheduler: str, n_workers: int) -> dict[str, Any]:
         import socket
 
-        from .sweep import _user, package_versions
+        from .sweep import user_name, package_versions
         from .units.fmu import FmuUnitType
 
         previous = self.store.metadata() or {}
@@ -588,18 +588,18 @@ class Optimization:
             "spec_path": str(Path(self.spec.path).resolve()), "spec_digest": self.spec.digest, "spec": self.spec.raw,
             "fmu_checksums": {name: su.unit_type.digest for name, su in self.system.units.items()
                               if isinstance(su.unit_type, FmuUnitType)},
-            "packages": {**package_versions(), **_versions("optuna")}, "host": socket.gethostname(), "user": _user(),
+            "packages": {**package_versions(), **_versions("optuna")}, "host": socket.gethostname(), "user": user_name(),
             "points": self.settings.budget, "design_method": f"optimize ({self.settings.sampler})",
             "started": previous.get("started", started), "runs": previous.get("runs", []) + [info],
             "ended": None, "counts": previous.get("counts"),
         }
 
     def _finish(self) -> dict[str, int]:
-        from .sweep import _now
+        from .sweep import now_utc
 
         counts = self.store.compact()  # rows stay in the order they were evaluated
         meta = self.store.metadata() or {}
-        meta.update(ended=_now(), counts=counts)
+        meta.update(ended=now_utc(), counts=counts)
         if meta.get("runs"):
             meta["runs"][-1]["ended"] = meta["ended"]
         self.store.write_metadata(meta)

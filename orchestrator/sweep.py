@@ -173,7 +173,8 @@ def package_versions() -> dict[str, str]:
     return versions
 
 
-def _now() -> str:
+def now_utc() -> str:
+    """The current UTC time as ISO 8601 text (seconds), as the metadata records it."""
     return datetime.now(timezone.utc).isoformat(timespec="seconds")
 
 
@@ -248,7 +249,7 @@ class Sweep:
             "spec_path": str(Path(self.spec.path).resolve()), "spec_digest": self.spec.digest, "spec": self.spec.raw,
             "fmu_checksums": {name: su.unit_type.digest for name, su in self.system.units.items()
                               if isinstance(su.unit_type, FmuUnitType)},
-            "packages": package_versions(), "host": socket.gethostname(), "user": _user(),
+            "packages": package_versions(), "host": socket.gethostname(), "user": user_name(),
             "points": len(self.space), "design_method": self.space.method,
             "started": previous.get("started", started), "runs": previous.get("runs", []) + [client_info],
             "ended": None, "counts": previous.get("counts"),
@@ -281,7 +282,7 @@ class Sweep:
     def _run(self) -> dict[str, int]:
         from .evaluator import ClusterError, dask_client
 
-        started = _now()
+        started = now_utc()
         done = self.store.done_ids() if self.resume else set()
         total = len(self.space)
         todo = total - len(done & {p.id for p in self.space}) if done else total
@@ -306,7 +307,7 @@ class Sweep:
     def _finish(self) -> dict[str, int]:
         counts = self.store.compact(order=(p.id for p in self.space), csv=self.csv)
         meta = self.store.metadata() or {}
-        meta.update(ended=_now(), counts=counts)
+        meta.update(ended=now_utc(), counts=counts)
         if meta.get("runs"):
             meta["runs"][-1]["ended"] = meta["ended"]
         self.store.write_metadata(meta)
@@ -404,7 +405,8 @@ def check_scheduler_address(address: str) -> None:
                          "tcp://HOST:PORT, as `dask scheduler` prints it, e.g. tcp://127.0.0.1:8786") from None
 
 
-def _user() -> str:
+def user_name() -> str:
+    """The login name for the metadata, or '' when the system cannot tell."""
     try:
         return getpass.getuser()
     except Exception:

@@ -49,3 +49,18 @@ def write_spec(tmp_path):
 def python_unit(cls: str) -> str:
     """The spec reference of a test unit in tests/units_for_tests.py."""
     return f"{TESTS / 'units_for_tests.py'}:{cls}"
+
+
+@pytest.fixture
+def panda_viewer():
+    """The Panda trace viewer, registered as its entry point in pyproject.toml names it (as an install does)."""
+    import importlib
+    import re
+
+    from orchestrator.viewers import register_viewer, unregister_viewer
+
+    text = (Path(__file__).resolve().parent.parent / "pyproject.toml").read_text()
+    module, _, name = re.search(r'^panda = "([^"]+)"', text, re.M).group(1).partition(":")
+    viewer = register_viewer(getattr(importlib.import_module(module), name))
+    yield viewer
+    unregister_viewer(viewer.name)

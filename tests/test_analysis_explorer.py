@@ -233,7 +233,7 @@ def test_explorer_reruns_the_selected_design_and_shows_its_traces(xvfb, tmp_path
         root.destroy()
 
 
-def test_explorer_animates_the_arm_of_a_rerun_robot_design(xvfb, tmp_path):
+def test_explorer_animates_the_arm_of_a_rerun_robot_design(xvfb, tmp_path, panda_viewer):
     import tkinter as tk
 
     from orchestrator.analysis.explorer import ExplorerWindow

@@ -12,9 +12,11 @@ import pytest
 
 from orchestrator.analysis.rerun import rerun
 from orchestrator.analysis.table import load_results
-from orchestrator.analysis.traces import arm_animation, arm_points, trace_groups, traces_figure
+from cosim.models.panda_viewer import arm_animation, arm_points
+from orchestrator.analysis.traces import animation, trace_groups, traces_figure
 
 matplotlib.use("Agg")
+pytestmark = pytest.mark.usefixtures("panda_viewer")  # the engine shows robot signals only through it
 
 PICK_AND_PLACE = Path(__file__).resolve().parent.parent / "examples" / "pick_and_place" / "spec.json"
 
@@ -82,3 +84,26 @@ def test_arm_animation_moves_the_arm(robot_run):
     q_end = traces[[f"robot.q[{i}]" for i in range(1, 8)]].to_numpy()[-1]
     assert np.allclose(end.T, arm_points(q_end)[0])
     assert arm_animation(fig, traces.drop(columns=["robot.q[3]"])) is None
+
+
+def test_the_engine_shows_robot_signals_only_through_the_viewer_plug_in(robot_run, panda_viewer):
+    """Without the Panda viewer the same traces get one panel per port and no animation; with it, its panels."""
+    import ast
+
+    from orchestrator.viewers import unregister_viewer
+
+    traces = robot_run[0].traces
+    fig = matplotlib.figure.Figure()
+    assert dict(trace_groups(traces))["joint angles [rad]"][0] == "robot.q[1]"
+    anim = animation(fig, traces)
+    assert anim is not None
+    unregister_viewer(panda_viewer.name)
+    groups = dict(trace_groups(traces))
+    assert "joint angles [rad]" not in groups and groups["robot.q"] == [f"robot.q[{i}]" for i in range(1, 8)]
+    assert animation(fig, traces) is None
+    engine = Path(__file__).resolve().parent.parent / "orchestrator"
+    for path in engine.rglob("*.py"):  # no engine module imports the robot models
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.Import, ast.ImportFrom)):
+                names = [a.name for a in node.names] if isinstance(node, ast.Import) else [node.module or ""]
+                assert not any(n.split(".")[:1] == ["models"] or n.startswith("cosim.models") for n in names), path

@@ -351,7 +351,7 @@ class ExplorerWindow:
         from matplotlib.backends.backend_tkagg import FigureCanvasTkAgg
         from matplotlib.figure import Figure
 
-        from .traces import arm_animation, traces_figure
+        from .traces import animation, traces_figure
 
         win = self.tk.Toplevel(self.root)
         pid = self.state.table.df["point_id"].iloc[row] if "point_id" in self.state.table.df.columns else row
@@ -366,13 +366,13 @@ class ExplorerWindow:
             try:
                 arm_fig = Figure(figsize=(5, 5), dpi=100)
                 arm_canvas = FigureCanvasTkAgg(arm_fig, master=win)
-                anim = arm_animation(arm_fig, result.traces)
+                anim = animation(arm_fig, result.traces)  # e.g. the Panda viewer's arm (cosim.models.panda_viewer)
                 if anim is not None:
                     arm_canvas.get_tk_widget().pack(side="right", fill="both", expand=True)
                     win.arm_figure, win.animation = arm_fig, anim  # keep the animation alive
                     arm_canvas.draw_idle()  # its first draw starts the animation's timer
-            except Exception as exc:  # no pinocchio model: traces alone are still useful
-                self.status.configure(text=f"no arm animation: {exc}")
+            except Exception as exc:  # e.g. no pinocchio model: traces alone are still useful
+                self.status.configure(text=f"no animation: {exc}")
         canvas.draw_idle()
         self.trace_windows.append(win)
         return win

@@ -17,7 +17,7 @@ from fmpy.fmi2 import (
 from fmpy.fmi2 import fmi2LastSuccessfulTime, fmi2Terminated
 
 from ..unit import SimulationEnded
-from .fmi_instance import FmiInstance, _TypeGroup
+from .fmi_instance import FmiInstance, TypeGroup
 from .fmpy_internals import fmi2_allocator, instance_handle, library
 
 
@@ -66,7 +66,7 @@ class Fmi2Unit(FmiInstance):
         }
         self._do_step = getattr(dll, "fmi2DoStep", None)  # absent from a Model-Exchange-only FMU
 
-    def _bind(self, group: _TypeGroup) -> tuple[Callable[[], int], Callable[[], int]]:
+    def _bind(self, group: TypeGroup) -> tuple[Callable[[], int], Callable[[], int]]:
         get, put = self._calls[group.fmi_type]
         args = (self._component, group.vrs, group.n_vrs, group.values)
         return partial(get, *args), partial(put, *args)

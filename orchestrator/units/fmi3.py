@@ -9,7 +9,7 @@ from typing import Any, Callable, Sequence
 from fmpy.fmi3 import FMU3Slave
 
 from ..unit import Selection, SimulationEnded
-from .fmi_instance import FmiInstance, _TypeGroup
+from .fmi_instance import FmiInstance, TypeGroup
 from .fmpy_internals import instance_handle, library
 
 
@@ -60,7 +60,7 @@ class Fmi3Unit(FmiInstance):
     def _log_callback_py(self, env: Any, status: int, category: bytes, message: bytes) -> None:
         self._record_log(status, category, message)
 
-    def _bind(self, group: _TypeGroup) -> tuple[Callable[[], int], Callable[[], int]]:
+    def _bind(self, group: TypeGroup) -> tuple[Callable[[], int], Callable[[], int]]:
         get, put = self._calls[group.fmi_type]
         if group.fmi_type == "Binary":  # (..., valueSizes, values, nValues): sizes come before the values
             args = (self._component, group.vrs, group.n_vrs, group.sizes, group.values, group.n_values)

@@ -19,7 +19,7 @@ from ..unit import ElementRef, Selection, Unit, UnitError
 STATUS_LABELS = ["OK", "Warning", "Discard", "Error", "Fatal", "Pending"]
 
 
-class _TypeGroup:
+class TypeGroup:
     """All requested elements of one FMI type: one get/set call reads them all."""
 
     def __init__(self, fmi_type: str, c_type: Any, vr_c_type: Any, vrs: list[int], sizes: list[int]):
@@ -40,7 +40,7 @@ class _TypeGroup:
 class FmiSelection(Selection):
     """Elements resolved to (type group, position in that group's value buffer)."""
 
-    def __init__(self, refs: Sequence[ElementRef], groups: list[_TypeGroup], positions: list[tuple[int, int]],
+    def __init__(self, refs: Sequence[ElementRef], groups: list[TypeGroup], positions: list[tuple[int, int]],
                  partial_arrays: bool):
         self.refs = tuple(refs)
         self.groups = groups
@@ -120,14 +120,14 @@ class FmiInstance(Unit):
         for ref in refs:
             element = self.elements[ref.variable][ref.offset]
             by_type.setdefault(element.fmi_type, {})[element.value_reference] = element.size
-        groups: list[_TypeGroup] = []
+        groups: list[TypeGroup] = []
         offsets: dict[tuple[str, int], tuple[int, int]] = {}
         for g, (fmi_type, sizes) in enumerate(by_type.items()):
             start = 0
             for vr, size in sizes.items():
                 offsets[(fmi_type, vr)] = (g, start)
                 start += size
-            group = _TypeGroup(fmi_type, self._c_types[fmi_type], self._vr_type, list(sizes), list(sizes.values()))
+            group = TypeGroup(fmi_type, self._c_types[fmi_type], self._vr_type, list(sizes), list(sizes.values()))
             group.read, group.write = self._bind(group)
             groups.append(group)
         positions = []
@@ -202,7 +202,7 @@ class FmiInstance(Unit):
                 raise self.fail_status(self.call_name("Set", group.fmi_type), status)
 
     @staticmethod
-    def _convert(group: _TypeGroup, value: Any, index: int) -> Any:
+    def _convert(group: TypeGroup, value: Any, index: int) -> Any:
         if group.fmi_type == "Boolean":
             return bool(value)
         if group.fmi_type == "String":
@@ -229,6 +229,6 @@ class FmiInstance(Unit):
 
     # Implemented per FMI version -------------------------------------------
 
-    def _bind(self, group: _TypeGroup) -> tuple[Callable[[], int], Callable[[], int]]:
+    def _bind(self, group: TypeGroup) -> tuple[Callable[[], int], Callable[[], int]]:
         """Calls that read / write the group's values from / into the FMU, returning the FMI status."""
         raise NotImplementedError
