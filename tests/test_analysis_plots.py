@@ -8,11 +8,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from orchestrator.analysis.pareto import pareto_naive
 from orchestrator.analysis.plots import new_figure, save, scatter_cloud
 from orchestrator.analysis.table import load_results
 from orchestrator.cli import main
 
+from .reference import pareto_naive
 from .test_analysis_table import make_sweep_table
 
 matplotlib.use("Agg")

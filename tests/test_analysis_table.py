@@ -10,6 +10,8 @@ import pandas as pd
 import pytest
 
 from orchestrator.analysis.pareto import pareto_mask
+
+from .reference import pareto_naive
 from orchestrator.analysis.table import AnalysisError, identifier, load_results
 from orchestrator.cli import main
 
@@ -25,21 +27,6 @@ SPEC = {
     "design": {"parameters": {"traj.q_via[2]": {"min": -100, "max": 20, "step": 1, "unit": "deg"},
                               "traj.q_via[4]": {"min": 0, "max": 140, "step": 1, "unit": "deg"}}},
 }
-
-
-def pareto_naive(values: np.ndarray, senses=None) -> np.ndarray:
-    """The Pareto mask by comparing every pair (O(n^2)): the reference pareto_mask is checked against."""
-    values = np.asarray(values, dtype=float)
-    n, k = values.shape
-    signs = np.array([1.0 if s.lower().startswith("min") else -1.0 for s in (senses or ["min"] * k)])
-    v = values * signs
-    out = np.zeros(n, dtype=bool)
-    for i in range(n):
-        if np.isnan(v[i]).any():
-            continue
-        out[i] = not any(j != i and not np.isnan(v[j]).any() and np.all(v[j] <= v[i]) and np.any(v[j] < v[i])
-                         for j in range(n))
-    return out
 
 
 def make_sweep_table(folder: Path, n2: int = 13, n4: int = 15, metadata: bool = True, failed: int = 3) -> Path:
