@@ -87,27 +87,43 @@ def _decimal(x: Any) -> Decimal:
     return Decimal(repr(x)) if isinstance(x, float) else Decimal(int(x))
 
 
+def range_problem(lo: Any, hi: Any, step: Any, grid: bool = True) -> tuple[str, str] | None:
+    """(what is wrong, the fix) for a range ``min``/``max``/``step``, or None: the one check of a range.
+
+    ``grid``: the range is stepped (a sampler draws from ``[min, max]`` and
+    needs no step).  Used by the design space and by ``cosim validate``.
+    """
+    if grid and step is None:
+        return ("a grid needs a 'step' for each range",
+                "add 'step', or use method 'lhs', 'sobol' or 'random' with 'samples'")
+    if isinstance(step, (int, float)) and step <= 0:
+        return f"step must be positive, got {step}", "write a positive step"
+    if isinstance(lo, (int, float)) and isinstance(hi, (int, float)) and hi < lo:
+        return f"max ({hi}) is below min ({lo})", "swap them"
+    return None
+
+
+def _check_range(lo: Any, hi: Any, step: Any, grid: bool = True) -> None:
+    problem = range_problem(lo, hi, step, grid)
+    if problem is not None:
+        raise ValueError(problem[0])
+
+
 def range_count(lo: Any, hi: Any, step: Any) -> int:
     """How many values ``range_values(lo, hi, step)`` has, computed without making them.
 
-    Raises ValueError for a non-positive step or hi < lo.
+    Raises ValueError for a missing or non-positive step or hi < lo.
     """
-    if step is None or step <= 0:
-        raise ValueError(f"step must be positive, got {step}")
-    if hi < lo:
-        raise ValueError(f"max ({hi}) is below min ({lo})")
+    _check_range(lo, hi, step)
     return int((_decimal(hi) - _decimal(lo)) // _decimal(step)) + 1
 
 
 def range_values(lo: Any, hi: Any, step: Any) -> list[Any]:
     """Inclusive ``lo, lo+step, ..., <= hi`` computed without floating-point drift.
 
-    Ints when all three are ints. Raises ValueError for a non-positive step or hi < lo.
+    Ints when all three are ints. Raises ValueError for a missing or non-positive step or hi < lo.
     """
-    if step is None or step <= 0:
-        raise ValueError(f"step must be positive, got {step}")
-    if hi < lo:
-        raise ValueError(f"max ({hi}) is below min ({lo})")
+    _check_range(lo, hi, step)
     d_lo, d_step = _decimal(lo), _decimal(step)
     n = int((_decimal(hi) - d_lo) // d_step)
     if all(isinstance(x, int) and not isinstance(x, bool) for x in (lo, hi, step)):
@@ -174,14 +190,9 @@ class _Parameter:
     @staticmethod
     def _range(lo: Any, hi: Any, step: Any, sampled: bool) -> _Dimension:
         integer = all(isinstance(x, int) and not isinstance(x, bool) for x in (lo, hi, step) if x is not None)
+        _check_range(lo, hi, step, grid=not sampled)
         if sampled:
-            if hi < lo:
-                raise ValueError(f"max ({hi}) is below min ({lo})")
-            if step is not None and step <= 0:
-                raise ValueError(f"step must be positive, got {step}")
             return _Dimension(None, lo, hi, step, integer)
-        if step is None:
-            raise ValueError("a grid needs a 'step' for each range")
         count, most = range_count(lo, hi, step), limits.limit("points")
         if count > most:  # checked before a single value is made
             raise ValueError(f"the range {lo} .. {hi} in steps of {step} has {count:.3g} values, more than the "

@@ -22,7 +22,7 @@ plug-ins outside the package) can raise these errors without import cycles.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Iterable, Sequence
+from typing import Sequence
 
 EXIT_OK = 0  # everything ran
 EXIT_RUN_FAILED = 1  # a run (or some sweep points) failed
