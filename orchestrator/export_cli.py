@@ -9,7 +9,7 @@ from typing import Any
 
 def add_export_parsers(sub: Any) -> None:
     """Register the export subcommands on the CLI's subparsers."""
-    from .cli import add_experiment_options
+    from .cli_options import add_experiment_options
 
     p = sub.add_parser("export", help="write a spec's system as an SSP 2.0 archive (Python units become FMUs)")
     p.add_argument("spec", help="path to spec.json (or an SSP)")
@@ -25,7 +25,8 @@ def add_export_parsers(sub: Any) -> None:
 
 def cmd_export(args: argparse.Namespace) -> int:
     """``cosim export spec.json -o system.ssp``; also writes system.spec.json beside it."""
-    from .cli import EXIT_OK, UsageError, experiment_overrides
+    from .cli_options import experiment_overrides
+    from .errors import EXIT_OK, UsageError
     from .ssp.writer import companion_spec_path, export_ssp
     from .validate import check_spec
 
@@ -46,7 +47,7 @@ def cmd_export_fmu(args: argparse.Namespace) -> int:
     """``cosim export-fmu file.py:Class -o unit.fmu``."""
     import sys
 
-    from .cli import EXIT_OK, UsageError
+    from .errors import EXIT_OK, UsageError
     from .fmu_export import export_python_unit
 
     out = Path(args.out)

@@ -26,7 +26,7 @@ def add_sweep_parser(sub: Any) -> None:
     p.add_argument("--resume", action="store_true", help="run only the points missing in --out")
     p.add_argument("--csv", action="store_true", help="also write DIR/results.csv")
     p.add_argument("--batch-size", type=int, metavar="N", help="points per Dask task (default: automatic)")
-    from .cli import add_experiment_options
+    from .cli_options import add_experiment_options
     add_experiment_options(p)
     p.add_argument("--dry-run", action="store_true",
                    help="print the number of points, the first few and a time estimate from sample runs of "
@@ -47,7 +47,7 @@ def add_cluster_options(p: argparse.ArgumentParser) -> None:
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     """Run (or dry-run) a sweep; returns the exit code. SpecError, SweepError and UsageError reach cli.main."""
-    from .cli import experiment_overrides
+    from .cli_options import experiment_overrides
     from .sweep import Sweep
 
     if args.batch_size is not None and args.batch_size < 1:
@@ -86,7 +86,7 @@ def _dry_run(args: argparse.Namespace) -> int:
     import os
     import tempfile
 
-    from .cli import experiment_overrides
+    from .cli_options import experiment_overrides
     from .sweep import Sweep
 
     with tempfile.TemporaryDirectory(prefix="cosim_dry_") as scratch:

@@ -60,3 +60,19 @@ def test_one_identifier_rule_for_columns_and_design_parameters(name, expected):
     from orchestrator.design import expression_name
 
     assert identifier(name) == expression_name(name) == expected
+
+
+def test_one_cli_entry_dispatches_to_subcommand_modules_that_never_import_it():
+    import ast
+
+    from orchestrator import cli
+
+    commands = set(cli._parser()._subparsers._group_actions[0].choices)
+    assert {"validate", "run", "inspect", "sweep", "plot", "pareto", "report", "explore"} <= commands
+    for path in (ROOT / "orchestrator").rglob("*.py"):
+        if path.name == "cli.py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                module = "." * node.level + (node.module or "")
+                assert module not in (".cli", "..cli", "orchestrator.cli"), path
