@@ -1,0 +1,73 @@
+"""PandaExudyn gives today's results: the speed work of issue 16 kept the model's outputs.
+
+``tests/data/panda_exudyn_reference.json`` holds the unit's outputs computed *before*
+the speed work (commit 0ca756b, see ``tests/data/make_panda_exudyn_reference.py``):
+the pick-and-place study's objectives at five design points, a recorded trace, and
+the unit driven directly with its defaults (two solver steps per communication
+step, reference at mid-step) and with the bin-picking pendulum.  The same cases
+are run again with the current unit and compared.
+
+Stated tolerance: relative 1e-6 plus absolute 1e-8 (in the outputs' SI units: rad,
+rad/s, N.m, m, J).  The solver is the same generalized-alpha method with the same
+step, tolerances and Newton settings; the work moved around it (reference update,
+feed-forward, outputs) changes the arithmetic only at the level of round-off and
+of the Newton tolerance (relative 1e-10), far below this bound.  Booleans must match
+exactly.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+DATA = Path(__file__).resolve().parent / "data"
+RTOL, ATOL = 1e-6, 1e-8
+
+
+def _maker():
+    spec = importlib.util.spec_from_file_location("make_panda_exudyn_reference", DATA / "make_panda_exudyn_reference.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+MAKER = _maker()
+REFERENCE = json.loads((DATA / "panda_exudyn_reference.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def study_now():
+    return MAKER.study_cases()
+
+
+def test_study_objectives_match_the_reference(study_now):
+    rows, _ = study_now
+    assert [r["point"] for r in rows] == [r["point"] for r in REFERENCE["study"]]
+    for now, ref in zip(rows, REFERENCE["study"]):
+        assert now["objectives"].keys() == ref["objectives"].keys()
+        for name, expected in ref["objectives"].items():
+            assert now["objectives"][name] == pytest.approx(expected, rel=RTOL, abs=ATOL), (ref["point"], name)
+        assert now["objectives"]["limit_violated"] == ref["objectives"]["limit_violated"]
+
+
+def test_recorded_trace_matches_the_reference(study_now):
+    _, trace = study_now
+    ref = REFERENCE["trace"]
+    np.testing.assert_array_equal(trace["time"], ref["time"])  # the same communication points
+    for signal in MAKER.TRACE_SIGNALS:
+        np.testing.assert_allclose(trace[signal], ref[signal], rtol=RTOL, atol=ATOL, err_msg=signal)
+
+
+@pytest.mark.parametrize("case, params", [("unit_defaults", {}), ("unit_pendulum", MAKER.PENDULUM)])
+def test_unit_driven_directly_matches_the_reference(case, params):
+    now, ref = MAKER.unit_case(params), REFERENCE[case]
+    assert len(now["samples"]) == len(ref["samples"])
+    for a, b in zip(now["samples"], ref["samples"]):
+        assert a["t"] == b["t"]
+        assert a["limit_violated"] == b["limit_violated"], a["t"]
+        for name in MAKER.UNIT_OUTPUTS:
+            np.testing.assert_allclose(a[name], b[name], rtol=RTOL, atol=ATOL, err_msg=f"{case} {name} t={a['t']}")
