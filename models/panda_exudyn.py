@@ -23,9 +23,12 @@ Servo
         tau_ff = RNEA(q_r, qd_r, qdd_r)          (pinocchio, same model as the plant)
 
     The PD part is Exudyn's built-in kinematic-tree joint control
-    (``jointPControlVector``/``jointDControlVector`` with position and velocity
-    offsets), which enters the solver's Jacobian and is evaluated in C++; the
-    feed-forward torque is ``jointForceVector``.  The reference within a
+    (``jointPControlVector``/``jointDControlVector``), which enters the solver's
+    Jacobian and is evaluated in C++.  The reference and feed-forward enter as one
+    constant torque per solver step, ``jointForceVector = tau_ff + kp q_r + kd qd_r``,
+    with zero position and velocity offsets: Exudyn then applies
+    ``jointForceVector - kp q - kd qd``, the same law with one parameter set per
+    step instead of three.  The reference within a
     communication step ``[t, t+h]`` is extrapolated from the inputs sampled at
     ``t`` (exact inside a parabolic-blend phase) and evaluated at
     ``t_k + ref_phase * dt`` of each internal step ``[t_k, t_k + dt]``; the default
@@ -53,6 +56,7 @@ initial state (about 0.05 ms).
 from __future__ import annotations
 
 import math
+from operator import gt, lt, sub
 
 import exudyn as exu
 import numpy as np
@@ -69,7 +73,7 @@ from exudyn.utilities import RigidBodyInertia
 from orchestrator.unit import Variable
 from orchestrator.units.python import PythonUnit
 
-from .panda_model import EE_FRAME, GRAVITY, N_JOINTS, cached_model, ee_frame_id, limits_exceeded, payload_key, robot_variables
+from .panda_model import EE_FRAME, GRAVITY, N_JOINTS, cached_model, ee_frame_id, payload_key, robot_variables
 
 # libfranka example joint_impedance_control.cpp: k_gains and d_gains.
 DEFAULT_KP = (600.0, 600.0, 600.0, 600.0, 250.0, 150.0, 50.0)  # N.m/rad
@@ -209,13 +213,17 @@ class PandaExudyn(PythonUnit):
         self._kd = np.array(self.kd, dtype=float)
         self._mbs.SetObjectParameter(self._tree, "jointPControlVector", self._kp)
         self._mbs.SetObjectParameter(self._tree, "jointDControlVector", self._kd)
+        # limits as Python floats for the per-step checks in _read_outputs
+        self._q_min_list, self._q_max_list = np.asarray(self.q_min, float).tolist(), np.asarray(self.q_max, float).tolist()
+        self._qd_max_list = np.asarray(self.qd_max, float).tolist()
+        self._tau_max_list = np.asarray(self.tau_max, float).tolist()
         self._set_servo(q0, qd0, np.array(self.qdd_ref, dtype=float))
         st = self._settings.timeIntegration
         st.startTime = self.start_time
         st.endTime = self.start_time + self.substep
         self._solver.InitializeSolver(self._mbs, self._settings)  # also computes initial accelerations
         self._start_ref = (q0, qd0)
-        self._ee_last = None  # the path starts at the initial pose
+        self._ee_last = None  # the path starts at the initial pose (a list of 3 floats once set)
         self.ee_path_length = 0.0
         self._read_outputs(q0)
 
@@ -237,12 +245,11 @@ class PandaExudyn(PythonUnit):
         self._key = key
 
     def _set_servo(self, q_r, qd_r, qdd_r) -> None:
-        self._q_r, self._qd_r = q_r, qd_r
-        self._tau_ff = pin.rnea(self._model, self._data, q_r, qd_r, qdd_r)
-        mbs, tree = self._mbs, self._tree
-        mbs.SetObjectParameter(tree, "jointForceVector", self._tau_ff)
-        mbs.SetObjectParameter(tree, "jointPositionOffsetVector", q_r)
-        mbs.SetObjectParameter(tree, "jointVelocityOffsetVector", qd_r)
+        """Apply the servo law for reference ``(q_r, qd_r, qdd_r)`` to the next solver step."""
+        tau_ff = pin.rnea(self._model, self._data, q_r, qd_r, qdd_r)
+        # kp q_r + kd qd_r + tau_ff: the part of the law that is constant over the step
+        self._tau_const = self._kp * q_r + self._kd * qd_r + tau_ff
+        self._mbs.SetObjectParameter(self._tree, "jointForceVector", self._tau_const)
 
     def do_step(self, t: float, h: float) -> None:
         if self.ref_timing not in REF_TIMINGS:
@@ -266,38 +273,54 @@ class PandaExudyn(PythonUnit):
         n_sub = max(1, math.ceil(h / self.substep - 1e-9))
         dt = h / n_sub
         q_ref, qd_ref, qdd_ref = self.q_ref, self.qd_ref, self.qdd_ref  # float arrays, not modified here
-        solver, it = self._solver, self._solver.it
+        solver, it, mbs, settings = self._solver, self._solver.it, self._mbs, self._settings
         for k in range(n_sub):
             tau_k = (k + self.ref_phase) * dt - shift  # reference time, relative to the input sample
-            qd_r = qd_ref + qdd_ref * tau_k
-            # q + qd tau + qdd tau^2 / 2 = q + (qd + qd_r) tau / 2, with one temporary less
-            self._set_servo(q_ref + (qd_ref + qd_r) * (0.5 * tau_k), qd_r, qdd_ref)
+            if tau_k == 0.0:  # the inputs are the reference (the study's step_end, ref_phase 1, one solver step)
+                self._set_servo(q_ref, qd_ref, qdd_ref)
+            else:
+                qd_r = qd_ref + qdd_ref * tau_k
+                # q + qd tau + qdd tau^2 / 2 = q + (qd + qd_r) tau / 2, with one temporary less
+                self._set_servo(q_ref + (qd_ref + qd_r) * (0.5 * tau_k), qd_r, qdd_ref)
             it.startTime = t + k * dt
             it.endTime = t + (k + 1) * dt
-            if not solver.SolveSteps(self._mbs, self._settings):
+            if not solver.SolveSteps(mbs, settings):
                 raise RuntimeError(f"Exudyn solver failed in [{it.startTime:g}, {it.endTime:g}] s: {solver.GetErrorString()}")
         end = h - shift  # t + h relative to the input sample
-        self._read_outputs(q_ref + qd_ref * end + 0.5 * qdd_ref * end * end)
+        self._read_outputs(q_ref if end == 0.0 else q_ref + qd_ref * end + 0.5 * qdd_ref * end * end)
 
     def _read_outputs(self, q_ref_now: np.ndarray) -> None:
+        """Outputs at the end of the step from Exudyn's state.
+
+        Runs every communication step, so the reductions (max, limits, finiteness)
+        use Python floats: on 7 values they cost a fraction of numpy's per-call
+        overhead, and give the same results (the same IEEE operations).
+        """
         sd = self._mbs.systemData
         # the tree's node was added first: its 7 coordinates lead the system's ODE2 vector
-        self.q[:] = sd.GetODE2Coordinates()[:N_JOINTS]
-        self.qd[:] = sd.GetODE2Coordinates_t()[:N_JOINTS]
-        self.qdd[:] = sd.GetODE2Coordinates_tt()[:N_JOINTS]
+        q, qd, qdd = sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t(), sd.GetODE2Coordinates_tt()
+        if self._body is not None:
+            q, qd, qdd = q[:N_JOINTS], qd[:N_JOINTS], qdd[:N_JOINTS]
+        self.q, self.qd, self.qdd = q, qd, qdd  # fresh arrays from Exudyn, owned by this unit
         # the servo law at the end-of-step state: what the solver applied there
-        self.tau[:] = self._tau_ff + self._kp * (self._q_r - self.q) + self._kd * (self._qd_r - self.qd)
-        pin.forwardKinematics(self._model, self._data, self.q)
-        self.ee_pos[:] = pin.updateFramePlacement(self._model, self._data, self._ee).translation
+        tau = self._tau_const - self._kp * q - self._kd * qd
+        self.tau = tau
+        pin.forwardKinematics(self._model, self._data, q)
+        ee = pin.updateFramePlacement(self._model, self._data, self._ee).translation
+        self.ee_pos[:] = ee
+        ee_now = ee.tolist()
         if self._ee_last is not None:  # one straight chord per communication step
-            d = self.ee_pos - self._ee_last
-            self.ee_path_length += math.sqrt(d.dot(d))
-        self._ee_last = self.ee_pos.copy()
-        self.tracking_error = float(abs(self.q - q_ref_now).max())
+            self.ee_path_length += math.dist(ee_now, self._ee_last)
+        self._ee_last = ee_now
+        q_list, qd_list, tau_list = q.tolist(), qd.tolist(), tau.tolist()
+        self.tracking_error = max(map(abs, map(sub, q_list, q_ref_now.tolist())))
+        ratio = [abs(x) / m for x, m in zip(tau_list, self._tau_max_list)]
+        self.tau_ratio[:] = ratio
+        self.limit_violated = (max(ratio) > 1.0 or any(map(lt, q_list, self._q_min_list))
+                               or any(map(gt, q_list, self._q_max_list))
+                               or any(abs(v) > m for v, m in zip(qd_list, self._qd_max_list)))
         if self._body is not None:
             axis = self._mbs.GetObjectOutputBody(self._body, exu.OutputVariableType.RotationMatrix).reshape(3, 3)[:, 2]
             self.pendulum_angle = float(np.arccos(np.clip(axis[2], -1.0, 1.0)))  # body z is world z at rest
-        np.divide(np.abs(self.tau), self.tau_max, out=self.tau_ratio)
-        self.limit_violated = limits_exceeded(self.q, self.qd, self.tau_ratio, self.q_min, self.q_max, self.qd_max)
-        if not math.isfinite(self.q.sum()):  # a NaN or an infinity makes the sum non-finite
+        if not math.isfinite(sum(q_list)):  # a NaN or an infinity makes the sum non-finite
             raise RuntimeError("the simulation diverged (non-finite joint angles)")

@@ -1,0 +1,255 @@
+"""The Exudyn level of the pick-and-place study: Python around the solver, time per point, full-study projection.
+
+Runs the study of ``examples/pick_and_place/spec_exudyn.json`` (trajectory -> PandaExudyn -> energy
+FMU, 2 ms steps, Gauss-Seidel) at ``--points`` design points with the units reused and reset between
+points, as a sweep worker does, for today's ``PandaExudyn`` and, with ``--before REV``, for the unit
+as it was at git revision REV (loaded from ``git show REV:models/panda_exudyn.py``).  Implementations
+run interleaved (all at one point, then the next point), so a shared machine's load hits them alike:
+compare the ratios of one run.
+
+Two passes over the same points:
+
+1. *clean*: nothing wrapped; the wall time of each point (``Execution.run``) -> time per point and
+   the projected full study, ``17061 points x mean time per point / 2 workers`` (the sweep runs one
+   point at a time per worker; on this machine the measured full sweep was within 2 % of that
+   projection, benchmarks/README.md);
+2. *split*: the robot unit's ``do_step`` and its solver's ``SolveSteps`` wrapped with timers ->
+   per communication step: Exudyn's solver, the Python work around it inside ``do_step``
+   (reference, feed-forward, parameter updates, outputs) and their ratio, the *Python share*.
+   The timer wrappers' own cost is measured and subtracted.
+
+Usage::
+
+    python benchmarks/exudyn_level.py                       # today's unit, 24 points (~10 s)
+    python benchmarks/exudyn_level.py --before 0ca756b      # and the unit before issue 16, interleaved
+    python benchmarks/exudyn_level.py --full                # then the full 17061-point study via cosim sweep
+                                                            # (minutes; its output folder is removed)
+
+Results are recorded in benchmarks/exudyn_level.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import importlib.util
+import os
+import platform
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from orchestrator.execution import Execution  # noqa: E402
+from orchestrator.spec import load_spec  # noqa: E402
+from orchestrator.system import build_system  # noqa: E402
+
+SPEC = ROOT / "examples" / "pick_and_place" / "spec_exudyn.json"
+STUDY_POINTS = 121 * 141  # the full grid of spec_exudyn.json
+WORKERS = 2
+
+
+def machine() -> str:
+    model = "?"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{platform.machine()}, {os.cpu_count()} cores ({model}), Python {platform.python_version()}"
+
+
+def load_avg() -> str:
+    return "{:.2f} {:.2f} {:.2f}".format(*os.getloadavg())
+
+
+def unit_class_at(revision: str):
+    """``PandaExudyn`` as it was at git ``revision``, imported as a sibling of cosim.models.panda_exudyn."""
+    source = subprocess.run(["git", "-C", str(ROOT), "show", f"{revision}:models/panda_exudyn.py"],
+                            capture_output=True, text=True, check=True).stdout
+    folder = Path(tempfile.mkdtemp(prefix="exudyn_before_"))
+    path = folder / "panda_exudyn_before.py"
+    path.write_text(source)
+    name = "cosim.models._panda_exudyn_at_" + revision.replace("-", "_").replace(".", "_")
+    spec = importlib.util.spec_from_file_location(name, path)  # parent package cosim.models: relative imports work
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module.PandaExudyn
+
+
+def design_points(n: int, seed: int = 16) -> list[tuple[float, float]]:
+    """``n`` grid points of the study (q2[2] in -100..20, q2[4] in 0..140, degrees), uniformly at random."""
+    rng = np.random.default_rng(seed)
+    return [(float(rng.integers(-100, 21)), float(rng.integers(0, 141))) for _ in range(n)]
+
+
+class TimedSolver:
+    """Stands in for the unit's Exudyn solver and times ``SolveSteps``; everything else is passed on."""
+
+    def __init__(self, solver):
+        self._solver = solver
+        self.it = solver.it
+        self.seconds = 0.0
+        self.calls = 0
+
+    def SolveSteps(self, mbs, settings):  # noqa: N802 (Exudyn's name)
+        t0 = time.perf_counter()
+        ok = self._solver.SolveSteps(mbs, settings)
+        self.seconds += time.perf_counter() - t0
+        self.calls += 1
+        return ok
+
+    def __getattr__(self, name):
+        return getattr(self._solver, name)
+
+
+class Level:
+    """One implementation of the robot unit in the study system, its units built once and reused."""
+
+    def __init__(self, label: str, robot_class):
+        self.label = label
+        self.system = build_system(load_spec(SPEC))
+        self.units = {n: su.unit_type.instantiate(n) for n, su in self.system.units.items()}
+        self.units["robot"] = robot_class("robot")
+        self.walls: list[float] = []
+        self.do_step_s = 0.0
+        self.do_step_calls = 0
+        self.solver: TimedSolver | None = None
+
+    def run(self, q22: float, q24: float):
+        for unit in self.units.values():
+            unit.reset()
+        overrides = [self.system.assignment_for("traj.waypoints[9]", q22),
+                     self.system.assignment_for("traj.waypoints[11]", q24)]
+        result = Execution(self.system, overrides, units=self.units).run()
+        if not result.ok:
+            raise RuntimeError(f"{self.label} at {(q22, q24)}: {result.message}")
+        return result
+
+    def time_do_step(self) -> None:
+        """Wrap the robot's do_step and its solver with timers (after a first run built the solver)."""
+        robot = self.units["robot"]
+        self.solver = TimedSolver(robot._solver)
+        robot._solver = self.solver
+        plain = robot.do_step
+        clock = time.perf_counter
+
+        def do_step(t, h):
+            t0 = clock()
+            try:
+                return plain(t, h)
+            finally:
+                self.do_step_s += clock() - t0
+                self.do_step_calls += 1
+        robot.do_step = do_step
+
+
+def wrapper_cost(n: int = 200_000) -> float:
+    """Seconds a timing wrapper like the ones above adds to one call (its clock reads and bookkeeping)."""
+    class Target:
+        def call(self, a, b):
+            return True
+    target = Target()
+    t0 = time.perf_counter()
+    for _ in range(n):
+        target.call(0.0, 0.0)
+    bare = time.perf_counter() - t0
+    seconds = [0.0]
+    clock = time.perf_counter
+
+    def wrapped(a, b):
+        s = clock()
+        try:
+            return target.call(a, b)
+        finally:
+            seconds[0] += clock() - s
+    t0 = time.perf_counter()
+    for _ in range(n):
+        wrapped(0.0, 0.0)
+    return max(0.0, (time.perf_counter() - t0 - bare) / n)
+
+
+def full_study(out_parent: Path) -> float:
+    """Wall seconds of ``cosim sweep spec_exudyn.json`` (2 workers) from the command to the written table."""
+    out = out_parent / "exudyn_full_study"
+    command = [sys.executable, "-m", "orchestrator.cli", "sweep", str(SPEC), "--out", str(out), "--workers", str(WORKERS)]
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    print(f"full study: {' '.join(command[1:])}  (load before: {load_avg()})", flush=True)
+    t0 = time.perf_counter()
+    done = subprocess.run(command, env=env, cwd=str(ROOT))
+    seconds = time.perf_counter() - t0
+    print(f"full study: exit {done.returncode}, {seconds:.0f} s = {seconds / 60:.1f} min (load after: {load_avg()})")
+    shutil.rmtree(out, ignore_errors=True)
+    return seconds
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--points", type=int, default=24, help="design points per pass (default 24)")
+    parser.add_argument("--before", metavar="REV", help="also run PandaExudyn as it was at this git revision")
+    parser.add_argument("--full", action="store_true", help="then run the full study with cosim sweep and time it")
+    args = parser.parse_args()
+
+    print(f"date {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC; machine {machine()}")
+    print(f"load average at start: {load_avg()}")
+    from cosim.models.panda_exudyn import PandaExudyn
+    levels = [Level("today", PandaExudyn)]
+    if args.before:
+        levels.insert(0, Level(f"at {args.before}", unit_class_at(args.before)))
+    points = design_points(args.points)
+    for level in levels:
+        level.run(*points[0])  # warm-up: imports, Exudyn system and solver, FMU instance
+
+    for q22, q24 in points:  # pass 1: clean wall time per point, interleaved
+        for level in levels:
+            t0 = time.perf_counter()
+            level.run(q22, q24)
+            level.walls.append(time.perf_counter() - t0)
+
+    per_call = wrapper_cost()
+    for level in levels:
+        level.time_do_step()
+    for q22, q24 in points:  # pass 2: do_step and SolveSteps timed, interleaved
+        for level in levels:
+            level.run(q22, q24)
+
+    print(f"{len(points)} points, seed 16; timer wrapper {per_call * 1e6:.2f} us per call (subtracted)")
+    header = (f"{'unit':16s} {'point mean':>10s} {'median':>8s} {'full study (proj.)':>18s} "
+              f"{'solver/step':>11s} {'Python/step':>11s} {'Python share':>12s}")
+    print(header)
+    first_mean = None
+    for level in levels:
+        mean = statistics.fmean(level.walls)
+        first_mean = first_mean or mean
+        calls, steps = level.solver.calls, level.do_step_calls
+        solver_s = level.solver.seconds
+        # do_step's own time less both wrappers (around do_step and around SolveSteps) and the solver
+        python_s = level.do_step_s - steps * per_call - calls * per_call - solver_s
+        projected = STUDY_POINTS * mean / WORKERS
+        print(f"{level.label:16s} {mean * 1e3:8.1f}ms {statistics.median(level.walls) * 1e3:6.1f}ms "
+              f"{projected:8.0f} s = {projected / 60:4.1f} min "
+              f"{solver_s / calls * 1e6:9.1f}us {python_s / steps * 1e6:9.1f}us {python_s / solver_s * 100:10.1f} %")
+    if len(levels) > 1:
+        print(f"time per point, today / before: {statistics.fmean(levels[-1].walls) / first_mean:.3f}")
+    print(f"load average at end: {load_avg()}")
+    for level in levels:
+        for unit in level.units.values():
+            unit.terminate()
+    if args.full:
+        with tempfile.TemporaryDirectory(prefix="exudyn_study_") as folder:
+            full_study(Path(folder))
+
+
+if __name__ == "__main__":
+    main()
