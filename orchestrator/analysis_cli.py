@@ -54,6 +54,10 @@ def add_analysis_parsers(sub: Any) -> None:
     p = sub.add_parser("report", help="one self-contained HTML page about a sweep")
     p.add_argument("table", help="results.parquet, a .csv, or a sweep folder")
     p.add_argument("-o", "--out", required=True, help="the .html file to write")
+    p.add_argument("--min", dest="objectives", action=_Objective, metavar="OBJ",
+                   help="minimize OBJ in the Pareto front (repeatable; replaces the senses of the spec)")
+    p.add_argument("--max", dest="objectives", action=_Objective, metavar="OBJ",
+                   help="maximize OBJ in the Pareto front (repeatable; replaces the senses of the spec)")
     _spec_option(p)
     p.set_defaults(handler=cmd_report)
 
@@ -172,6 +176,8 @@ def cmd_report(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     table = load_results(args.table, args.spec)
+    if args.objectives:
+        table.choose_objectives(args.objectives)
     write_report(table, out)
     print(f"written: {out}")
     return 0

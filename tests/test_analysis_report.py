@@ -92,3 +92,19 @@ def test_report_says_when_an_objective_is_the_same_for_every_design(tmp_path):
     assert f"<p class='warn'>The same in every ok row ({ok} rows): <code>reach</code> = 1.</p>" in text
     single = make_sweep_table(tmp_path / "one_sense")  # SPEC gives 'energy' and 't_exec' a sense: a front
     assert main(["report", str(single), "-o", str(out)]) == 0 and "Needs two or more" not in out.read_text()
+
+
+def test_report_front_of_objectives_chosen_on_the_command_line(tmp_path, capsys):
+    """`--min/--max` replace the spec's senses: the front is that of the chosen objectives, in their senses."""
+    path = make_sweep_table(tmp_path / "s")
+    table = load_results(path)
+    out = tmp_path / "r.html"
+    assert main(["report", str(path), "-o", str(out), "--min", "energy", "--max", "reach"]) == 0
+    text = out.read_text()
+    values = np.column_stack([table.values("energy"), -table.values("reach")])  # maximize reach = minimize -reach
+    front = pareto_naive(values)
+    assert f"{front.sum()} non-dominated of {table.ok_mask().sum()} ok rows for minimize energy, maximize reach" \
+        in text
+    assert front.sum() != pareto_naive(np.column_stack([table.values("energy"), table.values("t_exec")])).sum()
+    assert main(["report", str(path), "-o", str(out), "--min", "nonsense"]) == 2
+    assert "nonsense" in capsys.readouterr().err

@@ -163,8 +163,8 @@ def _pareto_section(table: ResultsTable, parameters: list[str], ok: np.ndarray) 
         why = "no sweep metadata" if not table.spec else f"{len(senses)} objective(s) with a sense in the spec"
         example = " ".join(f"--min {html.escape(o)}" for o in roles(table)[1][:2])
         return head + (f"<p class='note'>Needs two or more objectives with a sense ({why}): give a second objective "
-                       f"a <code>sense</code> in the spec, or ask for a front with <code>cosim pareto TABLE "
-                       f"{example}</code>.</p>")
+                       f"a <code>sense</code> in the spec, or choose the objectives with <code>cosim report TABLE "
+                       f"{example} -o report.html</code> (or <code>cosim pareto TABLE {example}</code>).</p>")
     names = list(senses)
     values = np.column_stack([np.where(ok, table.values(n), np.nan) for n in names])
     front = pareto_mask(values, [senses[n] for n in names])

@@ -60,6 +60,8 @@ class ResultsTable:
     metadata: dict[str, Any] | None = None
     spec: dict[str, Any] | None = None
     _units: dict[str, str] = field(default_factory=dict, repr=False)
+    # senses chosen by the reader (`cosim report --min A --min B`); they replace the spec's
+    _chosen_senses: dict[str, str] | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         if self.spec:
@@ -105,9 +107,17 @@ class ResultsTable:
         unit = self.unit(column)
         return f"{column} [{unit}]" if unit else column
 
+    def choose_objectives(self, objectives: list[tuple[str, str]]) -> None:
+        """Use these (column, 'min'|'max') pairs as the table's objectives from now on, whatever the spec says;
+        raises AnalysisError for a column the table does not have."""
+        self._chosen_senses = {self.check_column(name): sense for name, sense in objectives}
+
     def objective_senses(self) -> dict[str, str]:
-        """Flat objective columns with a ``sense`` -> 'min' or 'max': those an optimisation ran on (its
-        metadata, or the spec's ``optimize`` section) when given, else the spec's, in spec order."""
+        """Flat objective columns with a ``sense`` -> 'min' or 'max': those chosen with choose_objectives, else
+        those an optimisation ran on (its metadata, or the spec's ``optimize`` section) when given, else the
+        spec's, in spec order."""
+        if self._chosen_senses:
+            return dict(self._chosen_senses)
         optimized = ((self.metadata or {}).get("optimize") or {}).get("objectives") \
             or ((self.spec or {}).get("optimize") or {}).get("objectives")
         if isinstance(optimized, Mapping) and optimized:
