@@ -78,7 +78,8 @@ def _check_version(fmi_version: int) -> None:
         raise FmuBuildError(f"FMI version must be 2 or 3, not {fmi_version!r}")
 
 
-def _compiler() -> str:
+def c_compiler() -> str:
+    """The C compiler to build with ($CC, else gcc) as a path; FmuBuildError when it is not installed."""
     cc = os.environ.get("CC", "gcc")
     path = shutil.which(cc)
     if path is None:
@@ -86,7 +87,8 @@ def _compiler() -> str:
     return path
 
 
-def _fmpy_include_dir() -> Path:
+def fmi_headers_folder() -> Path:
+    """fmpy's folder of the FMI 2.0 and 3.0 headers; FmuBuildError when they are missing."""
     try:
         import fmpy
     except ImportError as exc:  # pragma: no cover - fmpy is a dependency
@@ -97,7 +99,7 @@ def _fmpy_include_dir() -> Path:
     return include
 
 
-def _platform(fmi_version: int) -> tuple[str, str]:
+def binaries_platform(fmi_version: int) -> tuple[str, str]:
     """The binaries folder name and shared-library suffix fmpy looks for here."""
     import fmpy
 
@@ -121,7 +123,7 @@ def source_digest(name: str, fmi_version: int, interfaces: tuple[str, ...] | Non
     h = hashlib.sha256()
     for path in _sources(name):
         h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
-    h.update(repr((fmi_version, CFLAGS, _platform(fmi_version), os.environ.get("CC", "gcc"))).encode())
+    h.update(repr((fmi_version, CFLAGS, binaries_platform(fmi_version), os.environ.get("CC", "gcc"))).encode())
     if interfaces is not None:  # the default build keeps the digest it had before interfaces could be chosen
         h.update(repr(sorted(interfaces)).encode())
     return h.hexdigest()
@@ -150,9 +152,9 @@ def build_fmu(name: str, fmi_version: int, out_dir: str | os.PathLike,
         raise FmuBuildError(str(exc)) from exc
     if model.name != name:
         raise FmuBuildError(f"{folder}/model.json: name is '{model.name}', expected the folder name '{name}'")
-    cc = _compiler()
-    include = _fmpy_include_dir()
-    platform_folder, suffix = _platform(fmi_version)
+    cc = c_compiler()
+    include = fmi_headers_folder()
+    platform_folder, suffix = binaries_platform(fmi_version)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     target = out / fmu_filename(name, fmi_version)

@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from .errors import EXIT_OK
+
 FIGURE_SUFFIXES = (".png", ".svg", ".pdf")
 
 
@@ -106,7 +108,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
     save(fig, out)
     extra = f", {counts.missing} without a value" if counts.missing else ""
     print(f"{out}: {counts.coloured} points coloured, {counts.greyed} greyed{extra}")
-    return 0
+    return EXIT_OK
 
 
 def front_of(table, objectives: list[tuple[str, str]], where: str | None):
@@ -166,7 +168,7 @@ def cmd_pareto(args: argparse.Namespace) -> int:
         draw_front(ax, table, names[0], names[1], front)
         save(fig, plot)
         print(f"written: {plot}")
-    return 0
+    return EXIT_OK
 
 
 def cmd_report(args: argparse.Namespace) -> int:
@@ -180,7 +182,7 @@ def cmd_report(args: argparse.Namespace) -> int:
         table.choose_objectives(args.objectives)
     write_report(table, out)
     print(f"written: {out}")
-    return 0
+    return EXIT_OK
 
 
 def cmd_explore(args: argparse.Namespace) -> int:

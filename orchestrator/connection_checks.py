@@ -9,6 +9,7 @@ from .problems import Problem, json_path
 from .signals import resolve_signal, split_unit_name
 from .spec import Spec
 from .system_parts import Connection, SystemUnit
+from .unit_kinds import replaying_units
 from .value_checks import article
 
 
@@ -17,7 +18,7 @@ def check_connections(spec: Spec, units: Mapping[str, SystemUnit], problems: lis
     file = spec.path
     connections = []
     fed: dict[tuple[str, str, int], int] = {}
-    players = {u.name for u in spec.units if u.kind == "player"}
+    players = replaying_units(spec.units)
     for c in spec.connections:
         if split_unit_name(str(c.target), units)[0] in players:
             continue  # the input of a unit now replayed by a player: the recording already has what it caused

@@ -30,7 +30,6 @@ from .spec_json import read_spec_json  # strict JSON: no NaN, no key twice, boun
 SCHEMA_RESOURCE = ("cosim.specs", "spec.schema.json")
 REDUCTIONS = tuple(REDUCERS)  # the names; the reductions themselves are in orchestrator.observers
 ALGORITHMS = tuple(MASTER_ALGORITHMS)  # the names; the algorithms are in orchestrator.algorithms
-FMU_ONLY = ("interface", "tolerance", "max_step")  # unit settings that only an FMU unit takes
 
 
 @dataclass(frozen=True)
@@ -218,10 +217,12 @@ def _value_problems(raw: dict, file: str, seen: set[tuple[str, str]]) -> list[Pr
                                             "use one of: " + ", ".join(REDUCTIONS)))
     units = raw.get("units")
     for name, unit in (units.items() if isinstance(units, dict) else ()):
-        for key in FMU_ONLY if isinstance(unit, dict) and "fmu" not in unit else ():
-            if key in unit:
-                problems.append(Problem(file, json_path(["units", name, key]), f"'{key}' applies to FMU units only",
-                                        "remove it, or make the unit an FMU"))
+        from .unit_kinds import misplaced_fields  # a field of another kind (e.g. an FMU's tolerance on a player)
+
+        for key, owners in misplaced_fields(unit) if isinstance(unit, dict) else ():
+            kinds = " or ".join(owners)
+            problems.append(Problem(file, json_path(["units", name, key]), f"'{key}' applies to {kinds} units only",
+                                    f"remove it, or make the unit a {kinds} unit"))
     experiment = raw.get("experiment")
     if isinstance(experiment, dict):
         start, stop, step = experiment.get("start", 0), experiment.get("stop"), experiment.get("step")

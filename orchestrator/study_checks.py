@@ -9,6 +9,7 @@ from .signals import split_unit_name
 from .spec import Spec
 from .stepping import strongly_connected
 from .system_parts import LoadedUnits
+from .unit_kinds import replaying_units
 from .value_checks import assignment
 
 
@@ -40,7 +41,7 @@ def check_objective_expressions(spec: Spec, problems: list[Problem]) -> None:
 
 def check_design(spec: Spec, units: LoadedUnits, problems: list[Problem]) -> None:
     """Problems of the design space: unknown targets, values that do not fit, bad ranges, size, constraint."""
-    players = {u.name for u in spec.units if u.kind == "player"}
+    players = replaying_units(spec.units)
     for p in spec.design.parameters:
         path = json_path(["design", "parameters", p.target])
         unit_name, _, port = split_unit_name(p.target, [*units, *units.failed])

@@ -378,8 +378,9 @@ class Sweep:
 def _refuse_design_of_players(spec: Any) -> None:
     """A design parameter of a unit replaced by a player varies nothing: SweepError naming it and the fix."""
     from .system import split_unit_name
+    from .unit_kinds import replaying_units
 
-    players = {u.name: u.source for u in spec.units if u.kind == "player"}
+    players = {u.name: u.source for u in spec.units if u.name in replaying_units(spec.units)}
     for p in spec.design.parameters:
         unit = split_unit_name(p.target, [u.name for u in spec.units])[0]
         if unit in players:

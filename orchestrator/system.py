@@ -23,7 +23,7 @@ from .stepping import check_algebraic_loops, stepping_order
 from .study_checks import check_design, check_objective_expressions
 from .system_parts import Assignment, Connection, LoadedUnits, Signal, SystemUnit  # noqa: F401  (re-exported)
 from .unit import NUMERIC_TYPES, UnitDescription, UnitType
-from .unit_kinds import unit_kind
+from .unit_kinds import replaying_units, unit_kind
 from .units.fmu import FmuProblems
 from .value_checks import SETTABLE_AS_PARAMETER, SETTABLE_AS_START, assignment  # noqa: F401  (their old place)
 
@@ -110,8 +110,9 @@ def build_system(spec: Spec, broken_units: frozenset[str] = frozenset()) -> Syst
             units.failed.add(u.name)
 
     assignments = []
+    replaying = replaying_units(spec.units)
     for u in spec.units:
-        if u.name not in units or u.kind == "player":  # a player replaying a unit plays what that unit's values gave
+        if u.name not in units or u.name in replaying:  # a player replaying a unit plays what that unit's values gave
             continue
         for field_name, values in (("parameters", u.parameters), ("start", u.start)):
             for port, value in values.items():

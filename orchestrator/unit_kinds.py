@@ -51,6 +51,10 @@ class UnitKind:
     resolving relative paths against ``folder`` (the spec's folder) and
     raising UserError (or FileNotFoundError, ImportError, ValueError) when the
     source cannot be used; ``example`` shows the key in use, for messages.
+    ``replays`` marks a kind whose units stand in for a recorded unit (the
+    ``player``): the parameters, start values, incoming connections and design
+    parameters of such a unit are not used, since the recording already holds
+    what they gave.
     """
 
     name: str
@@ -58,6 +62,7 @@ class UnitKind:
     create: Callable[["UnitSpec", str], "UnitType"]
     example: str = ""
     description: str = ""
+    replays: bool = False
 
     @property
     def options(self) -> tuple[str, ...]:
@@ -124,6 +129,31 @@ def kind_of(raw_unit: Mapping[str, Any]) -> UnitKind | None:
     """The kind of a unit entry of a spec (its one kind key), or None when it has none."""
     kinds = unit_kinds()
     return next((kinds[k] for k in raw_unit if k in kinds), None)
+
+
+def misplaced_fields(raw_unit: Mapping[str, Any]) -> list[tuple[str, list[str]]]:
+    """The fields of a spec's unit entry that only other kinds take: ``[(field, [those kinds]), ...]``.
+
+    Empty for a unit without exactly one kind key (the schema check reports that).
+    """
+    kinds = unit_kinds()
+    own = [kinds[k] for k in raw_unit if k in kinds]
+    if len(own) != 1:
+        return []
+    out = []
+    for key in raw_unit:
+        if key in own[0].fields or key in COMMON_FIELDS:
+            continue
+        owners = [k.name for k in kinds.values() if key in k.options]
+        if owners:
+            out.append((key, owners))
+    return out
+
+
+def replaying_units(units: Any) -> set[str]:
+    """The names of the units (UnitSpecs) whose kind replays a recorded unit (see :attr:`UnitKind.replays`)."""
+    kinds = unit_kinds()
+    return {u.name for u in units if u.kind in kinds and kinds[u.kind].replays}
 
 
 def _load_entry_points() -> None:
@@ -293,7 +323,7 @@ PLAYER = UnitKind("player", {
                       "description": "player only: beyond the recorded time range, hold the end values or fail."},
     "units": {"type": "object", "additionalProperties": {"type": "string"},
               "description": "player only: unit of measure of played columns or arrays, e.g. {\"speed\": \"rpm\"}."},
-}, _create_player, example='"player": "traces.parquet"', description="recorded signals played back")
+}, _create_player, example='"player": "traces.parquet"', description="recorded signals played back", replays=True)
 
 BUILTIN_KINDS = {kind.name: kind for kind in (FMU, PYTHON, PLAYER)}
 _REGISTRY.kinds.update(BUILTIN_KINDS)

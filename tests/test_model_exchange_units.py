@@ -246,7 +246,7 @@ def test_unit_settings_are_checked(write_spec, capsys, built_fmu):
     out = text.out + text.err
     assert "Traceback" not in out
     for where, what in [
-        ("$.units.py.tolerance", "'tolerance' applies to FMU units only"),
+        ("$.units.py.tolerance", "'tolerance' applies to fmu units only"),
         ("$.units.cs.fmu", 'asks for "interface": "model-exchange" but the FMU offers only co-simulation'),
         ("$.units.cs2.fmu", "configure the model-exchange solver, but this FMU runs as co-simulation"),
         ("$.units.both.fmu", 'add "interface": "model-exchange"'),

@@ -133,3 +133,26 @@ def test_registering_checks_names():
     with pytest.raises(errors.InternalError, match="cannot be removed"):
         unregister_unit_kind("python")
     assert list(unit_kinds.unit_kinds())[:3] == ["fmu", "python", "player"]
+
+
+def test_a_field_of_another_kind_is_reported_naming_the_kinds_that_take_it(tmp_path, capsys):
+    def create(unit_spec, folder):
+        return unit_kinds.PYTHON.create(unit_spec, folder)
+
+    register_unit_kind(UnitKind("gadget", {"gadget": {"type": "string"}, "columns": {"type": "array"},
+                                           "speed": {"type": "number"}}, create))
+    try:
+        spec = tmp_path / "spec.json"
+        spec.write_text(json.dumps({"units": {
+            "f": {"fmu": "builtin:linear_ode_fmi3", "columns": ["x"]},  # a player's field: was silently ignored
+            "p": {"player": "t.csv", "tolerance": 1e-6, "speed": 2},
+            "g": {"gadget": "tests.units_for_tests:Gain", "columns": ["y"]}},  # its own field: no problem
+            "experiment": {"stop": 1, "step": 0.1}}))
+        assert main(["validate", str(spec)]) == errors.EXIT_USAGE
+        err = capsys.readouterr().err
+        assert "$.units.f.columns: 'columns' applies to player or gadget units only" in err
+        assert "$.units.p.tolerance: 'tolerance' applies to fmu units only" in err
+        assert "$.units.p.speed: 'speed' applies to gadget units only" in err
+        assert "$.units.g.columns" not in err
+    finally:
+        unregister_unit_kind("gadget")

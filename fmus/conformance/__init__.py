@@ -23,7 +23,7 @@ import tempfile
 import zipfile
 from pathlib import Path
 
-from ..build import CFLAGS, FmuBuildError, _compiler, _fmpy_include_dir, _platform, cache_dir
+from ..build import CFLAGS, FmuBuildError, binaries_platform, c_compiler, cache_dir, fmi_headers_folder
 
 HERE = Path(__file__).resolve().parent
 
@@ -46,7 +46,7 @@ def _digest(name: str, fmi_version: int) -> str:
     h = hashlib.sha256(b"conformance\0")
     for path in _inputs(name, fmi_version):
         h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
-    h.update(repr((fmi_version, CFLAGS, _platform(fmi_version), os.environ.get("CC", "gcc"))).encode())
+    h.update(repr((fmi_version, CFLAGS, binaries_platform(fmi_version), os.environ.get("CC", "gcc"))).encode())
     return h.hexdigest()
 
 
@@ -59,13 +59,13 @@ def build(name: str, fmi_version: int, out_dir: str | os.PathLike) -> Path:
     if versions is None or fmi_version not in versions:
         raise FmuBuildError(f"no conformance FMU '{name}' for FMI {fmi_version}; available: {available()}")
     folder = HERE / name
-    platform_folder, suffix = _platform(fmi_version)
+    platform_folder, suffix = binaries_platform(fmi_version)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     target = out / f"{name}_fmi{fmi_version}.fmu"
     with tempfile.TemporaryDirectory(prefix=f"build-{name}-", dir=out) as tmp:
         library = Path(tmp) / f"{name}{suffix}"
-        command = [_compiler(), *CFLAGS, f"-DFMI_VERSION={fmi_version}", f"-I{_fmpy_include_dir()}",
+        command = [c_compiler(), *CFLAGS, f"-DFMI_VERSION={fmi_version}", f"-I{fmi_headers_folder()}",
                    str(folder / "model.c"), "-o", str(library), "-lm"]
         result = subprocess.run(command, capture_output=True, text=True)
         if result.returncode != 0:

@@ -11,8 +11,9 @@ selected" and "Save figure" buttons, the plot with matplotlib's toolbar; below,
 one row per numeric column with two sliders (lower and upper end of its
 range; points outside are greyed), the range and, in red, the selected
 row's value.  Clicking a point selects the nearest drawn point (within 12
-pixels).  A re-run opens a window with the run's traces and, when they have
-joint angles ``q[1..7]``, an animation of the arm.  It runs in the window's
+pixels).  A re-run opens a window with the run's traces, shown by the trace
+viewer that recognises them (:mod:`orchestrator.viewers`; e.g. the Panda
+arm's panels and stick-figure animation), else one panel per port.  It runs in the window's
 own thread (a design run takes a fraction of a second to seconds; the window
 is busy meanwhile): Tk objects must never be touched, nor garbage-collected,
 in another thread.
@@ -25,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import EXIT_OK
 from .table import AnalysisError, ResultsTable
 
 SLIDER_STEPS = 1000  # sliders move over 0..1000; 0 and 1000 are exactly the column's min and max
@@ -347,7 +349,7 @@ class ExplorerWindow:
             label.configure(text="" if v is None else f"{v:.6g}" if isinstance(v, (float, np.floating)) else str(v))
 
     def show_traces(self, row: int, result) -> Any:
-        """A window with the run's traces and, with joint angles, the arm animation; returns the Toplevel."""
+        """A window with the run's traces and, when their viewer has one, its animation; returns the Toplevel."""
         from matplotlib.backends.backend_tkagg import FigureCanvasTkAgg
         from matplotlib.figure import Figure
 
@@ -389,4 +391,4 @@ def run_explorer(table: ResultsTable) -> int:
         raise AnalysisError(f"cannot open a window ({exc}); set DISPLAY, or use cosim plot/report") from None
     ExplorerWindow(root, state)
     root.mainloop()
-    return 0
+    return EXIT_OK

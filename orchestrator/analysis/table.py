@@ -146,9 +146,6 @@ class ResultsTable:
             out.extend(self._columns_of(target))
         return out
 
-    def parameter_targets(self) -> list[str]:
-        return list((((self.spec or {}).get("design") or {}).get("parameters") or {}))
-
     def _columns_of(self, name: str) -> list[str]:
         if name in self.df.columns:
             return [name]
