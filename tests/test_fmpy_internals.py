@@ -6,6 +6,7 @@ give what fmpy's public wrappers give, within the fmpy version range pyproject.t
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import math
 import re
@@ -53,15 +54,24 @@ def unzipped(built_fmu):
         shutil.rmtree(folder, ignore_errors=True)
 
 
+@contextlib.contextmanager
+def instantiated(slave_class, md, folder):
+    """An instantiated fmpy slave of the unzipped FMU, freed afterwards."""
+    slave = slave_class(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
+                        instanceName="probe")
+    slave.instantiate()
+    try:
+        yield slave
+    finally:
+        slave.freeInstance()
+
+
 def test_fmi2_library_handle_and_allocator(unzipped):
     from fmpy.fmi2 import FMU2Slave
 
     md, folder = unzipped(2)
     vr = {v.name: v.valueReference for v in md.modelVariables}
-    slave = FMU2Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
-                      instanceName="probe")
-    slave.instantiate()
-    try:
+    with instantiated(FMU2Slave, md, folder) as slave:
         lib, handle = fmpy_internals.library(slave), fmpy_internals.instance_handle(slave)
         assert isinstance(lib, ctypes.CDLL) and handle
         assert lib.fmi2GetReal.restype is not None and lib.fmi2DoStep.argtypes  # signatures set by fmpy
@@ -74,8 +84,6 @@ def test_fmi2_library_handle_and_allocator(unzipped):
         assert lib.fmi2GetReal(handle, (ctypes.c_uint * 1)(vr["y"]), 1, values) == 0
         assert values[0] == slave.getReal([vr["y"]])[0] == pytest.approx(3.0 * math.exp(-1.0), rel=1e-12)
         slave.terminate()
-    finally:
-        slave.freeInstance()
     calloc, free = fmpy_internals.fmi2_allocator()
     pointer = calloc(4, 8)
     assert pointer and all(b == 0 for b in ctypes.string_at(pointer, 32))  # calloc: zeroed memory
@@ -87,10 +95,7 @@ def test_fmi3_library_and_handle(unzipped):
 
     md, folder = unzipped(3)
     vr = {v.name: v.valueReference for v in md.modelVariables}
-    slave = FMU3Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
-                      instanceName="probe")
-    slave.instantiate()
-    try:
+    with instantiated(FMU3Slave, md, folder) as slave:
         lib, handle = fmpy_internals.library(slave), fmpy_internals.instance_handle(slave)
         assert isinstance(lib, ctypes.CDLL) and handle and lib.fmi3GetFloat64.argtypes
         slave.setFloat64([vr["a"], vr["x0"]], [-2.0, 3.0])
@@ -103,5 +108,3 @@ def test_fmi3_library_and_handle(unzipped):
         assert lib.fmi3GetFloat64(handle, (ctypes.c_uint * 1)(vr["y"]), 1, values, 1) == 0
         assert values[0] == slave.getFloat64([vr["y"]])[0] == pytest.approx(3.0 * math.exp(-1.0), rel=1e-12)
         slave.terminate()
-    finally:
-        slave.freeInstance()

@@ -100,7 +100,8 @@ class _ModelExchangeStepping:
     time: float | None
     _slave: Any
 
-    def _init_model_exchange(self, unit_type: Any) -> None:
+    def __init__(self, name: str, unit_type: Any):
+        super().__init__(name, unit_type)  # type: ignore[call-arg]  # Fmi2Unit/Fmi3Unit: the instance, as a model
         md = unit_type.model_description()
         self._settings: SolverSettings = unit_type.solver_settings
         self._nx = md.numberOfContinuousStates
@@ -315,10 +316,6 @@ class Fmi2ModelExchangeUnit(_ModelExchangeStepping, Fmi2Unit):
     _interface = "modelExchange"
     _update_call = "fmi2NewDiscreteStates"
 
-    def __init__(self, name: str, unit_type: Any):
-        super().__init__(name, unit_type)
-        self._init_model_exchange(unit_type)
-
     def setup(self, start_time: float, stop_time: float | None) -> None:
         self.time = self._now = start_time
         self._guard("fmi2SetupExperiment", lambda: self._slave.setupExperiment(
@@ -337,10 +334,6 @@ class Fmi3ModelExchangeUnit(_ModelExchangeStepping, Fmi3Unit):
     _slave_class = FMU3Model
     _interface = "modelExchange"
     _update_call = "fmi3UpdateDiscreteStates"
-
-    def __init__(self, name: str, unit_type: Any):
-        super().__init__(name, unit_type)
-        self._init_model_exchange(unit_type)
 
     def enter_initialization(self) -> None:
         self._guard("fmi3EnterInitializationMode", lambda: self._slave.enterInitializationMode(
