@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import shutil
 import signal
 import socket
 import subprocess
@@ -46,13 +45,15 @@ def dask_processes(tmp_path_factory):
 
     Yields (scheduler address, worker folder).
     """
-    dask = shutil.which("dask") or [sys.executable, "-m", "distributed.cli.dask_scheduler"]
+    # `python -m dask` of this interpreter, not whatever `dask` is first on PATH: scheduler, workers and the
+    # client must be the same dask version (the minimum-versions run has another dask on PATH)
+    dask = [sys.executable, "-m", "dask"]
     port = free_port()
     address = f"tcp://127.0.0.1:{port}"
     worker_dir = tmp_path_factory.mktemp("worker_cwd")
-    scheduler = subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+    scheduler = subprocess.Popen([*dask, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-    workers = subprocess.Popen([dask, "worker", address, "--nworkers", "2", "--nthreads", "1", "--no-dashboard",
+    workers = subprocess.Popen([*dask, "worker", address, "--nworkers", "2", "--nthreads", "1", "--no-dashboard",
                                 "--host", "127.0.0.1", "--local-directory", str(worker_dir)],
                                cwd=worker_dir, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                                start_new_session=True)

@@ -174,6 +174,67 @@ def test_example_readme_long_command_runs_as_written(scratch, example, command):
     assert done.returncode == 0, (command, done.stdout[-1000:], done.stderr[-2000:])
 
 
+def shell_blocks() -> list[tuple[str, list[str]]]:
+    """Every ```bash block of the examples' READMEs as (example, its command lines without comments)."""
+    blocks = []
+    for path in EXAMPLE_READMES:
+        for block in fenced_blocks(path, "bash"):
+            lines = [re.sub(r"\s+#.*$", "", line).strip() for line in block.splitlines()]
+            blocks.append((path.parent.name, [line for line in lines if line and not line.startswith("#")]))
+    return blocks
+
+
+def run_shell_block(lines: list[str], root: Path, venv_dir: Path) -> None:
+    """Run a README's shell block line by line as a reader would, from ``root`` (the repository's place).
+
+    ``cd DIR`` moves on, ``pip install -e DIR`` installs into a venv of its own that sees this interpreter's
+    packages (the plug-in's entry point then exists only there), ``cosim`` and ``python`` run in that venv once
+    it exists. Any other command is a failure: a documented command this test cannot run.
+    """
+    cwd, python = root, sys.executable
+    for line in lines:
+        argv = shlex.split(line)
+        if argv[0] == "cd":
+            cwd = (cwd / argv[1]).resolve()
+            continue
+        if argv[:3] == ["pip", "install", "-e"]:
+            subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv_dir)], check=True)
+            python = str(venv_dir / "bin" / "python")
+            # no build isolation: the build backend (setuptools) comes from this interpreter, not the network
+            done = subprocess.run([python, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation",
+                                   "-e", str(cwd / argv[3])], capture_output=True, text=True)
+            assert done.returncode == 0, (line, done.stderr[-2000:])
+            continue
+        assert argv[0] in ("cosim", "python"), f"documented command not runnable by this test: {line}"
+        argv = [python, "-m", "orchestrator.cli", *argv[1:]] if argv[0] == "cosim" else [python, *argv[1:]]
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]),
+                   MPLBACKEND="Agg")
+        done = subprocess.run(argv, cwd=cwd, env=env, capture_output=True, text=True, timeout=3600)
+        assert done.returncode == 0, (line, done.stdout[-1000:], done.stderr[-2000:])
+
+
+def test_every_example_shell_block_has_commands():
+    blocks = shell_blocks()
+    assert {example for example, _ in blocks} >= {"plugin_unit_kind", "optimal_timing"}
+    assert all(lines for _, lines in blocks)
+
+
+@pytest.mark.parametrize("example, lines", shell_blocks(), ids=lambda v: v if isinstance(v, str) else "")
+def test_example_shell_block_runs_as_written(tmp_path, example, lines):
+    """The block's quick commands, in order, in a fresh copy of the examples (its long ones: the slow test)."""
+    shutil.copytree(REPO / "examples", tmp_path / "examples",
+                    ignore=shutil.ignore_patterns("sweep_full", "__pycache__"))
+    run_shell_block([line for line in lines if not any(long in line for long in LONG)], tmp_path, tmp_path / "venv")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("example, lines", shell_blocks(), ids=lambda v: v if isinstance(v, str) else "")
+def test_example_shell_block_runs_whole_as_written(tmp_path, example, lines):
+    shutil.copytree(REPO / "examples", tmp_path / "examples",
+                    ignore=shutil.ignore_patterns("sweep_full", "__pycache__"))
+    run_shell_block(lines, tmp_path, tmp_path / "venv")
+
+
 def test_the_project_cites_no_document_outside_it():
     """The team's design notes are not part of the project: what a reader needs is in the project's own docs."""
     import subprocess as sp
