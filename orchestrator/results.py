@@ -127,6 +127,11 @@ class ResultsStore:
     def _part_files(self) -> list[Path]:
         return sorted(p for p in self.parts.iterdir() if _PART.match(p.name))
 
+    def discard_rows(self) -> None:
+        """Remove every stored row (table, CSV, parts); the metadata stays."""
+        for path in [self.table_path, self.folder / "results.csv", *self._part_files()]:
+            path.unlink(missing_ok=True)
+
     def has_rows(self) -> bool:
         return self.table_path.exists() or bool(self._part_files())
 

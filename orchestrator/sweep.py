@@ -46,6 +46,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterable, Iterator, Sequence, TextIO
 
 from .design import DesignSpace, Point
+from .folder_lock import FolderLock
+from .unit_checksums import changed_units, unit_checksums
 from .errors import UserError
 from .evaluator import ScatteredPayload, lost_rows, rerun
 from .isolation import IsolatedRunner, make_payload
@@ -194,13 +196,13 @@ class Sweep:
                  scheduler: str | None = None, timeout: float | None = None, resume: bool = False,
                  batch_size: int | None = None, csv: bool = False, progress: TextIO | None = None,
                  quiet: bool = False, experiment: dict | None = None, space_of: Any = None,
-                 cluster: str | Path | None = None):
+                 cluster: str | Path | None = None, recompute: bool = False):
         from .cluster import read_cluster_file
         from .results import ResultsStore  # pandas and pyarrow only when a sweep is made
         from .validate import check_spec
 
-        if timeout is not None and timeout <= 0:
-            raise SweepError(f"the timeout must be positive, got {timeout}")
+        if timeout is not None and not (math.isfinite(timeout) and timeout > 0):
+            raise SweepError(f"the timeout must be a positive number of seconds, got {timeout}")
         if workers is not None and workers < 1:
             raise SweepError(f"workers must be at least 1, got {workers}")
         if cluster is not None and scheduler is not None:
@@ -223,6 +225,10 @@ class Sweep:
             raise SweepError("resume needs the results folder of the interrupted sweep (--out DIR)")
         self.out = Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="cosim_sweep_"))
         self.store = ResultsStore(self.out)
+        self.lock = FolderLock(self.out)
+        self.lock.check_free()  # a sweep running into this folder is the first thing to say
+        self.checksums = unit_checksums(self.system)
+        self.recompute = recompute
         self._check_folder()
         self.payload = make_payload(self.system)  # FMU bytes read now: workers never open these paths
 
@@ -233,9 +239,25 @@ class Sweep:
                 raise SweepError(f"{self.out} holds results of a different spec (digest "
                                  f"{str(previous.get('spec_digest'))[:12]}…, this one {self.spec.digest[:12]}…); "
                                  "use another --out, or run without --resume into an empty folder")
+            changed = self._changed_units(previous or {})
+            if changed and not self.recompute:
+                raise SweepError(f"{self.out} holds results of other unit files than the spec names now ("
+                                 + "; ".join(changed) + "); resuming would mix two models in one table; restore "
+                                 "the files, use another --out, or add --recompute to discard the stored rows "
+                                 "and compute every point again")
+            if changed:
+                self.store.discard_rows()
         elif self.store.has_rows():
             raise SweepError(f"{self.out} already holds results; add --resume to finish that sweep, "
                              "or choose another --out")
+
+    def _changed_units(self, previous: dict[str, Any]) -> list[str]:
+        """Units whose content differs from the checksums stored with the rows."""
+        stored = previous.get("unit_checksums")
+        if stored is None:  # folders written before unit checksums: FMUs only
+            stored = previous.get("fmu_checksums", {})
+            return changed_units(stored, {k: v for k, v in self.checksums.items() if k in stored})
+        return changed_units(stored, self.checksums)
 
     def _say(self, text: str) -> None:
         if not self.quiet:
@@ -249,6 +271,7 @@ class Sweep:
             "spec_path": str(Path(self.spec.path).resolve()), "spec_digest": self.spec.digest, "spec": self.spec.raw,
             "fmu_checksums": {name: su.unit_type.digest for name, su in self.system.units.items()
                               if isinstance(su.unit_type, FmuUnitType)},
+            "unit_checksums": self.checksums,
             "packages": package_versions(), "host": socket.gethostname(), "user": user_name(),
             "points": len(self.space), "design_method": self.space.method,
             "started": previous.get("started", started), "runs": previous.get("runs", []) + [client_info],
@@ -258,8 +281,9 @@ class Sweep:
     def run(self) -> pd.DataFrame:
         """Evaluate every missing point; returns the whole table (every point once, in design order).
 
-        Raises SweepError when no Dask workers are reachable.  Ctrl-C stops the
-        sweep; the rows written so far stay and ``resume`` finishes the rest.
+        Raises SweepError when no Dask workers are reachable, FolderInUse when
+        another sweep writes into the same folder.  Ctrl-C stops the sweep;
+        the rows written so far stay and ``resume`` finishes the rest.
         """
         self._run()
         table = self.store.table()
@@ -280,6 +304,13 @@ class Sweep:
             shutil.rmtree(self.out, ignore_errors=True)
 
     def _run(self) -> dict[str, int]:
+        self.lock.acquire()  # released when this process ends, however it ends
+        try:
+            return self._run_locked()
+        finally:
+            self.lock.release()
+
+    def _run_locked(self) -> dict[str, int]:
         from .evaluator import ClusterError, dask_client
 
         started = now_utc()

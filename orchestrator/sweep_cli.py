@@ -24,6 +24,9 @@ def add_sweep_parser(sub: Any) -> None:
     add_cluster_options(p)
     p.add_argument("--timeout", type=float, metavar="S", help="seconds a point may run before it is stopped")
     p.add_argument("--resume", action="store_true", help="run only the points missing in --out")
+    p.add_argument("--recompute", action="store_true",
+                   help="with --resume: when a unit's file changed since the stored rows, discard them and run "
+                        "every point again (without it such a resume is refused)")
     p.add_argument("--csv", action="store_true", help="also write DIR/results.csv")
     p.add_argument("--batch-size", type=int, metavar="N", help="points per Dask task (default: automatic)")
     from .cli_options import add_experiment_options
@@ -59,7 +62,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         return _dry_run(args)
     sweep = Sweep(args.spec, workers=args.workers, out=out, scheduler=args.scheduler, cluster=args.cluster,
                   timeout=args.timeout,
-                  resume=args.resume, batch_size=args.batch_size, csv=args.csv, experiment=experiment_overrides(args))
+                  resume=args.resume, batch_size=args.batch_size, csv=args.csv, experiment=experiment_overrides(args),
+                  recompute=args.recompute)
     counts = sweep.run_to_disk()  # a huge sweep's table never sits in memory
     total = sum(counts.values())
     summary = ", ".join(f"{n} {s}" for s, n in sorted(counts.items()) if n)

@@ -29,6 +29,7 @@ from typing import Any, ClassVar, Mapping, Sequence
 
 import numpy as np
 
+from ..import_guard import guarded_import
 from ..unit import ElementRef, Selection, SimulationEnded, Unit, UnitDescription, UnitError, UnitType, Variable
 
 
@@ -231,7 +232,8 @@ class PythonUnitType(UnitType):
         """Import and return the class.
 
         Raises ValueError for a malformed target, ImportError for a module or
-        file that cannot be imported and TypeError when the class is not a
+        file that cannot be imported (also when it calls sys.exit() or takes
+        longer than the import_seconds limit) and TypeError when the class is not a
         :class:`PythonUnit`.
         """
         if self._cls is not None:
@@ -251,9 +253,15 @@ class PythonUnitType(UnitType):
                 spec = importlib.util.spec_from_file_location(key, path)
                 module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
                 sys.modules[key] = module
-                spec.loader.exec_module(module)  # type: ignore[union-attr]
+                try:
+                    with guarded_import(str(path)):  # sys.exit() or a hang at import: an ImportError
+                        spec.loader.exec_module(module)  # type: ignore[union-attr]
+                except BaseException:
+                    sys.modules.pop(key, None)  # a half-run module must not be found next time
+                    raise
         else:
-            module = self._import_module(module_name)
+            with guarded_import(f"module '{module_name}'"):
+                module = self._import_module(module_name)
         cls = getattr(module, class_name, None)
         if cls is None:
             raise ImportError(f"module '{module_name}' has no class '{class_name}'")

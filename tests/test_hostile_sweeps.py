@@ -1,0 +1,153 @@
+"""Careless use of sweeps: changed units on resume, two sweeps on one folder, units that exit or hang
+at import, nonsense timeouts."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from orchestrator.folder_lock import FolderInUse, FolderLock
+from orchestrator.sweep import Sweep, SweepError
+
+from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
+
+REPO = Path(__file__).resolve().parent.parent
+
+SCALE_UNIT = """
+from orchestrator import PythonUnit, Variable
+
+class Scale(PythonUnit):
+    variables = (Variable("k", "parameter", start=1.0), Variable("y", "output", start=0.0))
+
+    def do_step(self, t, h):
+        self.y = {factor} * self.k
+"""
+
+
+def _cosim(*args: str, env: dict | None = None, timeout: float = 120, cwd: Path | None = None):
+    full_env = dict(os.environ, PYTHONPATH=str(REPO), **(env or {}))
+    return subprocess.run([sys.executable, "-m", "orchestrator.cli", *args], capture_output=True, text=True,
+                          env=full_env, timeout=timeout, cwd=cwd)
+
+
+def _scale_spec(tmp_path: Path, factor: float) -> Path:
+    (tmp_path / "scale.py").write_text(SCALE_UNIT.format(factor=factor))
+    spec = {"units": {"s": {"python": "scale.py:Scale"}}, "experiment": {"stop": 0.2, "step": 0.1},
+            "objectives": {"y": {"signal": "s.y", "reduce": "final"}},
+            "design": {"parameters": {"s.k": {"values": [1.0, 2.0, 3.0, 4.0]}}}}
+    path = tmp_path / "spec.json"
+    path.write_text(json.dumps(spec))
+    return path
+
+
+def test_resume_refuses_a_changed_python_unit_file_and_recompute_runs_all_again(tmp_path, local_cluster):
+    spec = _scale_spec(tmp_path, 10.0)
+    out = tmp_path / "out"
+    first = Sweep(spec, out=out, scheduler=local_cluster, quiet=True).run()
+    assert sorted(first["y"]) == [10.0, 20.0, 30.0, 40.0]
+    meta = json.loads((out / "metadata.json").read_text())
+    assert set(meta["unit_checksums"]) == {"s"}
+    Sweep(spec, out=out, scheduler=local_cluster, resume=True, quiet=True)  # unchanged: accepted
+    _scale_spec(tmp_path, 100.0)  # same spec text, another model
+    with pytest.raises(SweepError, match=r"holds results of other unit files .*unit 's': .*would mix two models"):
+        Sweep(spec, out=out, scheduler=local_cluster, resume=True, quiet=True)
+    again = Sweep(spec, out=out, scheduler=local_cluster, resume=True, recompute=True, quiet=True).run()
+    assert sorted(again["y"]) == [100.0, 200.0, 300.0, 400.0] and len(again) == 4
+
+
+def test_resume_refuses_a_changed_fmu_through_the_command_line(tmp_path, built_fmu, local_cluster):
+    fmu = tmp_path / "model.fmu"
+    fmu.write_bytes(built_fmu("linear_ode", 3).read_bytes())
+    spec = tmp_path / "spec.json"
+    spec.write_text(json.dumps({"units": {"o": {"fmu": "model.fmu"}}, "experiment": {"stop": 0.2, "step": 0.1},
+                                "objectives": {"y": {"signal": "o.y", "reduce": "final"}},
+                                "design": {"parameters": {"o.a": {"values": [-1.0, -2.0]}}}}))
+    out = tmp_path / "out"
+    done = _cosim("sweep", str(spec), "--out", str(out), "--scheduler", local_cluster)
+    assert done.returncode == 0, done.stderr
+    with zipfile.ZipFile(fmu, "a") as zf:  # re-exported in place: same spec, different bytes
+        zf.writestr("resources/note.txt", "rebuilt")
+    done = _cosim("sweep", str(spec), "--out", str(out), "--scheduler", local_cluster, "--resume")
+    assert done.returncode == 2 and "unit 'o'" in done.stderr and "--recompute" in done.stderr
+    assert "Traceback" not in done.stderr
+
+
+def test_a_second_sweep_on_the_same_folder_sees_the_lock(tmp_path):
+    spec = _scale_spec(tmp_path, 1.0)
+    out = tmp_path / "out"
+    holder = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
+        import sys, time
+        from orchestrator.folder_lock import FolderLock
+        lock = FolderLock({str(out)!r})
+        lock.acquire()
+        print("locked", flush=True)
+        time.sleep(600)
+    """)], stdout=subprocess.PIPE, text=True, env=dict(os.environ, PYTHONPATH=str(REPO)))
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        done = _cosim("sweep", str(spec), "--out", str(out), "--workers", "1")
+        assert done.returncode == 2, done.stderr
+        assert f"is in use by another cosim sweep (pid {holder.pid}" in done.stderr
+        with pytest.raises(FolderInUse):
+            FolderLock(out).acquire()
+    finally:
+        holder.send_signal(signal.SIGKILL)  # a killed holder leaves nothing stuck
+        holder.wait(timeout=10)
+    lock = FolderLock(out)
+    lock.acquire()
+    lock.release()
+
+
+def test_a_running_sweep_holds_the_lock_and_releases_it(tmp_path, local_cluster):
+    spec = _scale_spec(tmp_path, 1.0)
+    out = tmp_path / "out"
+    sweep = Sweep(spec, out=out, scheduler=local_cluster, quiet=True)
+    sweep.lock.acquire()  # as run() does, before the cluster starts
+    with pytest.raises(FolderInUse, match="in use by another cosim sweep"):
+        Sweep(spec, out=out, scheduler=local_cluster, resume=True, quiet=True)
+    sweep.lock.release()
+    assert len(sweep.run()) == 4
+    Sweep(spec, out=out, scheduler=local_cluster, resume=True, quiet=True)  # released after the run
+
+
+@pytest.mark.parametrize("body, expected", [
+    ("import sys\nsys.exit(0)\n", "called sys.exit(0) while being imported"),
+    ("raise SystemExit('bye')\n", "called sys.exit('bye') while being imported"),
+    ("import time\ntime.sleep(3600)\n", "took longer than 2 s"),
+    ("while True:\n    pass\n", "took longer than 2 s"),
+])
+def test_a_unit_module_that_exits_or_hangs_at_import_is_reported_by_validate(tmp_path, body, expected):
+    (tmp_path / "bad.py").write_text(body + SCALE_UNIT.format(factor=1.0))
+    spec = tmp_path / "spec.json"
+    spec.write_text(json.dumps({"units": {"s": {"python": "bad.py:Scale"}}, "experiment": {"stop": 0.2, "step": 0.1}}))
+    started = time.monotonic()
+    done = _cosim("validate", str(spec), env={"COSIM_IMPORT_SECONDS": "2"}, timeout=60)
+    assert done.returncode == 2, (done.stdout, done.stderr)
+    assert "$.units.s.python" in done.stderr and expected in done.stderr and "Traceback" not in done.stderr
+    assert time.monotonic() - started < 50  # did not wait for the sleep
+
+
+def test_a_module_unit_that_exits_at_import_is_reported(tmp_path):
+    (tmp_path / "exiting_module.py").write_text("import sys\nsys.exit(3)\n")
+    spec = tmp_path / "spec.json"
+    spec.write_text(json.dumps({"units": {"s": {"python": "exiting_module:Scale"}},
+                                "experiment": {"stop": 0.2, "step": 0.1}}))
+    done = _cosim("validate", str(spec), timeout=60)
+    assert done.returncode == 2 and "module 'exiting_module' called sys.exit(3)" in done.stderr
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-1", "0"])
+def test_nonsense_timeouts_are_refused(tmp_path, value):
+    spec = _scale_spec(tmp_path, 1.0)
+    done = _cosim("sweep", str(spec), "--out", str(tmp_path / "out"), f"--timeout={value}", timeout=60)
+    assert done.returncode == 2 and "the timeout must be a positive number of seconds" in done.stderr
+    assert "Traceback" not in done.stderr
