@@ -12,8 +12,19 @@ and reads one row per point with a watchdog:
 - the child dies (segfault, abort, os._exit): the point gets ``crashed`` with
   the signal or exit code;
 
+- the child writes something that is not a row into its channel to the
+  parent (junk from a unit): the child is killed, the point gets ``crashed``;
+
 and a fresh child takes the remaining points.  So :meth:`IsolatedRunner.run`
-always returns exactly one row per point it was given.
+always returns exactly one row per point it was given, and no read of the
+parent waits without a deadline (without a timeout, the
+``timeout_first_seconds`` limit applies).
+
+A child caps its own data memory (``COSIM_CHILD_MEMORY_MB``: an allocation
+beyond it fails the point, not the machine) and ends itself after
+``COSIM_CHILD_POINTS`` points or once it holds more than
+``COSIM_CHILD_RSS_MB`` resident (a leaking unit); the parent then starts a
+fresh one for the rest of the batch.
 
 The *payload* (:func:`make_payload`) carries the pickled
 :class:`~orchestrator.system.System` together with the bytes of the files its
@@ -28,6 +39,7 @@ import atexit
 import hashlib
 import os
 import pickle
+import queue
 import shutil
 import signal
 import subprocess
@@ -39,7 +51,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any, Sequence
 
-from .limits import LIMITS
+from .limits import LIMITS, limit
 
 LOAD_TIMEOUT = 300.0  # seconds a fresh child may take to import, unpack and load the system
 
@@ -161,13 +173,50 @@ def _watch_parent(parent: int) -> None:
         time.sleep(0.5)
 
 
+def _limit_memory(size: int) -> None:
+    """Cap this process's data memory (RLIMIT_DATA: heap and private mappings) at ``size`` bytes.
+
+    A unit that allocates beyond it gets MemoryError (Python) or a failed
+    malloc (native code) in this child instead of starving the machine.
+    """
+    try:
+        import resource
+
+        soft, hard = resource.getrlimit(resource.RLIMIT_DATA)
+        if hard == resource.RLIM_INFINITY or size < hard:
+            resource.setrlimit(resource.RLIMIT_DATA, (size, hard))
+    except (ImportError, ValueError, OSError):
+        pass  # not on this platform: the recycling below still bounds a leak
+
+
+def _resident_bytes() -> int:
+    """This process's resident memory now (Linux /proc; 0 where unavailable)."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return 0
+
+
+def _recycle_reason(served: int) -> str | None:
+    """Why this child should be replaced after ``served`` points, or None."""
+    if served >= limit("child_points"):
+        return f"ran {served} points (COSIM_CHILD_POINTS)"
+    resident = _resident_bytes()
+    if resident > int(limit("child_rss_mb")) << 20:
+        return f"holds {resident >> 20} MB (COSIM_CHILD_RSS_MB)"
+    return None
+
+
 def child_main(read_fd: int, write_fd: int, parent: int) -> None:
     """The child's loop: load the payload, then answer 'run' messages with one row per point."""
     threading.Thread(target=_watch_parent, args=(parent,), daemon=True).start()
     signal.signal(signal.SIGTERM, _remove_own_folder_and_exit)  # a group SIGTERM reaches this child too
     inbox, outbox = Connection(read_fd, writable=False), Connection(write_fd, readable=False)
     folder = tempfile.mkdtemp(prefix="payload_")  # under the TMPDIR the parent made for this child
+    _limit_memory(int(limit("child_memory_mb")) << 20)
     runner = None
+    served = 0
     try:
         kind, payload = inbox.recv()
         try:
@@ -184,7 +233,14 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
             if kind != "run":
                 return
             for point_id, values in points:
-                outbox.send(("row", runner.run(point_id, values)))
+                row = runner.run(point_id, values)
+                served += 1
+                reason = _recycle_reason(served)
+                if reason:
+                    row["recycle"] = reason  # the parent starts a fresh child for the rest
+                outbox.send(("row", row))
+                if reason:
+                    return
     finally:
         if runner is not None:
             runner.close()
@@ -195,6 +251,58 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
 
 
 # -- the parent side -----------------------------------------------------------------------
+
+MAX_MESSAGE = 64 << 20  # bytes of one message from a child (a row is a few kB)
+_KINDS = ("ready", "error", "row")
+
+
+class _Channel:
+    """Messages from a child, read by a thread, so that every wait of the parent has a deadline.
+
+    A unit runs inside the child and can write anything into the pipe back to
+    the parent (a C library writing to the wrong file descriptor, a hostile
+    unit).  The reader thread turns whatever arrives into ``(kind, body)``:
+    a well-formed message, ``("eof", None)`` when the child is gone, or
+    ``("junk", why)`` for bytes that are not a message; a message that is
+    too long or does not unpickle to one of the known kinds is junk.  A
+    partial message blocks only the thread, never the parent: the parent's
+    deadline expires and the child is killed, which ends the thread.
+    """
+
+    def __init__(self, conn: Connection):
+        self._queue: queue.Queue = queue.Queue()
+        threading.Thread(target=self._read, args=(conn,), daemon=True).start()
+
+    def _read(self, conn: Connection) -> None:
+        while True:
+            try:
+                data = conn.recv_bytes(MAX_MESSAGE)
+            except EOFError:
+                self._queue.put(("eof", None))
+                return
+            except OSError as exc:  # a length over MAX_MESSAGE, or the pipe closed under us
+                self._queue.put(("junk", f"{exc}"))
+                return
+            except Exception as exc:  # a malformed length header
+                self._queue.put(("junk", f"{type(exc).__name__}: {exc}"))
+                return
+            try:
+                message = pickle.loads(data)
+            except Exception as exc:
+                self._queue.put(("junk", f"undecodable bytes ({type(exc).__name__})"))
+                return
+            if not (isinstance(message, tuple) and len(message) == 2 and message[0] in _KINDS):
+                self._queue.put(("junk", "a message of unknown form"))
+                return
+            self._queue.put(message)
+
+    def get(self, timeout: float) -> tuple[str, Any] | None:
+        """The next message, or None when none came within ``timeout`` seconds."""
+        try:
+            return self._queue.get(timeout=timeout)
+        except queue.Empty:
+            return None
+
 
 _LIVE: set["IsolatedRunner"] = set()
 
@@ -224,6 +332,7 @@ class IsolatedRunner:
         self._inbox: Connection | None = None
         self._outbox: Connection | None = None
         self._folder: str | None = None
+        self._channel: _Channel | None = None
 
     def _start(self) -> str | None:
         """Start a child and load the payload; None when ready, else why it failed."""
@@ -246,24 +355,35 @@ class IsolatedRunner:
         os.close(from_child_w)
         self._outbox = Connection(to_child_w, readable=False)
         self._inbox = Connection(from_child_r, writable=False)
+        self._channel = _Channel(self._inbox)
         if not _kill_children_registered:
             _register_exit_hook()
         _LIVE.add(self)
         try:
             self._outbox.send(("load", self.payload))
-            if not self._inbox.poll(LOAD_TIMEOUT):
-                self.close(force=True)
-                return f"the worker's child process did not load the system within {LOAD_TIMEOUT:g} s"
-            kind, message = self._inbox.recv()
-        except (EOFError, OSError):
-            return f"the worker's child process died while loading the system ({self._exit_text()})"
-        if kind != "ready":
+        except OSError:
+            pass  # the child is already gone: the channel says so below
+        message = self._channel.get(LOAD_TIMEOUT)
+        if message is None:
+            self.close(force=True)
+            return f"the worker's child process did not load the system within {LOAD_TIMEOUT:g} s"
+        kind, body = message
+        if kind == "ready":
+            return None
+        if kind == "error":
             self.close()
-            return message
-        return None
+            return str(body)
+        why = f"died ({self._exit_text_now()})" if kind == "eof" else f"wrote junk on its channel ({body})"
+        self.close(force=True)
+        return f"the worker's child process {why} while loading the system"
 
     def run(self, points: Sequence[tuple[str, dict[str, Any]]], timeout: float | None = None) -> list[dict]:
-        """One row per point, in order; statuses ok, failed, timeout or crashed."""
+        """One row per point, in order; statuses ok, failed, timeout or crashed.
+
+        Without ``timeout`` a point may run for the ``timeout_first_seconds``
+        limit (COSIM_TIMEOUT_FIRST): no read of a child waits forever.
+        """
+        deadline = timeout if timeout is not None else float(limit("timeout_first_seconds"))
         rows: list[dict] = []
         remaining = list(points)
         while remaining:
@@ -282,25 +402,41 @@ class IsolatedRunner:
             done = 0
             for point_id, _ in remaining:
                 started = time.perf_counter()
-                try:
-                    ready = self._inbox.poll(timeout)
-                    if not ready:
-                        self.close(force=True)
-                        rows.append(_row(point_id, "timeout", f"no result within the timeout of {timeout:g} s; "
-                                                              "the run was stopped", started))
-                        done += 1
-                        break
-                    kind, row = self._inbox.recv()
-                except (EOFError, OSError):
+                message = self._channel.get(deadline)
+                done += 1
+                if message is None:
+                    self.close(force=True)
+                    rows.append(_row(point_id, "timeout", f"no result within the timeout of {deadline:g} s; "
+                                                          "the run was stopped", started))
+                    break
+                kind, row = message
+                if kind == "eof":
                     rows.append(_row(point_id, "crashed", f"the process running this point died "
                                                           f"({self._exit_text()})", started))
                     self.close()
-                    done += 1
                     break
+                if kind != "row" or not isinstance(row, dict) or row.get("point_id") != point_id:
+                    why = row if kind == "junk" else "a message that is not this point's row"
+                    self.close(force=True)  # its channel is out of step: trust nothing more from it
+                    rows.append(_row(point_id, "crashed", "the process running this point wrote something "
+                                                          f"other than a result on its channel ({why}); it was "
+                                                          "replaced", started))
+                    break
+                recycle = row.pop("recycle", None)
                 rows.append(row)
-                done += 1
+                if recycle:  # the child ended itself (memory or point count): a fresh one goes on
+                    self.close()
+                    break
             remaining = remaining[done:]
         return rows
+
+    def _exit_text_now(self) -> str:
+        if self._proc is not None and self._proc.poll() is None:
+            try:
+                self._proc.wait(timeout=1)
+            except subprocess.TimeoutExpired:
+                return "still running"
+        return self._exit_text()
 
     def _exit_text(self) -> str:
         if self._proc is None:

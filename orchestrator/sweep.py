@@ -29,6 +29,7 @@ evaluates the points on Dask:
 
 from __future__ import annotations
 
+import collections
 import getpass
 import itertools
 import math
@@ -36,6 +37,7 @@ import os
 import platform
 import shutil
 import socket
+import statistics
 import sys
 import tempfile
 import threading
@@ -45,6 +47,7 @@ from importlib import metadata as importlib_metadata
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterable, Iterator, Sequence, TextIO
 
+from . import limits
 from .design import DesignSpace, Point
 from .folder_lock import FolderLock
 from .unit_checksums import changed_units, unit_checksums
@@ -178,6 +181,24 @@ def package_versions() -> dict[str, str]:
 def now_utc() -> str:
     """The current UTC time as ISO 8601 text (seconds), as the metadata records it."""
     return datetime.now(timezone.utc).isoformat(timespec="seconds")
+
+
+TIMEOUT_FACTOR = 50  # a point may take this many times the median measured point time (default timeout)
+
+
+def default_timeout(point_times: Sequence[float]) -> float:
+    """The per-point timeout when none is given, from the run times of points measured so far.
+
+    ``TIMEOUT_FACTOR`` times their median, but at least the
+    ``timeout_floor_seconds`` limit and at most ``timeout_first_seconds``,
+    which is also the timeout until three points have been measured.  So a
+    hanging point never hangs a sweep, and a slow model is not cut short.
+    """
+    first = float(limits.limit("timeout_first_seconds"))
+    if len(point_times) < 3:
+        return first
+    floor = float(limits.limit("timeout_floor_seconds"))
+    return min(first, max(floor, TIMEOUT_FACTOR * statistics.median(point_times)))
 
 
 class Sweep:
@@ -354,12 +375,15 @@ class Sweep:
         in_flight: dict[str, tuple[list[Point], int, Any]] = {}  # task key -> points, reruns so far, payload
         pending = as_completed()
 
+        times: collections.deque[float] = collections.deque(maxlen=1000)  # recent ok point times
+
         def submit(batch: list[Point] | None = None, attempt: int = 0, stale: Any = None) -> bool:
             batch = batch or next(batches, None)
             if batch is None:
                 return False
             used = payload.future(stale)
-            future = client.submit(run_batch, used, [(p.id, p.values) for p in batch], self.timeout,
+            timeout = self.timeout if self.timeout is not None else default_timeout(times)
+            future = client.submit(run_batch, used, [(p.id, p.values) for p in batch], timeout,
                                    pure=False, retries=0)
             in_flight[future.key] = batch, attempt, used
             pending.add(future)
@@ -382,6 +406,7 @@ class Sweep:
                 rows = lost_rows([p.id for p in batch], exc)
             future.release()
             self.store.append([self._row(p, r) for p, r in zip(batch, rows)])
+            times.extend(r["run_time"] for r in rows if r["status"] == "ok")
             if progress is not None:
                 progress.update(len(rows), sum(r["status"] != "ok" for r in rows))
             submit()

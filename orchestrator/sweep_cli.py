@@ -119,6 +119,11 @@ def _dry_run(args: argparse.Namespace) -> int:
         else:
             print(f"estimate: {per_point:.3f} s per point, about {_fmt_time(total * per_point / workers)} "
                   f"on {workers} worker(s)")
+        if args.timeout is None:
+            from .sweep import TIMEOUT_FACTOR, default_timeout
+
+            print(f"timeout: {default_timeout(steady * 3):.0f} s per point by default ({TIMEOUT_FACTOR} x the "
+                  "measured point time, within COSIM_TIMEOUT_FLOOR .. COSIM_TIMEOUT_FIRST); --timeout S sets it")
     else:
         print("estimate: none (no sample run succeeded)")
     return EXIT_OK
