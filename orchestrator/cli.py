@@ -45,6 +45,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "handler", None):
         parser.print_help()
         return EXIT_USAGE
+    from .interrupts import stop_cleanly_on_signals
+    stop_cleanly_on_signals()
     try:
         return args.handler(args)
     except BrokenPipeError:  # the reader stopped early (`cosim pareto ... | head`): not an error of ours

@@ -58,6 +58,7 @@ def dask_client(workers: int, scheduler: str | None = None,
     from distributed import Client, LocalCluster
 
     from .cluster import ALLOWED_FAILURES, configured_scheduler, read_cluster_file, start_cluster
+    from .interrupts import WORKER_PRELOAD
 
     cluster = None
     wait, hint, origin = 60, "start some with: dask worker ADDRESS --nthreads 1", ""
@@ -80,7 +81,8 @@ def dask_client(workers: int, scheduler: str | None = None,
         dashboard = _dashboard_available()
         with dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES}):
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                   dashboard_address="127.0.0.1:0", silence_logs=40)
+                                   dashboard_address="127.0.0.1:0", silence_logs=40,
+                                   preload=[WORKER_PRELOAD])  # the workers ignore a terminal's Ctrl-C
         client = Client(cluster)
         link = cluster.dashboard_link if dashboard else "unavailable (install bokeh to get it)"
     else:

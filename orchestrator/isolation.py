@@ -212,6 +212,7 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
     """The child's loop: load the payload, then answer 'run' messages with one row per point."""
     threading.Thread(target=_watch_parent, args=(parent,), daemon=True).start()
     signal.signal(signal.SIGTERM, _remove_own_folder_and_exit)  # a group SIGTERM reaches this child too
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the parent decides, quietly
     inbox, outbox = Connection(read_fd, writable=False), Connection(write_fd, readable=False)
     folder = tempfile.mkdtemp(prefix="payload_")  # under the TMPDIR the parent made for this child
     _limit_memory(int(limit("child_memory_mb")) << 20)

@@ -45,6 +45,7 @@ import time
 from datetime import datetime, timezone
 from importlib import metadata as importlib_metadata
 from pathlib import Path
+from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any, Iterable, Iterator, Sequence, TextIO
 
 from . import limits
@@ -64,6 +65,32 @@ PACKAGES = ("cosim", "fmpy", "dask", "distributed", "numpy", "pandas", "pyarrow"
 
 class SweepError(UserError):
     """A sweep cannot start as asked (results folder in use, resume of another spec, no workers)."""
+
+
+class OutputError(SweepError):
+    """The results folder cannot be written: read-only, full, no permission."""
+
+
+@contextmanager
+def results_writes(out: Path) -> Iterator[None]:
+    """Turn a failed write into the results folder into an OutputError (exit 2, no traceback).
+
+    Half-written temporary files are removed; the part files already written
+    stay, so after freeing space ``--resume`` finishes the sweep exactly.
+    """
+    try:
+        yield
+    except OSError as exc:
+        for leftover in ("results.parquet.tmp", "results.csv.tmp", "metadata.json.tmp"):
+            try:
+                (out / leftover).unlink(missing_ok=True)
+            except OSError:
+                pass
+        reason = exc.strerror or str(exc) or type(exc).__name__
+        raise OutputError(f"cannot write the results into {out}: {reason}", file=str(out),
+                          fix="free space on that filesystem or make the folder writable (or choose another "
+                              "--out); the rows written so far are kept: run the same command with --resume to "
+                              "finish") from None
 
 
 # -- worker side ------------------------------------------------------------------
@@ -245,9 +272,10 @@ class Sweep:
         if resume and out is None:
             raise SweepError("resume needs the results folder of the interrupted sweep (--out DIR)")
         self.out = Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="cosim_sweep_"))
-        self.store = ResultsStore(self.out)
-        self.lock = FolderLock(self.out)
-        self.lock.check_free()  # a sweep running into this folder is the first thing to say
+        with results_writes(self.out):
+            self.store = ResultsStore(self.out)
+            self.lock = FolderLock(self.out)
+            self.lock.check_free()  # a sweep running into this folder is the first thing to say
         self.checksums = unit_checksums(self.system)
         self.recompute = recompute
         self._check_folder()
@@ -325,7 +353,8 @@ class Sweep:
             shutil.rmtree(self.out, ignore_errors=True)
 
     def _run(self) -> dict[str, int]:
-        self.lock.acquire()  # released when this process ends, however it ends
+        with results_writes(self.out):
+            self.lock.acquire()  # released when this process ends, however it ends
         try:
             return self._run_locked()
         finally:
@@ -345,7 +374,8 @@ class Sweep:
             with dask_client(self.workers, self.scheduler, self.cluster) as (client, n_workers, link):
                 info = {"started": started, "scheduler": client.scheduler.address, "workers": n_workers,
                         "timeout": self.timeout}
-                self.store.write_metadata(self._metadata(started, info))
+                with results_writes(self.out):
+                    self.store.write_metadata(self._metadata(started, info))
                 self._say(f"cosim sweep {self.spec.name}: {total} points ({todo} to run) on {n_workers} "
                           f"worker(s); dashboard: {link}; results: {self.out}")
                 self._evaluate(client, done, todo, n_workers)
@@ -357,12 +387,13 @@ class Sweep:
         return self._finish()
 
     def _finish(self) -> dict[str, int]:
-        counts = self.store.compact(order=(p.id for p in self.space), csv=self.csv)
-        meta = self.store.metadata() or {}
-        meta.update(ended=now_utc(), counts=counts)
-        if meta.get("runs"):
-            meta["runs"][-1]["ended"] = meta["ended"]
-        self.store.write_metadata(meta)
+        with results_writes(self.out):  # a full disk during the final merge loses nothing (see compact)
+            counts = self.store.compact(order=(p.id for p in self.space), csv=self.csv)
+            meta = self.store.metadata() or {}
+            meta.update(ended=now_utc(), counts=counts)
+            if meta.get("runs"):
+                meta["runs"][-1]["ended"] = meta["ended"]
+            self.store.write_metadata(meta)
         return counts
 
     def _evaluate(self, client: Any, done: set[str], todo: int, n_workers: int) -> None:
@@ -405,7 +436,8 @@ class Sweep:
                     continue
                 rows = lost_rows([p.id for p in batch], exc)
             future.release()
-            self.store.append([self._row(p, r) for p, r in zip(batch, rows)])
+            with results_writes(self.out):
+                self.store.append([self._row(p, r) for p, r in zip(batch, rows)])
             times.extend(r["run_time"] for r in rows if r["status"] == "ok")
             if progress is not None:
                 progress.update(len(rows), sum(r["status"] != "ok" for r in rows))
