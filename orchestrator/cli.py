@@ -45,8 +45,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "handler", None):
         parser.print_help()
         return EXIT_USAGE
-    from .interrupts import stop_cleanly_on_signals
-    stop_cleanly_on_signals()
+    from .interrupts import restore_signals, stop_cleanly_on_signals
+    previous = stop_cleanly_on_signals()
     try:
         return args.handler(args)
     except BrokenPipeError:  # the reader stopped early (`cosim pareto ... | head`): not an error of ours
@@ -57,6 +57,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         report_error(exc)
         return exit_code(exc)
+    finally:
+        restore_signals(previous)  # main() may be called from a program with handlers of its own
 
 
 def _discard_stdout() -> None:

@@ -26,10 +26,11 @@ from typing import Any
 WORKER_PRELOAD = __name__  # the module name given to Dask's ``preload`` for the workers cosim starts
 
 
-def stop_cleanly_on_signals() -> None:
+def stop_cleanly_on_signals() -> dict[int, Any]:
     """Make SIGINT and SIGTERM raise KeyboardInterrupt in the main thread, and quiet Dask after a stop.
 
-    Does nothing outside the main thread (signal handlers can only be set there).
+    Returns the handlers it replaced, for :func:`restore_signals`.  Does
+    nothing outside the main thread (signal handlers can only be set there).
     """
     def stop(signum: int, frame: Any) -> None:
         import logging
@@ -39,9 +40,15 @@ def stop_cleanly_on_signals() -> None:
         sys.unraisablehook = lambda unraisable: None
         raise KeyboardInterrupt
 
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, stop)
-        signal.signal(signal.SIGINT, stop)
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {signum: signal.signal(signum, stop) for signum in (signal.SIGTERM, signal.SIGINT)}
+
+
+def restore_signals(previous: dict[int, Any]) -> None:
+    """Put back the handlers :func:`stop_cleanly_on_signals` replaced."""
+    for signum, handler in previous.items():
+        signal.signal(signum, handler)
 
 
 def dask_setup(worker: Any) -> None:
