@@ -31,6 +31,18 @@ class ClusterError(UserError):
     """No Dask workers can be had (scheduler unreachable or without workers)."""
 
 
+def check_timeout(timeout: float | None, error: type[UserError] = UserError) -> None:
+    """Refuse a per-point timeout that is not a positive, finite number of seconds (None: the default timeout).
+
+    Every driver (sweep, optimize, sensitivity) checks its ``timeout`` here
+    before any work.  Raises ``error`` (a UserError, so exit code 2): NaN,
+    infinity, zero or a negative number would make every point ``crashed`` or
+    never stop a hanging one.
+    """
+    if timeout is not None and not (isinstance(timeout, (int, float)) and math.isfinite(timeout) and timeout > 0):
+        raise error(f"the timeout must be a positive number of seconds, got {timeout}")
+
+
 def _dashboard_available() -> bool:
     try:
         import bokeh  # noqa: F401  (distributed serves its dashboard only with bokeh)

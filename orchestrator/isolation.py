@@ -51,6 +51,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any, Sequence
 
+from . import import_guard
 from .limits import LIMITS, limit
 
 LOAD_TIMEOUT = 300.0  # seconds a fresh child may take to import, unpack and load the system
@@ -213,6 +214,7 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
     threading.Thread(target=_watch_parent, args=(parent,), daemon=True).start()
     signal.signal(signal.SIGTERM, _remove_own_folder_and_exit)  # a group SIGTERM reaches this child too
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the parent decides, quietly
+    import_guard.CHECK_IN_CHILD = False  # this child is the isolation: a unit killing it costs a crashed point
     inbox, outbox = Connection(read_fd, writable=False), Connection(write_fd, readable=False)
     folder = tempfile.mkdtemp(prefix="payload_")  # under the TMPDIR the parent made for this child
     _limit_memory(int(limit("child_memory_mb")) << 20)

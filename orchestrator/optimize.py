@@ -349,12 +349,12 @@ class Optimization:
 
         from .cluster import read_cluster_file
         from .design import DesignSpace, expression_name
+        from .evaluator import check_timeout
         from .isolation import make_payload
         from .results import ResultsStore
         from .validate import check_spec
 
-        if timeout is not None and timeout <= 0:
-            raise OptimizeError(f"the timeout must be positive, got {timeout}")
+        check_timeout(timeout, OptimizeError)
         if cluster is not None and scheduler is not None:
             raise OptimizeError("give either a cluster file or a scheduler address, not both")
         self.cluster = None if cluster is None else str(cluster)

@@ -53,7 +53,7 @@ from .design import DesignSpace, Point
 from .folder_lock import FolderLock
 from .unit_checksums import changed_units, unit_checksums
 from .errors import UserError
-from .evaluator import ScatteredPayload, lost_rows, rerun
+from .evaluator import ScatteredPayload, check_timeout, lost_rows, rerun
 from .isolation import IsolatedRunner, make_payload
 from .table_columns import TAIL_COLUMNS
 
@@ -249,8 +249,7 @@ class Sweep:
         from .results import ResultsStore  # pandas and pyarrow only when a sweep is made
         from .validate import check_spec
 
-        if timeout is not None and not (math.isfinite(timeout) and timeout > 0):
-            raise SweepError(f"the timeout must be a positive number of seconds, got {timeout}")
+        check_timeout(timeout, SweepError)
         if workers is not None and workers < 1:
             raise SweepError(f"workers must be at least 1, got {workers}")
         if cluster is not None and scheduler is not None:

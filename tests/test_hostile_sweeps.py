@@ -145,9 +145,52 @@ def test_a_module_unit_that_exits_at_import_is_reported(tmp_path):
     assert done.returncode == 2 and "module 'exiting_module' called sys.exit(3)" in done.stderr
 
 
+NATIVE_LOOP = "void spin_forever(void) { for (volatile int i = 0;; i = 0) {} }\n"  # never returns to Python
+
+
+@pytest.mark.parametrize("body, expected", [
+    ("import os\nos._exit(0)\n", "ended the process (exit code 0"),
+    ("import os\nos._exit(7)\n", "ended the process (exit code 7"),
+    ("import ctypes\nctypes.string_at(0)\n", "ended the process (killed by signal SIGSEGV"),
+    ("import ctypes, pathlib\nctypes.CDLL(str(pathlib.Path(__file__).with_name('spin.so'))).spin_forever()\n",
+     "took longer than 2 s"),
+])
+def test_a_unit_module_that_ends_or_blocks_the_process_at_import_is_reported_by_validate(tmp_path, body, expected):
+    """os._exit(), a native crash or a native loop at import: the import runs in a child process first, so
+    validate names the file instead of ending with exit 0, dying or hanging (a timer signal cannot interrupt
+    native code that never returns to Python)."""
+    (tmp_path / "spin.c").write_text(NATIVE_LOOP)
+    subprocess.run(["gcc", "-shared", "-fPIC", "-O0", "-o", str(tmp_path / "spin.so"), str(tmp_path / "spin.c")],
+                   check=True)
+    (tmp_path / "bad.py").write_text(body + SCALE_UNIT.format(factor=1.0))
+    spec = tmp_path / "spec.json"
+    spec.write_text(json.dumps({"units": {"s": {"python": "bad.py:Scale"}}, "experiment": {"stop": 0.2, "step": 0.1}}))
+    started = time.monotonic()
+    done = _cosim("validate", str(spec), env={"COSIM_IMPORT_SECONDS": "2"}, timeout=60)
+    assert done.returncode == 2, (done.stdout, done.stderr)
+    assert "$.units.s.python" in done.stderr and str(tmp_path / "bad.py") in done.stderr
+    assert expected in done.stderr and "Traceback" not in done.stderr, done.stderr
+    assert time.monotonic() - started < 50
+
+
+def test_a_module_unit_that_ends_the_process_at_import_is_reported(tmp_path):
+    (tmp_path / "ending_module.py").write_text("import os\nos._exit(0)\n")
+    spec = tmp_path / "spec.json"
+    spec.write_text(json.dumps({"units": {"s": {"python": "ending_module:Scale"}},
+                                "experiment": {"stop": 0.2, "step": 0.1}}))
+    done = _cosim("validate", str(spec), timeout=60)
+    assert done.returncode == 2, (done.stdout, done.stderr)
+    assert "importing module 'ending_module' ended the process (exit code 0" in done.stderr
+
+
+@pytest.mark.parametrize("command", ["sweep", "optimize", "sensitivity"])
 @pytest.mark.parametrize("value", ["nan", "inf", "-1", "0"])
-def test_nonsense_timeouts_are_refused(tmp_path, value):
+def test_nonsense_timeouts_are_refused(tmp_path, capsys, command, value):
+    """Every driver refuses a timeout that would crash every point or never stop one, before any work."""
+    from orchestrator.cli import main
+
     spec = _scale_spec(tmp_path, 1.0)
-    done = _cosim("sweep", str(spec), "--out", str(tmp_path / "out"), f"--timeout={value}", timeout=60)
-    assert done.returncode == 2 and "the timeout must be a positive number of seconds" in done.stderr
-    assert "Traceback" not in done.stderr
+    code = main([command, str(spec), "--out", str(tmp_path / "out"), f"--timeout={value}"])
+    err = capsys.readouterr().err
+    assert code == 2 and f"the timeout must be a positive number of seconds, got {float(value)}" in err, err
+    assert "Traceback" not in err and not (tmp_path / "out").exists()

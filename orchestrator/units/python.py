@@ -29,7 +29,7 @@ from typing import Any, ClassVar, Mapping, Sequence
 
 import numpy as np
 
-from ..import_guard import guarded_import
+from ..import_guard import guarded_import, import_in_child_first
 from ..unit import ElementRef, Selection, SimulationEnded, Unit, UnitDescription, UnitError, UnitType, Variable
 
 
@@ -184,10 +184,10 @@ class PythonUnitType(UnitType):
     where the unit is used, so a Dask worker imports it itself.
     """
 
-    def __init__(self, target: str, base_dir: str | Path | None = None):
+    def __init__(self, target: str, base_dir: str | Path | None = None, source_zip: str | None = None):
         self.target = target
         self.base_dir = str(base_dir) if base_dir is not None else None
-        self._source_zip: str | None = None  # set on a worker: the module's shipped source
+        self._source_zip: str | None = source_zip  # set on a worker: the module's shipped source
         self._cls: type[PythonUnit] | None = None
 
     def __getstate__(self) -> dict:
@@ -232,9 +232,10 @@ class PythonUnitType(UnitType):
         """Import and return the class.
 
         Raises ValueError for a malformed target, ImportError for a module or
-        file that cannot be imported (also when it calls sys.exit() or takes
-        longer than the import_seconds limit) and TypeError when the class is not a
-        :class:`PythonUnit`.
+        file that cannot be imported (also when importing it exits, crashes or
+        takes longer than the import_seconds limit: it is imported in a child
+        process first, see :mod:`orchestrator.import_guard`) and TypeError when
+        the class is not a :class:`PythonUnit`.
         """
         if self._cls is not None:
             return self._cls
@@ -250,6 +251,7 @@ class PythonUnitType(UnitType):
             key = f"cosim_user_{abs(hash(str(path.resolve())))}"
             module = sys.modules.get(key)
             if module is None:
+                import_in_child_first(str(path), self.target, self.base_dir, self._source_zip)
                 spec = importlib.util.spec_from_file_location(key, path)
                 module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
                 sys.modules[key] = module
@@ -260,6 +262,9 @@ class PythonUnitType(UnitType):
                     sys.modules.pop(key, None)  # a half-run module must not be found next time
                     raise
         else:
+            ours = module_name.split(".")[0] in ("cosim", "orchestrator") or _builtin_module(module_name)
+            if not ours and module_name not in sys.modules:  # cosim's own units are trusted to import
+                import_in_child_first(f"module '{module_name}'", self.target, self.base_dir, self._source_zip)
             with guarded_import(f"module '{module_name}'"):
                 module = self._import_module(module_name)
         cls = getattr(module, class_name, None)
