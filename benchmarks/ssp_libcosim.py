@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import sys
 import tempfile
@@ -103,6 +104,12 @@ def main() -> None:
         print(f"{name:28s} wall {median * 1e3:7.1f} ms per run ({median / n_steps / 3 * 1e6:5.2f} µs per unit "
               f"per step, {median / base:4.2f} x libcosim); CPU {median_cpu * 1e3:7.1f} ms "
               f"({median_cpu / base_cpu:4.2f} x libcosim)")
+    wall_ratio = statistics.median(a / b for a, b in zip(timings["cosim"], timings["libcosim"]))
+    cpu_ratio = statistics.median(a / b for a, b in zip(cpu["cosim"], cpu["libcosim"]))
+    load = os.getloadavg()
+    print(f"load {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}, {time.strftime('%Y-%m-%d %H:%M %Z')}; target: cosim "
+          f"costs less than libcosim per run: wall {wall_ratio:.2f}x ({'met' if wall_ratio < 1 else 'NOT met'}), "
+          f"CPU {cpu_ratio:.2f}x ({'met' if cpu_ratio < 1 else 'NOT met'}) (medians of per-round ratios)")
 
 
 if __name__ == "__main__":

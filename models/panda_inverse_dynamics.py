@@ -16,6 +16,7 @@ import numpy as np
 import pinocchio as pin
 
 from orchestrator.units.python import PythonUnit
+from orchestrator.units.python_batch import PythonBatchUnit
 
 from .panda_model import cached_model, ee_frame_id, limits_exceeded, payload_key, robot_variables
 
@@ -82,3 +83,62 @@ class PandaInverseDynamics(PythonUnit):
             self._outputs_stale = False
             self.compute_outputs()
         self._path_done = (self.ee_path_length, self.ee_pos.copy())
+
+
+class PandaInverseDynamicsBatch(PythonBatchUnit):
+    """:class:`PandaInverseDynamics` for K design points at once (lock-step runs, orchestrator.lockstep).
+
+    pinocchio has no batched RNEA, so it is called per active row, with the
+    single unit's calls; everything else works on all rows at once with the
+    same element-wise operations, so row k's outputs equal a single unit's bit
+    for bit.
+    """
+
+    def initialize(self) -> None:
+        self._models = []
+        keys: dict[tuple, tuple] = {}
+        for k in range(self.rows):
+            key = payload_key(self.payload_mass[k], self.payload_com[k], self.payload_inertia[k])
+            if key not in keys:
+                model = cached_model(*key)
+                keys[key] = (model, model.createData(), ee_frame_id(model))
+            self._models.append(keys[key])
+        # row views, made once: the arrays are only ever written in place
+        self._row_views = list(zip(self.q, self.qd, self.qdd))
+        self._path_done = None
+        self.compute_outputs()
+        self._path_done = (np.zeros(self.rows), self.ee_pos.copy())
+        self.ee_path_length[:] = 0.0
+
+    def compute_outputs(self) -> None:
+        self.q[:] = self.q_ref
+        self.qd[:] = self.qd_ref
+        self.qdd[:] = self.qdd_ref
+        q, qd, tau, ee, models, views = self.q, self.qd, self.tau, self.ee_pos, self._models, self._row_views
+        rnea, kinematics, placement = pin.rnea, pin.forwardKinematics, pin.updateFramePlacement
+        active = self.active
+        for k in active.tolist():
+            m, d, frame = models[k]
+            q_k, qd_k, qdd_k = views[k]
+            tau[k] = rnea(m, d, q_k, qd_k, qdd_k)
+            kinematics(m, d, q_k)
+            ee[k] = placement(m, d, frame).translation
+        done = self._path_done
+        if done is not None:  # the chord from the last communication point to now, as the single unit
+            chord = ee[active] - done[1][active]
+            # a row's sum of 3 squares adds in the order chord.dot(chord) does, so the length is the same
+            self.ee_path_length[active] = done[0][active] + np.sqrt((chord * chord).sum(axis=1))
+        self.tracking_error[:] = 0.0
+        np.divide(np.abs(tau), self.tau_max, out=self.tau_ratio)
+        self.limit_violated[:] = ((self.tau_ratio.max(axis=1) > 1.0) | ((q - self.q_min).min(axis=1) < 0.0)
+                                  | ((self.q_max - q).min(axis=1) < 0.0)
+                                  | ((np.abs(qd) - self.qd_max).max(axis=1) > 0.0))
+
+    def do_step(self, t: float, h: float) -> None:
+        if self._outputs_stale:
+            self._outputs_stale = False
+            self.compute_outputs()
+        self._path_done = (self.ee_path_length.copy(), self.ee_pos.copy())
+
+
+PandaInverseDynamics.batch_class = PandaInverseDynamicsBatch

@@ -9,7 +9,8 @@ long runs do not drift.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Callable, Mapping, Sequence
+from functools import partial
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -38,7 +39,7 @@ class Transfer:
     keeps the plain copy.
     """
 
-    __slots__ = ("source", "source_selection", "target", "target_selection", "read", "_set")
+    __slots__ = ("source", "source_selection", "target", "target_selection", "read", "write")
 
     def __init__(self, source: Unit, target: Unit, connections: Sequence[Connection]):
         self.source = source
@@ -46,22 +47,29 @@ class Transfer:
         self.source_selection = source.select([r for c in connections for r in c.source.refs])
         self.target_selection = target.select([r for c in connections for r in c.target.refs])
         read = source.reader(self.source_selection)  # valid until its next call
+        # A unit with its own writer (an FMU: straight into the buffer its set call reads) takes the values
+        # as they are read (numpy views of the source's buffer, or lists); others get them through set().
+        own_writer = type(target).writer is not Unit.writer
         if any((c.factor, c.offset) != (1.0, 0.0) for c in connections):
-            read = _converting(read, connections)
+            read = _converting(read, connections, as_list=not own_writer)
         self.read = read
-        self._set = target.set
-
-    def write(self, values: Sequence) -> None:
-        self._set(self.target_selection, values)
+        if own_writer:
+            self.write = target.writer(self.target_selection)
+        else:
+            self.write = partial(target.set, self.target_selection)
 
     def run(self) -> None:
-        self._set(self.target_selection, self.read())
+        self.write(self.read())
 
 
-def _converting(read: Callable[[], Sequence], connections: Sequence[Connection]) -> Callable[[], list]:
-    """``read`` followed by each element's unit conversion ``factor * x + offset`` (one multiply-add, no drift)."""
+def _converting(read: Callable[[], Sequence], connections: Sequence[Connection],
+                as_list: bool = True) -> Callable[[], Any]:
+    """``read`` followed by each element's unit conversion ``factor * x + offset`` (one multiply-add, no drift);
+    a list, or with ``as_list=False`` a numpy array."""
     factor = np.array([c.factor for c in connections for _ in c.source.refs])
     offset = np.array([c.offset for c in connections for _ in c.source.refs])
+    if not as_list:
+        return lambda: np.asarray(read(), dtype=float) * factor + offset
     return lambda: (np.asarray(read(), dtype=float) * factor + offset).tolist()
 
 
@@ -116,12 +124,17 @@ class Jacobi(MasterAlgorithm):
         self._units = [units[n] for n in order]
 
     def step(self, t: float, h: float) -> None:
-        # each transfer reads into its own buffer, so all reads stay valid until the writes
+        # each transfer reads into its source's buffer, so all reads stay valid until the writes
         values = [transfer.read() for transfer in self._transfers]
         for transfer, v in zip(self._transfers, values):
             transfer.write(v)
-        for unit in self._units:
-            step_unit(unit, t, h)
+        try:  # step_unit's rule, with the try around the loop: one Python call less per unit and step
+            for unit in self._units:
+                unit.do_step(t, h)
+        except (UnitError, SimulationEnded):
+            raise
+        except Exception as exc:
+            raise UnitError(unit.name, f"do_step raised {type(exc).__name__}: {exc}", t) from exc
 
 
 ALGORITHMS = {GaussSeidel.name: GaussSeidel, Jacobi.name: Jacobi}  # the one list of master algorithm names

@@ -218,7 +218,7 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
     inbox, outbox = Connection(read_fd, writable=False), Connection(write_fd, readable=False)
     folder = tempfile.mkdtemp(prefix="payload_")  # under the TMPDIR the parent made for this child
     _limit_memory(int(limit("child_memory_mb")) << 20)
-    runner = None
+    runner = grouped = None
     served = 0
     try:
         kind, payload = inbox.recv()
@@ -233,10 +233,16 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
                 kind, points = inbox.recv()
             except EOFError:
                 return
-            if kind != "run":
+            if kind not in ("run", "run_each"):
                 return
-            for point_id, values in points:
-                row = runner.run(point_id, values)
+            if kind == "run":  # lock-step groups where the system allows (orchestrator.lockstep)
+                from .lockstep import LockstepRunner
+
+                grouped = grouped or LockstepRunner(runner)
+                rows = grouped.rows(points, announce=lambda n: outbox.send(("group", n)))
+            else:  # after a crash or timeout: one by one, so the row names the point that caused it
+                rows = (runner.run(point_id, values) for point_id, values in points)
+            for row in rows:
                 served += 1
                 reason = _recycle_reason(served)
                 if reason:
@@ -245,6 +251,8 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
                 if reason:
                     return
     finally:
+        if grouped is not None:
+            grouped.close()
         if runner is not None:
             runner.close()
         from .units.fmu import EXTRACTED
@@ -256,7 +264,7 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
 # -- the parent side -----------------------------------------------------------------------
 
 MAX_MESSAGE = 64 << 20  # bytes of one message from a child (a row is a few kB)
-_KINDS = ("ready", "error", "row")
+_KINDS = ("ready", "error", "row", "group")  # "group": n rows of one lock-step run follow (orchestrator.lockstep)
 
 
 class _Channel:
@@ -389,6 +397,7 @@ class IsolatedRunner:
         deadline = timeout if timeout is not None else float(limit("timeout_first_seconds"))
         rows: list[dict] = []
         remaining = list(points)
+        mode = "run"  # after a crash or timeout the rest runs one point at a time (no lock-step groups)
         while remaining:
             if self._proc is None or self._proc.poll() is not None:
                 self.close()
@@ -398,35 +407,53 @@ class IsolatedRunner:
                     rows.extend(_row(pid, "failed", problem, time.perf_counter()) for pid, _ in remaining)
                     break
             try:
-                self._outbox.send(("run", remaining))
+                self._outbox.send((mode, remaining))
             except OSError:
                 self.close()
                 continue
-            done = 0
-            for point_id, _ in remaining:
+            done = grouped = 0  # grouped: rows still to come from a lock-step group the child announced
+            while done < len(remaining):
+                point_id = remaining[done][0]
                 started = time.perf_counter()
-                message = self._channel.get(deadline)
-                done += 1
-                if message is None:
+                received = self._channel.get(deadline)
+                if received is None:
                     self.close(force=True)
+                    mode = "run_each"
+                    if grouped:  # not this point's fault for sure: the group's points run again one by one
+                        break
                     rows.append(_row(point_id, "timeout", f"no result within the timeout of {deadline:g} s; "
                                                           "the run was stopped", started))
+                    done += 1
                     break
-                kind, row = message
+                kind, row = received
                 if kind == "eof":
+                    mode = "run_each"
+                    if grouped:  # as for a timeout: which point of the group killed the child is found alone
+                        self.close()
+                        break
                     rows.append(_row(point_id, "crashed", f"the process running this point died "
                                                           f"({self._exit_text()})", started))
                     self.close()
+                    done += 1
                     break
+                if kind == "group" and isinstance(row, int) and row > 0 and not grouped:
+                    grouped = row  # the next `row` rows come from one lock-step run (orchestrator.lockstep)
+                    continue
                 if kind != "row" or not isinstance(row, dict) or row.get("point_id") != point_id:
                     why = row if kind == "junk" else "a message that is not this point's row"
                     self.close(force=True)  # its channel is out of step: trust nothing more from it
+                    mode = "run_each"
+                    if grouped:  # written by some point of the group: found when they run one by one
+                        break
                     rows.append(_row(point_id, "crashed", "the process running this point wrote something "
                                                           f"other than a result on its channel ({why}); it was "
                                                           "replaced", started))
+                    done += 1
                     break
                 recycle = row.pop("recycle", None)
                 rows.append(row)
+                done += 1
+                grouped = max(0, grouped - 1)
                 if recycle:  # the child ended itself (memory or point count): a fresh one goes on
                     self.close()
                     break

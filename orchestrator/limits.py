@@ -50,6 +50,9 @@ LIMITS: dict[str, Limit] = {
     "child_memory_mb": Limit("COSIM_CHILD_MEMORY_MB", 8192, "megabytes of data memory of one child process"),
     "child_rss_mb": Limit("COSIM_CHILD_RSS_MB", 2048, "resident megabytes after which a child is replaced"),
     "child_points": Limit("COSIM_CHILD_POINTS", 5000, "points one child runs before it is replaced"),
+    # lock-step groups in a sweep's child (orchestrator.lockstep)
+    "lockstep_seconds": Limit("COSIM_LOCKSTEP_SECONDS", 0.25, "seconds a lock-step group of points is sized to "
+                              "last (a tiny value turns lock-step off)", integer=False),
     "timeout_floor_seconds": Limit("COSIM_TIMEOUT_FLOOR", 60, "shortest default per-point timeout",
                                    integer=False),
     "timeout_first_seconds": Limit("COSIM_TIMEOUT_FIRST", 600, "default per-point timeout before a point "

@@ -11,6 +11,7 @@ signals to numbers on the fly, so a sweep never holds a whole trace.
 
 from __future__ import annotations
 
+import functools
 from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 import numpy as np
@@ -106,6 +107,15 @@ class TraceRecorder(Observer):
     def step(self, t: float, values: np.ndarray) -> None:
         self._append(t, values)
 
+    def load(self, times: np.ndarray, values: np.ndarray) -> None:
+        """Replace the samples by a whole run's: ``times`` (n,), ``values`` (n, all columns) as ``step`` receives them."""
+        if self._exact is not None:
+            raise ValueError("load() takes numeric columns only")
+        data = np.empty((len(times), len(self._float_columns) + 1))  # row-major as step() fills it: the
+        data[:, 0] = times                                             # reductions then sum in the same order
+        data[:, 1:] = values[:, self._index]
+        self._data, self._n = data, len(times)
+
     def data(self) -> np.ndarray:
         """The samples so far: column 0 is time, then one column per recorded signal."""
         return self._data[: self._n]
@@ -175,12 +185,18 @@ class ObjectiveReducer(Observer):
             flat.extend(columns.index(c) for c in cols)
             self._slices.append(slice(start, len(flat)))
         self._samples = TraceRecorder(columns, [columns[i] for i in flat])
+        # called every step: straight to the recorder's append, not through two method calls
+        self.step = self._samples._append  # type: ignore[method-assign]
 
     def initialized(self, t: float, values: np.ndarray) -> None:
         self._samples.initialized(t, values)
 
     def step(self, t: float, values: np.ndarray) -> None:
         self._samples.step(t, values)
+
+    def load(self, times: np.ndarray, values: np.ndarray) -> None:
+        """Take a whole run's samples at once instead of step by step: ``times`` (n,), ``values`` (n, all columns)."""
+        self._samples.load(times, values)
 
     def results(self) -> dict[str, Any]:
         """Objective name -> value (float, or a numpy array for an array signal)."""
@@ -197,6 +213,13 @@ class ObjectiveReducer(Observer):
         return out
 
 
+@functools.lru_cache(maxsize=512)
+def parsed_expression(text: str) -> Expression:
+    """``Expression(text)``, parsed once per process: a sweep evaluates the same few expressions at every point
+    (parsing costs more than a fast point's reductions).  Expressions are never changed after parsing."""
+    return Expression(text)
+
+
 def evaluate_expressions(objectives: Sequence[ObjectiveSpec], values: Mapping[str, Any]) -> dict[str, Any]:
     """Add the expression objectives to ``values`` (dependencies first).
 
@@ -204,7 +227,7 @@ def evaluate_expressions(objectives: Sequence[ObjectiveSpec], values: Mapping[st
     """
     result = dict(values)
     pending = [o for o in objectives if o.expr]
-    parsed = {o.name: Expression(o.expr) for o in pending}  # type: ignore[arg-type]
+    parsed = {o.name: parsed_expression(o.expr) for o in pending}  # type: ignore[arg-type]
     names = {o.name for o in objectives}
     while pending:
         ready = [o for o in pending if parsed[o.name].names & names <= result.keys()]

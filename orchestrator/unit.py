@@ -258,6 +258,11 @@ class Unit(abc.ABC):
         """
         return lambda: self.get(selection)
 
+    def writer(self, selection: Selection) -> Callable[[Any], None]:
+        """A function setting the selected elements from a 1-D numpy array (or a sequence), for setting them
+        every step (the master's transfers, lock-step runs).  Units may return something faster than ``set``."""
+        return lambda values: self.set(selection, values.tolist() if hasattr(values, "tolist") else values)
+
     @abc.abstractmethod
     def setup(self, start_time: float, stop_time: float | None) -> None:
         """Prepare a run from ``start_time`` (to ``stop_time`` if known)."""

@@ -84,6 +84,7 @@ class Fmi2Unit(FmiInstance):
 
     def do_step(self, t: float, h: float) -> None:
         self.time = t
+        self.generation += 1
         status = self._do_step(self._component, t, h, 1)
         if status == 2 and self._terminated():  # fmi2Discard + fmi2Terminated: the FMU ends the simulation
             end = self._guard("fmi2GetRealStatus", lambda: self._slave.getRealStatus(fmi2LastSuccessfulTime))

@@ -9,7 +9,7 @@ from typing import Any, Callable, Sequence
 from fmpy.fmi3 import FMU3Slave
 
 from ..unit import Selection, SimulationEnded
-from .fmi_instance import FmiInstance, TypeGroup
+from .fmi_instance import FmiInstance, FmiSelection, TypeGroup
 from .fmpy_internals import instance_handle, library
 
 
@@ -68,9 +68,16 @@ class Fmi3Unit(FmiInstance):
             args = (self._component, group.vrs, group.n_vrs, group.values, group.n_values)
         return partial(get, *args), partial(put, *args)
 
+    def select(self, refs: Sequence[Any]) -> FmiSelection:
+        selection = super().select(refs)
+        # decided once here, not at every set: set() is on the stepping loop's hot path
+        structural = {v.name for v in self.description.variables if v.causality == "structuralParameter"}
+        selection.structural = any(r.variable in structural for r in selection.refs)
+        return selection
+
     def set(self, selection: Selection, values: Sequence[Any]) -> None:
         """Set values; structural parameters are set in Configuration Mode, as FMI 3.0 requires."""
-        if not any(self.description.by_name[r.variable].causality == "structuralParameter" for r in selection.refs):
+        if not getattr(selection, "structural", True):
             return super().set(selection, values)
         self._guard("fmi3EnterConfigurationMode", self._slave.enterConfigurationMode)
         try:
@@ -97,6 +104,7 @@ class Fmi3Unit(FmiInstance):
 
     def do_step(self, t: float, h: float) -> None:
         self.time = t
+        self.generation += 1
         status = self._do_step(self._component, t, h, True, self._event_ref, self._terminate_ref,
                                self._early_ref, self._last_time_ref)
         if status > 1:

@@ -73,6 +73,12 @@ class FmiInstance(Unit):
         self.log: deque[str] = deque(maxlen=20)
         self.time: float | None = None
         self._alive = False
+        # Bumped by every call that may change the FMU's values (do_step, set, lifecycle calls through _guard):
+        # a reader whose last read is of the current generation hands out its buffer again without calling
+        # the FMU, since FMI values change only through such calls.  So an output read by a transfer and
+        # again by the probe after the same step costs one get call.
+        self.generation = 0
+        self._readers: dict[tuple, Callable[[], Sequence[Any]]] = {}
 
     # Logging and errors ---------------------------------------------------
 
@@ -98,7 +104,13 @@ class FmiInstance(Unit):
             text += "; FMU log: " + " | ".join(self.log)
         return UnitError(self.name, text, self.time)
 
+    # True while set() and do_step() are the plain FMI calls of this class and its FMI 2.0/3.0 subclasses, so
+    # a writer may fill the set call's buffer itself and reads may be reused; False for Model Exchange units,
+    # whose set() and do_step() do more (restart the solver, integrate, handle events).
+    _plain_calls = True
+
     def _guard(self, call: str, fn: Callable[[], Any]) -> Any:
+        self.generation += 1
         try:
             return fn()
         except UnitError:
@@ -164,19 +176,44 @@ class FmiInstance(Unit):
         sel: FmiSelection = selection  # type: ignore[assignment]
         if not sel.plain:
             return lambda: self.get(sel)
+        shared = self._readers.get(sel.refs)
+        if shared is not None:  # the same elements read elsewhere too (a transfer and the probe): one reader
+            return shared
         group = sel.groups[0]
         read, view, fail = group.read, np.frombuffer(group.values, dtype=group.values._type_), self.fail_status
+        read_at = [-1]  # the generation of the last read
 
         def read_into_view() -> np.ndarray:
+            if read_at[0] == self.generation:
+                return view  # nothing was called since the last read: the FMU's values are the same
             status = read()
             if status > 1:
                 raise fail(self.call_name("Get", group.fmi_type), status)
+            read_at[0] = self.generation if self._plain_calls else -1
             return view  # a numpy view of the buffer the FMU just filled: no copy
 
+        self._readers[sel.refs] = read_into_view
         return read_into_view
+
+    def writer(self, selection: Selection) -> Callable[[Any], None]:
+        sel: FmiSelection = selection  # type: ignore[assignment]
+        if not sel.plain or getattr(sel, "structural", False) or not self._plain_calls:
+            return super().writer(selection)
+        group = sel.groups[0]
+        write, view, fail = group.write, np.frombuffer(group.values, dtype=group.values._type_), self.fail_status
+
+        def write_from_array(values: Any) -> None:
+            view[:] = values  # into the buffer the set call reads: no list, no per-element conversion
+            self.generation += 1
+            status = write()
+            if status > 1:
+                raise fail(self.call_name("Set", group.fmi_type), status)
+
+        return write_from_array
 
     def set(self, selection: Selection, values: Sequence[Any]) -> None:
         sel: FmiSelection = selection  # type: ignore[assignment]
+        self.generation += 1
         if sel.plain:
             sel.groups[0].values[:] = values
         else:
@@ -220,6 +257,7 @@ class FmiInstance(Unit):
         if not self._alive:
             return
         self._alive = False
+        self.generation += 1
         try:
             self._slave.terminate()
         except Exception:

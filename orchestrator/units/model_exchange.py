@@ -96,6 +96,9 @@ class _ModelExchangeStepping:
     ``_get_derivatives`` (fmpy's name differs between versions).
     """
 
+    _plain_calls = False  # its set() and do_step() do more than the FMI calls (see FmiInstance._plain_calls)
+
+
     name: str
     time: float | None
     _slave: Any
