@@ -215,6 +215,8 @@ class Expression:
                 return np.divide(np.asarray(left, dtype=float), right)[()]
             if isinstance(node.op, ast.Pow):
                 return _power(left, right)
+            if isinstance(left, float) or isinstance(right, float):
+                left = np.float64(left)  # numpy floats follow errstate: strict makes 1e308 * 10 an overflow error
             return _BINARY[type(node.op)](left, right)
         if isinstance(node, ast.UnaryOp):
             return _UNARY[type(node.op)](self._eval(node.operand, values))

@@ -47,7 +47,7 @@ def default_folder(spec_path: str | Path) -> Path:
     """Where ``cosim sweep`` writes without ``--out``: ``results/<spec name>`` (the file's stem without a name)."""
     try:
         name = json.loads(Path(spec_path).read_text(encoding="utf-8")).get("name") or Path(spec_path).stem
-    except (OSError, ValueError, AttributeError):
+    except (OSError, ValueError, AttributeError, RecursionError):  # a broken spec: validation reports it next
         name = Path(spec_path).stem
     return Path("results") / re.sub(r"[^A-Za-z0-9_.-]+", "_", str(name))
 

@@ -75,6 +75,20 @@ def test_deep_nesting_gives_a_clean_message(tmp_path, capsys, depth):
     assert "nested more than 64 levels deep" in out or "nested too deeply" in out
 
 
+@pytest.mark.parametrize("command", [["sweep", "--dry-run"], ["sweep"], ["optimize"], ["sensitivity"], ["run"],
+                                     ["inspect"]])
+def test_deep_nesting_gives_a_clean_message_from_every_command(tmp_path, capsys, monkeypatch, command):
+    """Also the commands that read the spec's name for their default results folder before checking it."""
+    monkeypatch.chdir(tmp_path)
+    depth = 100_000  # deeper than Python's recursion limit, wherever the reader is called from
+    text = json.dumps(_base())[:-1] + ', "description": ' + "[" * depth + "]" * depth + "}"
+    code = main([command[0], str(_write(tmp_path, text)), *command[1:]])
+    out = capsys.readouterr()
+    assert code == 2 and "Traceback" not in out.err, out.err
+    assert "nested more than 64 levels deep" in out.err or "nested too deeply" in out.err
+    assert not (tmp_path / "results").exists()
+
+
 def test_too_many_steps_is_refused_and_the_limit_can_be_raised(tmp_path):
     spec = _base()
     spec["experiment"] = {"stop": 1e9, "step": 1e-9}
@@ -136,6 +150,9 @@ def test_repeated_values_in_a_long_list_are_named(tmp_path):
     ("9**9**9 > 1", "too large"),
     ("2**2**40 > 1", "too large"),
     ("g_k ** 1e6 > 1", "too large"),
+    ("g_k * 1e308 * 10 > 1", "too large"),
+    ("1e308 + 1e308 > 1", "too large"),
+    ("-1e308 - 1e308 < 1", "too large"),
     ("g_k // 0 > 1", "division by zero"),
     ("g_k % 0 > 1", "division by zero"),
     ("sqrt(-g_k) > 1", "invalid operation"),
