@@ -7,7 +7,8 @@ in batches of 100 points: what is timed is the parent <-> child round trip per p
 run of one step, the row back, the parent's read), which is where the reader thread with deadlines, the
 child's memory checks and the recycling checks of issue 18 cost something.  Each repetition runs this
 tree and the other one alternately, each in a fresh interpreter with PYTHONPATH set to that tree; the
-figures are medians of µs per point, and the ratio is taken within the same run.
+figures are the median and the fastest run in µs per point (on a loaded machine the fastest run is the
+closest to the cost itself), and the ratio is taken within the same repetition.
 """
 
 from __future__ import annotations
@@ -78,7 +79,8 @@ def main() -> None:
                 times[name].append(measure(tree, spec, args.points))
         ratios = [a / b for a, b in zip(times["this"], times["other"])]
     for name, tree in trees.items():
-        print(f"{name} ({tree}): median {statistics.median(times[name]):.0f} µs per point "
+        print(f"{name} ({tree}): median {statistics.median(times[name]):.0f}, fastest {min(times[name]):.0f} "
+              f"µs per point "
               f"(runs: {', '.join(f'{t:.0f}' for t in times[name])})")
     print(f"this / other: median {statistics.median(ratios):.3f} (per-run ratios: "
           f"{', '.join(f'{r:.3f}' for r in ratios)})")
