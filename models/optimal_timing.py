@@ -37,7 +37,8 @@ current is the motoring ``tau / (R eta k_m)`` or the braking
 sequential convex scheme): each pass re-freezes them at the best timing so
 far, keeps ``s_dot`` within a trust region around it, and its result is kept
 only if the energy unit's exact model, evaluated on the grid (:func:`_energy`),
-improves; otherwise the trust region shrinks.  The first timing is the blend,
+improves; otherwise the trust region shrinks (and the passes stop when the rejected
+timing lies inside the smaller region too: the next pass would return it again).  The first timing is the blend,
 uniformly slowed down to the duration bound: the result is never worse than it
 by that measure, which agrees with a dense evaluation to ~0.05 %.
 
@@ -351,8 +352,7 @@ def plan_optimal_timing(blend: ParabolicBlendTrajectory, model: pin.Model, v_max
         p = np.concatenate([values[k].ravel() for k in names] + [ds, [time_weight]])  # (n, 7).ravel() = vec of (7, n)
         lbx_pass, ubx_pass = lbx.copy(), ubx.copy()
         if math.isfinite(best[0]):  # trust region: s_dot within (1 -/+ radius) of the best timing so far
-            lbx_pass[: n + 1] = np.minimum((1 - radius) ** 2 * best[1], cap)
-            ubx_pass[: n + 1] = np.minimum((1 + radius) ** 2 * best[1], cap)
+            lbx_pass[: n + 1], ubx_pass[: n + 1] = _trust_region(best[1], radius, cap)
         kwargs = dict(x0=x0, p=p, lbx=lbx_pass, ubx=ubx_pass, lbg=lbg, ubg=ubg)
         result = solver(**kwargs)
         status = solver.stats()["return_status"]
@@ -375,13 +375,22 @@ def plan_optimal_timing(blend: ParabolicBlendTrajectory, model: pin.Model, v_max
                 break
         else:  # the model promised more than the true energy gives: a smaller step
             radius /= 2
-            if radius < 1e-3:
+            lower, upper = _trust_region(best[1], radius, cap)
+            if radius < 1e-3 or (np.all(candidate >= lower) and np.all(candidate <= upper)):
+                # the next pass would solve the same convex problem on a smaller region that still
+                # holds this candidate, its optimum there: it would return it and be rejected again
+                # (at a duration bound the path cannot beat, the first pass returns the start itself)
                 break
     b = best[1]
     root = np.sqrt(b)
     t = np.concatenate([[0.0], np.cumsum(2 * ds / np.maximum(root[:-1] + root[1:], 1e-300))])
     return OptimalTiming(blend=blend, s=path.s, b=b, t=t, planned_energy=_energy(path, drive, b),
                          solve_time=time.perf_counter() - start, passes=passes)
+
+
+def _trust_region(centre: np.ndarray, radius: float, cap: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds on b of the trust region: s_dot within (1 -/+ radius) of ``centre``'s, b at most ``cap``."""
+    return np.minimum((1 - radius) ** 2 * centre, cap), np.minimum((1 + radius) ** 2 * centre, cap)
 
 
 def _duration(path: PathData, b: np.ndarray) -> float:
