@@ -5,6 +5,9 @@ The geometric path is the one of the parabolic-blend trajectory
 blends.  Its path parameter ``s`` is the blend's own time, so ``q(s)``,
 ``q'(s)`` and ``q''(s)`` are the blend's position, velocity and acceleration
 (exact, piecewise quadratic), and the blend's timing is ``s_dot = 1``.
+Or the path is given as samples (:class:`models.sampled_path.SampledPath`, a
+cubic spline through them, ``s`` = the samples' time): the same planner re-times
+it, and where the path does not start or end at rest the timing does (``s_dot = 0``).
 
 Timing ``s(t)`` is found with the convex reformulation of D. Verscheure,
 B. Demeulenaere, J. Swevers, J. De Schutter, M. Diehl, "Time-Optimal Path
@@ -46,7 +49,10 @@ Constraints: ``|qd| <= v_max`` (as bounds on ``b``, exact between grid points,
 see the code), ``|qdd| <= a_max`` at both ends of every interval (exact: it
 is linear in ``s`` inside), ``|tau| <= tau_max`` at the start, middle and end
 of every interval (checked on dense sampling by the tests), and optionally
-``duration <= max_duration``.  The solver is IPOPT, shipped with CasADi; the
+``duration <= max_duration``.  On a sampled path (a cubic spline) ``q'`` is
+quadratic and ``q''`` linear inside an interval: the speed and acceleration
+limits then hold at the grid points, between them up to the spline's curvature
+(exactly on a straight line, as the tests check).  The solver is IPOPT, shipped with CasADi; the
 NLP is built once per grid size and recuperation setting and reused with new
 path data (parameters).  The blend's own duration is usually its path's
 minimum time under the speed and acceleration limits, so "at most the blend's
@@ -72,7 +78,10 @@ from orchestrator.unit import Variable
 
 from .motor_gear_energy import RAD_PER_S_TO_RPM
 from .panda_model import FRANKA_DOC_LIMITS, N_JOINTS, cached_model, payload_key
+from .sampled_path import SampledPath
 from .trajectory import ParabolicBlendTrajectory, TrajectoryGenerator, plan_parabolic_blend
+
+JointPath = ParabolicBlendTrajectory | SampledPath  # a geometric path q(s): sample(s) -> (q, q', q'')
 
 NJ = N_JOINTS
 # fractions of the limits the grid constraints use (1: none needed so far, see the module docstring)
@@ -115,7 +124,7 @@ class TimingInfeasible(ValueError):
 # --------------------------------------------------------------------------- path data
 
 
-def _grid(blend: ParabolicBlendTrajectory, n_grid: int) -> np.ndarray:
+def _grid(blend: JointPath, n_grid: int) -> np.ndarray:
     """Grid in the blend's time: every phase boundary, each phase split by its share of ``n_grid``."""
     bounds = np.append(blend.phase_start, blend.duration)
     lengths = np.diff(bounds)
@@ -134,12 +143,12 @@ def _grid(blend: ParabolicBlendTrajectory, n_grid: int) -> np.ndarray:
 
 @dataclass(frozen=True)
 class PathData:
-    """The path on a grid: per interval the start, middle and end values of q, q', the constant q''."""
+    """The path on a grid: per interval the start, middle and end values of q, q', q'' (from inside it)."""
 
     s: np.ndarray  # (N+1,)
     q: np.ndarray  # (N, 3, 7): start, mid, end of each interval
     dq: np.ndarray  # (N, 3, 7)
-    ddq: np.ndarray  # (N, 7)
+    ddq: np.ndarray  # (N, 3, 7)
     m: np.ndarray  # (N, 3, 7) torque coefficients of s_ddot
     c: np.ndarray  # (N, 3, 7) ... of s_dot^2
     g: np.ndarray  # (N, 3, 7) ... constant (gravity)
@@ -149,27 +158,22 @@ class PathData:
         return len(self.s) - 1
 
 
-def path_data(blend: ParabolicBlendTrajectory, model: pin.Model, n_grid: int) -> PathData:
-    """Sample the blend's path on the grid and the torque coefficients there (pinocchio RNEA)."""
+def path_data(blend: JointPath, model: pin.Model, n_grid: int) -> PathData:
+    """Sample the path on the grid and the torque coefficients there (pinocchio RNEA)."""
     s = _grid(blend, n_grid)
     n = len(s) - 1
     data = model.createData()
-    q = np.empty((n, 3, NJ))
-    dq = np.empty((n, 3, NJ))
-    ddq = np.empty((n, NJ))
-    m, c, g = (np.empty((n, 3, NJ)) for _ in range(3))
+    q, dq, ddq, m, c, g = (np.empty((n, 3, NJ)) for _ in range(6))
     zero = np.zeros(NJ)
     for k in range(n):
-        mid = 0.5 * (s[k] + s[k + 1])
-        ddq[k] = blend.sample(mid)[2]  # constant inside the interval (phase boundaries are grid points)
-        for p, point in enumerate((s[k], mid, s[k + 1])):
-            qk, dqk, _ = blend.sample(point)
-            if point >= blend.duration:  # sample() rests after the end: q' there is the limit from inside
-                qk, dqk = blend.waypoints[-1], np.zeros(NJ)
-            q[k, p], dq[k, p] = qk, dqk
-            g[k, p] = pin.rnea(model, data, qk, zero, zero)
-            m[k, p] = pin.rnea(model, data, qk, zero, dqk) - g[k, p]
-            c[k, p] = pin.rnea(model, data, qk, dqk, ddq[k]) - g[k, p]
+        # the ends a hair inside the interval: the values from inside it (the blend's q'' jumps at
+        # phase boundaries, which are grid points; sample() rests before 0 and after the end)
+        points = (np.nextafter(s[k], np.inf), 0.5 * (s[k] + s[k + 1]), np.nextafter(s[k + 1], -np.inf))
+        for p, point in enumerate(points):
+            q[k, p], dq[k, p], ddq[k, p] = blend.sample(point)
+            g[k, p] = pin.rnea(model, data, q[k, p], zero, zero)
+            m[k, p] = pin.rnea(model, data, q[k, p], zero, dq[k, p]) - g[k, p]
+            c[k, p] = pin.rnea(model, data, q[k, p], dq[k, p], ddq[k, p]) - g[k, p]
     return PathData(s=s, q=q, dq=dq, ddq=ddq, m=m, c=c, g=g)
 
 
@@ -183,7 +187,7 @@ def _nlp(n: int, recuperation: bool):
     c = ca.SX.sym("c", n + 1)  # c <= sqrt(b) (second-order cone, tight at the optimum)
     e = ca.SX.sym("e", NJ, n)  # energy per joint and interval (epigraph variables)
     P = {name: ca.SX.sym(name, NJ, n) for name in
-         ("dq0", "dq1", "dq2", "ddq", "m0", "m1", "m2", "c0", "c1", "c2", "g0", "g1", "g2",
+         ("dq0", "dq1", "dq2", "ddq0", "ddq2", "m0", "m1", "m2", "c0", "c1", "c2", "g0", "g1", "g2",
           "w_motoring", "w_braking", "inv_eta", "eta")}
     ds = ca.SX.sym("ds", n)
     time_weight = ca.SX.sym("time_weight")
@@ -202,15 +206,15 @@ def _nlp(n: int, recuperation: bool):
     mech = tau1 * P["dq1"] * row(ds.T)  # integral of tau * qd dt = tau q' ds
     g_motoring = e - (P["w_motoring"] * copper + P["inv_eta"] * mech)
     g_braking = e - (P["w_braking"] * copper + P["eta"] * mech)
-    acc0 = P["dq0"] * row(a) + P["ddq"] * row(b0)
-    acc2 = P["dq2"] * row(a) + P["ddq"] * row(b1)
+    acc0 = P["dq0"] * row(a) + P["ddq0"] * row(b0)
+    acc2 = P["dq2"] * row(a) + P["ddq2"] * row(b1)
     cone = c**2 - b
     g = ca.vertcat(ca.vec(g_motoring), ca.vec(g_braking), ca.vec(acc0), ca.vec(acc2),
                    ca.vec(tau0), ca.vec(tau1), ca.vec(tau2), cone, duration)
     x = ca.vertcat(b, c, ca.vec(e))
     objective = ca.sum1(ca.sum2(e)) + time_weight * duration
     solver = ca.nlpsol("timing", "ipopt", {"x": x, "p": params, "f": objective, "g": g},
-                       {"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False,
+                       {"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False, "record_time": True,
                         "ipopt.tol": 1e-8, "ipopt.max_iter": 500, "ipopt.mu_strategy": "adaptive"})
     sizes = {"n": n, "x": x.numel(), "g": g.numel()}
     return solver, tuple(P), sizes
@@ -221,15 +225,18 @@ def _nlp(n: int, recuperation: bool):
 
 @dataclass(frozen=True)
 class OptimalTiming:
-    """A timing ``s(t)`` of the blend's path; ``sample`` like :class:`ParabolicBlendTrajectory`."""
+    """A timing ``s(t)`` of a path (the blend's or a sampled one); ``sample`` like :class:`ParabolicBlendTrajectory`."""
 
-    blend: ParabolicBlendTrajectory
+    blend: JointPath
     s: np.ndarray  # grid (N+1), in the blend's time
     b: np.ndarray  # s_dot^2 at the grid points
     t: np.ndarray  # time at the grid points (t[0] = 0)
     planned_energy: float  # the optimised energy bound (J)
     solve_time: float  # s, all passes, path data included
     passes: int
+    # CasADi's own counters summed over the passes: IPOPT iterations, its CPU / wall time (t_proc_total,
+    # t_wall_total) and the part of it in CasADi's function evaluations (t_proc_nlp_*)
+    solver_stats: dict = field(default_factory=dict, compare=False)
     _times: list = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -278,13 +285,16 @@ def _braking(path: PathData, b: np.ndarray) -> np.ndarray:
     return tau * path.dq[:, 1] < 0.0
 
 
-def plan_optimal_timing(blend: ParabolicBlendTrajectory, model: pin.Model, v_max, a_max, tau_max,
+def plan_optimal_timing(blend: JointPath, model: pin.Model, v_max, a_max, tau_max,
                         drive: DriveParameters | None = None, max_duration: float | None = None,
                         time_weight: float = 0.0, n_grid: int = DEFAULT_GRID,
                         max_passes: int = 4) -> OptimalTiming:
     """The timing of ``blend``'s path minimising energy + ``time_weight`` (J/s) x duration,
     with the duration at most ``max_duration`` (s; None: no bound, then ``time_weight`` > 0).
 
+    ``blend``: the path, a :class:`ParabolicBlendTrajectory` or a
+    :class:`models.sampled_path.SampledPath`; where the path does not start (end)
+    at rest (``q' != 0``), the timing does (``s_dot = 0`` there).
     ``v_max``, ``a_max``, ``tau_max``: per-joint limits.  Raises
     :class:`TimingInfeasible` when the limits (and the duration) cannot be met,
     ValueError for bad arguments, RuntimeError when IPOPT fails otherwise.
@@ -319,6 +329,10 @@ def plan_optimal_timing(blend: ParabolicBlendTrajectory, model: pin.Model, v_max
     with np.errstate(divide="ignore"):
         b_cap = np.min((v_max * MARGINS["velocity"]) ** 2 / dq_peak, axis=1)  # per interval
     ubx[: n + 1] = np.minimum(np.append(b_cap, np.inf), np.append(np.inf, b_cap))
+    # at rest at both ends: the blend's path is (q' = 0 there), a sampled one may not be: then s_dot = 0
+    moving = 1e-9 * np.max(np.abs(path.dq))
+    ubx[0] = 0.0 if np.max(np.abs(path.dq[0, 0])) > moving else ubx[0]
+    ubx[n] = 0.0 if np.max(np.abs(path.dq[-1, 2])) > moving else ubx[n]
     col = lambda v, k: np.tile(v, k)  # noqa: E731 - per-joint bounds for k columns (column-major vec)
     acc_bound = col(a_max * MARGINS["acceleration"], n)
     tau_bound = col(tau_max * MARGINS["torque"], n)
@@ -338,13 +352,14 @@ def plan_optimal_timing(blend: ParabolicBlendTrajectory, model: pin.Model, v_max
     best = (_energy(path, drive, b) + time_weight * _duration(path, b), b) if feasible else (math.inf, b)
     x0 = np.concatenate([b, np.sqrt(b), np.zeros(NJ * n)])
     radius, passes, result = TRUST_RADIUS, 0, None
+    solver_stats = {"iterations": 0, "t_proc_total": 0.0, "t_wall_total": 0.0, "t_proc_functions": 0.0}
     for passes in range(1, max_passes + 1):
         # the convex model at the current timing: efficiencies at its speeds, copper loss of the
         # current its power directions need (motoring 1/eta^2, braking eta^2)
         speed = np.sqrt(0.5 * (b[:-1] + b[1:]))
         eta = drive.efficiency(path.dq[:, 1, :] * speed[:, None])  # (n, 7)
         w_copper = np.where(_braking(path, b), w * eta**2, w / eta**2)
-        values = {"dq0": path.dq[:, 0], "dq1": path.dq[:, 1], "dq2": path.dq[:, 2], "ddq": path.ddq,
+        values = {"dq0": path.dq[:, 0], "dq1": path.dq[:, 1], "dq2": path.dq[:, 2], "ddq0": path.ddq[:, 0], "ddq2": path.ddq[:, 2],
                   "m0": path.m[:, 0], "m1": path.m[:, 1], "m2": path.m[:, 2],
                   "c0": path.c[:, 0], "c1": path.c[:, 1], "c2": path.c[:, 2],
                   "g0": path.g[:, 0], "g1": path.g[:, 1], "g2": path.g[:, 2],
@@ -355,6 +370,7 @@ def plan_optimal_timing(blend: ParabolicBlendTrajectory, model: pin.Model, v_max
             lbx_pass[: n + 1], ubx_pass[: n + 1] = _trust_region(best[1], radius, cap)
         kwargs = dict(x0=x0, p=p, lbx=lbx_pass, ubx=ubx_pass, lbg=lbg, ubg=ubg)
         result = solver(**kwargs)
+        _add_stats(solver_stats, solver.stats())
         status = solver.stats()["return_status"]
         if not solver.stats()["success"]:
             if status in ("Infeasible_Problem_Detected", "Restoration_Failed") and not math.isfinite(best[0]):
@@ -385,7 +401,14 @@ def plan_optimal_timing(blend: ParabolicBlendTrajectory, model: pin.Model, v_max
     root = np.sqrt(b)
     t = np.concatenate([[0.0], np.cumsum(2 * ds / np.maximum(root[:-1] + root[1:], 1e-300))])
     return OptimalTiming(blend=blend, s=path.s, b=b, t=t, planned_energy=_energy(path, drive, b),
-                         solve_time=time.perf_counter() - start, passes=passes)
+                         solve_time=time.perf_counter() - start, passes=passes, solver_stats=solver_stats)
+
+
+def _add_stats(total: dict, stats: dict) -> None:
+    total["iterations"] += int(stats.get("iter_count", 0))
+    for key in ("t_proc_total", "t_wall_total"):
+        total[key] += float(stats.get(key, 0.0))
+    total["t_proc_functions"] += sum(float(v) for k, v in stats.items() if k.startswith("t_proc_nlp_"))
 
 
 def _trust_region(centre: np.ndarray, radius: float, cap: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -415,7 +438,7 @@ def _within_limits(path: PathData, b: np.ndarray, cap: np.ndarray, a_max: np.nda
         return False
     a = (np.diff(b) / (2 * np.diff(path.s)))[:, None]
     ends = ((0, b[:-1]), (2, b[1:]))
-    if any(np.any(np.abs(path.dq[:, k] * a + path.ddq * bk[:, None]) > a_max * tol) for k, bk in ends):
+    if any(np.any(np.abs(path.dq[:, k] * a + path.ddq[:, k] * bk[:, None]) > a_max * tol) for k, bk in ends):
         return False
     points = ((0, b[:-1]), (1, 0.5 * (b[:-1] + b[1:])), (2, b[1:]))
     return not any(np.any(np.abs(path.m[:, k] * a + path.c[:, k] * bk[:, None] + path.g[:, k]) > tau_max * tol)
@@ -444,6 +467,9 @@ class OptimalTimingTrajectory(TrajectoryGenerator):
     parabolic blend uniformly slowed down to the duration bound.  Outputs
     added: ``blend_duration`` (the full-speed blend's), ``planned_energy`` (the
     energy on the planning grid, J) and ``solve_time`` (s).
+    ``path_file``: a path given as samples instead (a table as ``cosim run --out``
+    writes it, e.g. a recorded ``traj.q_ref``; see :class:`models.sampled_path.SampledPath`):
+    the waypoints are then not used, and "the blend" above means the samples' own timing.
     An infeasible timing (limits, bound) raises :class:`TimingInfeasible`: the run fails with its message.
     """
 
@@ -475,12 +501,21 @@ class OptimalTimingTrajectory(TrajectoryGenerator):
         Variable("optimize", "parameter", type="Boolean", start=True, variability="fixed",
                  description="false: play the reference instead, the parabolic blend uniformly slowed down to the "
                              "duration bound (limits v_max/f, a_max/f^2), for comparisons at the same duration"),
-        Variable("blend_duration", "output", unit="s", start=0.0, description="duration of the parabolic blend"),
+        Variable("path_file", "parameter", type="String", start="", variability="fixed",
+                 description="a path given as samples instead of the waypoints: a table (Parquet/CSV, as cosim run "
+                             "--out writes) with 'time' and <path_columns>[1..7] (URDF rad); relative to the "
+                             "working directory; '' = the waypoints' parabolic blend"),
+        Variable("path_columns", "parameter", type="String", start="traj.q_ref", variability="fixed",
+                 description="the columns of path_file holding the joint positions: <path_columns>[1] .. [7]"),
+        Variable("blend_duration", "output", unit="s", start=0.0,
+                 description="duration of the parabolic blend (of the samples' own timing with path_file)"),
         Variable("planned_energy", "output", unit="J", start=0.0, description="electric energy of the planned timing on the planning grid (drive model, midpoint rule)"),
         Variable("solve_time", "output", unit="s", start=0.0, description="time spent planning (path data + IPOPT)"),
     )
 
     def plan(self, waypoints: np.ndarray):
+        if self.path_file:
+            return self._plan_sampled(SampledPath.from_table(self.path_file, self.path_columns))
         blend = super().plan(waypoints)
         bounds = [float(self.max_duration) if self.max_duration > 0 else math.inf,
                   float(self.max_duration_factor) * blend.duration if self.max_duration_factor > 0 else math.inf]
@@ -500,6 +535,25 @@ class OptimalTimingTrajectory(TrajectoryGenerator):
                                      n_grid=int(self.n_grid))
         self.planned_energy = timing.planned_energy
         self.solve_time = timing.solve_time
+        return timing
+
+    def _plan_sampled(self, path: SampledPath):
+        """Re-time a sampled path; the reference (optimize = false) is its own timing slowed down to the bound."""
+        bounds = [float(self.max_duration) if self.max_duration > 0 else math.inf,
+                  float(self.max_duration_factor) * path.duration if self.max_duration_factor > 0 else math.inf]
+        self.blend_duration = path.duration
+        model = cached_model(*payload_key(self.payload_mass, self.payload_com, self.payload_inertia))
+        if not self.optimize:
+            f = max(1.0, min(bounds) / path.duration) if math.isfinite(min(bounds)) else 1.0
+            data = path_data(path, model, int(self.n_grid))
+            b = np.full(data.n + 1, 1 / f**2)
+            self.planned_energy, self.solve_time = _energy(data, self._drive(), b), 0.0
+            return OptimalTiming(path, data.s, b, data.s * f, self.planned_energy, 0.0, 0)
+        timing = plan_optimal_timing(path, model, self.v_max, self.a_max, self.tau_max, self._drive(),
+                                     time_weight=float(self.time_weight),
+                                     max_duration=min(bounds) if math.isfinite(min(bounds)) else None,
+                                     n_grid=int(self.n_grid))
+        self.planned_energy, self.solve_time = timing.planned_energy, timing.solve_time
         return timing
 
     def _drive(self) -> DriveParameters:
