@@ -168,5 +168,5 @@ def test_study_specs_are_up_to_date_and_validate():
     for name, raw in {"spec.json": make_specs.main_study(base), "spec_tradeoff.json": make_specs.tradeoff(base)}.items():
         assert json.loads((folder / name).read_text()) == raw, f"{name} is stale: run make_specs.py"
         assert list(build_system(load_spec(folder / name)).order) == ["traj", "robot", "energy"]
-    assert len(DesignSpace.from_spec(load_spec(folder / "spec.json"))) == 7 * 11 * 2
+    assert len(DesignSpace.from_spec(load_spec(folder / "spec.json"))) == 13 * 21 * 2
     assert len(DesignSpace.from_spec(load_spec(folder / "spec_tradeoff.json"))) == 9 * 8 * 2
