@@ -20,7 +20,9 @@ Anything unusual makes the points run one by one instead, so a point's row
 never depends on its neighbours: a unit error, an exception, a unit ending the
 simulation, a twin refusing the rows (:class:`~orchestrator.units.python_batch.NotBatchable`).
 Lock-step is used only where it pays and cannot change a result: no traces
-recorded, only numeric probes, and at least one unit with a twin.
+recorded, only numeric probes, Real connections, and at least one unit with
+a twin.  An FMU's outputs that no objective needs before a point's end (only
+``final`` reductions) are read at that point's last sample only.
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ from .limits import limit
 from .observers import ObjectiveReducer, evaluate_expressions, flatten_objectives
 from .system import Assignment, Connection, System
 from .unit import NUMERIC_TYPES, Selection, Unit
+from .units.fmi_instance import FmiInstance
 from .units.python import PythonUnitType
 from .units.python_batch import NotBatchable, PythonBatchUnit, batch_class_of
 
@@ -83,6 +86,10 @@ class InstanceBatch:
         for k in self._active_list:
             out[k] = readers[k]()
         return out
+
+    def get_rows(self, selection: tuple[list[Selection], list[Any], list[Any]], rows: list[int]) -> np.ndarray:
+        readers = selection[1]
+        return np.array([readers[k]() for k in rows], dtype=float).reshape(len(rows), len(selection[0][0]))
 
     def set(self, selection: tuple[list[Selection], list[Any], list[Any]], values: np.ndarray) -> None:
         setters = selection[2]
@@ -207,15 +214,18 @@ def _transfers(batches: Mapping[str, Any], connections: Sequence[Connection]) ->
 
 
 class _BatchProbe:
-    """Every probed scalar of every row: ``read()`` gives a (K, columns) array in :class:`Probe`'s column order."""
+    """Probed scalars of every row: ``read()`` gives a (K, columns) array in :class:`Probe`'s column order.
 
-    def __init__(self, system: System, batches: Mapping[str, Any], columns: Sequence[str]):
+    ``columns`` are all probe columns; only those in ``keep`` are read (the others stay 0).
+    """
+
+    def __init__(self, system: System, batches: Mapping[str, Any], columns: Sequence[str], keep: set[str]):
         index = {c: i for i, c in enumerate(columns)}
         per_unit: dict[str, tuple[list, list[int]]] = {}
         for signal in system.probes:
             for ref, column in zip(signal.refs, signal.columns):
                 refs, where = per_unit.setdefault(signal.unit, ([], []))
-                if column in index and index[column] not in where:
+                if column in index and column in keep and index[column] not in where:
                     refs.append(ref)
                     where.append(index[column])
         self._reads = [(batches[name], batches[name].select(refs), np.array(where))
@@ -223,10 +233,31 @@ class _BatchProbe:
         self.width = len(columns)
 
     def read(self, rows: int) -> np.ndarray:
-        values = np.empty((rows, self.width))
+        values = np.zeros((rows, self.width))
         for batch, selection, where in self._reads:
             values[:, where] = batch.get(selection)
         return values
+
+    def fill(self, values: np.ndarray, rows: np.ndarray) -> None:
+        """Read this probe's columns of ``rows`` only, into ``values`` (a sample already taken)."""
+        for batch, selection, where in self._reads:
+            values[np.ix_(rows, where)] = batch.get_rows(selection, rows.tolist())
+
+
+def _end_only_columns(system: System, batches: Mapping[str, Any], columns: Sequence[str]) -> set[str]:
+    """Columns of FMU instances that no objective needs before a point's end: read only then.
+
+    A column only reduced by ``final`` (or ``initial``: the first sample is read whole) or not used at all
+    needs no sample but the last; an FMU's get has no side effect, so reading it then gives the same value
+    (a Python unit's get may compute its outputs, so Python units are read every step).
+    """
+    needed = {system.spec.experiment.stop_when} if system.spec.experiment.stop_when else set()
+    for o in system.spec.objectives:
+        if o.signal and o.reduce not in ("final", "initial"):
+            needed.update(_columns_of(system, o.signal))
+    fmu_units = {name for name, batch in batches.items()
+                 if isinstance(batch, InstanceBatch) and isinstance(batch.units[0], FmiInstance)}
+    return {c for s in system.probes if s.unit in fmu_units for c in s.columns if c not in needed} & set(columns)
 
 
 def run_lockstep(system: System, points: Sequence[Sequence[Assignment]], batches: Mapping[str, Any]) -> list[RunResult]:
@@ -254,7 +285,9 @@ def run_lockstep(system: System, points: Sequence[Sequence[Assignment]], batches
     stop_column = columns.index(exp.stop_when) if exp.stop_when else None
     n_steps = step_count(exp.start, exp.stop, exp.step)
     start, h, last = exp.start, exp.step, n_steps - 1
+    end_probe = wiring.end_probe
     samples = [probe.read(rows)]
+    end_probe.fill(samples[0], np.arange(rows))
     times = [exp.start]
     active = np.arange(n)
     ends = np.full(n, -1)  # per point: the index of its last sample
@@ -270,10 +303,13 @@ def run_lockstep(system: System, points: Sequence[Sequence[Assignment]], batches
             done = values[active, stop_column] != 0
             if done.any():
                 ends[active[done]] = k + 1
+                end_probe.fill(values, active[done])  # their last sample: now the end-only columns too
                 active = active[~done]
                 if not len(active):
                     break
                 _set_active(batches, active)
+    if len(active) and ends[active[0]] < 0:  # still running at the stop time: the last sample is theirs
+        end_probe.fill(samples[-1], active)
     ends[ends < 0] = len(samples) - 1
     data = np.stack(samples)  # (samples, rows, columns)
     t_all = np.array(times)
@@ -325,7 +361,9 @@ class _Wiring:
         self.into = [(batches[name], _transfers(batches, into.get(name, []))) for name in system.order]
         self.after_init = _transfers(batches, system.init_order)
         self.columns = probe_columns(system)
-        self.probe = _BatchProbe(system, batches, self.columns)
+        end_only = _end_only_columns(system, batches, self.columns)
+        self.probe = _BatchProbe(system, batches, self.columns, set(self.columns) - end_only)
+        self.end_probe = _BatchProbe(system, batches, self.columns, end_only)
         self.step = _plan(system, batches)
         self.reducer = ObjectiveReducer(self.columns, [(o, _columns_of(system, o.signal))
                                                        for o in system.spec.objectives if o.signal])

@@ -106,6 +106,10 @@ class PythonBatchUnit:
                 i += n
         return out
 
+    def get_rows(self, selection: Selection, rows: list[int]) -> np.ndarray:
+        """The selected elements of ``rows`` only, (len(rows), n) floats."""
+        return self.get(selection)[rows]
+
     def set(self, selection: Selection, values: np.ndarray) -> None:
         i = 0
         for name, part, n in selection.runs:  # type: ignore[attr-defined]
