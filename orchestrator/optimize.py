@@ -53,6 +53,7 @@ from typing import Any, Mapping, Sequence, TextIO
 
 import numpy as np
 
+from .driver import check_results_folder, finish_metadata, now_utc, package_versions, run_metadata, say
 from .errors import UserError
 from .problems import Problem, SpecError
 from .table_columns import TAIL_COLUMNS
@@ -368,7 +369,8 @@ class Optimization:
                                      "parameters", "add parameters with ranges or value lists")])
         self.out, self.resume = Path(out), resume
         self.store = ResultsStore(self.out)
-        previous = self.store.metadata() if resume else None
+        previous = check_results_folder(self.store, resume, self.spec.digest, "optimization",
+                                        "continue that optimisation", OptimizeError)
         stored = (previous or {}).get("optimize", {})
         given = {"budget": budget, "sampler": sampler, "batch": batch, "seed": seed, "objectives": objectives}
         for key in ("sampler", "batch", "seed", "objectives"):  # a resume replays the stored run: these must not change
@@ -387,24 +389,11 @@ class Optimization:
                             for i, text in enumerate(self.settings.constraints)]
         self.workers, self.scheduler, self.timeout = workers or os.cpu_count() or 1, scheduler, timeout
         self.quiet, self.progress_stream = quiet, progress
-        self._check_folder(previous)
         self.payload = make_payload(self.system)
         self._outcomes: dict[tuple, tuple] = {}  # (point id, status) -> _outcome: each row is read once
 
-    def _check_folder(self, previous: dict[str, Any] | None) -> None:
-        if self.resume:
-            if previous is not None and previous.get("spec_digest") != self.spec.digest:
-                raise OptimizeError(f"{self.out} holds results of a different spec; use another --out, or run "
-                                    "without --resume into an empty folder")
-            if previous is not None and previous.get("kind") != "optimization":
-                raise OptimizeError(f"{self.out} holds a {previous.get('kind', 'sweep')}, not an optimisation")
-        elif self.store.has_rows():
-            raise OptimizeError(f"{self.out} already holds results; add --resume to continue that optimisation, "
-                                "or choose another --out")
-
     def _say(self, text: str) -> None:
-        if not self.quiet:
-            print(text, file=self.progress_stream or sys.stderr, flush=True)
+        say(text, self.quiet, self.progress_stream)
 
     # -- rows and trials ------------------------------------------------------------
     def _table_row(self, values: dict[str, Any], row: dict[str, Any], trial: int, batch: int) -> dict[str, Any]:
@@ -459,7 +448,6 @@ class Optimization:
         import optuna
 
         from .evaluator import ClusterError, Evaluator, dask_client
-        from .sweep import now_utc
 
         optuna.logging.set_verbosity(optuna.logging.WARNING)
         started = now_utc()
@@ -575,47 +563,16 @@ class Optimization:
         return not_ok, len(front), hypervolume(front)
 
     def _metadata(self, started: str, scheduler: str, n_workers: int) -> dict[str, Any]:
-        import socket
-
-        from .sweep import user_name, package_versions
-        from .units.fmu import FmuUnitType
-
-        previous = self.store.metadata() or {}
         info = {"started": started, "scheduler": scheduler, "workers": n_workers, "timeout": self.timeout,
                 "budget": self.settings.budget}
-        return {
-            "kind": "optimization", "optimize": asdict(self.settings),
-            "spec_path": str(Path(self.spec.path).resolve()), "spec_digest": self.spec.digest, "spec": self.spec.raw,
-            "fmu_checksums": {name: su.unit_type.digest for name, su in self.system.units.items()
-                              if isinstance(su.unit_type, FmuUnitType)},
-            "packages": {**package_versions(), **_versions("optuna")}, "host": socket.gethostname(), "user": user_name(),
-            "points": self.settings.budget, "design_method": f"optimize ({self.settings.sampler})",
-            "started": previous.get("started", started), "runs": previous.get("runs", []) + [info],
-            "ended": None, "counts": previous.get("counts"),
-        }
+        return run_metadata(self.store, self.system, info, kind="optimization", optimize=asdict(self.settings),
+                            packages=package_versions("optuna"), points=self.settings.budget,
+                            design_method=f"optimize ({self.settings.sampler})")
 
     def _finish(self) -> dict[str, int]:
-        from .sweep import now_utc
-
         counts = self.store.compact()  # rows stay in the order they were evaluated
-        meta = self.store.metadata() or {}
-        meta.update(ended=now_utc(), counts=counts)
-        if meta.get("runs"):
-            meta["runs"][-1]["ended"] = meta["ended"]
-        self.store.write_metadata(meta)
+        finish_metadata(self.store, counts)
         return counts
-
-
-def _versions(*names: str) -> dict[str, str]:
-    from importlib import metadata
-
-    out = {}
-    for name in names:
-        try:
-            out[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            pass
-    return out
 
 
 def optimize(spec_path: str | Path, out: str | Path, **options: Any) -> "Any":

@@ -30,11 +30,9 @@ evaluates the points on Dask:
 from __future__ import annotations
 
 import collections
-import getpass
 import itertools
 import math
 import os
-import platform
 import shutil
 import socket
 import statistics
@@ -42,14 +40,13 @@ import sys
 import tempfile
 import threading
 import time
-from datetime import datetime, timezone
-from importlib import metadata as importlib_metadata
 from pathlib import Path
 from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any, Iterable, Iterator, Sequence, TextIO
 
 from . import limits
 from .design import DesignSpace, Point
+from .driver import check_results_folder, finish_metadata, now_utc, run_metadata, say
 from .folder_lock import FolderLock
 from .unit_checksums import changed_units, unit_checksums
 from .errors import UserError
@@ -60,7 +57,6 @@ from .table_columns import TAIL_COLUMNS
 if TYPE_CHECKING:
     import pandas as pd
 
-PACKAGES = ("cosim", "fmpy", "dask", "distributed", "numpy", "pandas", "pyarrow", "scipy")
 
 
 class SweepError(UserError):
@@ -195,21 +191,6 @@ def _batched(points: Iterable[Point], size: int) -> Iterator[list[Point]]:
         yield batch
 
 
-def package_versions() -> dict[str, str]:
-    versions = {"python": platform.python_version()}
-    for name in PACKAGES:
-        try:
-            versions[name] = importlib_metadata.version(name)
-        except importlib_metadata.PackageNotFoundError:
-            pass
-    return versions
-
-
-def now_utc() -> str:
-    """The current UTC time as ISO 8601 text (seconds), as the metadata records it."""
-    return datetime.now(timezone.utc).isoformat(timespec="seconds")
-
-
 TIMEOUT_FACTOR = 50  # a point may take this many times the median measured point time (default timeout)
 
 
@@ -281,12 +262,9 @@ class Sweep:
         self.payload = make_payload(self.system)  # FMU bytes read now: workers never open these paths
 
     def _check_folder(self) -> None:
-        previous = self.store.metadata()
+        previous = check_results_folder(self.store, self.resume, self.spec.digest, "sweep", "finish that sweep",
+                                        SweepError)
         if self.resume:
-            if previous is not None and previous.get("spec_digest") != self.spec.digest:
-                raise SweepError(f"{self.out} holds results of a different spec (digest "
-                                 f"{str(previous.get('spec_digest'))[:12]}…, this one {self.spec.digest[:12]}…); "
-                                 "use another --out, or run without --resume into an empty folder")
             changed = self._changed_units(previous or {})
             if changed and not self.recompute:
                 raise SweepError(f"{self.out} holds results of other unit files than the spec names now ("
@@ -295,9 +273,6 @@ class Sweep:
                                  "and compute every point again")
             if changed:
                 self.store.discard_rows()
-        elif self.store.has_rows():
-            raise SweepError(f"{self.out} already holds results; add --resume to finish that sweep, "
-                             "or choose another --out")
 
     def _changed_units(self, previous: dict[str, Any]) -> list[str]:
         """Units whose content differs from the checksums stored with the rows."""
@@ -308,23 +283,11 @@ class Sweep:
         return changed_units(stored, self.checksums)
 
     def _say(self, text: str) -> None:
-        if not self.quiet:
-            print(text, file=self.progress_stream or sys.stderr, flush=True)
+        say(text, self.quiet, self.progress_stream)
 
-    def _metadata(self, started: str, client_info: dict[str, Any]) -> dict[str, Any]:
-        from .units.fmu import FmuUnitType
-
-        previous = self.store.metadata() or {}
-        return {
-            "spec_path": str(Path(self.spec.path).resolve()), "spec_digest": self.spec.digest, "spec": self.spec.raw,
-            "fmu_checksums": {name: su.unit_type.digest for name, su in self.system.units.items()
-                              if isinstance(su.unit_type, FmuUnitType)},
-            "unit_checksums": self.checksums,
-            "packages": package_versions(), "host": socket.gethostname(), "user": user_name(),
-            "points": len(self.space), "design_method": self.space.method,
-            "started": previous.get("started", started), "runs": previous.get("runs", []) + [client_info],
-            "ended": None, "counts": previous.get("counts"),
-        }
+    def _metadata(self, client_info: dict[str, Any]) -> dict[str, Any]:
+        return run_metadata(self.store, self.system, client_info, unit_checksums=self.checksums,
+                            points=len(self.space), design_method=self.space.method)
 
     def run(self) -> pd.DataFrame:
         """Evaluate every missing point; returns the whole table (every point once, in design order).
@@ -374,7 +337,7 @@ class Sweep:
                 info = {"started": started, "scheduler": client.scheduler.address, "workers": n_workers,
                         "timeout": self.timeout}
                 with results_writes(self.out):
-                    self.store.write_metadata(self._metadata(started, info))
+                    self.store.write_metadata(self._metadata(info))
                 self._say(f"cosim sweep {self.spec.name}: {total} points ({todo} to run) on {n_workers} "
                           f"worker(s); dashboard: {link}; results: {self.out}")
                 self._evaluate(client, done, todo, n_workers)
@@ -388,11 +351,7 @@ class Sweep:
     def _finish(self) -> dict[str, int]:
         with results_writes(self.out):  # a full disk during the final merge loses nothing (see compact)
             counts = self.store.compact(order=(p.id for p in self.space), csv=self.csv)
-            meta = self.store.metadata() or {}
-            meta.update(ended=now_utc(), counts=counts)
-            if meta.get("runs"):
-                meta["runs"][-1]["ended"] = meta["ended"]
-            self.store.write_metadata(meta)
+            finish_metadata(self.store, counts)
         return counts
 
     def _evaluate(self, client: Any, done: set[str], todo: int, n_workers: int) -> None:
@@ -491,14 +450,6 @@ def check_scheduler_address(address: str) -> None:
     except (ValueError, TypeError) as exc:
         raise SweepError(f"--scheduler '{address}' is not a Dask scheduler address ({exc}); write it as "
                          "tcp://HOST:PORT, as `dask scheduler` prints it, e.g. tcp://127.0.0.1:8786") from None
-
-
-def user_name() -> str:
-    """The login name for the metadata, or '' when the system cannot tell."""
-    try:
-        return getpass.getuser()
-    except Exception:
-        return ""
 
 
 def sweep(spec_path: str | Path, workers: int | None = None, out: str | Path | None = None,

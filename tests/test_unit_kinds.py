@@ -156,3 +156,12 @@ def test_a_field_of_another_kind_is_reported_naming_the_kinds_that_take_it(tmp_p
         assert "$.units.g.columns" not in err
     finally:
         unregister_unit_kind("gadget")
+
+
+def test_an_ssp_export_refuses_a_plug_in_kind_by_name(tmp_path, capsys, signal_kind):
+    spec = tmp_path / "spec.json"
+    spec.write_text(json.dumps({"units": {"source": {"signal": "sine"}}, "experiment": {"stop": 1, "step": 0.1}}))
+    assert main(["export", str(spec), "-o", str(tmp_path / "x.ssp")]) == errors.EXIT_USAGE
+    err = capsys.readouterr().err
+    assert "$.units.source: a signal unit cannot be exported to an SSP" in err and "Traceback" not in err
+    assert not (tmp_path / "x.ssp").exists()

@@ -61,13 +61,15 @@ def _number(value: Any) -> str:
 def export_ssp(system: System, out: str | Path, spec_copy: bool = True) -> Path:
     """Write ``system`` as an SSP 2.0 archive at ``out``; returns its path.
 
-    Raises SpecError for a unit that cannot go into an SSP (a player).
+    Raises SpecError for a unit that cannot go into an SSP: only FMUs and
+    Python units (built into FMUs) can; not a player, nor a plug-in's kind.
     """
     out = Path(out)
     spec = system.spec
-    problems = [Problem(spec.path, f"$.units.{u.name}", "a player unit cannot be exported to an SSP",
-                        "record it into an FMU first, or export the system without it")
-                for u in spec.units if u.kind == "player"]
+    problems = [Problem(spec.path, f"$.units.{u.name}", f"a {u.kind} unit cannot be exported to an SSP",
+                        "only FMU and Python units go into an SSP: make it one of those (e.g. an FMU), or export "
+                        "the system without it")
+                for u in spec.units if u.kind not in ("fmu", "python")]
     if problems:
         raise SpecError(problems)
     with tempfile.TemporaryDirectory(prefix="cosim_ssp_export_") as scratch:
