@@ -47,6 +47,21 @@ Stepping
     ``tau`` (the servo law at the end-of-step state) equals
     ``RNEA(q, qd, qdd)`` of the outputs to the Newton tolerance.
 
+Newton Jacobian
+    ``SolveSteps`` asks for a new Newton Jacobian at every call, i.e. every
+    communication step, and Exudyn builds it by numerical differentiation (14
+    evaluations of the tree's forces for 7 joints): two thirds of the solver's time.
+    Without a pendulum, :class:`NewtonJacobian` answers that request instead:
+    ``J = c M(q) - beta h^2 K - gamma h D`` with the mass matrix ``M`` Exudyn has
+    just evaluated at the step's predicted state and the stiffness and damping
+    parts ``K``, ``D`` (PD gains, gravity, Coriolis; they change slowly) kept from
+    Exudyn's own differentiation, redone every ``JACOBIAN_REFRESH_STEPS`` steps and
+    whenever the modified Newton method asks again within a step (poor
+    contraction).  The Jacobian only steers the Newton iteration: the converged
+    step satisfies the same equations to the same tolerance, so results agree with
+    a fresh Jacobian per step to that tolerance (checked against the outputs before
+    this change in ``tests/test_panda_exudyn_reference.py``).
+
 The Exudyn system is built once per instance and rebuilt only when the payload
 changes (or, with a pendulum, every run: its initial pose follows the arm's);
 ``initialize()`` after ``reset()`` otherwise just re-applies gains and the
@@ -156,6 +171,48 @@ def add_pendulum(mbs, tree, model: pin.Model, q0, qd0, bob_mass: float, rod_mass
     return body
 
 
+JACOBIAN_REFRESH_STEPS = 10  # re-differentiate K and D this often (fewest solver CPU seconds at 5-20)
+
+
+class NewtonJacobian:
+    """Exudyn's ``ComputeNewtonJacobian`` for the generalized-alpha solver, cheaper on a kinematic tree.
+
+    Registered with ``solver.SetUserFunctionComputeNewtonJacobian`` for systems
+    without algebraic equations (constraints).  Exudyn's own Jacobian is
+    ``c M + J_rhs`` with ``c = (1 - alpha_m) / (1 - alpha_f)`` and
+    ``J_rhs = -beta h^2 dF/dq - gamma h dF/dqd`` (F: the forces on the right-hand
+    side); this keeps ``J_rhs`` (from ``ComputeJacobianODE2RHS``, the same numerical
+    differentiation) for up to ``refresh_steps`` requests and adds the current mass
+    matrix each time.  Holds no reference to the unit or the solver (the solver is
+    passed in), so registering it creates no reference cycle through C++.
+    """
+
+    def __init__(self, refresh_steps: int = JACOBIAN_REFRESH_STEPS):
+        self.refresh_steps = refresh_steps
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the kept part (new gains, new run)."""
+        self._rhs_part = None
+        self._step_size = None
+        self._age = 0
+
+    def __call__(self, solver, mbs, settings) -> bool:
+        it = solver.it
+        h = it.currentStepSize
+        if (self._rhs_part is None or it.newtonSteps > 1 or h != self._step_size
+                or self._age >= self.refresh_steps):
+            # it.newtonSteps > 1: the modified Newton method found the Jacobian poor and asks again
+            solver.ComputeJacobianODE2RHS(mbs, -solver.newmarkBeta * h * h, -solver.newmarkGamma * h)
+            self._rhs_part = solver.GetSystemJacobian()
+            self._mass_factor = (1.0 - solver.alphaM) / (1.0 - solver.alphaF)
+            self._step_size = h
+            self._age = 0
+        self._age += 1
+        solver.SetSystemJacobian(self._rhs_part + self._mass_factor * solver.GetSystemMassMatrix())
+        return True
+
+
 class PandaExudyn(PythonUnit):
     """Panda arm simulated in Exudyn with a PD + inverse-dynamics feed-forward joint servo.
 
@@ -205,6 +262,10 @@ class PandaExudyn(PythonUnit):
             self._body = add_pendulum(self._mbs, self._tree, self._model, q0, qd0, float(self.pendulum_bob_mass),
                                       float(self.pendulum_rod_mass), float(self.pendulum_length))
             self._key = None  # the next run rebuilds
+            self._jacobian = None  # constraints: Exudyn's own Jacobian (NewtonJacobian has no constraint part)
+        elif self._jacobian is None:  # a fresh system and solver (see _build)
+            self._jacobian = NewtonJacobian()
+            self._solver.SetUserFunctionComputeNewtonJacobian(self._mbs, self._jacobian)
         else:
             sd = self._mbs.systemData
             sd.SetODE2Coordinates(q0, configuration=exu.ConfigurationType.Initial)
@@ -222,6 +283,8 @@ class PandaExudyn(PythonUnit):
         st.startTime = self.start_time
         st.endTime = self.start_time + self.substep
         self._solver.InitializeSolver(self._mbs, self._settings)  # also computes initial accelerations
+        if self._jacobian is not None:
+            self._jacobian.reset()  # the gains may have changed
         self._start_ref = (q0, qd0)
         self._ee_last = None  # the path starts at the initial pose (a list of 3 floats once set)
         self.ee_path_length = 0.0
@@ -242,6 +305,7 @@ class PandaExudyn(PythonUnit):
         s.timeIntegration.newton.useModifiedNewton = True
         self._settings = s
         self._solver = exu.MainSolverImplicitSecondOrder()
+        self._jacobian: NewtonJacobian | None = None  # Exudyn's own Newton Jacobian until initialize() sets one
         self._key = key
 
     def _set_servo(self, q_r, qd_r, qdd_r) -> None:

@@ -79,3 +79,41 @@ def test_unit_driven_directly_matches_the_reference(case, params):
         expected = np.array([b[name] for b in ref["samples"]], dtype=float)
         scale = np.abs(expected).max()
         np.testing.assert_allclose(got, expected, rtol=0.0, atol=RANGE_TOL * scale, err_msg=f"{case} {name}")
+
+
+def test_newton_jacobian_is_exudyns_own_when_fresh_and_serves_only_systems_without_constraints():
+    """NewtonJacobian builds the Jacobian Exudyn builds itself (at a refresh), and the unit uses it without a pendulum."""
+    import exudyn as exu
+
+    from cosim.models.panda_exudyn import DEFAULT_KD, DEFAULT_KP, NewtonJacobian, PandaExudyn, build_kinematic_tree
+    from cosim.models.panda_model import cached_model
+
+    model = cached_model()
+    q0, qd0 = np.array([0.3, -0.5, 0.2, -1.8, 0.1, 1.4, 0.6]), np.array([0.4, -0.2, 0.3, 0.5, -0.6, 0.2, 0.9])
+    _, mbs, _, tree = build_kinematic_tree(model, q0, qd0)
+    mbs.SetObjectParameter(tree, "jointPControlVector", list(DEFAULT_KP))
+    mbs.SetObjectParameter(tree, "jointDControlVector", list(DEFAULT_KD))
+    settings = exu.SimulationSettings()
+    settings.solution.file.write = False
+    settings.timeIntegration.numberOfSteps = 1
+    settings.timeIntegration.endTime = 0.002
+    solver = exu.MainSolverImplicitSecondOrder()
+    solver.InitializeSolver(mbs, settings)
+    assert solver.SolveSteps(mbs, settings)  # a step: mass matrix and step size as in a run
+    solver.ComputeNewtonJacobian(mbs, settings)  # Exudyn's own (no user function registered)
+    exudyns = solver.GetSystemJacobian()
+    solver.SetSystemJacobian(np.zeros_like(exudyns))  # so that only NewtonJacobian can put it back
+    ours = NewtonJacobian()
+    assert ours(solver, mbs, settings)
+    np.testing.assert_allclose(solver.GetSystemJacobian(), exudyns, rtol=1e-12, atol=1e-12 * np.abs(exudyns).max())
+    assert np.abs(exudyns - exudyns.T).max() > 1e-6  # not a trivially symmetric matrix (damping, Coriolis)
+
+    unit = PandaExudyn("robot")
+    unit.setup(0.0, None)
+    unit.exit_initialization()
+    assert isinstance(unit._jacobian, NewtonJacobian)
+    unit.reset()
+    unit.set_values(MAKER.PENDULUM)
+    unit.setup(0.0, None)
+    unit.exit_initialization()
+    assert unit._jacobian is None  # constraints: Exudyn's own Jacobian
