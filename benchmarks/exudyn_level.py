@@ -15,9 +15,10 @@ Two passes over the same points:
    projection, benchmarks/README.md);
 2. *split*: the robot unit's ``do_step``, its solver's ``SolveSteps`` and (today's unit) the
    Newton-Jacobian callback that Exudyn calls from inside ``SolveSteps`` wrapped with timers ->
-   per communication step: Exudyn's solver (``SolveSteps`` less the callback), the Python work
-   around it (the rest of ``do_step``: reference, feed-forward, parameter updates, outputs; plus
-   the callback) and their ratio, the *Python share*.  The timer wrappers' own cost is measured
+   per communication step: Exudyn's solver (``SolveSteps`` less the callback, plus the numerical
+   differentiation the callback asks Exudyn for), the Python work around it (the rest of
+   ``do_step``: feed-forward, parameter update, outputs; plus the callback's own Python) and
+   their ratio, the *Python share*.  The timer wrappers' own cost is measured
    and subtracted.
 
 Usage::
@@ -131,6 +132,14 @@ def timed_jacobian_class(base, level: "Level"):
             finally:
                 level.callback_s += clock() - t0
                 level.callback_calls += 1
+
+        def _differentiate(self, solver, mbs, h):  # Exudyn's C++ differentiation: solver work, not Python
+            t0 = clock()
+            try:
+                return super()._differentiate(solver, mbs, h)
+            finally:
+                level.differentiate_s += clock() - t0
+                level.differentiate_calls += 1
     return TimedNewtonJacobian
 
 
@@ -148,6 +157,8 @@ class Level:
         self.solver: TimedSolver | None = None
         self.callback_s = 0.0  # inside the unit's Newton-Jacobian callback (Python, called by SolveSteps)
         self.callback_calls = 0
+        self.differentiate_s = 0.0  # of which in Exudyn's numerical differentiation (C++, solver work)
+        self.differentiate_calls = 0
 
     def run(self, q22: float, q24: float):
         for unit in self.units.values():
@@ -262,10 +273,12 @@ def main() -> None:
         mean = statistics.fmean(level.walls)
         first_mean = first_mean or mean
         calls, steps = level.solver.calls, level.do_step_calls
-        callback_s = level.callback_s - level.callback_calls * per_call
-        solver_s = level.solver.seconds - level.callback_s  # Exudyn's own time inside SolveSteps
+        differentiate_s = level.differentiate_s - level.differentiate_calls * per_call
+        callback_s = level.callback_s - level.callback_calls * per_call - level.differentiate_s  # its Python part
+        # Exudyn's own time: SolveSteps less the Python callback it makes (but with the differentiation)
+        solver_s = level.solver.seconds - level.callback_s + differentiate_s
         # do_step's own time less both wrappers (around do_step and around SolveSteps) and SolveSteps,
-        # plus the Python callback made from inside SolveSteps
+        # plus the Python part of the callback made from inside SolveSteps
         python_s = level.do_step_s - steps * per_call - calls * per_call - level.solver.seconds + callback_s
         projected = STUDY_POINTS * mean / WORKERS
         print(f"{level.label:16s} {mean * 1e3:8.1f}ms {statistics.median(level.walls) * 1e3:6.1f}ms "

@@ -203,14 +203,18 @@ class NewtonJacobian:
         if (self._rhs_part is None or it.newtonSteps > 1 or h != self._step_size
                 or self._age >= self.refresh_steps):
             # it.newtonSteps > 1: the modified Newton method found the Jacobian poor and asks again
-            solver.ComputeJacobianODE2RHS(mbs, -solver.newmarkBeta * h * h, -solver.newmarkGamma * h)
-            self._rhs_part = solver.GetSystemJacobian()
-            self._mass_factor = (1.0 - solver.alphaM) / (1.0 - solver.alphaF)
-            self._step_size = h
-            self._age = 0
+            self._differentiate(solver, mbs, h)
         self._age += 1
         solver.SetSystemJacobian(self._rhs_part + self._mass_factor * solver.GetSystemMassMatrix())
         return True
+
+    def _differentiate(self, solver, mbs, h: float) -> None:
+        """Exudyn's numerical differentiation of the forces: the part of the Jacobian kept for later steps."""
+        solver.ComputeJacobianODE2RHS(mbs, -solver.newmarkBeta * h * h, -solver.newmarkGamma * h)
+        self._rhs_part = solver.GetSystemJacobian()
+        self._mass_factor = (1.0 - solver.alphaM) / (1.0 - solver.alphaF)
+        self._step_size = h
+        self._age = 0
 
 
 class PandaExudyn(PythonUnit):
@@ -263,13 +267,13 @@ class PandaExudyn(PythonUnit):
                                       float(self.pendulum_rod_mass), float(self.pendulum_length))
             self._key = None  # the next run rebuilds
             self._jacobian = None  # constraints: Exudyn's own Jacobian (NewtonJacobian has no constraint part)
-        elif self._jacobian is None:  # a fresh system and solver (see _build)
-            self._jacobian = NewtonJacobian()
-            self._solver.SetUserFunctionComputeNewtonJacobian(self._mbs, self._jacobian)
         else:
             sd = self._mbs.systemData
             sd.SetODE2Coordinates(q0, configuration=exu.ConfigurationType.Initial)
             sd.SetODE2Coordinates_t(qd0, configuration=exu.ConfigurationType.Initial)
+            if self._jacobian is None:  # a fresh system and solver (see _build)
+                self._jacobian = NewtonJacobian()
+                self._solver.SetUserFunctionComputeNewtonJacobian(self._mbs, self._jacobian)
         self._kp = np.array(self.kp, dtype=float)
         self._kd = np.array(self.kd, dtype=float)
         self._mbs.SetObjectParameter(self._tree, "jointPControlVector", self._kp)
