@@ -369,10 +369,11 @@ class PandaExudyn(PythonUnit):
         q, qd, qdd = sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t(), sd.GetODE2Coordinates_tt()
         if self._body is not None:
             q, qd, qdd = q[:N_JOINTS], qd[:N_JOINTS], qdd[:N_JOINTS]
-        self.q, self.qd, self.qdd = q, qd, qdd  # fresh arrays from Exudyn, owned by this unit
+        # outputs are written into the unit's arrays, never rebound: a master may hold on to them
+        self.q[:], self.qd[:], self.qdd[:] = q, qd, qdd
         # the servo law at the end-of-step state: what the solver applied there
         tau = self._tau_const - self._kp * q - self._kd * qd
-        self.tau = tau
+        self.tau[:] = tau
         pin.forwardKinematics(self._model, self._data, q)
         ee = pin.updateFramePlacement(self._model, self._data, self._ee).translation
         self.ee_pos[:] = ee
