@@ -1,16 +1,41 @@
 """Print pyproject.toml's dependencies (and the test extra) pinned to their declared floors: ``x>=1.2`` -> ``x==1.2``.
 
-.ci/run installs these into a fresh venv and runs the suite there, so a floor that is too low fails CI.
+.ci/minimum_versions installs these into a fresh venv and runs the suite there, so a floor that is too low fails.
+A requirement pinned exactly (``torch==2.13.0``) is printed as it is; the test extra's ``cosim[EXTRA]`` stands
+for that extra's requirements.  Any other form (no bound, ``~=``, ``<``, two bounds) is refused with exit 1: it
+has no single version to test.
+
+    python .ci/minimum_requirements.py [PYPROJECT]      (default: the repository's pyproject.toml)
 """
 
-import re
 import sys
 import tomllib
 from pathlib import Path
 
-project = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())["project"]
-for requirement in project["dependencies"] + project["optional-dependencies"]["test"]:
-    pinned, count = re.subn(r">=", "==", requirement)
-    if count != 1:
-        sys.exit(f"dependency {requirement!r} has no single '>=' floor; .ci/minimum_requirements.py cannot pin it")
-    print(pinned)
+from packaging.requirements import Requirement
+
+path = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).resolve().parents[1] / "pyproject.toml"
+project = tomllib.loads(path.read_text())["project"]
+extras = project.get("optional-dependencies", {})
+
+
+def requirements(listed: list[str]) -> list[Requirement]:
+    """``listed`` parsed, with cosim[EXTRA] replaced by that extra's requirements (recursively)."""
+    out = []
+    for text in listed:
+        requirement = Requirement(text)
+        if requirement.name == project["name"]:
+            for extra in sorted(requirement.extras):
+                out += requirements(extras[extra])
+        else:
+            out.append(requirement)
+    return out
+
+
+for requirement in requirements(project["dependencies"] + extras.get("test", [])):
+    specifiers = list(requirement.specifier)
+    if len(specifiers) != 1 or specifiers[0].operator not in (">=", "==") or requirement.marker is not None:
+        sys.exit(f"dependency '{requirement}' has neither a single '>=' floor nor an exact '==' pin; "
+                 ".ci/minimum_requirements.py cannot pin it")
+    extra = f"[{','.join(sorted(requirement.extras))}]" if requirement.extras else ""
+    print(f"{requirement.name}{extra}=={specifiers[0].version}")

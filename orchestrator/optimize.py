@@ -228,8 +228,10 @@ def make_sampler(name: str, seed: int, batch: int) -> Any:
         try:
             import torch  # noqa: F401  (Optuna's GP sampler is written in PyTorch)
         except ImportError:
-            raise OptimizeError("the gp sampler needs PyTorch, which is not installed (pip install torch); "
-                                "use tpe, nsga2, random or qmc") from None
+            raise OptimizeError("the gp sampler needs PyTorch, which is not installed: install cosim's gp extra "
+                                "(pip install 'cosim[gp]', or pip install -e '.[gp]' in a source checkout; it "
+                                "pins the CPU build of torch the project is tested with), or use tpe, nsga2, "
+                                "random or qmc") from None
         return optuna.samplers.GPSampler(seed=seed)
     if name == "random":
         return optuna.samplers.RandomSampler(seed=seed)
