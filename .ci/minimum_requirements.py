@@ -1,9 +1,10 @@
 """Print pyproject.toml's dependencies (and the test extra) pinned to their declared floors: ``x>=1.2`` -> ``x==1.2``.
 
 .ci/minimum_versions installs these into a fresh venv and runs the suite there, so a floor that is too low fails.
-A requirement pinned exactly (``torch==2.13.0``) is printed as it is; the test extra's ``cosim[EXTRA]`` stands
-for that extra's requirements.  Any other form (no bound, ``~=``, ``<``, two bounds) is refused with exit 1: it
-has no single version to test.
+Upper caps beside the floor are dropped (``fmpy>=0.3.32,<0.4`` -> ``fmpy==0.3.32``); a requirement pinned
+exactly (``torch==2.13.0``) is printed as it is; the test extra's ``cosim[EXTRA]`` stands for that extra's
+requirements.  Any other form (no bound, only a cap, ``~=``, two floors) is refused with exit 1: it has no
+single version to test.
 
     python .ci/minimum_requirements.py [PYPROJECT]      (default: the repository's pyproject.toml)
 """
@@ -34,8 +35,12 @@ def requirements(listed: list[str]) -> list[Requirement]:
 
 for requirement in requirements(project["dependencies"] + extras.get("test", [])):
     specifiers = list(requirement.specifier)
-    if len(specifiers) != 1 or specifiers[0].operator not in (">=", "==") or requirement.marker is not None:
+    floors = [s for s in specifiers if s.operator == ">="]
+    caps = [s for s in specifiers if s.operator in ("<", "<=", "!=")]
+    exact = len(specifiers) == 1 and specifiers[0].operator == "=="
+    if not exact and (len(floors) != 1 or len(floors) + len(caps) != len(specifiers)) \
+            or requirement.marker is not None:
         sys.exit(f"dependency '{requirement}' has neither a single '>=' floor nor an exact '==' pin; "
                  ".ci/minimum_requirements.py cannot pin it")
     extra = f"[{','.join(sorted(requirement.extras))}]" if requirement.extras else ""
-    print(f"{requirement.name}{extra}=={specifiers[0].version}")
+    print(f"{requirement.name}{extra}=={(specifiers[0] if exact else floors[0]).version}")

@@ -1,4 +1,5 @@
-""".ci/minimum_requirements.py: the floors of every dependency, exact pins kept, cosim[EXTRA] expanded."""
+""".ci/minimum_requirements.py: the floors of every dependency (caps dropped), exact pins kept, cosim[EXTRA]
+expanded."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ SCRIPT = Path(__file__).resolve().parents[1] / ".ci" / "minimum_requirements.py"
 PYPROJECT = """
 [project]
 name = "cosim"
-dependencies = ["numpy>=2.2", "dask[distributed]>=2024.1"]
+dependencies = ["numpy>=2.2", "dask[distributed]>=2024.1", "fmpy>=0.3.32,<0.4"]
 [project.optional-dependencies]
 gp = ["torch==2.13.0", "greenlet>=3.5.6"]
 test = ["cosim[gp]", "pytest>=7"]
@@ -27,12 +28,13 @@ def pinned(tmp_path: Path, text: str) -> subprocess.CompletedProcess:
 def test_floors_pinned_exact_pins_kept_and_own_extras_expanded(tmp_path):
     done = pinned(tmp_path, PYPROJECT)
     assert done.returncode == 0, done.stderr
-    assert done.stdout.split() == ["numpy==2.2", "dask[distributed]==2024.1", "torch==2.13.0", "greenlet==3.5.6",
+    assert done.stdout.split() == ["numpy==2.2", "dask[distributed]==2024.1", "fmpy==0.3.32", "torch==2.13.0", "greenlet==3.5.6",
                                    "pytest==7"]
 
 
 def test_a_requirement_without_one_floor_or_pin_is_refused(tmp_path):
-    for bad in ('"scipy<2"', '"scipy>=1.15,<2"', '"scipy"', '"scipy~=1.15"'):
+    for bad in ('"scipy<2"', '"scipy>=1.15,>=1.16"', '"scipy"', '"scipy~=1.15"',
+                '"scipy>=1.15; python_version < \\"3.12\\""'):
         done = pinned(tmp_path, PYPROJECT.replace('"pytest>=7"', bad))
         assert done.returncode == 1 and "cannot pin it" in done.stderr, (bad, done.stderr)
 
