@@ -158,6 +158,22 @@ def real_run(sampler: str, seed: int, budget: int, scratch: Path, expected: pd.D
             "median_run_time": float(table["run_time"].median())}
 
 
+def planned_runs(args) -> list[tuple[str, int, int]]:
+    """(sampler, seed, budget) of every optimisation asked for on the command line."""
+    return [(sampler, seed, args.gp_budget if sampler == "gp" and args.gp_budget else args.budget)
+            for sampler in args.samplers for seed in args.seeds]
+
+
+def cached_runs(cache: Path) -> list[tuple[str, int, int]]:
+    """(sampler, seed, budget) of every finished optimisation in ``cache``, samplers in SAMPLERS' order."""
+    runs = []
+    for timing in cache.glob("*_*_*.json"):
+        sampler, seed, budget = timing.stem.rsplit("_", 2)
+        if sampler in SAMPLERS and (cache / timing.stem / "results.parquet").exists():
+            runs.append((sampler, int(seed), int(budget)))
+    return sorted(runs, key=lambda r: (SAMPLERS.index(r[0]), r[2], r[1]))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5])
@@ -167,8 +183,13 @@ def main() -> None:
     parser.add_argument("--real", action="store_true",
                         help="also run NSGA-II with the first seed with real simulations on Dask")
     parser.add_argument("--cache", type=Path, help="keep and reuse the optimisations' results folders here")
+    parser.add_argument("--from-cache", action="store_true",
+                        help="run nothing: report every finished run in --cache (and the Latin hypercube of "
+                             "--budget for each seed among them)")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "optimize_pick_and_place.md")
     args = parser.parse_args()
+    if args.from_cache and not args.cache:
+        parser.error("--from-cache needs --cache DIR")
     uptime_before = _uptime()
     grid_table = pd.read_parquet(GRID)
     grid_table = grid_table[grid_table["status"] == "ok"]
@@ -176,20 +197,18 @@ def main() -> None:
     results = []  # (method, seed, budget, history, cpu seconds, wall seconds)
     tables = {}
     with tempfile.TemporaryDirectory(prefix="cosim_bench_opt_") as scratch:
-        for sampler in args.samplers:
-            budget = args.gp_budget if sampler == "gp" and args.gp_budget else args.budget
-            for seed in args.seeds:
-                table = optimise(sampler, seed, budget, grid,
-                                 (args.cache or Path(scratch)) / f"{sampler}_{seed}_{budget}")
-                tables[sampler, seed] = table
-                history = scale.history(table[["e_total", "duration"]].to_numpy(float))
-                results.append((sampler, seed, budget, history, table.attrs["cpu_seconds"],
-                                table.attrs["wall_seconds"]))
-                print(f"{sampler} seed {seed}: {history[-1]:.4f} of the grid hypervolume after {len(history)}; "
-                      f"{table.attrs['cpu_seconds']:.0f} s CPU, {table.attrs['wall_seconds']:.0f} s wall", flush=True)
-        for seed in args.seeds:
+        for sampler, seed, budget in cached_runs(args.cache) if args.from_cache else planned_runs(args):
+            table = optimise(sampler, seed, budget, grid,
+                             (args.cache or Path(scratch)) / f"{sampler}_{seed}_{budget}")
+            tables[sampler, seed] = table
+            history = scale.history(table[["e_total", "duration"]].to_numpy(float))
+            results.append((sampler, seed, budget, history, table.attrs["cpu_seconds"],
+                            table.attrs["wall_seconds"]))
+            print(f"{sampler} seed {seed}: {history[-1]:.4f} of the grid hypervolume after {len(history)}; "
+                  f"{table.attrs['cpu_seconds']:.0f} s CPU, {table.attrs['wall_seconds']:.0f} s wall", flush=True)
+        for seed in sorted({seed for _, seed, _ in cached_runs(args.cache)}) if args.from_cache else args.seeds:
             history = scale.history(latin_hypercube(args.budget, seed, grid))
-            results.append(("lhs (sweep)", seed, args.budget, history, None, None))
+            results.append(("lhs (sweep)", seed, len(history), history, None, None))
             print(f"lhs seed {seed}: {history[-1]:.4f} after {len(history)}", flush=True)
         real = real_run("nsga2", args.seeds[0], args.budget, Path(scratch), tables["nsga2", args.seeds[0]]) \
             if args.real else None
@@ -206,6 +225,8 @@ def write_report(args, results, scale, grid_size, real, uptime_before, uptime_af
                + (f"--samplers {' '.join(args.samplers)} " if list(args.samplers) != list(SAMPLERS) else "")
                + f"--budget {budget}" + (f" --gp-budget {args.gp_budget}" if args.gp_budget else "")
                + (" --real" if args.real else "") + (" --cache DIR" if args.cache else ""))
+    if args.from_cache:
+        command = f"python benchmarks/optimize_pick_and_place.py --budget {budget} --cache DIR --from-cache"
     lines = [
         "# `cosim optimize` on the pick-and-place grid (thesis 7.2.3)",
         "",
@@ -241,16 +262,19 @@ def write_report(args, results, scale, grid_size, real, uptime_before, uptime_af
         lines.append(f"| {method} | {seed} | {run_budget} | {_n(evaluations_to(history, 0.95))} | "
                      f"{_n(evaluations_to(history, 0.99))} | {100 * history[-1]:.2f} % | "
                      f"{_seconds(cpu)} | {_seconds(wall)} |")
+    first = min(r[2] for r in results)  # every run's share at the smallest budget: an equal-budget comparison
     lines += ["", "Over the seeds (median of the seeds that reached the share; the count says how many did):", "",
               "| method | runs | evaluations to 95 % | evaluations to 99 % | 99 % within 5 % of the grid "
-              f"({int(0.05 * grid_size)} evaluations) | median share after the budget | median CPU time per run (s) |",
-              "|---|---|---|---|---|---|---|"]
-    for method in dict.fromkeys(r[0] for r in results):
-        rows = [r for r in results if r[0] == method]
+              f"({int(0.05 * grid_size)} evaluations) | median share after {first} evaluations "
+              "| median share after the budget | median CPU time per run (s) |",
+              "|---|---|---|---|---|---|---|---|"]
+    for method, budget_of in dict.fromkeys((r[0], r[2] if r[4] is not None else None) for r in results):
+        rows = [r for r in results if r[0] == method and (r[4] is None or r[2] == budget_of)]
         within = sum(1 for r in rows if (evaluations_to(r[3], 0.99) or grid_size) <= 0.05 * grid_size)
         cpu = [r[4] for r in rows if r[4] is not None]
-        lines.append(f"| {method} | {len(rows)} | {_median([evaluations_to(r[3], 0.95) for r in rows])} | "
+        lines.append(f"| {method}{'' if budget_of is None else f' (budget {budget_of})'} | {len(rows)} | {_median([evaluations_to(r[3], 0.95) for r in rows])} | "
                      f"{_median([evaluations_to(r[3], 0.99) for r in rows])} | {within} of {len(rows)} | "
+                     f"{100 * float(np.median([r[3][first - 1] for r in rows])):.2f} % | "
                      f"{100 * float(np.median([r[3][-1] for r in rows])):.2f} % | "
                      f"{_seconds(float(np.median(cpu)) if cpu else None)} |")
     lines += ["", "('—': not reached within the budget.)"]

@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from orchestrator.design import DesignSpace
 from orchestrator.optimize import OptimizeSettings, distributions
@@ -45,3 +46,34 @@ def test_free_pose_dimensions_lie_within_the_joint_limits():
     settings = OptimizeSettings.from_spec(system.spec)
     assert settings.objectives == {"e_total": "minimize", "duration": "minimize"}
     assert settings.constraints == ["peak_tau_ratio <= 1"]
+
+
+def test_the_committed_optimisation_opens_in_every_analysis_command(tmp_path, capsys):
+    """An optimisation's folder is a sweep folder: report, pareto, plot, the explorer and run --point work on it
+    unchanged, and the re-run of the least-energy feasible design gives the table's energy again."""
+    import pandas as pd
+
+    from orchestrator.analysis.explorer import ExplorerState
+    from orchestrator.analysis.table import load_results
+    from orchestrator.cli import main
+
+    folder = FOLDER / "results_optimize"
+    df = pd.read_parquet(folder / "results.parquet")
+    usable = df[(df["status"] == "ok") & df["feasible"]]
+    best = usable.loc[usable["e_total"].idxmin()]
+    assert main(["report", str(folder), "-o", str(tmp_path / "report.html")]) == 0
+    assert "<h2>Optimisation</h2>" in (tmp_path / "report.html").read_text()
+    assert main(["pareto", str(folder), "--csv", str(tmp_path / "front.csv")]) == 0
+    front = pd.read_csv(tmp_path / "front.csv")
+    assert front["feasible"].all() and best["point_id"] in set(front["point_id"])  # least energy is on the front
+    assert main(["plot", str(folder), "--x", "duration", "--y", "e_total", "--color", "traj.velocity_scale",
+                 "-o", str(tmp_path / "front.png")]) == 0
+    assert (tmp_path / "front.png").stat().st_size > 10_000
+    state = ExplorerState(load_results(folder))
+    assert {state.x, state.y} <= set(df.columns)
+    capsys.readouterr()
+    assert main(["run", str(FOLDER / "spec.json"), "--point", best["point_id"], "--results", str(folder),
+                 "--out", str(tmp_path / "best.parquet")]) == 0
+    out = capsys.readouterr().out
+    e_total = float(next(line.split()[1] for line in out.splitlines() if line.startswith("e_total ")))
+    assert e_total == pytest.approx(best["e_total"], rel=1e-5)  # printed with 6 digits
