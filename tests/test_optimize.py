@@ -231,3 +231,39 @@ def test_hypervolume_and_its_history_in_the_report(tmp_path):
     page = build_report(load_results(tmp_path / "o"))
     assert "<h2>Optimisation</h2>" in page and f"final {history[-1]:.4f}" in page
     assert f"{int(pareto_mask(values[usable], ['min', 'max']).sum())} non-dominated of 28 ok, feasible rows" in page
+
+
+class BowlsInProcess:
+    """TwoBowls answered in this process (the Evaluator interface); designs with x > 2.5 fail."""
+
+    def evaluate(self, points):
+        rows = []
+        for pid, values in points:
+            x, y = values["b.x"], values["b.y"]
+            if x > 2.5:
+                rows.append({"point_id": pid, "status": "failed", "message": "x > 2.5", "run_time": 0.0,
+                             "worker": "test", "objectives": {}})
+            else:
+                rows.append({"point_id": pid, "status": "ok", "message": "", "run_time": 0.0, "worker": "test",
+                             "objectives": {"f1": x * x + y * y, "f2": (x - 2) ** 2 + y * y}})
+        return rows
+
+
+def test_progress_line_counts_failures_front_and_hypervolume(write_spec, tmp_path):
+    import io
+
+    spec = write_spec(bowls_spec(budget=24, batch=8, seed=7, sampler="random", constraints=["f1 <= 3"]))
+    stream = io.StringIO()
+    run = Optimization(spec, tmp_path / "out", progress=stream)
+    run.run(evaluator=BowlsInProcess())
+    df = run.store.table()
+    last = stream.getvalue().strip().splitlines()[-1]
+    # recomputed from the table: failures, the feasible front and its area (staircase, objectives scaled over
+    # the feasible rows, reference 1.1)
+    failed = int((df["status"] != "ok").sum())
+    usable = df[(df["status"] == "ok") & df["feasible"]][["f1", "f2"]].to_numpy(float)
+    front = usable[pareto_mask(usable)]
+    scaled = (front - usable.min(axis=0)) / (usable.max(axis=0) - usable.min(axis=0))
+    assert failed > 0 and len(usable) < len(df) - failed  # both a failure and an infeasible row were seen
+    assert last.startswith(f"24/24 evaluations, {failed} not ok, front {len(front)}, "
+                           f"hypervolume {staircase_area(scaled, 1.1):.4f}, "), last
