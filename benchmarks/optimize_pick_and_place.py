@@ -272,7 +272,8 @@ def write_report(args, results, scale, grid_size, real, uptime_before, uptime_af
         rows = [r for r in results if r[0] == method and (r[4] is None or r[2] == budget_of)]
         within = sum(1 for r in rows if (evaluations_to(r[3], 0.99) or grid_size) <= 0.05 * grid_size)
         cpu = [r[4] for r in rows if r[4] is not None]
-        lines.append(f"| {method}{'' if budget_of is None else f' (budget {budget_of})'} | {len(rows)} | {_median([evaluations_to(r[3], 0.95) for r in rows])} | "
+        label = method if budget_of is None else f"{method} (budget {budget_of})"
+        lines.append(f"| {label} | {len(rows)} | {_median([evaluations_to(r[3], 0.95) for r in rows])} | "
                      f"{_median([evaluations_to(r[3], 0.99) for r in rows])} | {within} of {len(rows)} | "
                      f"{100 * float(np.median([r[3][first - 1] for r in rows])):.2f} % | "
                      f"{100 * float(np.median([r[3][-1] for r in rows])):.2f} % | "
