@@ -442,6 +442,7 @@ class BinPickingPlanner(_ExecutionCheck, PythonUnit):
         Variable("cartesian_distance", "output", unit="m", start=0.0, description="planned TCP path length"),
         Variable("planning_time", "output", unit="s", start=0.0, description="wall time of planning (for benchmarks)"),
     ) + _check_variables()
+    data_files = ("plant_file",)  # a plant file of the study travels with the unit to remote workers
     feedthrough = {v.name: () for v in variables if v.causality == "output"}  # q only feeds the next step's check
 
     def enter_initialization(self) -> None:
@@ -513,6 +514,7 @@ class PlantCollisionChecker(_ExecutionCheck, PythonUnit):
     """
 
     variables = _plant_parameters() + _check_variables()
+    data_files = ("plant_file",)  # a plant file of the study travels with the unit to remote workers
     feedthrough = {v.name: () for v in _check_variables() if v.causality == "output"}
 
     def initialize(self) -> None:

@@ -27,6 +27,7 @@ naming the file, the field and the fix (exit code 2).
 
 from __future__ import annotations
 
+import gc
 import importlib
 import inspect
 import logging
@@ -173,16 +174,21 @@ def start_cluster(config: ClusterFile) -> Any:
     kwargs = dict(config.kwargs)
     if "silence_logs" not in kwargs and _accepts(cls, "silence_logs"):
         kwargs["silence_logs"] = logging.CRITICAL  # Dask's own tracebacks (a worker refusing an argument) stay off
+    failure = None
     with dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES}), _quiet_dask_logs():
         try:
             cluster = cls(**kwargs)
         except TypeError as exc:
-            raise ClusterFileError(f"{config.type} refused these keyword arguments: {exc}", file=config.path,
-                                   path="kwargs", fix=f"use only arguments {config.type} accepts") from None
+            failure = ClusterFileError(f"{config.type} refused these keyword arguments: {exc}", file=config.path,
+                                       path="kwargs", fix=f"use only arguments {config.type} accepts")
         except Exception as exc:
-            cause = _root_cause(exc)  # e.g. "Nanny failed to start" hides the TypeError of a bad worker argument
-            raise ClusterFileError(f"cannot start {config.type}: {type(cause).__name__}: {cause}", file=config.path,
-                                   path="kwargs", fix="correct the keyword arguments") from None
+            failure = _start_failure(config, exc)
+    if failure is not None:
+        # Raised outside the except block, holding no exception, and the half-made cluster collected now: a class
+        # that registers its instances for an exit hook (dask-kubernetes' KubeCluster) must not find it at exit
+        # and print a traceback trying to close it.
+        gc.collect()
+        raise failure
     if not hasattr(cluster, "scheduler_address"):
         _close_quietly(cluster)
         raise ClusterFileError(f"{config.type} did not make a Dask cluster (no scheduler_address)",
@@ -198,6 +204,14 @@ def start_cluster(config: ClusterFile) -> Any:
         raise ClusterFileError(f"{config.type} could not {key}: {type(exc).__name__}: {exc}", file=config.path,
                                path=key, fix=f"check '{key}' and that the cluster's job system works") from None
     return cluster
+
+
+def _start_failure(config: ClusterFile, exc: BaseException) -> ClusterFileError:
+    """The error for a cluster class that raised ``exc`` while starting, naming the root cause."""
+    cause = _root_cause(exc)  # e.g. "Nanny failed to start" hides the TypeError of a bad worker argument
+    return ClusterFileError(f"cannot start {config.type}: {type(cause).__name__}: {cause}", file=config.path,
+                            path="kwargs", fix="correct the keyword arguments (or start what the class needs: "
+                                               "its job system, its Kubernetes operator and credentials)")
 
 
 def _accepts(cls: Any, name: str) -> bool:

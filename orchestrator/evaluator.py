@@ -13,14 +13,17 @@ their timeouts, and the rule that a fault is a row, never an exception:
 - :class:`Evaluator` runs a list of points on that client in parallel and
   returns one row per point in the order given (``evaluate``).
 - A task lost with its worker process is run again by the scheduler on
-  another worker; a batch lost twice is split and its points run one per task,
-  so only a point that kills its workers gets ``crashed`` (:func:`lost_rows`)
-  and every other point its true row.
+  another worker; the points of a task lost again then run one at a time,
+  each alone on the cluster, so only a point that kills its workers while
+  alone gets ``crashed`` (:class:`Reruns`, :func:`lost_rows`) and every other
+  point its true row.
 """
 
 from __future__ import annotations
 
+import collections
 import math
+import time
 from contextlib import contextmanager
 from typing import Any, Iterator, Sequence
 
@@ -65,7 +68,16 @@ def dask_client(workers: int, scheduler: str | None = None,
     a ``LocalCluster`` of ``workers`` processes is started.  Raises
     ClusterError when the scheduler cannot be reached or has no workers within
     60 s (a cluster file's jobs: 10 min), ClusterFileError for a bad cluster file.
+    Meanwhile the dashboard's web server logs its errors without tracebacks
+    (:mod:`orchestrator.dashboard`).
     """
+    from .dashboard import web_server_tracebacks_as_lines
+
+    with web_server_tracebacks_as_lines():
+        yield from _client(workers, scheduler, cluster_file)
+
+
+def _client(workers: int, scheduler: str | None, cluster_file: str | None) -> Iterator[tuple[Any, int, str]]:
     import dask
     from distributed import Client, LocalCluster
 
@@ -118,7 +130,8 @@ def dask_client(workers: int, scheduler: str | None = None,
             cluster.close()
 
 
-MAX_RERUNS = 3  # times the points of one failed task are submitted again before they get ``crashed`` rows
+SCATTER_TRIES = 5  # sending the payload to the workers, when workers die meanwhile
+WORKER_WAIT = 120.0  # seconds to wait for a worker when all died (a loaded machine restarts them slowly)
 
 
 def worker_died(exc: BaseException) -> bool:
@@ -132,27 +145,35 @@ def worker_died(exc: BaseException) -> bool:
     return isinstance(exc, KilledWorker)
 
 
-def rerun(points: Sequence[Any], exc: BaseException, attempt: int) -> list[list[Any]] | None:
-    """The point lists to submit again after a task of ``points`` failed with ``exc``, or None: give up.
+class Reruns:
+    """Where the points of a task that failed with its workers go next.
 
-    - Its worker processes died (KilledWorker) and the task held several
-      points: each point runs again on its own, so only a point that kills its
-      workers itself ends ``crashed``, never the innocent points of its batch.
-    - It was cancelled because the scattered payload died with the last
-      worker holding it: the same points run again (with the payload scattered
-      anew, see :class:`ScatteredPayload`).
-
-    ``attempt`` counts the reruns so far; after MAX_RERUNS, None.
+    Dask counts a worker's death against *every* task the scheduler had sent
+    to that worker (:attr:`TaskState.suspicious`), also tasks only waiting
+    there behind the one running, so a KilledWorker says "this task was on
+    workers that died", not "this task killed them"; and when the workers
+    that died held the last copies of the scattered payload, the tasks using
+    it are cancelled instead.  Blame is therefore only given to a point that
+    ran *alone*: the points of a task lost either way become ``suspects``;
+    the driver stops submitting new work, lets the tasks in flight finish,
+    then runs the suspects one point per task, one task at a time, with
+    nothing else on the cluster (the scheduler still re-runs such a task
+    ``allowed-failures`` times).  A point whose task is lost while it runs
+    alone is the one that kills its workers: it gets ``crashed``
+    (:func:`lost_rows`); every other suspect gets its true row.
     """
-    from concurrent.futures import CancelledError
 
-    if attempt >= MAX_RERUNS:
-        return None
-    if worker_died(exc) and len(points) > 1:
-        return [[point] for point in points]
-    if isinstance(exc, CancelledError):
-        return [list(points)]
-    return None
+    def __init__(self) -> None:
+        self.suspects: collections.deque[Any] = collections.deque()
+
+    def after_failure(self, points: Sequence[Any], exc: BaseException, alone: bool) -> bool:
+        """True when ``points`` became suspects (run again later, each alone); False: they get :func:`lost_rows`."""
+        from concurrent.futures import CancelledError
+
+        if not alone and (worker_died(exc) or isinstance(exc, CancelledError)):
+            self.suspects.extend(points)
+            return True
+        return False  # lost while alone, or the task could not run at all (e.g. unpicklable arguments): a row
 
 
 class ScatteredPayload:
@@ -165,11 +186,38 @@ class ScatteredPayload:
     def __init__(self, client: Any, payload: dict[str, Any]):
         self.client, self.payload, self._future = client, payload, None
 
-    def future(self, stale: Any = None) -> Any:
-        """The payload's future; scattered anew if it is lost or is ``stale`` (a task using it was cancelled)."""
-        if self._future is None or self._future is stale or not _alive(self._future):
-            self._future = self.client.scatter(self.payload, broadcast=True, hash=False)
+    def future(self) -> Any:
+        """The payload's future; scattered anew if it is lost (the workers holding it all died).
+
+        The payload is lost when every worker holding it died, and then there
+        may be no worker for a while (their nannies restart them): it waits up
+        to WORKER_WAIT seconds for one, then raises ClusterError.  A worker that dies while the payload
+        is being sent to it fails the scatter (CommClosedError, an OSError, or
+        a ValueError from the broadcast): it is tried again, at most
+        SCATTER_TRIES times.
+        """
+        if self._future is None or not _alive(self._future):
+            for attempt in range(SCATTER_TRIES):
+                try:
+                    self._wait_for_a_worker()
+                    self._future = self.client.scatter(self.payload, broadcast=True, hash=False)
+                    break
+                # OSError, also TimeoutError: "No valid workers found" when the last one just died; ValueError: "Can
+                # not use replicate to delete data" when the workers changed while the payload was sent to them all
+                except (OSError, ValueError):
+                    if attempt == SCATTER_TRIES - 1:
+                        raise
+                    time.sleep(1.0)  # the scheduler removes the dead worker meanwhile
         return self._future
+
+    def _wait_for_a_worker(self) -> None:
+        """Raises ClusterError when no worker is there within WORKER_WAIT seconds (all died, none came back)."""
+        try:
+            self.client.wait_for_workers(1, timeout=WORKER_WAIT)
+        except TimeoutError:
+            raise ClusterError(f"every Dask worker died and none came back within {WORKER_WAIT:g} s (a Dask nanny "
+                               "does not restart a worker killed while it starts); the rows so far are kept: start "
+                               "workers, or run again with --resume") from None
 
 
 def _alive(scattered: Any) -> bool:
@@ -178,19 +226,18 @@ def _alive(scattered: Any) -> bool:
     return all(f.status == "finished" for f in futures)
 
 
-def lost_rows(point_ids: Sequence[str], exc: BaseException) -> list[dict[str, Any]]:
-    """Rows for points whose task died with its worker process (KilledWorker) or broke on the way."""
+def lost_rows(point_ids: Sequence[str], exc: BaseException, alone: bool = False) -> list[dict[str, Any]]:
+    """``crashed`` rows for points whose task failed with its workers (``alone``: see :class:`Reruns`)."""
     from concurrent.futures import CancelledError
 
-    if worker_died(exc) or isinstance(exc, CancelledError):
-        # A cancelled task here means the workers holding its scattered data all died (see rerun): when a
-        # point kills every worker that runs it, Dask may report the last try as cancelled, not KilledWorker.
+    if alone and (worker_died(exc) or isinstance(exc, CancelledError)):
+        # A cancelled task here means the workers holding its scattered data all died while it ran alone.
         cause = (f"Dask: {exc}" if worker_died(exc) else
                  f"its workers died and took the task's data with them; Dask: {type(exc).__name__}: {exc}")
-        message = ("every Dask worker process that ran this point died (most likely the point kills it, e.g. "
-                   f"by using up the memory); {cause}")
+        message = ("every Dask worker process that ran this point died, also while it ran alone on the cluster "
+                   f"(the point kills them, e.g. by using up the memory); {cause}")
     else:
-        message = f"lost with its worker: {type(exc).__name__}: {exc}"
+        message = f"the task running this point failed: {type(exc).__name__}: {exc}"
     return [{"point_id": pid, "status": "crashed", "message": message,
              "run_time": float("nan"), "worker": "", "objectives": {}} for pid in point_ids]
 
@@ -201,10 +248,12 @@ class Evaluator:
     ``payload`` is :func:`orchestrator.isolation.make_payload` of the system;
     it is scattered to the workers once.  ``timeout`` is the seconds one point
     may run before its child process is killed (row status ``timeout``).
+    ``study`` names the tasks on the Dask dashboard (:func:`orchestrator.dashboard.task_key`).
     """
 
-    def __init__(self, client: Any, payload: dict[str, Any], n_workers: int, timeout: float | None = None):
-        self.client, self.n_workers, self.timeout = client, max(1, n_workers), timeout
+    def __init__(self, client: Any, payload: dict[str, Any], n_workers: int, timeout: float | None = None,
+                 study: str = ""):
+        self.client, self.n_workers, self.timeout, self.study = client, max(1, n_workers), timeout, study
         self._payload = ScatteredPayload(client, payload)
 
     def evaluate(self, points: Sequence[tuple[str, dict[str, Any]]]) -> list[dict[str, Any]]:
@@ -212,38 +261,40 @@ class Evaluator:
 
         The points are split into one task per worker, so a batch of K runs
         K / workers points per process.  A row has point_id, status, message,
-        run_time, worker and objectives (a flat dict).
+        run_time, worker and objectives (a flat dict).  Points of a task lost
+        with its workers are run again (:class:`Reruns`).
         """
-        from distributed import wait
-
         if not points:
             return []
         size = math.ceil(len(points) / self.n_workers)
-        chunks = [list(points[i:i + size]) for i in range(0, len(points), size)]
-        tasks = [self._submit(chunk) for chunk in chunks]
-        wait([future for future, _ in tasks])
-        rows: list[dict[str, Any]] = []
-        for chunk, task in zip(chunks, tasks):
-            rows.extend(self._rows(chunk, task))
-        return rows
+        rows: list[dict[str, Any] | None] = [None] * len(points)
+        reruns = Reruns()
+        chunks = [list(range(i, min(i + size, len(points)))) for i in range(0, len(points), size)]
+        in_flight = [(chunk, False, self._submit(points, chunk)) for chunk in chunks]  # (indices, alone, future)
+        while in_flight or reruns.suspects:
+            if not in_flight:  # every other task is done: the next suspect runs alone
+                suspect = [reruns.suspects.popleft()]
+                in_flight = [(suspect, True, self._submit(points, suspect))]
+            for indices, alone, future in in_flight:
+                try:
+                    done = future.result()  # waits; the others run meanwhile
+                except Exception as exc:  # the worker process itself died, or the task could not run
+                    if reruns.after_failure(indices, exc, alone):
+                        continue
+                    done = lost_rows([points[i][0] for i in indices], exc, alone)
+                finally:
+                    future.release()
+                for i, row in zip(indices, done):
+                    rows[i] = row
+            in_flight = []
+        return rows  # type: ignore[return-value]  (every index was filled)
 
-    def _submit(self, chunk: list[tuple[str, dict[str, Any]]], stale: Any = None) -> tuple[Any, Any]:
-        """(task future, payload future it uses)."""
+    def _submit(self, points: Sequence[tuple[str, dict[str, Any]]], indices: list[int]) -> Any:
+        """The task future for the points at ``indices``."""
+        from .dashboard import task_key
         from .sweep import run_batch
 
-        payload = self._payload.future(stale)
-        return self.client.submit(run_batch, payload, chunk, self.timeout, pure=False, retries=0), payload
-
-    def _rows(self, chunk: list[tuple[str, dict[str, Any]]], submitted: tuple[Any, Any],
-              attempt: int = 0) -> list[dict[str, Any]]:
-        future, payload = submitted
-        try:
-            return future.result()
-        except Exception as exc:  # the worker process itself died, or the task could not run
-            again = rerun(chunk, exc, attempt)
-            if again is None:
-                return lost_rows([pid for pid, _ in chunk], exc)
-            tasks = [self._submit(points, stale=payload) for points in again]
-            return [row for points, task in zip(again, tasks) for row in self._rows(points, task, attempt + 1)]
-        finally:
-            future.release()
+        chunk = [points[i] for i in indices]
+        key = task_key("optimize", self.study, indices, len(points))  # the dashboard's names: points of this batch
+        return self.client.submit(run_batch, self._payload.future(), chunk, self.timeout, pure=False, retries=0,
+                                  key=key)

@@ -471,7 +471,7 @@ class Optimization:
                 self._say(f"cosim optimize {self.spec.name}: {s.sampler}, budget {s.budget}, batch {s.batch}, "
                           f"seed {s.seed}, {len(stored)} evaluations stored; {n_workers} worker(s); dashboard: "
                           f"{link}; results: {self.out}")
-                evaluator = Evaluator(client, self.payload, n_workers, self.timeout)
+                evaluator = Evaluator(client, self.payload, n_workers, self.timeout, study=self.spec.name)
                 self._loop(study, dists, evaluator, stored)
         except ClusterError as exc:
             raise OptimizeError(str(exc)) from None

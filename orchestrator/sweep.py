@@ -19,8 +19,9 @@ evaluates the points on Dask:
   (``timeout``) or kills its process (``crashed``) gets a row and the other
   points go on.  A batch lost with its whole worker process (killed, out of
   memory, a lost node) is run again on another worker by the scheduler; lost
-  a second time (KilledWorker) it is split and each point run on its own, so
-  only a point that kills its workers gets ``crashed``.  Rows out = points in.
+  a second time (KilledWorker) its points run again one at a time, each alone
+  on the cluster, so only a point that kills its workers while alone gets
+  ``crashed`` (:class:`~orchestrator.evaluator.Reruns`).  Rows out = points in.
 - The client streams: a bounded number of batches in flight, each completed
   batch appended to the :class:`~orchestrator.results.ResultsStore` at once,
   so its memory does not grow with the number of points, and a kill -9 loses
@@ -50,7 +51,7 @@ from .driver import check_results_folder, finish_metadata, now_utc, run_metadata
 from .folder_lock import FolderLock
 from .unit_checksums import changed_units, unit_checksums
 from .errors import UserError
-from .evaluator import ScatteredPayload, check_timeout, lost_rows, rerun
+from .evaluator import Reruns, ScatteredPayload, check_timeout, lost_rows
 from .isolation import IsolatedRunner, make_payload
 from .table_columns import TAIL_COLUMNS
 
@@ -357,49 +358,56 @@ class Sweep:
     def _evaluate(self, client: Any, done: set[str], todo: int, n_workers: int) -> None:
         from distributed import as_completed
 
+        from .dashboard import task_key
+
         size = self.batch_size or max(1, min(64, math.ceil(todo / (n_workers * 8))))
+        total = len(self.space)
         batches = _batched((p for p in self.space if p.id not in done), size)
         payload = ScatteredPayload(client, self.payload)
         progress = Progress(todo, self.progress_stream) if not self.quiet else None
-        in_flight: dict[str, tuple[list[Point], int, Any]] = {}  # task key -> points, reruns so far, payload
+        in_flight: dict[str, tuple[list[Point], bool]] = {}  # task key -> points, alone (see evaluator.Reruns)
         pending = as_completed()
+        reruns = Reruns()
 
         times: collections.deque[float] = collections.deque(maxlen=1000)  # recent ok point times
 
-        def submit(batch: list[Point] | None = None, attempt: int = 0, stale: Any = None) -> bool:
-            batch = batch or next(batches, None)
+        def submit() -> bool:
+            alone = bool(reruns.suspects) or any(a for _, a in in_flight.values())
+            if alone and in_flight:
+                return False  # no new work until the suspects have run, each alone on the cluster
+            batch = [reruns.suspects.popleft()] if alone else next(batches, None)
             if batch is None:
                 return False
-            used = payload.future(stale)
             timeout = self.timeout if self.timeout is not None else default_timeout(times)
-            future = client.submit(run_batch, used, [(p.id, p.values) for p in batch], timeout,
-                                   pure=False, retries=0)
-            in_flight[future.key] = batch, attempt, used
+            key = task_key("sweep", self.spec.name, [p.index for p in batch], total)  # the dashboard's names
+            future = client.submit(run_batch, payload.future(), [(p.id, p.values) for p in batch], timeout,
+                                   pure=False, retries=0, key=key)
+            in_flight[future.key] = batch, alone
             pending.add(future)
             return True
 
-        for _ in range(2 * n_workers + 1):  # enough to keep every worker busy, few enough to stay small
-            if not submit():
-                break
+        def fill() -> None:  # enough to keep every worker busy, few enough to stay small
+            while len(in_flight) < 2 * n_workers + 1 and submit():
+                pass
+
+        fill()
         for future in pending:
-            batch, attempt, used = in_flight.pop(future.key)
+            batch, alone = in_flight.pop(future.key)
             try:
                 rows = future.result()
             except Exception as exc:  # the worker process itself died (KilledWorker) or the task broke
-                again = rerun(batch, exc, attempt)  # see evaluator.rerun: innocent points are never crashed
-                if again is not None:
+                if reruns.after_failure(batch, exc, alone):  # innocent points are never crashed
                     future.release()
-                    for points in again:
-                        submit(points, attempt + 1, stale=used)
+                    fill()
                     continue
-                rows = lost_rows([p.id for p in batch], exc)
+                rows = lost_rows([p.id for p in batch], exc, alone)
             future.release()
             with results_writes(self.out):
                 self.store.append([self._row(p, r) for p, r in zip(batch, rows)])
             times.extend(r["run_time"] for r in rows if r["status"] == "ok")
             if progress is not None:
                 progress.update(len(rows), sum(r["status"] != "ok" for r in rows))
-            submit()
+            fill()
         if progress is not None:
             progress.close()
 

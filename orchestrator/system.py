@@ -15,6 +15,7 @@ from dataclasses import dataclass, replace
 from typing import Any, Mapping, Sequence
 
 from .connection_checks import check_connections
+from .data_files import attach as attach_data_files
 from .errors import UserError
 from .problems import Problem, SpecError, did_you_mean, json_path
 from .signals import add_recorded, resolve_signal, split_unit_name
@@ -150,9 +151,11 @@ def build_system(spec: Spec, broken_units: frozenset[str] = frozenset()) -> Syst
     check_design(spec, units, problems)
     if problems:
         raise SpecError(problems)
-    return System(spec=spec, units=dict(units), connections=tuple(connections), order=tuple(order),
-                  init_order=tuple(init_order), assignments=tuple(assignments), probes=tuple(probes.values()),
-                  recorded=tuple(recorded))
+    system = System(spec=spec, units=dict(units), connections=tuple(connections), order=tuple(order),
+                    init_order=tuple(init_order), assignments=tuple(assignments), probes=tuple(probes.values()),
+                    recorded=tuple(recorded))
+    attach_data_files(system)  # files named by a unit's data-file parameters: read from the spec's folder, shipped
+    return system
 
 
 def _load_unit(u: UnitSpec, folder: str, file: str, problems: list[Problem]) -> SystemUnit | None:

@@ -10,6 +10,10 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
+import subprocess
+import sys
+from pathlib import Path
 
 import pandas as pd
 import pytest
@@ -22,6 +26,7 @@ from orchestrator.sweep import SweepError
 from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
 
 STOP = 0.5
+REPO = Path(__file__).resolve().parent.parent
 
 
 def ode_spec() -> dict:
@@ -39,6 +44,13 @@ def assert_exact(df: pd.DataFrame) -> None:
     assert len(df) == 4 and df["point_id"].is_unique
     assert (df["status"] == "ok").all(), df[["status", "message"]]
     assert (df["y_end"] - (df["ode.a"] * STOP).map(math.exp)).abs().max() < 1e-9
+
+
+def readme_cluster_file(name: str) -> str:
+    """The README's cluster-file example whose first line is ``# NAME: ...``."""
+    blocks = re.findall(r"```yaml\n(.*?)```", (REPO / "README.md").read_text(encoding="utf-8"), re.S)
+    (block,) = [b for b in blocks if b.startswith(f"# {name}:")]
+    return block
 
 
 def write(tmp_path, name: str, text: str):
@@ -83,9 +95,7 @@ def test_dask_jobqueue_in_its_test_mode_and_a_slurm_job_script(write_spec, tmp_p
     # the README's Slurm recipe: a real SLURMCluster renders its sbatch script from the file's kwargs
     from orchestrator.cluster import import_cluster_class
 
-    slurm = read_cluster_file(write(tmp_path, "slurm.yaml", "type: dask_jobqueue.SLURMCluster\n"
-                                    "kwargs: {cores: 1, memory: 4GB, walltime: '01:00:00', queue: short}\n"
-                                    "adapt: {minimum: 0, maximum: 50}\n"))
+    slurm = read_cluster_file(write(tmp_path, "slurm.yaml", readme_cluster_file("slurm.yaml")))
     with import_cluster_class(slurm)(**slurm.kwargs) as made:
         script = made.job_script()
     assert "#SBATCH -p short" in script and "#SBATCH -t 01:00:00" in script and "--nthreads 1" in script
@@ -147,3 +157,31 @@ def test_cluster_and_scheduler_together_are_refused(write_spec, tmp_path, capsys
     assert stop.value.code == 2 and "not allowed with argument" in capsys.readouterr().err
     with pytest.raises(ClusterFileError, match="cannot read the cluster file"):
         read_cluster_file(tmp_path / "missing.yaml")
+
+
+def test_the_readme_kubernetes_file_is_accepted_and_fails_cleanly_without_kubernetes(write_spec, tmp_path):
+    """No Kubernetes cluster here: the README's file is read and checked as --cluster reads it, then its start
+    fails with one message (no credentials, or dask-kubernetes not installed), exit 2, no traceback."""
+    from orchestrator.cluster import ALLOWED_FAILURES, import_cluster_class
+
+    kube = write(tmp_path, "kube.yaml", readme_cluster_file("kube.yaml"))
+    config = read_cluster_file(kube)
+    assert config.type == "dask_kubernetes.operator.KubeCluster" and config.adapt == {"minimum": 2, "maximum": 50}
+    assert config.kwargs["worker_command"].split()[-2:] == ["--nthreads", "1"]
+    assert config.kwargs["env"] == {"DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES": str(ALLOWED_FAILURES)}
+    spec = write_spec(ode_spec())
+    done = subprocess.run([sys.executable, "-m", "orchestrator.cli", "sweep", str(spec), "--cluster", str(kube)],
+                          capture_output=True, text=True, timeout=300, cwd=tmp_path,
+                          env={k: v for k, v in os.environ.items() if not k.startswith("KUBE")})
+    assert done.returncode == 2, done.stderr
+    assert "kube.yaml:" in done.stderr and "fix:" in done.stderr
+    assert "Traceback" not in done.stderr, done.stderr
+    try:
+        import dask_kubernetes  # noqa: F401
+    except ImportError:
+        assert "cosim[kubernetes]" in done.stderr
+        return
+    import inspect
+
+    inspect.signature(import_cluster_class(config)).bind(**config.kwargs)  # every keyword is one KubeCluster takes
+    assert "cannot start dask_kubernetes.operator.KubeCluster" in done.stderr

@@ -3,8 +3,9 @@
 Real `dask scheduler` / `dask worker` processes started in a temporary folder
 (their working directory and HOME), with only cosim on their PYTHONPATH; the
 spec's folder is moved away after the sweep is prepared, so nothing can be read
-from it by path. The spec uses a Python unit named by *module* from the spec's
-folder (shipped as source) and a player of a CSV table.
+from it by path. The specs use Python units named by *module* from the spec's
+folder (shipped as source), a player of a CSV table and data files a unit
+declares (``data_files``: JSON tables named in the spec and in the design).
 """
 
 from __future__ import annotations
@@ -103,3 +104,112 @@ def test_module_unit_and_played_table_travel_to_foreign_workers(tmp_path, foreig
     assert (df["status"] == "ok").all(), list(df["message"])
     assert list(df["y_end"]) == [3.0, 6.0, 15.0]
     assert list(df["y_sum"]) == [2.0, 4.0, 10.0]
+
+
+DATA_UNIT_SOURCE = '''
+import json
+
+from orchestrator import PythonUnit, Variable
+
+
+class TableGain(PythonUnit):
+    """y = gain * k, the gain read in initialize() from the JSON file named by 'table'."""
+
+    variables = (Variable("table", "parameter", type="String", start=""), Variable("k", "parameter", start=1.0),
+                 Variable("y", "output", start=0.0))
+    data_files = ("table",)
+
+    def initialize(self):
+        with open(self.table, encoding="utf-8") as f:
+            self.gain = json.load(f)["gain"]
+
+    def do_step(self, t, h):
+        self.y = self.gain * self.k
+'''
+
+
+def test_declared_data_files_travel_to_foreign_workers(tmp_path, foreign_workers):
+    """A unit's data files (named by its declared String parameters, in the spec and in the design) travel too."""
+    import json
+
+    folder = tmp_path / "project"
+    (folder / "tables").mkdir(parents=True)
+    (folder / "my_table_units.py").write_text(DATA_UNIT_SOURCE)
+    gains = {"tables/slow.json": 2.0, "tables/fast.json": 7.0, "default.json": 3.0}
+    for name, gain in gains.items():
+        (folder / name).write_text(json.dumps({"gain": gain}))
+    spec = {
+        "name": "data_travels",
+        "units": {"g": {"python": "my_table_units:TableGain", "parameters": {"table": "default.json"}}},
+        "experiment": {"stop": 0.2, "step": 0.1},
+        "objectives": {"y_end": {"signal": "g.y", "reduce": "final"}},
+        "design": {"parameters": {"g.table": {"values": ["tables/slow.json", "tables/fast.json"]},
+                                  "g.k": {"values": [1.0, 10.0]}}},
+    }
+    (folder / "spec.json").write_text(json.dumps(spec))
+    sweep = Sweep(folder / "spec.json", out=tmp_path / "out", scheduler=foreign_workers, quiet=True)
+    shutil.move(folder, tmp_path / "moved_away")  # the workers cannot read the tables by path, nor can the client
+    sys.modules.pop("my_table_units", None)
+    df = sweep.run()
+    assert (df["status"] == "ok").all(), list(df["message"])
+    expected = [gains[table] * k for table in ("tables/slow.json", "tables/fast.json") for k in (1.0, 10.0)]
+    assert sorted(df["y_end"]) == sorted(expected)
+    for _, row in df.iterrows():
+        assert row["y_end"] == gains[row["g.table"]] * row["g.k"]
+
+
+def test_a_data_file_path_is_read_from_the_spec_folder_whatever_the_working_directory(tmp_path, monkeypatch):
+    import json
+
+    from orchestrator import run
+
+    folder = tmp_path / "project"
+    folder.mkdir()
+    (folder / "my_table_units_local.py").write_text(DATA_UNIT_SOURCE)
+    (folder / "gain.json").write_text(json.dumps({"gain": 4.0}))
+    spec = {"name": "data_local",
+            "units": {"g": {"python": "my_table_units_local:TableGain", "parameters": {"table": "gain.json", "k": 2.5}}},
+            "experiment": {"stop": 0.2, "step": 0.1},
+            "objectives": {"y_end": {"signal": "g.y", "reduce": "final"}}}
+    (folder / "spec.json").write_text(json.dumps(spec))
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    result = run(str(folder / "spec.json"))
+    assert result.ok, result.message
+    assert result.objectives["y_end"] == 10.0
+
+
+def test_data_files_must_name_string_parameters(write_spec, tmp_path):
+    from orchestrator.problems import SpecError
+    from orchestrator.validate import check_spec
+
+    (tmp_path / "bad_units.py").write_text(DATA_UNIT_SOURCE.replace('data_files = ("table",)', 'data_files = ("k",)'))
+    spec = write_spec({"name": "bad", "units": {"g": {"python": "bad_units.py:TableGain"}},
+                       "experiment": {"stop": 0.1, "step": 0.1}})
+    with pytest.raises(SpecError) as info:
+        check_spec(spec)
+    assert "data_files must list names of its String parameters" in str(info.value)
+    assert "['k']" in str(info.value)
+
+
+def test_the_readme_data_files_unit_reads_its_table_from_the_spec_folder(tmp_path, monkeypatch):
+    import json
+    import re
+
+    from orchestrator import run
+
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    (block,) = [b for b in re.findall(r"```python\n(.*?)```", readme, re.S) if "class TableGain" in b]
+    folder = tmp_path / "project"
+    (folder / "tables").mkdir(parents=True)
+    (folder / "readme_table_unit.py").write_text(block)
+    (folder / "tables" / "gain.json").write_text(json.dumps({"gain": 6.5}))
+    (folder / "spec.json").write_text(json.dumps({
+        "name": "readme_data_files",
+        "units": {"g": {"python": "readme_table_unit.py:TableGain", "parameters": {"table": "tables/gain.json"}}},
+        "experiment": {"stop": 0.2, "step": 0.1}, "objectives": {"y_end": {"signal": "g.y", "reduce": "final"}}}))
+    monkeypatch.chdir(tmp_path)
+    result = run(str(folder / "spec.json"))
+    assert result.ok, result.message
+    assert result.objectives["y_end"] == 6.5

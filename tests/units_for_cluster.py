@@ -14,7 +14,7 @@ class SlowSquare(PythonUnit):
 
     The point with x == ``kill_at`` kills the Dask worker process running it
     (the parent of cosim's child process) at its first step, as the OOM killer
-    would.  With the environment variable SLOW_SQUARE_MARKERS set to a folder,
+    would, once that worker has run for 3 s.  With the environment variable SLOW_SQUARE_MARKERS set to a folder,
     each step writes a file named after the worker's process id there, so a test
     knows which worker has a point in flight.
     """
@@ -32,6 +32,13 @@ class SlowSquare(PythonUnit):
             with open(os.path.join(markers, str(os.getppid())), "w") as marker:
                 marker.write(str(self.x))
         if self.x == self.kill_at:
+            # Not while the worker is starting: a Dask nanny does not restart a worker killed before its nanny
+            # has seen it start (distributed 2026.8), and a loaded machine may then be left without workers.
+            # An out-of-memory kill hits a worker that has been running; so does this one.
+            import psutil
+
+            started = psutil.Process(os.getppid()).create_time()
+            time.sleep(max(0.0, started + 3.0 - time.time()))
             os.kill(os.getppid(), signal.SIGKILL)
             time.sleep(60)  # cosim's child stops itself when it sees its parent gone
         time.sleep(self.delay)

@@ -16,6 +16,12 @@ for arrays), so a step reads ``self.tau`` and writes ``self.power``::
 
 A spec names such a class as ``"python": "package.module:Gain"`` or
 ``"python": "file.py:Gain"`` (relative to the spec's folder).
+
+A unit that reads files names the String parameters holding their paths in
+``data_files`` (e.g. ``data_files = ("plant_file",)``): a relative path is
+then read from the spec's folder, and a sweep ships the file with the unit
+to workers that do not share the client's filesystem
+(:mod:`orchestrator.data_files`).
 """
 
 from __future__ import annotations
@@ -58,7 +64,10 @@ class PythonUnit(Unit):
 
     Subclasses set ``variables`` and may set ``feedthrough`` (output name to
     the inputs it reads directly, see :class:`UnitDescription`; default: no
-    direct feed-through) and ``can_reset``.  Hooks a subclass may override:
+    direct feed-through), ``can_reset`` and ``data_files`` (names of String
+    parameters whose values are paths of files the unit reads; by the time
+    ``initialize()`` runs they hold a path that can be opened here, see the
+    module docstring).  Hooks a subclass may override:
     ``initialize()`` (parameters and start values are set, runs once before the
     first step), ``do_step(t, h)``, ``compute_outputs()`` (only for units with
     direct feed-through: recompute outputs from the current inputs) and
@@ -69,6 +78,8 @@ class PythonUnit(Unit):
     feedthrough: ClassVar[Mapping[str, Sequence[str]]] = {}
     can_reset: ClassVar[bool] = True
     unit_description: ClassVar[str] = ""
+    data_files: ClassVar[Sequence[str]] = ()
+    _data_paths: Mapping[str, str] = {}  # a data-file parameter's value as given -> the file to open (set by the type)
 
     def __init__(self, name: str = "unit"):
         self.name = name
@@ -82,7 +93,15 @@ class PythonUnit(Unit):
 
     @classmethod
     def describe_class(cls) -> UnitDescription:
-        """The description of this class's variables and capabilities."""
+        """The description of this class's variables and capabilities.
+
+        Raises TypeError when ``data_files`` names anything but a String parameter.
+        """
+        strings = {v.name for v in cls.variables if v.causality == "parameter" and v.type == "String"}
+        wrong = [name for name in cls.data_files if name not in strings]
+        if wrong or isinstance(cls.data_files, str):
+            raise TypeError(f"{cls.__name__}.data_files must list names of its String parameters (paths of the "
+                            f"files it reads); {wrong or cls.data_files!r} are not")
         declared = {k: tuple(v) for k, v in cls.feedthrough.items()}
         feedthrough = {v.name: declared.get(v.name, ()) for v in cls.variables if v.causality == "output"}
         return UnitDescription(
@@ -143,9 +162,10 @@ class PythonUnit(Unit):
         self.stop_time = stop_time
 
     def enter_initialization(self) -> None:
-        pass
+        self._open_data_files_here()
 
     def exit_initialization(self) -> None:
+        self._open_data_files_here()  # also when a subclass's enter_initialization did not call this one's
         self._call("initialize", self.start_time)
         self._outputs_stale = self._has_feedthrough
 
@@ -156,6 +176,12 @@ class PythonUnit(Unit):
 
     def terminate(self) -> None:
         self._call("close", None)
+
+    def _open_data_files_here(self) -> None:
+        """Data-file parameters: the path as the spec wrote it -> the file beside the spec, or its copy on this worker."""
+        for name in self.data_files:
+            value = getattr(self, name)
+            setattr(self, name, self._data_paths.get(value, value))
 
     # Hooks for subclasses -------------------------------------------------
 
@@ -189,18 +215,24 @@ class PythonUnitType(UnitType):
         self.base_dir = str(base_dir) if base_dir is not None else None
         self._source_zip: str | None = source_zip  # set on a worker: the module's shipped source
         self._cls: type[PythonUnit] | None = None
+        # a data-file parameter's value (as the spec gives it) -> the file it names (orchestrator.data_files)
+        self.data_paths: dict[str, str] = {}
 
     def __getstate__(self) -> dict:
-        return {"target": self.target, "base_dir": self.base_dir, "_source_zip": self._source_zip, "_cls": None}
+        return {"target": self.target, "base_dir": self.base_dir, "_source_zip": self._source_zip, "_cls": None,
+                "data_paths": self.data_paths}
 
     def files(self) -> list[Path]:
-        """The unit's ``file.py``, or the source of a module named from the spec's folder (as a zip).
+        """The unit's ``file.py`` or the source of a module named from the spec's folder (as a zip), then its data files.
 
         A module beside the spec (``my_units:Gain`` with ``my_units.py`` or the
         package ``my_units/`` in the spec's folder) travels as source, so the
         workers need not have it installed; any other module must be importable
-        where units run.
+        where units run.  The data files are those of ``data_paths``.
         """
+        return self._source_files() + [Path(p) for p in self.data_paths.values()]
+
+    def _source_files(self) -> list[Path]:
         module, sep, _ = self.target.rpartition(":")
         if not sep:
             return []
@@ -220,6 +252,9 @@ class PythonUnitType(UnitType):
         return top if (top / "__init__.py").is_file() else None
 
     def relocate(self, copies: Sequence[Path]) -> None:
+        data = list(copies)[len(copies) - len(self.data_paths):]
+        self.data_paths = {value: str(copy) for value, copy in zip(self.data_paths, data)}
+        copies = list(copies)[:len(copies) - len(self.data_paths)]
         if not copies:
             return
         module, _, class_name = self.target.rpartition(":")
@@ -298,7 +333,10 @@ class PythonUnitType(UnitType):
         return self.load_class().describe_class()
 
     def instantiate(self, name: str) -> Unit:
-        return self.load_class()(name)
+        unit = self.load_class()(name)
+        if self.data_paths:
+            unit._data_paths = self.data_paths
+        return unit
 
 
 def zip_source(source: Path) -> Path:
