@@ -39,6 +39,23 @@ def local_cluster():
     cluster.close()
 
 
+def wait_for_workers(address: str, count: int, seconds: float) -> None:
+    """Block until the scheduler at ``address`` has ``count`` workers; retries while it is still starting,
+    raises OSError/TimeoutError after ``seconds``."""
+    from distributed import Client
+
+    deadline = time.monotonic() + seconds
+    while True:
+        try:
+            with Client(address, timeout=5) as client:
+                client.wait_for_workers(count, timeout=max(1, deadline - time.monotonic()))
+            return
+        except OSError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.5)
+
+
 @pytest.fixture(scope="module")
 def dask_processes(tmp_path_factory):
     """`dask scheduler` and `dask worker` (2 processes) started as commands, workers in their own folder.
@@ -58,18 +75,7 @@ def dask_processes(tmp_path_factory):
                                cwd=worker_dir, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                                start_new_session=True)
     try:
-        from distributed import Client
-
-        deadline = time.monotonic() + 60
-        while True:
-            try:
-                with Client(address, timeout=5) as client:
-                    client.wait_for_workers(2, timeout=max(1, deadline - time.monotonic()))
-                break
-            except OSError:
-                if time.monotonic() > deadline:
-                    raise
-                time.sleep(0.5)
+        wait_for_workers(address, 2, seconds=60)
         yield address, Path(worker_dir)
     finally:
         kill_group(workers)

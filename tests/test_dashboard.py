@@ -19,7 +19,7 @@ import orchestrator
 from orchestrator.dashboard import task_key
 
 from .conftest import TESTS
-from .sweep_fixtures import free_port, kill_group, local_cluster  # noqa: F401  (fixture)
+from .sweep_fixtures import free_port, kill_group, local_cluster, wait_for_workers  # noqa: F401  (fixture)
 
 
 def ode_spec(n: int) -> dict:
@@ -66,18 +66,7 @@ def logged_workers(tmp_path):
                                 "--nthreads", "1", "--no-dashboard", "--host", "127.0.0.1"], cwd=tmp_path,
                                stdout=handles[1], stderr=handles[1], start_new_session=True)
     try:
-        from distributed import Client
-
-        deadline = time.monotonic() + 90
-        while True:
-            try:
-                with Client(address, timeout=5) as client:
-                    client.wait_for_workers(2, timeout=max(1, deadline - time.monotonic()))
-                break
-            except OSError:
-                if time.monotonic() > deadline:
-                    raise
-                time.sleep(0.5)
+        wait_for_workers(address, 2, seconds=90)
         yield address, logs
     finally:
         kill_group(workers)

@@ -14,14 +14,13 @@ import os
 import shutil
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
 
 from orchestrator.sweep import Sweep
 
-from .sweep_fixtures import free_port, kill_group
+from .sweep_fixtures import free_port, kill_group, wait_for_workers
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -61,17 +60,9 @@ def foreign_workers(tmp_path_factory):
     try:
         from distributed import Client
 
-        deadline = time.monotonic() + 90
-        while True:
-            try:
-                with Client(address, timeout=5) as client:
-                    client.wait_for_workers(2, timeout=max(1, deadline - time.monotonic()))
-                    homes = set(client.run(lambda: os.environ["HOME"] + "|" + os.getcwd()).values())
-                break
-            except OSError:
-                if time.monotonic() > deadline:
-                    raise
-                time.sleep(0.5)
+        wait_for_workers(address, 2, seconds=90)
+        with Client(address, timeout=5) as client:
+            homes = set(client.run(lambda: os.environ["HOME"] + "|" + os.getcwd()).values())
         assert homes == {f"{home}|{home}"}
         yield address
     finally:
