@@ -1,0 +1,131 @@
+"""Client memory and time per point of `cosim sweep` over many trivial points.
+
+    python benchmarks/sweep_memory.py                         # 10 000, 100 000 and 1 000 000 points
+    python benchmarks/sweep_memory.py --sizes 10000,100000    # quicker
+
+Each size runs in a fresh process, the way ``cosim sweep`` runs (``Sweep.run_to_disk``: the table stays
+on disk; default local cluster of 2 worker processes, whose Dask scheduler lives in the client process).
+The unit is a gain (tests/units_for_tests.py:Gain) with one step a point, so a point's time is nearly all
+overhead: design point, Dask task share, child process, row, part file, merge. A thread samples the
+client's resident memory (RSS) every 20 ms, separately while the points run and during the final merge
+into results.parquet.
+
+Targets (issue 16): the client's memory stays flat (its peak growth over the baseline must not grow with the
+number of points: here, the growth at the largest size within 25 MB of the growth at the smallest), and the
+overhead per point <= 1 ms: the marginal wall time per point between the smallest and the largest size, on
+2 workers (so 2 points are in progress at once).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+FLAT_MB, TARGET_MS = 25.0, 1.0
+
+
+def trivial_spec(folder: Path, n: int) -> Path:
+    spec = {
+        "name": f"trivial_{n}",
+        "units": {"g": {"python": f"{ROOT / 'tests' / 'units_for_tests.py'}:Gain"}},
+        "experiment": {"stop": 1.0, "step": 1.0},
+        "objectives": {"y": {"signal": "g.y", "reduce": "final"}},
+        "design": {"parameters": {"g.k": {"min": 0, "max": n - 1, "step": 1}}},
+    }
+    path = folder / f"trivial_{n}.json"
+    path.write_text(json.dumps(spec))
+    return path
+
+
+def measure(spec: str, out: str) -> None:
+    """One sweep in this process; prints JSON: baseline, peaks while running and while merging, seconds."""
+    import psutil
+
+    sys.path.insert(0, str(ROOT))
+    from orchestrator import results
+    from orchestrator.sweep import Sweep
+
+    proc = psutil.Process()
+    sweep = Sweep(spec, workers=2, out=out, quiet=True)
+    stage = ["run"]
+    peaks = {"run": 0, "merge": 0}
+    stop = threading.Event()
+
+    def sample() -> None:
+        while not stop.is_set():
+            rss = proc.memory_info().rss
+            peaks[stage[0]] = max(peaks[stage[0]], rss)
+            time.sleep(0.02)
+
+    original_compact = results.ResultsStore.compact
+    merge_started = []
+
+    def compact(self, *args, **kwargs):
+        stage[0] = "merge"
+        merge_started.append(time.perf_counter())
+        return original_compact(self, *args, **kwargs)
+
+    results.ResultsStore.compact = compact
+    baseline = proc.memory_info().rss
+    thread = threading.Thread(target=sample, daemon=True)
+    thread.start()
+    started = time.perf_counter()
+    counts = sweep.run_to_disk()
+    ended = time.perf_counter()
+    stop.set()
+    thread.join()
+    print(json.dumps({"points": sum(counts.values()), "ok": counts["ok"], "baseline_mb": baseline / 1e6,
+                      "run_peak_mb": peaks["run"] / 1e6, "merge_peak_mb": peaks["merge"] / 1e6,
+                      "seconds": ended - started, "merge_seconds": ended - merge_started[0]}))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--sizes", default="10000,100000,1000000")
+    parser.add_argument("--measure", nargs=2, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.measure:
+        measure(*args.measure)
+        return
+    sizes = sorted(int(s) for s in args.sizes.split(","))
+    print(f"machine: {os.cpu_count()} cores, {os.uname().machine}; {time.strftime('%Y-%m-%d %H:%M %Z')}")
+    print(f"load before: {os.popen('uptime').read().strip()}")
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    results = {}
+    with tempfile.TemporaryDirectory(prefix="cosim_memory_") as tmp:
+        folder = Path(tmp)
+        for n in sizes:
+            spec, out = trivial_spec(folder, n), folder / f"out_{n}"
+            done = subprocess.run([sys.executable, __file__, "--measure", str(spec), str(out)], env=env,
+                                  capture_output=True, text=True)
+            if done.returncode != 0:
+                raise SystemExit(done.stderr[-3000:])
+            r = json.loads(done.stdout.strip().splitlines()[-1])
+            r["growth_mb"] = max(r["run_peak_mb"], r["merge_peak_mb"]) - r["baseline_mb"]
+            results[n] = r
+            shutil.rmtree(out, ignore_errors=True)
+            print(f"  {n:>8} points ({r['ok']} ok) in {r['seconds']:7.1f} s (merge {r['merge_seconds']:.1f} s): "
+                  f"client RSS {r['baseline_mb']:.0f} MB, peak while running {r['run_peak_mb']:.0f} MB, "
+                  f"while merging {r['merge_peak_mb']:.0f} MB (growth +{r['growth_mb']:.0f} MB)", flush=True)
+    small, large = sizes[0], sizes[-1]
+    spread = results[large]["growth_mb"] - results[small]["growth_mb"]
+    print(f"memory growth {large} vs {small} points: {spread:+.0f} MB  target flat (within {FLAT_MB:g} MB): "
+          f"{'met' if spread <= FLAT_MB else 'NOT met'}")
+    if large > small:
+        per_point = (results[large]["seconds"] - results[small]["seconds"]) / (large - small) * 1e3
+        print(f"marginal wall time per point, 2 workers: {per_point:.3f} ms  target <= {TARGET_MS:g} ms: "
+              f"{'met' if per_point <= TARGET_MS else 'NOT met'}")
+    print(f"load after: {os.popen('uptime').read().strip()}")
+
+
+if __name__ == "__main__":
+    main()
