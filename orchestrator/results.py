@@ -9,6 +9,9 @@ Layout of a results folder ``DIR``:
 - ``DIR/results.parquet``: the compacted table (:meth:`ResultsStore.compact`,
   called at the end of a sweep): every point exactly once (a later row of the
   same point id replaces an earlier one).
+- Rows a sweep writes carry their place in the design order in a column
+  ``__design_index`` that only the part files have: the final merge puts them
+  in order by it, streaming, without holding every point id.
 - ``DIR/results.csv``: the same table as CSV, on request.
 - ``DIR/metadata.json``: the spec and its digest, FMU checksums, package
   versions, host, start and end, counts by status.
@@ -26,7 +29,7 @@ import os
 import re
 import tempfile
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -38,9 +41,13 @@ from .table_columns import STATUSES, TAIL_COLUMNS  # noqa: F401  (defined once, 
 
 _PART = re.compile(r"^part-(\d+)\.parquet$")
 COMPACT_WINDOW = 10_000  # rows held at once while merging parts into the final table
-# Every MERGE_PARTS appended batches, the part files are merged into one: thousands of tiny files cost
-# the final merge more memory (per-file reader state) than their rows do.
-MERGE_PARTS = 128
+# The point's place in the design order, written by the sweep into part files only (never into results.parquet)
+DESIGN_INDEX = "__design_index"
+_SOURCE = "__source"  # which source file a row came from, while merging (a later source wins)
+# Every MERGE_PARTS appended batches, the newest part files are merged into one: the final merge holds a
+# buffer of rows per file, so the number of files must stay small.
+MERGE_PARTS = 64
+ROW_GROUP = 1024  # rows per row group of a merged part: what a streaming merge holds of each file
 
 
 def default_folder(spec_path: str | Path) -> Path:
@@ -54,6 +61,8 @@ def default_folder(spec_path: str | Path) -> Path:
 
 class ResultsStore:
     """Rows of one sweep in folder ``folder`` (created when missing)."""
+
+    INDEX_COLUMN = DESIGN_INDEX  # rows that carry it are put in design order by it (see ``compact``)
 
     def __init__(self, folder: str | Path):
         self.folder = Path(folder)
@@ -76,14 +85,20 @@ class ResultsStore:
         if self._parts_written % MERGE_PARTS == 0:
             self._merge_parts()
 
-    def _write_part(self, table: pa.Table) -> None:
-        """Write ``table`` as the next part file: temporary file, fsync, rename (whole or absent after a kill)."""
+    def _write_part(self, table: pa.Table | Iterable[pa.Table], schema: pa.Schema | None = None) -> None:
+        """Write ``table`` (or the tables of ``schema`` one after the other) as the next part file:
+        temporary file, fsync, rename (whole or absent after a kill)."""
         final = self.parts / f"part-{self._next:08d}.parquet"
         self._next += 1
         fd, tmp = tempfile.mkstemp(dir=self.parts, suffix=".tmp")
         try:
             with os.fdopen(fd, "wb") as f:
-                pq.write_table(table, f)
+                if isinstance(table, pa.Table):
+                    pq.write_table(table, f)
+                else:
+                    with pq.ParquetWriter(f, schema) as writer:
+                        for piece in table:
+                            writer.write_table(piece, row_group_size=ROW_GROUP)
                 f.flush()
                 os.fsync(f.fileno())
             os.replace(tmp, final)
@@ -97,6 +112,10 @@ class ResultsStore:
         Only the newest, small parts are merged, so a merge never reads more
         than MERGE_PARTS batches, however long the sweep.
 
+        Parts with the design index are merged streaming, into one part in
+        index order (so the final merge can stream too); others are
+        concatenated in write order.
+
         The merged file gets the next number and is in place before the small
         parts are removed: a kill in between leaves rows twice, which the
         final merge resolves (latest row wins; they are the same rows).
@@ -104,9 +123,12 @@ class ResultsStore:
         parts = self._part_files()[-MERGE_PARTS:]
         if len(parts) < 2:
             return
-        schema = _unified_schema(parts)
-        table = pa.concat_tables([_conform(_read(p), schema) for p in parts])
-        self._write_part(table)
+        if all(_sorted_by_index(p) for p in parts):
+            schema = _unified_schema(parts, keep_index=True)
+            self._write_part(_windows_by_index(parts, schema), schema)
+        else:
+            schema = _unified_schema(parts)
+            self._write_part(pa.concat_tables([_conform(_read(p), schema) for p in parts]))
         for part in parts:
             part.unlink()
 
@@ -152,43 +174,38 @@ class ResultsStore:
         if not frames:
             return pd.DataFrame(columns=["point_id", *TAIL_COLUMNS])
         df = pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0]
-        df = df.drop_duplicates("point_id", keep="last")
+        df = df.drop_duplicates("point_id", keep="last").drop(columns=[DESIGN_INDEX], errors="ignore")
         return _order_columns(df).reset_index(drop=True)
 
     def compact(self, order: Iterable[str] | None = None, csv: bool = False) -> dict[str, int]:
-        """Merge parts into ``results.parquet`` (rows in ``order`` of point ids when given); returns counts by status.
+        """Merge parts into ``results.parquet``, rows in design order; returns counts by status.
 
-        Each point appears once, its latest row winning.  The merge streams:
-        it holds the point ids and at most ``COMPACT_WINDOW`` rows at a time,
-        never the whole table, so a sweep's client memory does not grow with
-        its size.  Rows whose ids are not in ``order`` follow, in the order
-        they were written.  The parts are removed only after the new table is
-        in place, so an interruption here loses nothing.
+        Each point appears once, its latest row winning.  The merge streams and
+        holds at most about ``COMPACT_WINDOW`` rows at a time:
+
+        - when every part carries the design index (as a sweep writes them),
+          rows are placed by it and nothing else is held, so the client's
+          memory does not grow with the number of points; ``order`` is not read;
+        - otherwise (parts of an older cosim, a compacted table being resumed,
+          rows of ``cosim optimize``) rows go in ``order`` of point ids when
+          given, then rows whose ids are not in it, in the order they were
+          written; this holds the point ids (about 100 bytes a point).
+
+        The parts are removed only after the new table is in place, so an
+        interruption here loses nothing.
         """
         sources = ([self.table_path] if self.table_path.exists() else []) + self._part_files()
-        counts = {s: 0 for s in STATUSES}
-        where, position = _latest_rows_in_order(sources, order)
         schema = _unified_schema(sources)
+        if sources and all(_sorted_by_index(p) for p in sources):
+            windows = _windows_by_index(sources, schema)
+        else:
+            windows = _windows_by_id(sources, schema, order)
+        counts = {s: 0 for s in STATUSES}
         tmp = self.table_path.with_suffix(".parquet.tmp")
         csv_tmp = self.folder / "results.csv.tmp"
         csv_writer = None
         with pq.ParquetWriter(tmp, schema) as writer:
-            for low in range(0, len(position), COMPACT_WINDOW):
-                chosen = np.flatnonzero((position >= low) & (position < low + COMPACT_WINDOW))
-                if len(chosen) == 0:
-                    continue
-                chosen = chosen[np.argsort(where[chosen, 0], kind="stable")]  # grouped by source file
-                splits = np.flatnonzero(np.diff(where[chosen, 0])) + 1
-                pieces = []
-                for group in np.split(chosen, splits):
-                    path = sources[int(where[group[0], 0])]
-                    table = _conform(_read(path).take(pa.array(where[group, 1])), schema)
-                    pieces.append(table.append_column("__position", pa.array(position[group])))
-                    if len(pieces) >= 64:  # thousands of tiny tables cost more than their rows: merge early
-                        pieces = [pa.concat_tables(pieces).combine_chunks()]
-                if not pieces:
-                    continue
-                window = pa.concat_tables(pieces).sort_by("__position").drop_columns(["__position"])
+            for window in windows:
                 writer.write_table(window)
                 for status, n in zip(*np.unique(window.column("status").to_numpy(zero_copy_only=False),
                                                 return_counts=True)):
@@ -217,6 +234,100 @@ def _read(path: Path, columns: Sequence[str] | None = None) -> pa.Table:
     """One part file.  ``ParquetFile.read`` rather than ``pq.read_table``: the latter sets up the
     dataset machinery per call, and over thousands of small parts that costs tens of MB."""
     return pq.ParquetFile(path).read(columns=list(columns) if columns else None)
+
+
+def _windows_by_id(sources: Sequence[Path], schema: pa.Schema,
+                   order: Iterable[str] | None) -> Iterator[pa.Table]:
+    """The final table in windows of at most COMPACT_WINDOW rows, placed by point id (see ``compact``)."""
+    where, position = _latest_rows_in_order(sources, order)
+    for low in range(0, len(position), COMPACT_WINDOW):
+        chosen = np.flatnonzero((position >= low) & (position < low + COMPACT_WINDOW))
+        if len(chosen) == 0:
+            continue
+        chosen = chosen[np.argsort(where[chosen, 0], kind="stable")]  # grouped by source file
+        splits = np.flatnonzero(np.diff(where[chosen, 0])) + 1
+        pieces = []
+        for group in np.split(chosen, splits):
+            path = sources[int(where[group[0], 0])]
+            table = _conform(_read(path).take(pa.array(where[group, 1])), schema)
+            pieces.append(table.append_column("__position", pa.array(position[group])))
+            if len(pieces) >= 64:  # thousands of tiny tables cost more than their rows: merge early
+                pieces = [pa.concat_tables(pieces).combine_chunks()]
+        if pieces:
+            yield pa.concat_tables(pieces).sort_by("__position").drop_columns(["__position"])
+
+
+def _sorted_by_index(path: Path) -> bool:
+    """Whether the file has a DESIGN_INDEX for every row, in increasing order (reads only that column)."""
+    if DESIGN_INDEX not in pq.ParquetFile(path).schema_arrow.names:
+        return False
+    column = _read(path, [DESIGN_INDEX]).column(DESIGN_INDEX)
+    if column.null_count:
+        return False
+    index = column.to_numpy()
+    return bool(np.all(index[1:] >= index[:-1]))
+
+
+class _IndexedSource:
+    """One part file read in index order, ROW_GROUP rows at a time (parts are sorted by DESIGN_INDEX)."""
+
+    def __init__(self, path: Path, number: int, schema: pa.Schema):
+        self._batches = pq.ParquetFile(path).iter_batches(batch_size=ROW_GROUP)
+        self.number, self.schema = number, schema
+        self.buffer: pa.Table | None = None
+        self._pull()
+
+    def _pull(self) -> None:
+        """Refill the buffer when it is empty; None when the file is exhausted."""
+        while self.buffer is None or len(self.buffer) == 0:
+            batch = next(self._batches, None)
+            if batch is None:
+                self.buffer = None
+                return
+            self.buffer = pa.Table.from_batches([batch])
+
+    def head(self) -> int | None:
+        """The smallest index not yet taken, None when exhausted."""
+        return None if self.buffer is None else self.buffer.column(DESIGN_INDEX)[0].as_py()
+
+    def take_below(self, high: int) -> list[pa.Table]:
+        """Every row of this file with an index below ``high`` (not taken before), with the file's number."""
+        pieces = []
+        while self.buffer is not None:
+            index = self.buffer.column(DESIGN_INDEX).to_numpy()
+            cut = int(np.searchsorted(index, high))
+            if cut:
+                piece = _conform(self.buffer.slice(0, cut), self.schema)
+                pieces.append(piece.append_column(_SOURCE, pa.array(np.full(cut, self.number, dtype=np.int64))))
+            if cut < len(index):
+                self.buffer = self.buffer.slice(cut)
+                break
+            self.buffer = None
+            self._pull()
+        return pieces
+
+
+def _windows_by_index(sources: Sequence[Path], schema: pa.Schema) -> Iterator[pa.Table]:
+    """The final table in windows of about COMPACT_WINDOW design indices, read in step from every source.
+
+    Each source is sorted by DESIGN_INDEX, so a window takes a prefix of each;
+    of rows with the same index the one from the later source wins.  Held at
+    once: one window and about a row group per source.  The windows have
+    ``schema``'s columns (with DESIGN_INDEX when it has it: merging parts).
+    """
+    indexed = schema if DESIGN_INDEX in schema.names else _unified_schema(sources, keep_index=True)
+    readers = [_IndexedSource(path, number, indexed) for number, path in enumerate(sources)]
+    while True:
+        heads = [h for h in (r.head() for r in readers) if h is not None]
+        if not heads:
+            return
+        high = min(heads) + COMPACT_WINDOW
+        window = pa.concat_tables([piece for r in readers for piece in r.take_below(high)])
+        index = window.column(DESIGN_INDEX).to_numpy()
+        source = window.column(_SOURCE).to_numpy()
+        by_index = np.lexsort((source, index))  # by index, then by source: the last of each index wins
+        last = np.append(index[by_index][1:] != index[by_index][:-1], True)
+        yield _conform(window.take(pa.array(by_index[last])), schema)
 
 
 def _latest_rows_in_order(sources: Sequence[Path], order: Iterable[str] | None) -> tuple[np.ndarray, np.ndarray]:
@@ -263,14 +374,17 @@ def _order_array(order: Iterable[str], chunk: int = 10_000) -> np.ndarray:
     return np.concatenate(arrays) if arrays else np.array([], dtype=str)
 
 
-def _unified_schema(sources: Sequence[Path]) -> pa.Schema:
-    """One schema for all parts (a failed batch lacks objective columns; an all-null column has no type)."""
+def _unified_schema(sources: Sequence[Path], keep_index: bool = False) -> pa.Schema:
+    """One schema for all parts (a failed batch lacks objective columns; an all-null column has no type).
+
+    Without ``keep_index``, the schema of the final table: no DESIGN_INDEX.
+    """
     if not sources:
         return pa.schema([("point_id", pa.string()), ("status", pa.string()), ("message", pa.string()),
                           ("run_time", pa.float64()), ("worker", pa.string())])
     schema = pa.unify_schemas([pq.ParquetFile(p).schema_arrow.remove_metadata() for p in sources],
                               promote_options="permissive")
-    names = schema.names
+    names = [n for n in schema.names if keep_index or n != DESIGN_INDEX]
     tail = [c for c in TAIL_COLUMNS if c in names]
     middle = [c for c in names if c != "point_id" and c not in tail]
     fields = [schema.field(n) for n in ["point_id", *middle, *tail] if n in names]

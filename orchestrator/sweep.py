@@ -43,7 +43,7 @@ import threading
 import time
 from pathlib import Path
 from contextlib import contextmanager
-from typing import TYPE_CHECKING, Any, Iterable, Iterator, Sequence, TextIO
+from typing import TYPE_CHECKING, Any, Iterator, Sequence, TextIO
 
 from . import limits
 from .design import DesignSpace, Point
@@ -97,13 +97,29 @@ _IDLE_LOCK = threading.Lock()
 _MAX_PAYLOADS = 2  # idle child processes are kept for at most this many different systems
 
 
-def run_batch(payload: dict[str, Any], points: Sequence[tuple[str, dict[str, Any]]],
+class PointBatch:
+    """The points of one task as one opaque object.
+
+    Dask walks through the lists, tuples and dicts it is given looking for
+    futures; over a list of point tuples that walk costs the client about
+    60 µs a point, more than a trivial point's whole run.
+    """
+
+    __slots__ = ("points",)
+
+    def __init__(self, points: Sequence[tuple[str, dict[str, Any]]]):
+        self.points = points
+
+
+def run_batch(payload: dict[str, Any], points: PointBatch | Sequence[tuple[str, dict[str, Any]]],
               timeout: float | None) -> list[dict[str, Any]]:
     """Run ``points`` on this worker; one row per point (see IsolatedRunner.run), with the worker named.
 
     Runs on a Dask worker (or anywhere): the child process holding the system
     is kept for the next batch of the same payload.
     """
+    if isinstance(points, PointBatch):
+        points = points.points
     with _IDLE_LOCK:
         idle = _IDLE.pop(payload["key"], [])
         runner = idle.pop() if idle else IsolatedRunner(payload)
@@ -186,10 +202,53 @@ def _duration(seconds: float) -> str:
         else f"{seconds // 60}:{seconds % 60:02d}"
 
 
-def _batched(points: Iterable[Point], size: int) -> Iterator[list[Point]]:
-    it = iter(points)
-    while batch := list(itertools.islice(it, size)):
-        yield batch
+class BatchSizer:
+    """How many points go into the next Dask task.
+
+    The first tasks are small, so the first points spread over every worker
+    at once.  Once point times are known, a task gets enough points to last
+    about TASK_SECONDS (at most MAX_BATCH): each task costs the scheduler,
+    the worker and the client a few milliseconds whatever it holds, so tasks
+    of trivial points must hold many.  Near the end tasks shrink again, so
+    the workers finish together.  A fixed ``size`` (``--batch-size``) is kept.
+    """
+
+    TASK_SECONDS = 0.5
+    MAX_BATCH = 2048
+
+    def __init__(self, todo: int, n_workers: int, size: int | None = None):
+        self.fixed = size
+        self.n_workers = n_workers
+        self.first = size or max(1, min(64, math.ceil(todo / (n_workers * 8))))
+        self.remaining = todo  # points not yet handed to a task
+        self._seconds, self._count = 0.0, 0  # run time of the ok points so far, and how many
+
+    @property
+    def point_seconds(self) -> float | None:
+        """The mean run time of an ok point so far (None before the first)."""
+        return max(self._seconds / self._count, 1e-5) if self._count else None
+
+    def observe(self, rows: Sequence[dict[str, Any]]) -> None:
+        """Learn the time a point takes from the rows of a completed task."""
+        for row in rows:
+            if row.get("status") == "ok" and row.get("run_time", 0) > 0:
+                self._seconds += row["run_time"]
+                self._count += 1
+
+    def next(self) -> int:
+        """The size of the next task."""
+        if self.fixed is not None or self.point_seconds is None:
+            size = self.first
+        else:
+            size = min(self.MAX_BATCH, max(self.first, round(self.TASK_SECONDS / self.point_seconds)))
+            size = min(size, max(self.first, math.ceil(self.remaining / (4 * self.n_workers))))
+        return max(1, size)
+
+    def take(self, points: Iterator[Point]) -> list[Point]:
+        """The next task's points from ``points`` (an empty list at the end)."""
+        batch = list(itertools.islice(points, self.next()))
+        self.remaining -= len(batch)
+        return batch
 
 
 TIMEOUT_FACTOR = 50  # a point may take this many times the median measured point time (default timeout)
@@ -351,7 +410,7 @@ class Sweep:
 
     def _finish(self) -> dict[str, int]:
         with results_writes(self.out):  # a full disk during the final merge loses nothing (see compact)
-            counts = self.store.compact(order=(p.id for p in self.space), csv=self.csv)
+            counts = self.store.compact(order=(p.id for p in self.space), csv=self.csv)  # order: older parts
             finish_metadata(self.store, counts)
         return counts
 
@@ -360,9 +419,9 @@ class Sweep:
 
         from .dashboard import task_key
 
-        size = self.batch_size or max(1, min(64, math.ceil(todo / (n_workers * 8))))
+        sizer = BatchSizer(todo, n_workers, self.batch_size)
         total = len(self.space)
-        batches = _batched((p for p in self.space if p.id not in done), size)
+        unsubmitted = (p for p in self.space if p.id not in done)  # never rebound (a rerun once rebound 'points')
         payload = ScatteredPayload(client, self.payload)
         progress = Progress(todo, self.progress_stream) if not self.quiet else None
         in_flight: dict[str, tuple[list[Point], bool]] = {}  # task key -> points, alone (see evaluator.Reruns)
@@ -375,13 +434,13 @@ class Sweep:
             alone = bool(reruns.suspects) or any(a for _, a in in_flight.values())
             if alone and in_flight:
                 return False  # no new work until the suspects have run, each alone on the cluster
-            batch = [reruns.suspects.popleft()] if alone else next(batches, None)
-            if batch is None:
+            batch = [reruns.suspects.popleft()] if alone else sizer.take(unsubmitted)
+            if not batch:
                 return False
             timeout = self.timeout if self.timeout is not None else default_timeout(times)
             key = task_key("sweep", self.spec.name, [p.index for p in batch], total)  # the dashboard's names
-            future = client.submit(run_batch, payload.future(), [(p.id, p.values) for p in batch], timeout,
-                                   pure=False, retries=0, key=key)
+            future = client.submit(run_batch, payload.future(), PointBatch([(p.id, p.values) for p in batch]),
+                                   timeout, pure=False, retries=0, key=key)
             in_flight[future.key] = batch, alone
             pending.add(future)
             return True
@@ -402,6 +461,7 @@ class Sweep:
                     continue
                 rows = lost_rows([p.id for p in batch], exc, alone)
             future.release()
+            sizer.observe(rows)
             with results_writes(self.out):
                 self.store.append([self._row(p, r) for p, r in zip(batch, rows)])
             times.extend(r["run_time"] for r in rows if r["status"] == "ok")
@@ -412,7 +472,7 @@ class Sweep:
             progress.close()
 
     def _row(self, point: Point, row: dict[str, Any]) -> dict[str, Any]:
-        out = {"point_id": point.id}
+        out = {"point_id": point.id, self.store.INDEX_COLUMN: point.index}  # only in part files: results.py
         out.update(self.space.columns(point.values))
         out.update(row.get("objectives", {}))
         for key in TAIL_COLUMNS:

@@ -6,7 +6,7 @@ import math
 
 import pandas as pd
 
-from orchestrator.results import STATUSES, ResultsStore
+from orchestrator.results import DESIGN_INDEX, STATUSES, ResultsStore
 
 
 def counts_by_status(df: pd.DataFrame) -> dict[str, int]:
@@ -94,3 +94,49 @@ def test_parts_are_merged_as_they_accumulate_without_losing_rows(tmp_path, monke
     store.compact()
     df = store.table().set_index("point_id")
     assert len(df) == 28 and df.loc["p0-0", "y"] == 99.0 and df.loc["p6-3", "y"] == 6.0
+
+
+def indexed(ids_and_indices, status="ok", **extra):
+    """Rows as a sweep writes them: each with its place in the design order."""
+    return [{"point_id": pid, DESIGN_INDEX: i, "p.x": i, **extra, "status": status, "message": "", "run_time": 0.1,
+             "worker": "w"} for pid, i in ids_and_indices]
+
+
+def test_rows_with_the_design_index_are_merged_by_it_in_windows_latest_row_winning(tmp_path, monkeypatch):
+    import orchestrator.results as results
+
+    monkeypatch.setattr(results, "COMPACT_WINDOW", 3)  # several windows over 10 points
+    monkeypatch.setattr(results, "MERGE_PARTS", 3)  # and parts merged (streaming) on the way
+    monkeypatch.setattr(results, "ROW_GROUP", 2)
+    store = ResultsStore(tmp_path)
+    design = [f"id{i}" for i in range(10)]
+    batches = [[7, 8, 9], [0, 1], [4, 5, 6], [2, 3]]  # batches complete out of order
+    for b in batches[:2]:
+        store.append(indexed([(design[i], i) for i in b], y=float(b[0])))
+    store.append(indexed([(design[i], i) for i in batches[2]], status="failed"))  # no objective column
+    store.append(indexed([(design[i], i) for i in batches[3]], y=2.0))
+    store.append(indexed([(design[1], 1)], y=99.0))  # a later row of point 1 wins
+    assert len(list((tmp_path / "parts").glob("part-*.parquet"))) == 3  # 3 merged into 1, then 2 new
+    assert DESIGN_INDEX not in store.read().columns
+    counts = store.compact(order=iter(()))  # the order of ids is not needed (and not read) with the index
+    df = store.table()
+    assert list(df["point_id"]) == design
+    assert list(df.columns) == ["point_id", "p.x", "y", "status", "message", "run_time", "worker"]
+    y = df.set_index("point_id")["y"]
+    assert y["id1"] == 99.0 and y["id0"] == 0.0 and y["id9"] == 7.0 and y["id3"] == 2.0
+    assert all(math.isnan(y[f"id{i}"]) for i in (4, 5, 6))
+    assert counts == {"ok": 7, "failed": 3, "timeout": 0, "crashed": 0}
+    assert not list((tmp_path / "parts").iterdir())
+
+
+def test_the_index_merge_and_the_id_merge_give_the_same_table(tmp_path):
+    design = [f"q{i:03d}" for i in range(40)]
+    tables = []
+    for name, with_index in (("by_index", True), ("by_id", False)):
+        store = ResultsStore(tmp_path / name)
+        for start in (30, 0, 20, 10):
+            batch = indexed([(design[i], i) for i in range(start, start + 10)], y=float(start))
+            store.append(batch if with_index else [{k: v for k, v in r.items() if k != DESIGN_INDEX} for r in batch])
+        store.compact(order=design)
+        tables.append(store.table())
+    pd.testing.assert_frame_equal(tables[0], tables[1])
