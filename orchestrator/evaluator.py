@@ -58,14 +58,32 @@ def _thread_count(client: Any) -> int:
     return sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values())
 
 
+def local_cluster(workers: int) -> Any:
+    """The cluster cosim starts when given none: a LocalCluster of ``workers`` worker processes, one thread each,
+    on 127.0.0.1, its dashboard on a free port; a task may lose one worker (see :mod:`orchestrator.cluster`).
+    The caller closes it."""
+    import dask
+    from distributed import LocalCluster
+
+    from .cluster import ALLOWED_FAILURES
+    from .interrupts import WORKER_PRELOAD
+
+    with dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES}):
+        return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                            dashboard_address="127.0.0.1:0", silence_logs=40,
+                            preload=[WORKER_PRELOAD])  # the workers ignore a terminal's Ctrl-C
+
+
 @contextmanager
-def dask_client(workers: int, scheduler: str | None = None,
-                cluster_file: str | None = None) -> Iterator[tuple[Any, int, str]]:
+def dask_client(workers: int, scheduler: str | None = None, cluster_file: str | None = None,
+                early: Any = None) -> Iterator[tuple[Any, int, str]]:
     """Yields ``(client, worker threads, dashboard link)``; closes the client and any cluster it started.
 
     ``cluster_file`` (a path, see :mod:`orchestrator.cluster`) comes first,
     then ``scheduler``, then Dask's configured scheduler address; without any
-    a ``LocalCluster`` of ``workers`` processes is started.  Raises
+    a ``LocalCluster`` of ``workers`` processes is started, or taken from
+    ``early`` (an :class:`~orchestrator.early_cluster.EarlyCluster` started
+    before, which the caller closes if it is not used here).  Raises
     ClusterError when the scheduler cannot be reached or has no workers within
     60 s (a cluster file's jobs: 10 min), ClusterFileError for a bad cluster file.
     Meanwhile the dashboard's web server logs its errors without tracebacks
@@ -74,15 +92,14 @@ def dask_client(workers: int, scheduler: str | None = None,
     from .dashboard import web_server_tracebacks_as_lines
 
     with web_server_tracebacks_as_lines():
-        yield from _client(workers, scheduler, cluster_file)
+        yield from _client(workers, scheduler, cluster_file, early)
 
 
-def _client(workers: int, scheduler: str | None, cluster_file: str | None) -> Iterator[tuple[Any, int, str]]:
-    import dask
-    from distributed import Client, LocalCluster
+def _client(workers: int, scheduler: str | None, cluster_file: str | None,
+            early: Any) -> Iterator[tuple[Any, int, str]]:
+    from distributed import Client
 
-    from .cluster import ALLOWED_FAILURES, configured_scheduler, read_cluster_file, start_cluster
-    from .interrupts import WORKER_PRELOAD
+    from .cluster import configured_scheduler, read_cluster_file, start_cluster
 
     cluster = None
     wait, hint, origin = 60, "start some with: dask worker ADDRESS --nthreads 1", ""
@@ -103,10 +120,7 @@ def _client(workers: int, scheduler: str | None, cluster_file: str | None) -> It
         wait, hint = 600, f"check that the jobs of {config.type} start (its scale/adapt and job system)"
     elif scheduler is None:
         dashboard = _dashboard_available()
-        with dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES}):
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                   dashboard_address="127.0.0.1:0", silence_logs=40,
-                                   preload=[WORKER_PRELOAD])  # the workers ignore a terminal's Ctrl-C
+        cluster = early.take() if early is not None else local_cluster(workers)
         client = Client(cluster)
         link = cluster.dashboard_link if dashboard else "unavailable (install bokeh to get it)"
     else:

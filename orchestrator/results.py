@@ -37,6 +37,7 @@ import pyarrow as pa
 import pyarrow.csv as pa_csv
 import pyarrow.parquet as pq
 
+from .results_folder import default_folder  # noqa: F401  (its home before it needed no pandas)
 from .table_columns import STATUSES, TAIL_COLUMNS  # noqa: F401  (defined once, for writers and readers)
 
 _PART = re.compile(r"^part-(\d+)\.parquet$")
@@ -48,15 +49,6 @@ _SOURCE = "__source"  # which source file a row came from, while merging (a late
 # buffer of rows per file, so the number of files must stay small.
 MERGE_PARTS = 64
 ROW_GROUP = 1024  # rows per row group of a merged part: what a streaming merge holds of each file
-
-
-def default_folder(spec_path: str | Path) -> Path:
-    """Where ``cosim sweep`` writes without ``--out``: ``results/<spec name>`` (the file's stem without a name)."""
-    try:
-        name = json.loads(Path(spec_path).read_text(encoding="utf-8")).get("name") or Path(spec_path).stem
-    except (OSError, ValueError, AttributeError, RecursionError):  # a broken spec: validation reports it next
-        name = Path(spec_path).stem
-    return Path("results") / re.sub(r"[^A-Za-z0-9_.-]+", "_", str(name))
 
 
 class ResultsStore:

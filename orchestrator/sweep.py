@@ -279,15 +279,19 @@ class Sweep:
     space); a driver such as ``cosim sensitivity`` passes its own sample (an
     object with DesignSpace's ``__iter__``, ``__len__``, ``head``, ``columns``,
     ``targets`` and ``method``).
+
+    ``start_early`` (``cosim sweep``'s way): once the spec is checked, the
+    local cluster (when one is used) starts in the background while the rest
+    is prepared (:mod:`orchestrator.early_cluster`); :meth:`run`,
+    :meth:`run_to_disk` or :meth:`close` then ends it.
     """
 
     def __init__(self, spec_path: str | Path, workers: int | None = None, out: str | Path | None = None,
                  scheduler: str | None = None, timeout: float | None = None, resume: bool = False,
                  batch_size: int | None = None, csv: bool = False, progress: TextIO | None = None,
                  quiet: bool = False, experiment: dict | None = None, space_of: Any = None,
-                 cluster: str | Path | None = None, recompute: bool = False):
+                 cluster: str | Path | None = None, recompute: bool = False, start_early: bool = False):
         from .cluster import read_cluster_file
-        from .results import ResultsStore  # pandas and pyarrow only when a sweep is made
         from .validate import check_spec
 
         check_timeout(timeout, SweepError)
@@ -311,15 +315,37 @@ class Sweep:
         self._temporary = out is None
         if resume and out is None:
             raise SweepError("resume needs the results folder of the interrupted sweep (--out DIR)")
-        self.out = Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="cosim_sweep_"))
-        with results_writes(self.out):
-            self.store = ResultsStore(self.out)
-            self.lock = FolderLock(self.out)
-            self.lock.check_free()  # a sweep running into this folder is the first thing to say
-        self.checksums = unit_checksums(self.system)
-        self.recompute = recompute
-        self._check_folder()
-        self.payload = make_payload(self.system)  # FMU bytes read now: workers never open these paths
+        self._early = self._start_cluster_early() if start_early else None
+        try:
+            from .results import ResultsStore  # pandas and pyarrow only when a sweep is made
+
+            self.out = Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="cosim_sweep_"))
+            with results_writes(self.out):
+                self.store = ResultsStore(self.out)
+                self.lock = FolderLock(self.out)
+                self.lock.check_free()  # a sweep running into this folder is the first thing to say
+            self.checksums = unit_checksums(self.system)
+            self.recompute = recompute
+            self._check_folder()
+            self.payload = make_payload(self.system)  # FMU bytes read now: workers never open these paths
+        except BaseException:
+            self.close()
+            raise
+
+    def _start_cluster_early(self) -> Any:
+        """An EarlyCluster when this sweep will run on a local cluster, else None."""
+        from .cluster import configured_scheduler
+        from .early_cluster import EarlyCluster
+
+        if self.scheduler is None and self.cluster is None and configured_scheduler() is None:
+            return EarlyCluster(self.workers)
+        return None
+
+    def close(self) -> None:
+        """Stop the cluster started early if no run took it (a no-op otherwise)."""
+        early, self._early = self._early, None
+        if early is not None:
+            early.close()
 
     def _check_folder(self) -> None:
         previous = check_results_folder(self.store, self.resume, self.spec.digest, "sweep", "finish that sweep",
@@ -375,8 +401,12 @@ class Sweep:
             shutil.rmtree(self.out, ignore_errors=True)
 
     def _run(self) -> dict[str, int]:
-        with results_writes(self.out):
-            self.lock.acquire()  # released when this process ends, however it ends
+        try:
+            with results_writes(self.out):
+                self.lock.acquire()  # released when this process ends, however it ends
+        except BaseException:
+            self.close()  # the early cluster
+            raise
         try:
             return self._run_locked()
         finally:
@@ -390,10 +420,12 @@ class Sweep:
         total = len(self.space)
         todo = total - len(done & {p.id for p in self.space}) if done else total
         if todo == 0:
+            self.close()
             self._say(f"cosim sweep {self.spec.name}: all {total} points already in {self.out}")
             return self._finish()
         try:
-            with dask_client(self.workers, self.scheduler, self.cluster) as (client, n_workers, link):
+            with dask_client(self.workers, self.scheduler, self.cluster, early=self._early) as \
+                    (client, n_workers, link):
                 info = {"started": started, "scheduler": client.scheduler.address, "workers": n_workers,
                         "timeout": self.timeout}
                 with results_writes(self.out):
@@ -406,6 +438,8 @@ class Sweep:
         except KeyboardInterrupt:
             self._say(f"interrupted: the rows so far are in {self.out}; run again with --resume to finish")
             raise
+        finally:
+            self.close()  # the early cluster, if dask_client did not take it
         return self._finish()
 
     def _finish(self) -> dict[str, int]:

@@ -55,7 +55,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
     if args.batch_size is not None and args.batch_size < 1:
         raise UsageError("--batch-size must be at least 1")
-    from .results import default_folder
+    from .results_folder import default_folder
 
     out = Path(args.out) if args.out else default_folder(args.spec)
     if args.dry_run:
@@ -63,7 +63,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     sweep = Sweep(args.spec, workers=args.workers, out=out, scheduler=args.scheduler, cluster=args.cluster,
                   timeout=args.timeout,
                   resume=args.resume, batch_size=args.batch_size, csv=args.csv, experiment=experiment_overrides(args),
-                  recompute=args.recompute)
+                  recompute=args.recompute,
+                  start_early=True)  # the local cluster starts while the results folder and payload are prepared
     counts = sweep.run_to_disk()  # a huge sweep's table never sits in memory
     total = sum(counts.values())
     summary = ", ".join(f"{n} {s}" for s, n in sorted(counts.items()) if n)
