@@ -13,7 +13,9 @@ into results.parquet.
 Targets (issue 16): the client's memory stays flat (its peak growth over the baseline must not grow with the
 number of points: here, the growth at the largest size within 25 MB of the growth at the smallest), and the
 overhead per point <= 1 ms: the marginal wall time per point between the smallest and the largest size, on
-2 workers (so 2 points are in progress at once).
+2 workers (so 2 points are in progress at once). Under load the wall time says little, so the CPU time
+of the whole sweep (client, Dask workers, their child processes: ``getrusage(RUSAGE_CHILDREN)``) is printed
+too, and its marginal cost per point.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import shutil
 import subprocess
 import sys
@@ -105,17 +108,21 @@ def main() -> None:
         folder = Path(tmp)
         for n in sizes:
             spec, out = trivial_spec(folder, n), folder / f"out_{n}"
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)
             done = subprocess.run([sys.executable, __file__, "--measure", str(spec), str(out)], env=env,
                                   capture_output=True, text=True)
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
             if done.returncode != 0:
                 raise SystemExit(done.stderr[-3000:])
             r = json.loads(done.stdout.strip().splitlines()[-1])
             r["growth_mb"] = max(r["run_peak_mb"], r["merge_peak_mb"]) - r["baseline_mb"]
+            r["cpu_seconds"] = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
             results[n] = r
             shutil.rmtree(out, ignore_errors=True)
             print(f"  {n:>8} points ({r['ok']} ok) in {r['seconds']:7.1f} s (merge {r['merge_seconds']:.1f} s): "
                   f"client RSS {r['baseline_mb']:.0f} MB, peak while running {r['run_peak_mb']:.0f} MB, "
-                  f"while merging {r['merge_peak_mb']:.0f} MB (growth +{r['growth_mb']:.0f} MB)", flush=True)
+                  f"while merging {r['merge_peak_mb']:.0f} MB (growth +{r['growth_mb']:.0f} MB); "
+                  f"CPU {r['cpu_seconds']:.1f} s", flush=True)
     small, large = sizes[0], sizes[-1]
     spread = results[large]["growth_mb"] - results[small]["growth_mb"]
     print(f"memory growth {large} vs {small} points: {spread:+.0f} MB  target flat (within {FLAT_MB:g} MB): "
@@ -124,6 +131,8 @@ def main() -> None:
         per_point = (results[large]["seconds"] - results[small]["seconds"]) / (large - small) * 1e3
         print(f"marginal wall time per point, 2 workers: {per_point:.3f} ms  target <= {TARGET_MS:g} ms: "
               f"{'met' if per_point <= TARGET_MS else 'NOT met'}")
+        cpu = (results[large]["cpu_seconds"] - results[small]["cpu_seconds"]) / (large - small) * 1e3
+        print(f"marginal CPU time per point (all processes): {cpu:.3f} ms (on 2 cores, wall >= half of it)")
     print(f"load after: {os.popen('uptime').read().strip()}")
 
 

@@ -60,18 +60,19 @@ def _thread_count(client: Any) -> int:
 
 def local_cluster(workers: int) -> Any:
     """The cluster cosim starts when given none: a LocalCluster of ``workers`` worker processes, one thread each,
-    on 127.0.0.1, its dashboard on a free port; a task may lose one worker (see :mod:`orchestrator.cluster`).
-    The caller closes it."""
+    on 127.0.0.1, its dashboard on a free port; a task may lose one worker (see :mod:`orchestrator.cluster`);
+    the workers set up by :mod:`orchestrator.worker_setup`.  The caller closes it."""
     import dask
     from distributed import LocalCluster
 
     from .cluster import ALLOWED_FAILURES
     from .interrupts import WORKER_PRELOAD
+    from .worker_setup import WORKER_SETUP
 
     with dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES}):
         return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
                             dashboard_address="127.0.0.1:0", silence_logs=40,
-                            preload=[WORKER_PRELOAD])  # the workers ignore a terminal's Ctrl-C
+                            preload=[WORKER_PRELOAD, WORKER_SETUP])  # Ctrl-C ignored; a quick exit
 
 
 @contextmanager

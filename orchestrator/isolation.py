@@ -359,8 +359,11 @@ class IsolatedRunner:
         root = str(Path(__file__).resolve().parent.parent)
         env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")  # works from a source checkout too
         self._proc = subprocess.Popen(
+            # gc.freeze once child_main is done: the interpreter's final collections over the units' modules
+            # would only delay the exit the worker waits for
             [sys.executable, "-c", "import sys; from orchestrator.isolation import child_main; "
-             "child_main(*map(int, sys.argv[1:]))", str(to_child_r), str(from_child_w), str(os.getpid())],
+             "child_main(*map(int, sys.argv[1:])); import gc; gc.freeze()",
+             str(to_child_r), str(from_child_w), str(os.getpid())],
             pass_fds=(to_child_r, from_child_w), env=env, stdin=subprocess.DEVNULL)
         os.close(to_child_r)
         os.close(from_child_w)

@@ -82,3 +82,13 @@ def test_the_command_skips_the_final_collections_only_as_a_program(write_spec, t
         args = ["validate", str(spec)] if how == "given" else [how, str(spec)]
         out = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, check=True)
         assert out.stdout.split()[-2:] == ["0", str(frozen)], out.stdout + out.stderr
+
+
+def test_the_local_cluster_workers_run_cosims_set_up():
+    from distributed import Client
+
+    from orchestrator.evaluator import local_cluster
+
+    with local_cluster(1) as cluster, Client(cluster) as client:
+        loaded = client.run(lambda: __import__("sys").modules.get("orchestrator.worker_setup") is not None)
+    assert list(loaded.values()) == [True]
