@@ -15,9 +15,7 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
-
-import jsonschema
+from typing import TYPE_CHECKING, Any, Mapping
 
 from . import limits
 from .algorithms import ALGORITHMS as MASTER_ALGORITHMS
@@ -25,6 +23,9 @@ from .algorithms import DEFAULT_ALGORITHM
 from .observers import REDUCERS
 from .problems import Problem, SpecError, did_you_mean, json_path
 from .spec_json import read_spec_json  # strict JSON: no NaN, no key twice, bounded nesting
+
+if TYPE_CHECKING:
+    import jsonschema
 
 # Shipped as package data (cosim.specs, the repository's specs/ folder), so an installed cosim finds it too.
 SCHEMA_RESOURCE = ("cosim.specs", "spec.schema.json")
@@ -188,6 +189,8 @@ _schema = spec_schema  # the old private name, for callers not yet moved
 
 def schema_problems(raw: Any, file: str) -> list[Problem]:
     """Every way ``raw`` breaks the JSON Schema or the field-level rules, as problems."""
+    import jsonschema  # here, not at the top: a sweep's worker children unpickle specs without checking them
+
     schema = spec_schema()
     validator = jsonschema.Draft202012Validator(schema)
     problems: list[Problem] = []
