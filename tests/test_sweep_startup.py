@@ -20,7 +20,7 @@ UNIT = f"{TESTS / 'units_for_cluster.py'}:SlowSquare"
 def square_spec(values: list[float]) -> dict:
     return {
         "name": "early",
-        "units": {"sq": {"python": UNIT, "parameters": {"delay": 0.0}}},
+        "units": {"sq": {"python": UNIT, "parameters": {"delay": 0.0, "kill_at": -1e9}}},  # no point kills
         "experiment": {"stop": 0.2, "step": 0.1},
         "objectives": {"y_end": {"signal": "sq.y", "reduce": "final"}},
         "design": {"parameters": {"sq.x": {"values": values}}},
@@ -74,13 +74,12 @@ def test_a_sweep_that_cannot_start_closes_its_early_cluster(write_spec, tmp_path
 
 def test_the_command_skips_the_final_collections_only_as_a_program(write_spec, tmp_path):
     spec = write_spec(square_spec([1.0]))
-    code = ("import gc, sys; from orchestrator.cli import main; "
-            "code = main(sys.argv[1:]) if sys.argv[1] == 'given' else None; "
-            "sys.argv = ['cosim', 'validate', sys.argv[2]]; code = main() if code is None else code; "
+    code = ("import gc, sys; from orchestrator.cli import main; how, args = sys.argv[1], sys.argv[2:]; "
+            "sys.argv = ['cosim', *args]; code = main(args) if how == 'given' else main(); "
             "print(code, gc.get_freeze_count() > 0)")
     for how, frozen in (("given", False), ("program", True)):
-        args = ["validate", str(spec)] if how == "given" else [how, str(spec)]
-        out = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, check=True)
+        out = subprocess.run([sys.executable, "-c", code, how, "validate", str(spec)], capture_output=True,
+                             text=True, check=True)
         assert out.stdout.split()[-2:] == ["0", str(frozen)], out.stdout + out.stderr
 
 
