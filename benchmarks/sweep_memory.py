@@ -34,6 +34,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 FLAT_MB, TARGET_MS = 25.0, 1.0
+CURVE_SECONDS = 1.0  # the client's RSS is recorded this often with the number of rows stored so far
 
 
 def trivial_spec(folder: Path, n: int) -> Path:
@@ -64,13 +65,25 @@ def measure(spec: str, out: str) -> None:
     stop = threading.Event()
 
     def sample() -> None:
+        next_point = 0.0
         while not stop.is_set():
             rss = proc.memory_info().rss
             peaks[stage[0]] = max(peaks[stage[0]], rss)
+            now = time.perf_counter() - started
+            if now >= next_point:
+                curve.append((now, rows_done[0], rss / 1e6))
+                next_point += CURVE_SECONDS
             time.sleep(0.02)
 
     original_compact = results.ResultsStore.compact
+    original_append = results.ResultsStore.append
     merge_started = []
+    rows_done = [0]
+    curve: list[tuple[float, int, float]] = []  # (seconds, rows stored, client RSS MB) every CURVE_SECONDS
+
+    def append(self, rows):
+        rows_done[0] += len(rows)
+        return original_append(self, rows)
 
     def compact(self, *args, **kwargs):
         stage[0] = "merge"
@@ -78,17 +91,28 @@ def measure(spec: str, out: str) -> None:
         return original_compact(self, *args, **kwargs)
 
     results.ResultsStore.compact = compact
+    results.ResultsStore.append = append
     baseline = proc.memory_info().rss
+    started = time.perf_counter()
     thread = threading.Thread(target=sample, daemon=True)
     thread.start()
-    started = time.perf_counter()
     counts = sweep.run_to_disk()
     ended = time.perf_counter()
     stop.set()
     thread.join()
     print(json.dumps({"points": sum(counts.values()), "ok": counts["ok"], "baseline_mb": baseline / 1e6,
                       "run_peak_mb": peaks["run"] / 1e6, "merge_peak_mb": peaks["merge"] / 1e6,
-                      "seconds": ended - started, "merge_seconds": ended - merge_started[0]}))
+                      "seconds": ended - started, "merge_seconds": ended - merge_started[0], "curve": curve}))
+
+
+def rss_by_share(curve: list[list[float]], n: int) -> list[tuple[int, float]]:
+    """The client's RSS when 10 %, 20 %, ... 100 % of the ``n`` points were stored (the first sample at or after)."""
+    out = []
+    for share in range(10, 101, 10):
+        later = [rss for _, rows, rss in curve if rows >= n * share / 100]
+        if later:
+            out.append((share, later[0]))
+    return out
 
 
 def main() -> None:
@@ -123,7 +147,13 @@ def main() -> None:
                   f"client RSS {r['baseline_mb']:.0f} MB, peak while running {r['run_peak_mb']:.0f} MB, "
                   f"while merging {r['merge_peak_mb']:.0f} MB (growth +{r['growth_mb']:.0f} MB); "
                   f"CPU {r['cpu_seconds']:.1f} s", flush=True)
+            print("    RSS while running (share of points stored: MB): " + ", ".join(
+                f"{share}%: {rss:.0f}" for share, rss in rss_by_share(r["curve"], n)), flush=True)
     small, large = sizes[0], sizes[-1]
+    shares = dict(rss_by_share(results[large]["curve"], large))
+    if 20 in shares and 100 in shares:
+        print(f"client RSS while the {large} points ran: {shares[20]:.0f} MB at 20 %, {shares[100]:.0f} MB at 100 % "
+              f"({shares[100] - shares[20]:+.0f} MB)")
     spread = results[large]["growth_mb"] - results[small]["growth_mb"]
     print(f"memory growth {large} vs {small} points: {spread:+.0f} MB  target flat (within {FLAT_MB:g} MB): "
           f"{'met' if spread <= FLAT_MB else 'NOT met'}")

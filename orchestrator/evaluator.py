@@ -13,10 +13,10 @@ their timeouts, and the rule that a fault is a row, never an exception:
 - :class:`Evaluator` runs a list of points on that client in parallel and
   returns one row per point in the order given (``evaluate``).
 - A task lost with its worker process is run again by the scheduler on
-  another worker; the points of a task lost again then run one at a time,
-  each alone on the cluster, so only a point that kills its workers while
-  alone gets ``crashed`` (:class:`Reruns`, :func:`lost_rows`) and every other
-  point its true row.
+  another worker; the points of a task lost again then run in small groups,
+  each alone on the cluster, and the points of a group lost alone one at a
+  time, so only a point that kills its workers while alone gets ``crashed``
+  (:class:`Reruns`, :func:`lost_rows`) and every other point its true row.
 """
 
 from __future__ import annotations
@@ -160,6 +160,9 @@ def worker_died(exc: BaseException) -> bool:
     return isinstance(exc, KilledWorker)
 
 
+RERUN_GROUP = 64  # points of a lost task rerun together, alone on the cluster, before any is run by itself
+
+
 class Reruns:
     """Where the points of a task that failed with its workers go next.
 
@@ -169,26 +172,42 @@ class Reruns:
     workers that died", not "this task killed them"; and when the workers
     that died held the last copies of the scattered payload, the tasks using
     it are cancelled instead.  Blame is therefore only given to a point that
-    ran *alone*: the points of a task lost either way become ``suspects``;
-    the driver stops submitting new work, lets the tasks in flight finish,
-    then runs the suspects one point per task, one task at a time, with
-    nothing else on the cluster (the scheduler still re-runs such a task
-    ``allowed-failures`` times).  A point whose task is lost while it runs
-    alone is the one that kills its workers: it gets ``crashed``
-    (:func:`lost_rows`); every other suspect gets its true row.
+    ran *alone*: the points of a task lost either way become ``suspects``,
+    one point each (a task of more than RERUN_GROUP points: groups of
+    RERUN_GROUP); the driver stops submitting new work, lets the tasks in
+    flight finish, then runs the suspects one task at a time, with nothing
+    else on the cluster (the scheduler still re-runs such a task
+    ``allowed-failures`` times).  A group lost while it runs alone holds a
+    point that kills its workers: its points become suspects of one point
+    each.  A single point whose task is lost while it runs alone is the
+    one that kills its workers: it gets ``crashed`` (:func:`lost_rows`); every
+    other suspect gets its true row.
+
+    Why groups: a sweep's task may hold thousands of cheap points
+    (:class:`orchestrator.sweep.BatchSizer`); rerun one per task, one task at
+    a time, they would cost a scheduler round trip each (a minute or more
+    for a lost worker), where a group costs one.  The group holding the
+    killer costs one more round of worker deaths.
     """
 
-    def __init__(self) -> None:
-        self.suspects: collections.deque[Any] = collections.deque()
+    def __init__(self, group: int = RERUN_GROUP) -> None:
+        self.group = group
+        self.suspects: collections.deque[list[Any]] = collections.deque()  # each entry: one task's points
 
     def after_failure(self, points: Sequence[Any], exc: BaseException, alone: bool) -> bool:
-        """True when ``points`` became suspects (run again later, each alone); False: they get :func:`lost_rows`."""
+        """True when ``points`` became suspects (run again later, alone); False: they get :func:`lost_rows`."""
         from concurrent.futures import CancelledError
 
-        if not alone and (worker_died(exc) or isinstance(exc, CancelledError)):
-            self.suspects.extend(points)
+        if not (worker_died(exc) or isinstance(exc, CancelledError)):
+            return False  # the task could not run at all (e.g. unpicklable arguments): a row
+        if not alone:
+            size = self.group if len(points) > self.group else 1  # a task of at most `group` points: one by one
+            self.suspects.extend(list(points[i:i + size]) for i in range(0, len(points), size))
             return True
-        return False  # lost while alone, or the task could not run at all (e.g. unpicklable arguments): a row
+        if len(points) > 1:  # one of them kills its workers: find it, one point at a time
+            self.suspects.extend([point] for point in points)
+            return True
+        return False  # lost while alone: this point kills its workers
 
 
 class ScatteredPayload:
@@ -288,7 +307,7 @@ class Evaluator:
         in_flight = [(chunk, False, self._submit(points, chunk)) for chunk in chunks]  # (indices, alone, future)
         while in_flight or reruns.suspects:
             if not in_flight:  # every other task is done: the next suspect runs alone
-                suspect = [reruns.suspects.popleft()]
+                suspect = reruns.suspects.popleft()
                 in_flight = [(suspect, True, self._submit(points, suspect))]
             for indices, alone, future in in_flight:
                 try:

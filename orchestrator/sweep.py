@@ -19,9 +19,10 @@ evaluates the points on Dask:
   (``timeout``) or kills its process (``crashed``) gets a row and the other
   points go on.  A batch lost with its whole worker process (killed, out of
   memory, a lost node) is run again on another worker by the scheduler; lost
-  a second time (KilledWorker) its points run again one at a time, each alone
-  on the cluster, so only a point that kills its workers while alone gets
-  ``crashed`` (:class:`~orchestrator.evaluator.Reruns`).  Rows out = points in.
+  a second time (KilledWorker) its points run again in small groups, each
+  alone on the cluster, then those of a group lost again one at a time, so
+  only a point that kills its workers while alone gets ``crashed``
+  (:class:`~orchestrator.evaluator.Reruns`).  Rows out = points in.
 - The client streams: a bounded number of batches in flight, each completed
   batch appended to the :class:`~orchestrator.results.ResultsStore` at once,
   so its memory does not grow with the number of points, and a kill -9 loses
@@ -467,8 +468,8 @@ class Sweep:
         def submit() -> bool:
             alone = bool(reruns.suspects) or any(a for _, a in in_flight.values())
             if alone and in_flight:
-                return False  # no new work until the suspects have run, each alone on the cluster
-            batch = [reruns.suspects.popleft()] if alone else sizer.take(unsubmitted)
+                return False  # no new work until the suspects have run, each group alone on the cluster
+            batch = reruns.suspects.popleft() if alone else sizer.take(unsubmitted)
             if not batch:
                 return False
             timeout = self.timeout if self.timeout is not None else default_timeout(times)
