@@ -57,6 +57,7 @@ from .driver import check_results_folder, finish_metadata, now_utc, package_vers
 from .errors import UserError
 from .problems import Problem, SpecError
 from .table_columns import TAIL_COLUMNS
+from .unit_checksums import changed_files, data_file_checksums, unit_checksums
 
 SAMPLERS = ("tpe", "nsga2", "gp", "random", "qmc")
 DEFAULT_BUDGET = 200
@@ -373,6 +374,12 @@ class Optimization:
         self.store = ResultsStore(self.out)
         previous = check_results_folder(self.store, resume, self.spec.digest, "optimization",
                                         "continue that optimisation", OptimizeError)
+        self.checksums, self.data_checksums = unit_checksums(self.system), data_file_checksums(self.system)
+        changed = changed_files(previous or {}, self.checksums, self.data_checksums, self.spec.folder)
+        if changed:  # the stored trials would steer the sampler with another model's results
+            raise OptimizeError(f"{self.out} holds trials of other unit files than the spec names now ("
+                                + "; ".join(changed) + "); resuming would mix two models in one study; restore "
+                                "the files, or start afresh in another --out")
         stored = (previous or {}).get("optimize", {})
         given = {"budget": budget, "sampler": sampler, "batch": batch, "seed": seed, "objectives": objectives}
         for key in ("sampler", "batch", "seed", "objectives"):  # a resume replays the stored run: these must not change
@@ -569,6 +576,7 @@ class Optimization:
                 "budget": self.settings.budget}
         return run_metadata(self.store, self.system, info, kind="optimization", optimize=asdict(self.settings),
                             packages=package_versions("optuna"), points=self.settings.budget,
+                            unit_checksums=self.checksums, data_file_checksums=self.data_checksums,
                             design_method=f"optimize ({self.settings.sampler})")
 
     def _finish(self) -> dict[str, int]:

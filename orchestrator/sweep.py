@@ -50,7 +50,7 @@ from . import limits
 from .design import DesignSpace, Point
 from .driver import check_results_folder, finish_metadata, now_utc, run_metadata, say
 from .folder_lock import FolderLock
-from .unit_checksums import changed_units, unit_checksums
+from .unit_checksums import changed_files, data_file_checksums, unit_checksums
 from .errors import UserError
 from .evaluator import Reruns, ScatteredPayload, check_timeout, lost_rows
 from .isolation import IsolatedRunner, make_payload
@@ -326,6 +326,7 @@ class Sweep:
                 self.lock = FolderLock(self.out)
                 self.lock.check_free()  # a sweep running into this folder is the first thing to say
             self.checksums = unit_checksums(self.system)
+            self.data_checksums = data_file_checksums(self.system)
             self.recompute = recompute
             self._check_folder()
             self.payload = make_payload(self.system)  # FMU bytes read now: workers never open these paths
@@ -362,18 +363,15 @@ class Sweep:
                 self.store.discard_rows()
 
     def _changed_units(self, previous: dict[str, Any]) -> list[str]:
-        """Units whose content differs from the checksums stored with the rows."""
-        stored = previous.get("unit_checksums")
-        if stored is None:  # folders written before unit checksums: FMUs only
-            stored = previous.get("fmu_checksums", {})
-            return changed_units(stored, {k: v for k, v in self.checksums.items() if k in stored})
-        return changed_units(stored, self.checksums)
+        """Units and data files whose content differs from the checksums stored with the rows."""
+        return changed_files(previous, self.checksums, self.data_checksums, self.spec.folder)
 
     def _say(self, text: str) -> None:
         say(text, self.quiet, self.progress_stream)
 
     def _metadata(self, client_info: dict[str, Any]) -> dict[str, Any]:
         return run_metadata(self.store, self.system, client_info, unit_checksums=self.checksums,
+                            data_file_checksums=self.data_checksums,
                             points=len(self.space), design_method=self.space.method)
 
     def run(self) -> pd.DataFrame:

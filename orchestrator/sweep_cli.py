@@ -25,7 +25,7 @@ def add_sweep_parser(sub: Any) -> None:
     p.add_argument("--timeout", type=float, metavar="S", help="seconds a point may run before it is stopped")
     p.add_argument("--resume", action="store_true", help="run only the points missing in --out")
     p.add_argument("--recompute", action="store_true",
-                   help="with --resume: when a unit's file changed since the stored rows, discard them and run "
+                   help="with --resume: when a unit's file or a data file it reads changed since the stored rows, discard them and run "
                         "every point again (without it such a resume is refused)")
     p.add_argument("--csv", action="store_true", help="also write DIR/results.csv")
     p.add_argument("--batch-size", type=int, metavar="N", help="points per Dask task (default: automatic)")

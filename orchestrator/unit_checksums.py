@@ -7,23 +7,19 @@ text can name different models: an FMU file re-exported in place, an edited
 
 Covered: an FMU's bytes; a Python unit's source file (``file.py`` or the
 file of ``package.module``; modules it imports in turn are not covered); a
-player's table.
+player's table; and every data file (or data folder) a Python unit declares it
+reads (:mod:`orchestrator.data_files`), stored apart as
+``data_file_checksums`` (:func:`data_file_checksums`).  Every driver that
+resumes (a sweep, an optimisation) asks :func:`changed_files` what differs.
 """
 
 from __future__ import annotations
 
-import hashlib
 import sys
 from pathlib import Path
 from typing import Any, Mapping
 
-
-def _file_digest(path: str | Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
+from .file_digest import file_digest, path_digest
 
 
 def unit_file(unit_type: Any) -> Path | None:
@@ -55,7 +51,7 @@ def unit_checksums(system: Any) -> dict[str, str]:
             continue
         path = unit_file(system_unit.unit_type)
         if path is not None and path.is_file():
-            sums[name] = _file_digest(path)
+            sums[name] = file_digest(path)
     return sums
 
 
@@ -66,4 +62,59 @@ def changed_units(stored: Mapping[str, str], current: Mapping[str, str]) -> list
         before, now = stored.get(name), current.get(name)
         if before != now:
             lines.append(f"unit '{name}': {(before or 'none')[:12]}… then, {(now or 'none')[:12]}… now")
+    return lines
+
+
+def data_file_checksums(system: Any) -> dict[str, dict[str, str]]:
+    """Unit name -> {data-file parameter value as the spec writes it -> SHA-256 of the file or folder it names}.
+
+    Only units that declare data files and whose values name existing files
+    or folders appear (the unit type's ``data_paths``, filled when the system
+    was built).
+    """
+    sums: dict[str, dict[str, str]] = {}
+    for name, system_unit in system.units.items():
+        paths = getattr(system_unit.unit_type, "data_paths", None) or {}
+        if paths:
+            sums[name] = {value: path_digest(path) for value, path in sorted(paths.items())}
+    return sums
+
+
+def changed_data_files(stored: Mapping[str, Mapping[str, str]], current: Mapping[str, Mapping[str, str]],
+                       folder: str | Path) -> list[str]:
+    """Lines naming each data file whose checksum differs (named in only one of the two: changed too).
+
+    ``folder`` is the spec's folder, against which a relative value is shown
+    as the file it names.
+    """
+    lines = []
+    for unit in sorted(set(stored) | set(current)):
+        before_unit, now_unit = stored.get(unit, {}), current.get(unit, {})
+        for value in sorted(set(before_unit) | set(now_unit)):
+            before, now = before_unit.get(value), now_unit.get(value)
+            if before != now:
+                path = Path(value).expanduser()
+                shown = path if path.is_absolute() else Path(folder) / path
+                lines.append(f"data file {shown} (unit '{unit}'): {(before or 'none')[:12]}… then, "
+                             f"{(now or 'missing')[:12]}… now")
+    return lines
+
+
+def changed_files(previous: Mapping[str, Any], units: Mapping[str, str],
+                  data_files: Mapping[str, Mapping[str, str]], folder: str | Path) -> list[str]:
+    """What differs between a results folder's metadata (``previous``) and the units and data files now.
+
+    ``units`` and ``data_files`` are :func:`unit_checksums` and
+    :func:`data_file_checksums` of the system now.  Folders written before
+    these checksums existed are compared on what they recorded: only the
+    FMUs (``fmu_checksums``), no data files.
+    """
+    stored = previous.get("unit_checksums")
+    if stored is None:  # folders written before unit checksums: FMUs only
+        stored = previous.get("fmu_checksums", {})
+        units = {k: v for k, v in units.items() if k in stored}
+    lines = changed_units(stored, units)
+    stored_data = previous.get("data_file_checksums")
+    if stored_data is not None:
+        lines += changed_data_files(stored_data, data_files, folder)
     return lines

@@ -15,7 +15,6 @@ FMI 3.0 FMU (or a Python unit) with an array port ``x`` are interchangeable.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import platform
 import re
@@ -26,6 +25,7 @@ from typing import Any, Sequence
 
 from ..archive import ArchiveError, ExtractionCache, check_archive, extract_to_new_folder
 from ..errors import Problem, UserError
+from ..file_digest import file_digest
 from ..quantities import fmi_unit_definitions
 from ..unit import Unit, UnitDescription, UnitType, Variable, indexed_runs, parse_port
 from ..unit_kinds import BUILTIN_PREFIX  # noqa: F401  (re-exported from its old place)
@@ -116,15 +116,6 @@ def model_identifier_problem(archive: str, identifier: Any) -> Problem | None:
 
 
 EXTRACTED = ExtractionCache("fmu", safe_extract)  # one unpacked copy of each FMU per process
-
-
-def file_digest(path: str | Path) -> str:
-    """SHA-256 of a file's bytes (hex)."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def resolve_fmu_path(reference: str, base_dir: str | Path | None = None) -> Path:
