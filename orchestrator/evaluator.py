@@ -131,6 +131,8 @@ def _client(workers: int, scheduler: str | None, cluster_file: str | None,
             raise ClusterError(f"cannot reach the Dask scheduler at {scheduler}{origin}: {exc}") from None
         link = client.dashboard_link
     try:
+        if cluster_file is not None or scheduler is not None:  # a scheduler of another environment
+            _check_scheduler_imports_cosim(client, f"{scheduler}{origin}")
         n_workers = _thread_count(client)
         if n_workers == 0:
             try:
@@ -143,6 +145,17 @@ def _client(workers: int, scheduler: str | None, cluster_file: str | None,
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def _check_scheduler_imports_cosim(client: Any, where: str) -> None:
+    """Raise ClusterError when the scheduler cannot import cosim (it could run none of the tasks)."""
+    from .scheduler_check import scheduler_import_problem
+
+    problem = scheduler_import_problem(client)
+    if problem:
+        raise ClusterError(f"the Dask scheduler at {where} cannot import cosim ({problem}); Dask's scheduler "
+                           "unpickles every task, so it needs the modules the tasks name: install cosim (the "
+                           "version of this client) where the scheduler runs")
 
 
 SCATTER_TRIES = 5  # sending the payload to the workers, when workers die meanwhile
@@ -282,12 +295,14 @@ class Evaluator:
     ``payload`` is :func:`orchestrator.isolation.make_payload` of the system;
     it is scattered to the workers once.  ``timeout`` is the seconds one point
     may run before its child process is killed (row status ``timeout``).
-    ``study`` names the tasks on the Dask dashboard (:func:`orchestrator.dashboard.task_key`).
+    ``study`` names the tasks on the Dask dashboard (:func:`orchestrator.dashboard.task_key`);
+    ``board`` (:func:`orchestrator.dashboard_points.open_board`) counts their points on its page.
     """
 
     def __init__(self, client: Any, payload: dict[str, Any], n_workers: int, timeout: float | None = None,
-                 study: str = ""):
+                 study: str = "", board: Any = None):
         self.client, self.n_workers, self.timeout, self.study = client, max(1, n_workers), timeout, study
+        self.board = board
         self._payload = ScatteredPayload(client, payload)
 
     def evaluate(self, points: Sequence[tuple[str, dict[str, Any]]]) -> list[dict[str, Any]]:
@@ -316,6 +331,8 @@ class Evaluator:
                     if reruns.after_failure(indices, exc, alone):
                         continue
                     done = lost_rows([points[i][0] for i in indices], exc, alone)
+                    if self.board is not None:
+                        self.board.rows_made_here(future.key, done)
                 finally:
                     future.release()
                 for i, row in zip(indices, done):
@@ -329,6 +346,7 @@ class Evaluator:
         from .sweep import run_batch
 
         chunk = [points[i] for i in indices]
-        key = task_key("optimize", self.study, indices, len(points))  # the dashboard's names: points of this batch
+        key = task_key("optimize", self.study, indices, len(points),  # the dashboard's names: points of this batch
+                       run=self.board.run if self.board is not None else "")
         return self.client.submit(run_batch, self._payload.future(), chunk, self.timeout, pure=False, retries=0,
                                   key=key)

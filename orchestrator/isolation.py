@@ -49,7 +49,7 @@ import threading
 import time
 from multiprocessing.connection import Connection
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 from . import import_guard
 from .limits import LIMITS, limit
@@ -391,14 +391,22 @@ class IsolatedRunner:
         self.close(force=True)
         return f"the worker's child process {why} while loading the system"
 
-    def run(self, points: Sequence[tuple[str, dict[str, Any]]], timeout: float | None = None) -> list[dict]:
+    def run(self, points: Sequence[tuple[str, dict[str, Any]]], timeout: float | None = None,
+            on_row: Callable[[dict], None] | None = None) -> list[dict]:
         """One row per point, in order; statuses ok, failed, timeout or crashed.
 
         Without ``timeout`` a point may run for the ``timeout_first_seconds``
         limit (COSIM_TIMEOUT_FIRST): no read of a child waits forever.
+        ``on_row`` is called with each row as soon as its point is done.
         """
         deadline = timeout if timeout is not None else float(limit("timeout_first_seconds"))
         rows: list[dict] = []
+
+        def keep(*new: dict) -> None:
+            rows.extend(new)
+            for row in new if on_row is not None else ():
+                on_row(row)
+
         remaining = list(points)
         mode = "run"  # after a crash or timeout the rest runs one point at a time (no lock-step groups)
         while remaining:
@@ -407,7 +415,7 @@ class IsolatedRunner:
                 problem = self._start()
                 if problem is not None:
                     self.close()
-                    rows.extend(_row(pid, "failed", problem, time.perf_counter()) for pid, _ in remaining)
+                    keep(*(_row(pid, "failed", problem, time.perf_counter()) for pid, _ in remaining))
                     break
             try:
                 self._outbox.send((mode, remaining))
@@ -424,8 +432,8 @@ class IsolatedRunner:
                     mode = "run_each"
                     if grouped:  # not this point's fault for sure: the group's points run again one by one
                         break
-                    rows.append(_row(point_id, "timeout", f"no result within the timeout of {deadline:g} s; "
-                                                          "the run was stopped", started))
+                    keep(_row(point_id, "timeout", f"no result within the timeout of {deadline:g} s; "
+                                                   "the run was stopped", started))
                     done += 1
                     break
                 kind, row = received
@@ -434,8 +442,8 @@ class IsolatedRunner:
                     if grouped:  # as for a timeout: which point of the group killed the child is found alone
                         self.close()
                         break
-                    rows.append(_row(point_id, "crashed", f"the process running this point died "
-                                                          f"({self._exit_text()})", started))
+                    keep(_row(point_id, "crashed", f"the process running this point died "
+                                                   f"({self._exit_text()})", started))
                     self.close()
                     done += 1
                     break
@@ -448,13 +456,13 @@ class IsolatedRunner:
                     mode = "run_each"
                     if grouped:  # written by some point of the group: found when they run one by one
                         break
-                    rows.append(_row(point_id, "crashed", "the process running this point wrote something "
-                                                          f"other than a result on its channel ({why}); it was "
-                                                          "replaced", started))
+                    keep(_row(point_id, "crashed", "the process running this point wrote something "
+                                                   f"other than a result on its channel ({why}); it was "
+                                                   "replaced", started))
                     done += 1
                     break
                 recycle = row.pop("recycle", None)
-                rows.append(row)
+                keep(row)
                 done += 1
                 grouped = max(0, grouped - 1)
                 if recycle:  # the child ended itself (memory or point count): a fresh one goes on

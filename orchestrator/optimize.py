@@ -456,6 +456,7 @@ class Optimization:
         """
         import optuna
 
+        from .dashboard_points import open_board
         from .evaluator import ClusterError, Evaluator, dask_client
 
         optuna.logging.set_verbosity(optuna.logging.WARNING)
@@ -475,11 +476,14 @@ class Optimization:
         try:
             with dask_client(self.workers, self.scheduler, self.cluster) as (client, n_workers, link):
                 self.store.write_metadata(self._metadata(started, client.scheduler.address, n_workers))
+                board = open_board(client, "optimize", self.spec.name, s.budget, before=len(stored), dashboard=link)
                 self._say(f"cosim optimize {self.spec.name}: {s.sampler}, budget {s.budget}, batch {s.batch}, "
                           f"seed {s.seed}, {len(stored)} evaluations stored; {n_workers} worker(s); dashboard: "
-                          f"{link}; results: {self.out}")
-                evaluator = Evaluator(client, self.payload, n_workers, self.timeout, study=self.spec.name)
-                self._loop(study, dists, evaluator, stored)
+                          f"{link} ({board.describe()}); results: {self.out}")
+                evaluator = Evaluator(client, self.payload, n_workers, self.timeout, study=self.spec.name,
+                                      board=board)
+                with board.running():
+                    self._loop(study, dists, evaluator, stored)
         except ClusterError as exc:
             raise OptimizeError(str(exc)) from None
         except KeyboardInterrupt:

@@ -119,8 +119,11 @@ def run_batch(payload: dict[str, Any], points: PointBatch | Sequence[tuple[str, 
     Runs on a Dask worker (or anywhere): the child process holding the system
     is kept for the next batch of the same payload.
     """
+    from .dashboard_points import BatchProgress
+
     if isinstance(points, PointBatch):
         points = points.points
+    progress = BatchProgress()  # the points page of the dashboard counts points as they finish
     with _IDLE_LOCK:
         idle = _IDLE.pop(payload["key"], [])
         runner = idle.pop() if idle else IsolatedRunner(payload)
@@ -129,10 +132,11 @@ def run_batch(payload: dict[str, Any], points: PointBatch | Sequence[tuple[str, 
             for old in _IDLE.pop(next(iter(_IDLE))):
                 old.close()
     try:
-        rows = runner.run(points, timeout)
+        rows = runner.run(points, timeout, on_row=progress.row)
     finally:
         with _IDLE_LOCK:
             _IDLE.setdefault(payload["key"], []).append(runner)
+        progress.close()
     name = _worker_name()
     for row in rows:
         row["worker"] = name
@@ -412,6 +416,7 @@ class Sweep:
             self.lock.release()
 
     def _run_locked(self) -> dict[str, int]:
+        from .dashboard_points import open_board
         from .evaluator import ClusterError, dask_client
 
         started = now_utc()
@@ -429,9 +434,11 @@ class Sweep:
                         "timeout": self.timeout}
                 with results_writes(self.out):
                     self.store.write_metadata(self._metadata(info))
+                board = open_board(client, "sweep", self.spec.name, total, before=total - todo, dashboard=link)
                 self._say(f"cosim sweep {self.spec.name}: {total} points ({todo} to run) on {n_workers} "
-                          f"worker(s); dashboard: {link}; results: {self.out}")
-                self._evaluate(client, done, todo, n_workers)
+                          f"worker(s); dashboard: {link} ({board.describe()}); results: {self.out}")
+                with board.running():
+                    self._evaluate(client, done, todo, n_workers, board)
         except ClusterError as exc:
             raise SweepError(str(exc)) from None
         except KeyboardInterrupt:
@@ -447,7 +454,7 @@ class Sweep:
             finish_metadata(self.store, counts)
         return counts
 
-    def _evaluate(self, client: Any, done: set[str], todo: int, n_workers: int) -> None:
+    def _evaluate(self, client: Any, done: set[str], todo: int, n_workers: int, board: Any = None) -> None:
         from distributed import as_completed
 
         from .dashboard import task_key
@@ -471,7 +478,8 @@ class Sweep:
             if not batch:
                 return False
             timeout = self.timeout if self.timeout is not None else default_timeout(times)
-            key = task_key("sweep", self.spec.name, [p.index for p in batch], total)  # the dashboard's names
+            key = task_key("sweep", self.spec.name, [p.index for p in batch], total,  # the dashboard's names
+                           run=board.run if board is not None else "")
             future = client.submit(run_batch, payload.future(), PointBatch([(p.id, p.values) for p in batch]),
                                    timeout, pure=False, retries=0, key=key)
             in_flight[future.key] = batch, alone
@@ -493,6 +501,8 @@ class Sweep:
                     fill()
                     continue
                 rows = lost_rows([p.id for p in batch], exc, alone)
+                if board is not None:
+                    board.rows_made_here(future.key, rows)
             future.release()
             sizer.observe(rows)
             with results_writes(self.out):
