@@ -43,9 +43,11 @@ LIMITS: dict[str, Limit] = {
     # expressions (orchestrator.expressions)
     "expression_length": Limit("COSIM_EXPRESSION_LENGTH", 10_000, "characters of an expression"),
     "expression_depth": Limit("COSIM_EXPRESSION_DEPTH", 100, "nesting depth of an expression"),
-    # Python units (orchestrator.units.python)
+    # Python units (orchestrator.units.python, orchestrator.data_files)
     "import_seconds": Limit("COSIM_IMPORT_SECONDS", 120, "seconds a Python unit's module may take to import",
                             integer=False),
+    "data_mb": Limit("COSIM_DATA_MB", 256, "megabytes of one data file or folder a Python unit declares (it "
+                     "travels with every sweep's payload)", integer=False),
     # worker child processes (orchestrator.isolation)
     "child_memory_mb": Limit("COSIM_CHILD_MEMORY_MB", 8192, "megabytes of data memory of one child process"),
     "child_rss_mb": Limit("COSIM_CHILD_RSS_MB", 2048, "resident megabytes after which a child is replaced"),

@@ -204,3 +204,79 @@ def test_the_readme_data_files_unit_reads_its_table_from_the_spec_folder(tmp_pat
     result = run(str(folder / "spec.json"))
     assert result.ok, result.message
     assert result.objectives["y_end"] == 6.5
+
+
+ROBOT_UNIT_SOURCE = '''
+import re
+from pathlib import Path
+
+from orchestrator import PythonUnit, Variable
+
+
+class RobotMass(PythonUnit):
+    """y = k * scale * (bytes of the mesh), read from the folder named by 'model': robot.urdf names its mesh
+    by a path relative to the folder (as a URDF with its meshes does)."""
+
+    variables = (Variable("model", "parameter", type="String", start=""), Variable("k", "parameter", start=1.0),
+                 Variable("y", "output", start=0.0))
+    data_files = ("model",)
+
+    def initialize(self):
+        urdf = (Path(self.model) / "robot.urdf").read_text()
+        mesh, scale = re.search(r'<mesh filename="([^"]+)" scale="([^"]+)"', urdf).groups()
+        self.mass = float(scale) * len((Path(self.model) / mesh).read_bytes())
+
+    def do_step(self, t, h):
+        self.y = self.k * self.mass
+'''
+
+
+def _robot_folder(folder: Path, scale: float, mesh_bytes: int) -> None:
+    (folder / "meshes").mkdir(parents=True)
+    (folder / "robot.urdf").write_text(f'<robot><link><mesh filename="meshes/link.stl" scale="{scale}"/></link></robot>')
+    (folder / "meshes" / "link.stl").write_bytes(b"\x01" * mesh_bytes)
+
+
+def test_a_data_folder_travels_whole_to_foreign_workers(tmp_path, foreign_workers):
+    """A data-file parameter naming a folder (a URDF and its meshes): the folder travels whole, relative paths work."""
+    import json
+
+    folder = tmp_path / "project"
+    folder.mkdir()
+    (folder / "my_robot_units.py").write_text(ROBOT_UNIT_SOURCE)
+    _robot_folder(folder / "robots" / "small", scale=0.5, mesh_bytes=100)
+    _robot_folder(folder / "robots" / "big", scale=2.0, mesh_bytes=3000)
+    spec = {"name": "folder_travels", "units": {"r": {"python": "my_robot_units:RobotMass"}},
+            "experiment": {"stop": 0.2, "step": 0.1}, "objectives": {"y": {"signal": "r.y", "reduce": "final"}},
+            "design": {"parameters": {"r.model": {"values": ["robots/small", "robots/big"]},
+                                      "r.k": {"values": [1.0, 3.0]}}}}
+    (folder / "spec.json").write_text(json.dumps(spec))
+    sweep = Sweep(folder / "spec.json", out=tmp_path / "out", scheduler=foreign_workers, quiet=True)
+    shutil.move(folder, tmp_path / "moved_away")  # neither the workers nor the client can read the folders by path
+    sys.modules.pop("my_robot_units", None)
+    df = sweep.run()
+    assert (df["status"] == "ok").all(), list(df["message"])
+    mass = {"robots/small": 0.5 * 100, "robots/big": 2.0 * 3000}
+    assert sorted(zip(df["r.model"], df["r.k"], df["y"])) == sorted(
+        (m, k, k * mass[m]) for m in mass for k in (1.0, 3.0))
+
+
+def test_a_data_folder_above_the_size_limit_is_refused_naming_it_and_the_fix(tmp_path, monkeypatch, capsys):
+    import json
+
+    from orchestrator.cli import main
+
+    folder = tmp_path / "project"
+    folder.mkdir()
+    (folder / "robot_units.py").write_text(ROBOT_UNIT_SOURCE)
+    _robot_folder(folder / "robot", scale=1.0, mesh_bytes=1_500_000)
+    (folder / "spec.json").write_text(json.dumps({
+        "name": "big_folder", "units": {"r": {"python": "robot_units.py:RobotMass", "parameters": {"model": "robot"}}},
+        "experiment": {"stop": 0.2, "step": 0.1}, "objectives": {"y": {"signal": "r.y", "reduce": "final"}}}))
+    monkeypatch.setenv("COSIM_DATA_MB", "1")
+    assert main(["sweep", str(folder / "spec.json"), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert f"data file value 'robot' names the folder {folder / 'robot'} (2 files) of 1.5 MB" in err
+    assert "$.units.r" in err and "COSIM_DATA_MB" in err and "Traceback" not in err
+    monkeypatch.setenv("COSIM_DATA_MB", "2")  # raised on purpose: it runs
+    assert main(["run", str(folder / "spec.json")]) == 0

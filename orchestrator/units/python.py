@@ -217,10 +217,11 @@ class PythonUnitType(UnitType):
         self._cls: type[PythonUnit] | None = None
         # a data-file parameter's value (as the spec gives it) -> the file it names (orchestrator.data_files)
         self.data_paths: dict[str, str] = {}
+        self.data_folders: set[str] = set()  # those values of data_paths that name a folder (travel as a zip)
 
     def __getstate__(self) -> dict:
         return {"target": self.target, "base_dir": self.base_dir, "_source_zip": self._source_zip, "_cls": None,
-                "data_paths": self.data_paths}
+                "data_paths": self.data_paths, "data_folders": self.data_folders}
 
     def files(self) -> list[Path]:
         """The unit's ``file.py`` or the source of a module named from the spec's folder (as a zip), then its data files.
@@ -228,9 +229,13 @@ class PythonUnitType(UnitType):
         A module beside the spec (``my_units:Gain`` with ``my_units.py`` or the
         package ``my_units/`` in the spec's folder) travels as source, so the
         workers need not have it installed; any other module must be importable
-        where units run.  The data files are those of ``data_paths``.
+        where units run.  The data files are those of ``data_paths``; a folder
+        among them travels as a zip of its content (:func:`orchestrator.data_files.pack`).
         """
-        return self._source_files() + [Path(p) for p in self.data_paths.values()]
+        from ..data_files import pack
+
+        return self._source_files() + [pack(p) if value in self.data_folders else Path(p)
+                                       for value, p in self.data_paths.items()]
 
     def _source_files(self) -> list[Path]:
         module, sep, _ = self.target.rpartition(":")
@@ -252,8 +257,11 @@ class PythonUnitType(UnitType):
         return top if (top / "__init__.py").is_file() else None
 
     def relocate(self, copies: Sequence[Path]) -> None:
+        from ..data_files import unpack
+
         data = list(copies)[len(copies) - len(self.data_paths):]
-        self.data_paths = {value: str(copy) for value, copy in zip(self.data_paths, data)}
+        self.data_paths = {value: str(unpack(copy, Path(path).name) if value in self.data_folders else copy)
+                           for (value, path), copy in zip(self.data_paths.items(), data)}
         copies = list(copies)[:len(copies) - len(self.data_paths)]
         if not copies:
             return
