@@ -37,6 +37,7 @@ from pathlib import Path
 from typing import Any, Iterator
 
 from .errors import Problem, UserError
+from .interrupts import processes_started_here_ignore_ctrl_c
 
 # the package a cluster class comes from -> how to install it (the optional extras of pyproject.toml)
 EXTRAS = {
@@ -175,7 +176,8 @@ def start_cluster(config: ClusterFile) -> Any:
     if "silence_logs" not in kwargs and _accepts(cls, "silence_logs"):
         kwargs["silence_logs"] = logging.CRITICAL  # Dask's own tracebacks (a worker refusing an argument) stay off
     failure = None
-    with dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES}), _quiet_dask_logs():
+    with dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES}), _quiet_dask_logs(), \
+            processes_started_here_ignore_ctrl_c():  # a terminal's Ctrl-C is for cosim's client alone
         try:
             cluster = cls(**kwargs)
         except TypeError as exc:

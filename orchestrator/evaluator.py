@@ -144,7 +144,10 @@ def _client(workers: int, scheduler: str | None, cluster_file: str | None,
     finally:
         client.close()
         if cluster is not None:
-            cluster.close()
+            try:
+                cluster.close()
+            except OSError:  # its processes are already gone (a kill reached them): nothing left to close
+                pass
 
 
 def _check_scheduler_imports_cosim(client: Any, where: str) -> None:

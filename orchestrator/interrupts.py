@@ -13,6 +13,8 @@ far and says ``cosim: interrupted``):
   prints a traceback nor dies before the client closes it.  The worker
   process ignores it itself; nothing it does not own (the nanny, the client's
   own handler while workers are restarted after a loss) is changed.
+- :func:`processes_started_here_ignore_ctrl_c` does the same for the
+  processes a cluster file's class starts on this machine.
 - Point children (:mod:`orchestrator.isolation`) ignore SIGINT themselves.
 """
 
@@ -21,7 +23,8 @@ from __future__ import annotations
 import signal
 import sys
 import threading
-from typing import Any
+from contextlib import contextmanager
+from typing import Any, Iterator
 
 WORKER_PRELOAD = __name__  # the module name given to Dask's ``preload`` for the workers cosim starts
 
@@ -49,6 +52,34 @@ def restore_signals(previous: dict[int, Any]) -> None:
     """Put back the handlers :func:`stop_cleanly_on_signals` replaced."""
     for signum, handler in previous.items():
         signal.signal(signum, handler)
+
+
+@contextmanager
+def processes_started_here_ignore_ctrl_c() -> Iterator[None]:
+    """Processes started within the block (a cluster class's scheduler, nannies, workers) ignore SIGINT.
+
+    A terminal's Ctrl-C reaches cosim's whole process group, also the
+    processes a cluster file's class starts on this machine (a LocalCluster's
+    workers, a SubprocessCluster's scheduler): they must not print tracebacks
+    or die before the client closes them.  SIGINT is ignored in this process
+    while the block runs, so processes started meanwhile inherit that (an
+    ignored signal stays ignored across exec, and Python then keeps it so),
+    and workers a nanny starts later get the :func:`dask_setup` preload
+    through Dask's ``distributed.worker.preload`` setting.  A Ctrl-C while the
+    block runs is lost (cluster classes start quickly; their jobs start
+    later).  Outside the main thread only the preload is set.
+    """
+    import dask
+
+    preloads = [*dask.config.get("distributed.worker.preload", []), WORKER_PRELOAD]
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+    try:
+        with dask.config.set({"distributed.worker.preload": preloads}):
+            yield
+    finally:
+        if main:
+            signal.signal(signal.SIGINT, previous)
 
 
 def dask_setup(worker: Any) -> None:
