@@ -211,9 +211,14 @@ def start_cluster(config: ClusterFile) -> Any:
 def _start_failure(config: ClusterFile, exc: BaseException) -> ClusterFileError:
     """The error for a cluster class that raised ``exc`` while starting, naming the root cause."""
     cause = _root_cause(exc)  # e.g. "Nanny failed to start" hides the TypeError of a bad worker argument
+    if isinstance(cause, OSError):  # refused, timed out, no route: what the class talks to is not reachable
+        fix = ("check that what the class connects to is reachable from here (the Kubernetes API server of your "
+               "kubeconfig, the job system's host), then run again")
+    else:
+        fix = ("correct the keyword arguments (or start what the class needs: its job system, its Kubernetes "
+               "operator and credentials)")
     return ClusterFileError(f"cannot start {config.type}: {type(cause).__name__}: {cause}", file=config.path,
-                            path="kwargs", fix="correct the keyword arguments (or start what the class needs: "
-                                               "its job system, its Kubernetes operator and credentials)")
+                            path="kwargs", fix=fix)
 
 
 def _accepts(cls: Any, name: str) -> bool:
