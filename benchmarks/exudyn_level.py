@@ -21,9 +21,15 @@ Two passes over the same points:
    their ratio, the *Python share*.  The timer wrappers' own cost is measured
    and subtracted.
 
+With lock-step groups (``--lockstep K``; by default the group size a sweep worker chooses from the time of a
+point run alone), the same two passes run the points K at a time through ``PandaExudynBatch`` as well,
+interleaved group by group; its figures per step are per point and communication step (the group's time
+divided by the active rows summed over its steps).
+
 Usage::
 
-    python benchmarks/exudyn_level.py                       # today's unit, 24 points (~10 s)
+    python benchmarks/exudyn_level.py                       # today's unit, 24 points, alone and in lock-step
+    python benchmarks/exudyn_level.py --lockstep 12         # lock-step groups of 12 points
     python benchmarks/exudyn_level.py --before 0ca756b      # and the unit before issue 16, interleaved
     python benchmarks/exudyn_level.py --full                # then the full 17061-point study via cosim sweep
                                                             # (minutes; its output folder is removed)
@@ -52,6 +58,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from orchestrator.execution import Execution  # noqa: E402
+from orchestrator.limits import limit  # noqa: E402
+from orchestrator.lockstep import GROUP_SIZE, instantiate, run_lockstep  # noqa: E402
 from orchestrator.spec import load_spec  # noqa: E402
 from orchestrator.system import build_system  # noqa: E402
 
@@ -192,6 +200,54 @@ class Level:
         robot.do_step = do_step
 
 
+class LockstepLevel(Level):
+    """The study's points in lock-step groups of ``rows`` (``PandaExudynBatch``), as a sweep worker runs them."""
+
+    def __init__(self, rows: int):
+        self.label = f"lock-step K={rows}"
+        self.rows = rows
+        self.system = build_system(load_spec(SPEC))
+        self.batches = instantiate(self.system, rows)
+        self.units = self.batches
+        self.walls = []  # per point: its group's time / the group's size
+        self.do_step_s = 0.0
+        self.do_step_calls = 0
+        self.row_steps = 0  # active rows summed over do_step calls: the points' own communication steps
+        self.solver = None
+        self.callback_s = 0.0
+        self.callback_calls = 0
+        self.differentiate_s = 0.0
+        self.differentiate_calls = 0
+
+    def run_group(self, points) -> None:
+        overrides = [[self.system.assignment_for("traj.waypoints[9]", q22),
+                      self.system.assignment_for("traj.waypoints[11]", q24)] for q22, q24 in points]
+        for result in run_lockstep(self.system, overrides, self.batches):
+            if not result.ok:
+                raise RuntimeError(f"{self.label}: {result.message}")
+        for batch in self.batches.values():
+            batch.reset()
+
+    def time_do_step(self) -> None:
+        robot = self.batches["robot"]
+        module = sys.modules[robot.single_class.__module__]
+        robot._jacobian.__class__ = timed_jacobian_class(module.NewtonJacobian, self)
+        self.solver = TimedSolver(robot._solver)
+        robot._solver = self.solver
+        plain = robot.do_step
+        clock = CLOCK[0]
+
+        def do_step(t, h):
+            t0 = clock()
+            try:
+                return plain(t, h)
+            finally:
+                self.do_step_s += clock() - t0
+                self.do_step_calls += 1
+                self.row_steps += len(robot.active)
+        robot.do_step = do_step
+
+
 def wrapper_cost(n: int = 200_000) -> float:
     """Seconds a timing wrapper like the ones above adds to one call (its clock reads and bookkeeping)."""
     class Target:
@@ -231,10 +287,30 @@ def full_study(out_parent: Path) -> float:
     return seconds
 
 
+def split(level: Level, per_call: float) -> tuple[float, float]:
+    """(solver seconds, Python seconds) of a timed level's robot unit (see the module docstring)."""
+    calls, steps = level.solver.calls, level.do_step_calls
+    differentiate_s = level.differentiate_s - level.differentiate_calls * per_call
+    callback_s = level.callback_s - level.callback_calls * per_call - level.differentiate_s  # its Python part
+    # Exudyn's own time: SolveSteps less the Python callback it makes (but with the differentiation)
+    solver_s = level.solver.seconds - level.callback_s + differentiate_s
+    # do_step's own time less both wrappers (around do_step and around SolveSteps) and SolveSteps,
+    # plus the Python part of the callback made from inside SolveSteps
+    python_s = level.do_step_s - steps * per_call - calls * per_call - level.solver.seconds + callback_s
+    return solver_s, python_s
+
+
+def group_size(single_point_seconds: float) -> int:
+    """The lock-step group size a sweep worker chooses for points that take this long alone (orchestrator.lockstep)."""
+    return max(1, min(GROUP_SIZE, int(limit("lockstep_seconds") / max(single_point_seconds, 1e-6))))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--points", type=int, default=24, help="design points per pass (default 24)")
     parser.add_argument("--before", metavar="REV", help="also run PandaExudyn as it was at this git revision")
+    parser.add_argument("--lockstep", metavar="K", type=int, default=0,
+                        help="lock-step groups of K points (default: the size a sweep worker chooses); 1: none")
     parser.add_argument("--full", action="store_true", help="then run the full study with cosim sweep and time it")
     parser.add_argument("--clock", choices=("wall", "cpu"), default="wall",
                         help="time with the wall clock (default; an idle machine) or this process's CPU time (a loaded one)")
@@ -244,52 +320,72 @@ def main() -> None:
     print(f"date {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC; machine {machine()}")
     print(f"load average at start: {load_avg()}; clock: {args.clock}")
     from cosim.models.panda_exudyn import PandaExudyn
-    levels = [Level("today", PandaExudyn)]
+    levels = [Level("today, one by one", PandaExudyn)]
     if args.before:
         levels.insert(0, Level(f"at {args.before}", unit_class_at(args.before)))
     points = design_points(args.points)
     for level in levels:
         level.run(*points[0])  # warm-up: imports, Exudyn system and solver, FMU instance
+    t0 = CLOCK[0]()
+    levels[-1].run(*points[1])
+    rows = args.lockstep or group_size(CLOCK[0]() - t0)
+    groups = [points[i:i + rows] for i in range(0, len(points), rows)] if rows > 1 else []
+    groups = [g for g in groups if len(g) == rows]  # whole groups only: one size, one system
+    lockstep = LockstepLevel(rows) if groups else None
+    if lockstep:
+        lockstep.run_group(groups[0])  # warm-up
 
-    for q22, q24 in points:  # pass 1: clean wall time per point, interleaved
-        for level in levels:
-            t0 = CLOCK[0]()
-            level.run(q22, q24)
-            level.walls.append(CLOCK[0]() - t0)
+    def interleaved(timed: bool) -> None:
+        """Every level at each point (lock-step: each group) in turn, so the machine's load hits them alike."""
+        for i, group in enumerate(groups or [points]):
+            for q22, q24 in group:
+                for level in levels:
+                    t0 = CLOCK[0]()
+                    level.run(q22, q24)
+                    if not timed:
+                        level.walls.append(CLOCK[0]() - t0)
+            if lockstep:
+                t0 = CLOCK[0]()
+                lockstep.run_group(group)
+                if not timed:
+                    lockstep.walls.extend([(CLOCK[0]() - t0) / rows] * rows)
 
+    interleaved(timed=False)  # pass 1: clean time per point
     per_call = wrapper_cost()
-    for level in levels:
+    every = levels + ([lockstep] if lockstep else [])
+    for level in every:
         level.time_do_step()
-    for q22, q24 in points:  # pass 2: do_step and SolveSteps timed, interleaved
-        for level in levels:
-            level.run(q22, q24)
+    interleaved(timed=True)  # pass 2: do_step and SolveSteps timed
 
-    print(f"{len(points)} points, seed 16; timer wrapper {per_call * 1e6:.2f} us per call (subtracted)")
-    header = (f"{'unit':16s} {'point mean':>10s} {'median':>8s} {'full study (proj.)':>18s} "
-              f"{'solver/step':>11s} {'Python/step':>11s} {'Python share':>12s}")
-    print(header)
+    n = sum(len(g) for g in groups) if groups else len(points)
+    print(f"{n} points, seed 16; timer wrapper {per_call * 1e6:.2f} us per call (subtracted)")
+    print(f"{'unit':22s} {'point mean':>10s} {'median':>8s} {'full study (proj.)':>18s} "
+          f"{'solver/step':>11s} {'Python/step':>11s} {'Python share':>12s}")
     first_mean = None
-    for level in levels:
+    for level in every:
         mean = statistics.fmean(level.walls)
         first_mean = first_mean or mean
-        calls, steps = level.solver.calls, level.do_step_calls
-        differentiate_s = level.differentiate_s - level.differentiate_calls * per_call
-        callback_s = level.callback_s - level.callback_calls * per_call - level.differentiate_s  # its Python part
-        # Exudyn's own time: SolveSteps less the Python callback it makes (but with the differentiation)
-        solver_s = level.solver.seconds - level.callback_s + differentiate_s
-        # do_step's own time less both wrappers (around do_step and around SolveSteps) and SolveSteps,
-        # plus the Python part of the callback made from inside SolveSteps
-        python_s = level.do_step_s - steps * per_call - calls * per_call - level.solver.seconds + callback_s
+        solver_s, python_s = split(level, per_call)
+        # per point and communication step: a lock-step step advances every active row (and integrates the
+        # rows that have ended: solver work no point needs, counted in the solver's time)
+        steps = getattr(level, "row_steps", level.do_step_calls)
         projected = STUDY_POINTS * mean / WORKERS
-        print(f"{level.label:16s} {mean * 1e3:8.1f}ms {statistics.median(level.walls) * 1e3:6.1f}ms "
+        print(f"{level.label:22s} {mean * 1e3:8.1f}ms {statistics.median(level.walls) * 1e3:6.1f}ms "
               f"{projected:8.0f} s = {projected / 60:4.1f} min "
-              f"{solver_s / calls * 1e6:9.1f}us {python_s / steps * 1e6:9.1f}us {python_s / solver_s * 100:10.1f} %")
-    if len(levels) > 1:
-        print(f"time per point, today / before: {statistics.fmean(levels[-1].walls) / first_mean:.3f}")
+              f"{solver_s / steps * 1e6:9.1f}us {python_s / steps * 1e6:9.1f}us {python_s / solver_s * 100:10.1f} %")
+        if level is lockstep:
+            print(f"{'':22s} (per point and step; {steps / level.do_step_calls:.2f} of {rows} rows active per step "
+                  f"on average; per lock-step step: solver {solver_s / level.do_step_calls * 1e6:.0f} us, "
+                  f"Python {python_s / level.do_step_calls * 1e6:.0f} us)")
+    for level in every[1:]:
+        print(f"time per point, {level.label} / {every[0].label}: {statistics.fmean(level.walls) / first_mean:.3f}")
     print(f"load average at end: {load_avg()}")
     for level in levels:
         for unit in level.units.values():
             unit.terminate()
+    if lockstep:
+        for batch in lockstep.batches.values():
+            batch.terminate()
     if args.full:
         with tempfile.TemporaryDirectory(prefix="exudyn_study_") as folder:
             full_study(Path(folder))

@@ -62,6 +62,13 @@ Newton Jacobian
     a fresh Jacobian per step to that tolerance (checked against the outputs before
     this change in ``tests/test_panda_exudyn_reference.py``).
 
+Lock-step
+    :class:`PandaExudynBatch`, the unit's vectorised twin, runs K design points
+    of a sweep as K kinematic trees in one Exudyn system, one ``SolveSteps``
+    per communication step for all of them (``orchestrator.lockstep``; the
+    study's configuration only).  Its rows agree with single runs to the
+    Newton tolerance (they share one Newton iteration), not bit for bit.
+
 The Exudyn system is built once per instance and rebuilt only when the payload
 changes (or, with a pendulum, every run: its initial pose follows the arm's);
 ``initialize()`` after ``reset()`` otherwise just re-applies gains and the
@@ -87,6 +94,7 @@ from exudyn.utilities import RigidBodyInertia
 
 from orchestrator.unit import Variable
 from orchestrator.units.python import PythonUnit
+from orchestrator.units.python_batch import NotBatchable, PythonBatchUnit
 
 from .panda_model import EE_FRAME, GRAVITY, N_JOINTS, cached_model, ee_frame_id, payload_key, robot_variables
 
@@ -94,6 +102,7 @@ from .panda_model import EE_FRAME, GRAVITY, N_JOINTS, cached_model, ee_frame_id,
 DEFAULT_KP = (600.0, 600.0, 600.0, 600.0, 250.0, 150.0, 50.0)  # N.m/rad
 REF_TIMINGS = ("step_start", "step_end")
 DEFAULT_KD = (50.0, 50.0, 50.0, 50.0, 30.0, 25.0, 15.0)  # N.m.s/rad
+ONE_STEP = 1 + 1e-9  # a communication step up to this many substeps is one solver step (round-off in t + h)
 
 
 def build_kinematic_tree(model: pin.Model, q0, qd0, gravity=GRAVITY):
@@ -106,6 +115,15 @@ def build_kinematic_tree(model: pin.Model, q0, qd0, gravity=GRAVITY):
     libraries store them.  Raises ValueError for a model that is not a chain of
     revolute-z joints.
     """
+    sc = exu.SystemContainer()
+    mbs = sc.AddSystem()
+    node, tree = add_kinematic_tree(mbs, model, q0, qd0, gravity)
+    mbs.Assemble()
+    return sc, mbs, node, tree
+
+
+def add_kinematic_tree(mbs, model: pin.Model, q0, qd0, gravity=GRAVITY) -> tuple[int, int]:
+    """Add the chain of :func:`build_kinematic_tree` to ``mbs`` (not assembled); returns ``(node, tree)``."""
     n = model.nv
     for i in range(1, model.njoints):
         if model.joints[i].shortname() != "JointModelRZ" or model.parents[i] != i - 1:
@@ -119,8 +137,6 @@ def build_kinematic_tree(model: pin.Model, q0, qd0, gravity=GRAVITY):
         inertias.Append(inertia.inertia)  # about the COM, joint axes
         coms.Append(inertia.lever)
         masses.append(inertia.mass)
-    sc = exu.SystemContainer()
-    mbs = sc.AddSystem()
     node = mbs.AddNode(NodeGenericODE2(referenceCoordinates=[0.0] * n, initialCoordinates=list(q0),
                                        initialCoordinates_t=list(qd0), numberOfODE2Coordinates=n))
     zeros = [0.0] * n
@@ -130,8 +146,7 @@ def build_kinematic_tree(model: pin.Model, q0, qd0, gravity=GRAVITY):
         linkMasses=masses, gravity=list(gravity), jointForceVector=zeros, jointPositionOffsetVector=zeros,
         jointVelocityOffsetVector=zeros, jointPControlVector=zeros, jointDControlVector=zeros,
     ))
-    mbs.Assemble()
-    return sc, mbs, node, tree
+    return node, tree
 
 
 # Shape assumptions of the pendulum (the thesis gives only its masses): a thin rod
@@ -169,6 +184,19 @@ def add_pendulum(mbs, tree, model: pin.Model, q0, qd0, bob_mass: float, rod_mass
     mbs.AddObject(ObjectJointSpherical(markerNumbers=[m_tree, m_body]))
     mbs.Assemble()
     return body
+
+
+def solver_settings() -> exu.SimulationSettings:
+    """The simulation settings of every run: one implicit step per ``SolveSteps`` call, no files."""
+    s = exu.SimulationSettings()
+    s.timeIntegration.numberOfSteps = 1  # SolveSteps runs one internal step per call
+    s.timeIntegration.verboseMode = 0
+    s.solution.file.write = False  # default: a solution/ folder in the working directory
+    s.solution.sensors.active = False
+    s.timeIntegration.newton.relativeTolerance = 1e-10  # tau output exact to ~1e-9 N.m
+    # the Jacobian (mass matrix + PD terms) changes little per 1 ms step: reusing it saves ~10 %
+    s.timeIntegration.newton.useModifiedNewton = True
+    return s
 
 
 JACOBIAN_REFRESH_STEPS = 10  # re-differentiate K and D this often (fewest solver CPU seconds at 5-20)
@@ -290,6 +318,10 @@ class PandaExudyn(PythonUnit):
         if self._jacobian is not None:
             self._jacobian.reset()  # the gains may have changed
         self._start_ref = (q0, qd0)
+        # the study's configuration: the inputs are the reference at the end of the step, applied there
+        # (step_end, ref_phase 1); do_step then skips the general reference arithmetic when one solver
+        # step covers the communication step
+        self._at_reference = self.ref_timing == "step_end" and self.ref_phase == 1.0
         self._ee_last = None  # the path starts at the initial pose (a list of 3 floats once set)
         self.ee_path_length = 0.0
         self._read_outputs(q0)
@@ -299,27 +331,37 @@ class PandaExudyn(PythonUnit):
         self._data = self._model.createData()
         self._ee = ee_frame_id(self._model)
         self._sc, self._mbs, self._node, self._tree = build_kinematic_tree(self._model, q0, qd0)
-        s = exu.SimulationSettings()
-        s.timeIntegration.numberOfSteps = 1  # SolveSteps runs one internal step per call
-        s.timeIntegration.verboseMode = 0
-        s.solution.file.write = False  # default: a solution/ folder in the working directory
-        s.solution.sensors.active = False
-        s.timeIntegration.newton.relativeTolerance = 1e-10  # tau output exact to ~1e-9 N.m
-        # the Jacobian (mass matrix + PD terms) changes little per 1 ms step: reusing it saves ~10 %
-        s.timeIntegration.newton.useModifiedNewton = True
-        self._settings = s
+        self._settings = solver_settings()
         self._solver = exu.MainSolverImplicitSecondOrder()
         self._jacobian: NewtonJacobian | None = None  # Exudyn's own Newton Jacobian until initialize() sets one
         self._key = key
 
     def _set_servo(self, q_r, qd_r, qdd_r) -> None:
         """Apply the servo law for reference ``(q_r, qd_r, qdd_r)`` to the next solver step."""
-        tau_ff = pin.rnea(self._model, self._data, q_r, qd_r, qdd_r)
         # kp q_r + kd qd_r + tau_ff: the part of the law that is constant over the step
-        self._tau_const = self._kp * q_r + self._kd * qd_r + tau_ff
-        self._mbs.SetObjectParameter(self._tree, "jointForceVector", self._tau_const)
+        # (in place on fresh arrays: the same operations in the same order as the plain expression)
+        tau = self._kp * q_r
+        tau += self._kd * qd_r
+        tau += pin.rnea(self._model, self._data, q_r, qd_r, qdd_r)  # the feed-forward, a new array
+        self._tau_const = tau
+        self._mbs.SetObjectParameter(self._tree, "jointForceVector", tau)
 
     def do_step(self, t: float, h: float) -> None:
+        if self._at_reference and h <= self.substep * ONE_STEP:
+            # the study's case (step_end, ref_phase 1, one solver step per communication step): the
+            # general path below would compute the same (reference time 0: the inputs as they are;
+            # one solver step from t to t + h) with more Python around it
+            q_ref = self.q_ref
+            self._start_ref = None
+            self._set_servo(q_ref, self.qd_ref, self.qdd_ref)
+            solver = self._solver
+            it = solver.it
+            it.startTime = t
+            it.endTime = t + h
+            if not solver.SolveSteps(self._mbs, self._settings):
+                raise RuntimeError(f"Exudyn solver failed in [{t:g}, {t + h:g}] s: {solver.GetErrorString()}")
+            self._read_outputs(q_ref)
+            return
         if self.ref_timing not in REF_TIMINGS:
             raise ValueError(f"ref_timing must be one of {REF_TIMINGS}, got {self.ref_timing!r}")
         if self.ref_timing == "step_end":
@@ -338,7 +380,7 @@ class PandaExudyn(PythonUnit):
             if t == self.start_time and not (np.array_equal(q0, self.q_ref) and np.array_equal(qd0, self.qd_ref)):
                 self.initialize()
                 self._start_ref = None
-        n_sub = max(1, math.ceil(h / self.substep - 1e-9))
+        n_sub = max(1, math.ceil(h / self.substep - 1e-9))  # 1 for h <= substep * ONE_STEP
         dt = h / n_sub
         q_ref, qd_ref, qdd_ref = self.q_ref, self.qd_ref, self.qdd_ref  # float arrays, not modified here
         solver, it, mbs, settings = self._solver, self._solver.it, self._mbs, self._settings
@@ -393,3 +435,148 @@ class PandaExudyn(PythonUnit):
             self.pendulum_angle = float(np.arccos(np.clip(axis[2], -1.0, 1.0)))  # body z is world z at rest
         if not math.isfinite(sum(q_list)):  # a NaN or an infinity makes the sum non-finite
             raise RuntimeError("the simulation diverged (non-finite joint angles)")
+
+
+class PandaExudynBatch(PythonBatchUnit):
+    """:class:`PandaExudyn` for K design points at once (lock-step runs, :mod:`orchestrator.lockstep`).
+
+    One Exudyn system holds K kinematic trees, one per row, and one
+    ``SolveSteps`` call advances them all: the Python around the solver (the
+    solver call, reading the state, the outputs, the Newton-Jacobian callback)
+    is paid once per communication step for the K points; only the pinocchio
+    calls (feed-forward RNEA, TCP kinematics) and one ``jointForceVector`` set
+    per tree remain per row.  The Newton Jacobian is :class:`NewtonJacobian`'s
+    (it works on the K blocks at once), the linear solver sparse (K
+    independent 7x7 blocks: linear in K, where a dense LU is cubic).
+
+    Same model, servo law and solver settings as the single unit, but the K
+    trees share one Newton iteration, whose convergence test and step-size
+    control see all K residuals together: a row's results equal a single
+    run's to the Newton tolerance, not bit for bit (checked within the stated
+    bounds of ``tests/test_panda_exudyn_reference.py``).
+
+    Only the study's configuration runs here: ``ref_timing = "step_end"``,
+    ``ref_phase = 1``, one solver step per communication step, no pendulum;
+    otherwise :class:`NotBatchable` is raised and the points run one by one.
+    """
+
+    def initialize(self) -> None:
+        if not (np.all(self.ref_timing == "step_end") and np.all(self.ref_phase == 1.0)):
+            raise NotBatchable("PandaExudyn runs in lock-step only with ref_timing 'step_end' and ref_phase 1")
+        if ((self.pendulum_bob_mass + self.pendulum_rod_mass > 0) & (self.pendulum_length > 0)).any():
+            raise NotBatchable("PandaExudyn with a pendulum runs one by one (constraints)")
+        if not (np.all(self.substep > 0) and np.all(self.substep == self.substep[0])):
+            raise NotBatchable("PandaExudyn runs in lock-step only with one substep > 0 for all points")
+        keys = [payload_key(self.payload_mass[k], self.payload_com[k], self.payload_inertia[k]) for k in range(self.rows)]
+        q0 = np.array(self.q_ref, dtype=float)  # every run starts on its reference
+        qd0 = np.array(self.qd_ref, dtype=float)
+        if getattr(self, "_keys", None) != keys:
+            self._build(keys, q0, qd0)
+        mbs = self._mbs
+        mbs.systemData.SetODE2Coordinates(q0.ravel(), configuration=exu.ConfigurationType.Initial)
+        mbs.systemData.SetODE2Coordinates_t(qd0.ravel(), configuration=exu.ConfigurationType.Initial)
+        self._kp = np.array(self.kp, dtype=float)
+        self._kd = np.array(self.kd, dtype=float)
+        for k, tree in enumerate(self._trees):
+            mbs.SetObjectParameter(tree, "jointPControlVector", self._kp[k])
+            mbs.SetObjectParameter(tree, "jointDControlVector", self._kd[k])
+        self._feed_forward = np.zeros((self.rows, N_JOINTS))
+        self._tau_const = np.zeros((self.rows, N_JOINTS))
+        # per row, made once (the attributes are only ever written in place until the next reset):
+        # what the pinocchio calls and the force parameter need
+        self._servo_rows = list(zip(self._models, self.q_ref, self.qd_ref, self.qdd_ref, self._feed_forward))
+        self._force_rows = list(zip(self._trees, self._tau_const))
+        self._kinematics_rows = list(zip(self._models, self.q, self.ee_pos))
+        self._set_servo(np.arange(self.rows))
+        st = self._settings.timeIntegration
+        st.startTime = self.start_time
+        st.endTime = self.start_time + float(self.substep[0])
+        self._solver.InitializeSolver(mbs, self._settings)
+        self._jacobian.reset()
+        self._path_done = None
+        self._read_outputs()
+        self.ee_path_length[:] = 0.0
+
+    def _build(self, keys, q0, qd0) -> None:
+        self._sc = exu.SystemContainer()
+        self._mbs = self._sc.AddSystem()
+        self._models, self._trees, by_key = [], [], {}
+        for k, key in enumerate(keys):
+            if key not in by_key:
+                model = cached_model(*key)
+                by_key[key] = (model, model.createData(), ee_frame_id(model))
+            self._models.append(by_key[key])
+            self._trees.append(add_kinematic_tree(self._mbs, by_key[key][0], q0[k], qd0[k])[1])
+        self._mbs.Assemble()
+        self._settings = solver_settings()
+        self._settings.linearSolver.solverType = exu.LinearSolverType.EigenSparse
+        self._solver = exu.MainSolverImplicitSecondOrder()
+        self._jacobian = NewtonJacobian()
+        self._solver.SetUserFunctionComputeNewtonJacobian(self._mbs, self._jacobian)
+        self._keys = keys
+
+    def _set_servo(self, rows: np.ndarray) -> None:
+        """Apply the servo law of ``rows`` for their reference inputs to the next solver step."""
+        rnea, servo_rows = pin.rnea, self._servo_rows
+        row_list = rows.tolist()
+        for k in row_list:
+            (model, data, _), q_r, qd_r, qdd_r, feed_forward = servo_rows[k]
+            feed_forward[:] = rnea(model, data, q_r, qd_r, qdd_r)
+        # kp q_r + kd qd_r + tau_ff, the order of the single unit's operations
+        if len(row_list) == self.rows:
+            np.add(self._kp * self.q_ref + self._kd * self.qd_ref, self._feed_forward, out=self._tau_const)
+        else:
+            self._tau_const[rows] = self._kp[rows] * self.q_ref[rows] + self._kd[rows] * self.qd_ref[rows] + self._feed_forward[rows]
+        set_parameter, force_rows = self._mbs.SetObjectParameter, self._force_rows
+        for k in row_list:
+            tree, tau = force_rows[k]
+            set_parameter(tree, "jointForceVector", tau)
+
+    def do_step(self, t: float, h: float) -> None:
+        if h > self.substep[0] * ONE_STEP:
+            raise NotBatchable("PandaExudyn runs in lock-step only with one solver step per communication step")
+        self._set_servo(self.active)
+        solver = self._solver
+        it = solver.it
+        it.startTime = t
+        it.endTime = t + h
+        if not solver.SolveSteps(self._mbs, self._settings):
+            raise RuntimeError(f"Exudyn solver failed in [{t:g}, {t + h:g}] s: {solver.GetErrorString()}")
+        self._read_outputs()
+
+    def _read_outputs(self) -> None:
+        """Every row's outputs from the end-of-step state.
+
+        Rows whose point has ended are still integrated and their outputs
+        recomputed (whole-array operations are cheaper than selecting rows;
+        nobody reads them), except the per-row pinocchio kinematics.
+        """
+        sd = self._mbs.systemData
+        shape = (self.rows, N_JOINTS)  # the trees' nodes, in row order, make up the system's ODE2 vector
+        q, qd = self.q, self.qd
+        q[:] = sd.GetODE2Coordinates().reshape(shape)
+        qd[:] = sd.GetODE2Coordinates_t().reshape(shape)
+        self.qdd[:] = sd.GetODE2Coordinates_tt().reshape(shape)
+        np.subtract(self._tau_const - self._kp * q, self._kd * qd, out=self.tau)  # the law at the end-of-step state
+        kinematics, placement, kinematics_rows = pin.forwardKinematics, pin.updateFramePlacement, self._kinematics_rows
+        for k in self.active.tolist():
+            (model, data, frame), q_k, ee_k = kinematics_rows[k]
+            kinematics(model, data, q_k)
+            ee_k[:] = placement(model, data, frame).translation
+        ee, last = self.ee_pos, self._path_done
+        if last is not None:  # one straight chord per communication step, as the single unit
+            chord = ee - last
+            self.ee_path_length += np.sqrt((chord * chord).sum(axis=1))
+            last[:] = ee
+        else:
+            self._path_done = ee.copy()
+        self.tracking_error[:] = np.abs(q - self.q_ref).max(axis=1)  # NaN where q is NaN
+        np.divide(np.abs(self.tau), self.tau_max, out=self.tau_ratio)
+        # max(tau_ratio) > 1 or a position or velocity out of its limits, per row
+        outside = (self.tau_ratio > 1.0) | (q < self.q_min) | (q > self.q_max) | (np.abs(qd) > self.qd_max)
+        np.any(outside, axis=1, out=self.limit_violated)
+        if not math.isfinite(sum(self.tracking_error.tolist())):
+            raise RuntimeError("the simulation diverged (non-finite joint angles)")
+
+
+PandaExudyn.batch_class = PandaExudynBatch
