@@ -52,11 +52,22 @@ of every interval (checked on dense sampling by the tests), and optionally
 ``duration <= max_duration``.  On a sampled path (a cubic spline) ``q'`` is
 quadratic and ``q''`` linear inside an interval: the speed and acceleration
 limits then hold at the grid points, between them up to the spline's curvature
-(exactly on a straight line, as the tests check).  The solver is IPOPT, shipped with CasADi; the
-NLP is built once per grid size and recuperation setting and reused with new
-path data (parameters).  The blend's own duration is usually its path's
-minimum time under the speed and acceleration limits, so "at most the blend's
-duration" returns the blend's timing.
+(exactly on a straight line, as the tests check).
+
+Solvers (both ship with CasADi; each built once per grid size and reused with
+new path data as parameters): by default each pass is solved by Fatrop, on the
+same convex problem written stage by stage along the path
+(:mod:`models.timing_fatrop`: ~1 ms per iteration); its timing is kept only if
+it meets every grid limit and the duration bound exactly, else IPOPT (the whole
+problem as one NLP, ~5 ms per iteration) solves that pass.  Fatrop stops at a
+looser tolerance than IPOPT (1e-6, or "acceptable" 1e-4, against 1e-8), so the
+passes take slightly different steps: the energy agrees with IPOPT alone
+(``solver="ipopt"``) to about the passes' own stopping tolerance
+(``TOLERANCE``; measured: benchmarks/optimal_timing.md).  The blend's own
+duration is usually its path's minimum time under the limits, so "at most the
+blend's duration" returns the blend's timing: with Fatrop the planner first asks
+for the minimum time, and if the bound leaves no room (``NO_ROOM``) keeps the
+blend without any pass.
 
 Raises :class:`TimingInfeasible` when no timing within the limits (and the
 duration bound) exists, :class:`RuntimeError` when IPOPT fails otherwise.
@@ -76,6 +87,7 @@ import pinocchio as pin
 
 from orchestrator.unit import Variable
 
+from . import timing_fatrop
 from .motor_gear_energy import RAD_PER_S_TO_RPM
 from .panda_model import FRANKA_DOC_LIMITS, N_JOINTS, cached_model, payload_key
 from .sampled_path import SampledPath
@@ -89,6 +101,7 @@ MARGINS = {"velocity": 1.0, "acceleration": 1.0, "torque": 1.0}
 DEFAULT_GRID = 60
 TRUST_RADIUS = 0.3  # first trust region: s_dot within +-30 % of the best timing so far
 TOLERANCE = 1e-4  # stop when a pass improves the energy by less than this fraction
+NO_ROOM = 1e-6  # a duration bound within this fraction of the path's minimum time leaves no room: keep the start
 
 
 @dataclass(frozen=True)
@@ -234,8 +247,9 @@ class OptimalTiming:
     planned_energy: float  # the optimised energy bound (J)
     solve_time: float  # s, all passes, path data included
     passes: int
-    # CasADi's own counters summed over the passes: IPOPT iterations, its CPU / wall time (t_proc_total,
-    # t_wall_total) and the part of it in CasADi's function evaluations (t_proc_nlp_*)
+    # CasADi's own counters summed over the passes (Fatrop's and IPOPT's): iterations, the solvers' CPU / wall
+    # time (t_proc_total, t_wall_total) and the part of it in CasADi's function evaluations (t_proc_nlp_*);
+    # fatrop_passes / fatrop_iterations (the minimum-time check included) and ipopt_passes
     solver_stats: dict = field(default_factory=dict, compare=False)
     _times: list = field(init=False, repr=False, compare=False)
 
@@ -288,14 +302,15 @@ def _braking(path: PathData, b: np.ndarray) -> np.ndarray:
 def plan_optimal_timing(blend: JointPath, model: pin.Model, v_max, a_max, tau_max,
                         drive: DriveParameters | None = None, max_duration: float | None = None,
                         time_weight: float = 0.0, n_grid: int = DEFAULT_GRID,
-                        max_passes: int = 4) -> OptimalTiming:
+                        max_passes: int = 4, solver: str = "fatrop") -> OptimalTiming:
     """The timing of ``blend``'s path minimising energy + ``time_weight`` (J/s) x duration,
     with the duration at most ``max_duration`` (s; None: no bound, then ``time_weight`` > 0).
 
     ``blend``: the path, a :class:`ParabolicBlendTrajectory` or a
     :class:`models.sampled_path.SampledPath`; where the path does not start (end)
     at rest (``q' != 0``), the timing does (``s_dot = 0`` there).
-    ``v_max``, ``a_max``, ``tau_max``: per-joint limits.  Raises
+    ``v_max``, ``a_max``, ``tau_max``: per-joint limits.  ``solver``: "fatrop" (default, IPOPT
+    where a Fatrop pass fails) or "ipopt" (every pass; the planner before Fatrop).  Raises
     :class:`TimingInfeasible` when the limits (and the duration) cannot be met,
     ValueError for bad arguments, RuntimeError when IPOPT fails otherwise.
     """
@@ -314,7 +329,9 @@ def plan_optimal_timing(blend: JointPath, model: pin.Model, v_max, a_max, tau_ma
         return OptimalTiming(blend, np.zeros(2), np.zeros(2), np.zeros(2), 0.0, time.perf_counter() - start, 0)
     path = path_data(blend, model, n_grid)
     n = path.n
-    solver, names, sizes = _nlp(n, bool(drive.recuperation))
+    if solver not in ("fatrop", "ipopt"):
+        raise ValueError(f"solver must be 'fatrop' or 'ipopt', got {solver!r}")
+    ipopt, names, sizes = _nlp(n, bool(drive.recuperation))
     ds = np.diff(path.s)
     w = drive.r_terminal / (drive.gear_ratio * drive.k_m) ** 2  # copper loss per (joint torque)^2, eta = 1
 
@@ -351,8 +368,16 @@ def plan_optimal_timing(blend: JointPath, model: pin.Model, v_max, a_max, tau_ma
         max_duration is None or _duration(path, b) <= max_duration * (1 + 1e-9))
     best = (_energy(path, drive, b) + time_weight * _duration(path, b), b) if feasible else (math.inf, b)
     x0 = np.concatenate([b, np.sqrt(b), np.zeros(NJ * n)])
-    radius, passes, result = TRUST_RADIUS, 0, None
-    solver_stats = {"iterations": 0, "t_proc_total": 0.0, "t_wall_total": 0.0, "t_proc_functions": 0.0}
+    radius, passes = TRUST_RADIUS, 0
+    solver_stats = {"iterations": 0, "t_proc_total": 0.0, "t_wall_total": 0.0, "t_proc_functions": 0.0,
+                    "fatrop_passes": 0, "fatrop_iterations": 0, "ipopt_passes": 0}
+    if solver == "fatrop" and feasible and max_duration is not None and max_duration <= blend.duration * (1 + 1e-9):
+        # a bound at the full-speed path's own duration: usually nothing is faster (the blend is its path's minimum
+        # time), and the start is then the only timing within the bound -- a problem without interior, on which
+        # both interior-point solvers only slowly find that out.  Ask Fatrop for the minimum time first.
+        shortest = _minimum_time(path, drive, lbx, ubx, lbx[n + 1:2 * n + 2], a_max, tau_max, cap, solver_stats)
+        if shortest is not None and shortest >= max_duration * (1 - NO_ROOM):
+            max_passes = 0  # no room: keep the start
     for passes in range(1, max_passes + 1):
         # the convex model at the current timing: efficiencies at its speeds, copper loss of the
         # current its power directions need (motoring 1/eta^2, braking eta^2)
@@ -364,28 +389,29 @@ def plan_optimal_timing(blend: JointPath, model: pin.Model, v_max, a_max, tau_ma
                   "c0": path.c[:, 0], "c1": path.c[:, 1], "c2": path.c[:, 2],
                   "g0": path.g[:, 0], "g1": path.g[:, 1], "g2": path.g[:, 2],
                   "w_motoring": w_copper, "w_braking": w_copper, "inv_eta": 1.0 / eta, "eta": eta}
-        p = np.concatenate([values[k].ravel() for k in names] + [ds, [time_weight]])  # (n, 7).ravel() = vec of (7, n)
         lbx_pass, ubx_pass = lbx.copy(), ubx.copy()
         if math.isfinite(best[0]):  # trust region: s_dot within (1 -/+ radius) of the best timing so far
             lbx_pass[: n + 1], ubx_pass[: n + 1] = _trust_region(best[1], radius, cap)
-        kwargs = dict(x0=x0, p=p, lbx=lbx_pass, ubx=ubx_pass, lbg=lbg, ubg=ubg)
-        result = solver(**kwargs)
-        _add_stats(solver_stats, solver.stats())
-        status = solver.stats()["return_status"]
-        if not solver.stats()["success"]:
-            if status in ("Infeasible_Problem_Detected", "Restoration_Failed") and not math.isfinite(best[0]):
-                raise TimingInfeasible(f"no timing of the path meets the velocity, acceleration and torque limits"
-                                       f"{f' within {max_duration:.4g} s' if max_duration else ''} (IPOPT: {status})")
-            if not math.isfinite(best[0]):
-                raise RuntimeError(f"IPOPT did not solve the timing problem: {status}")
-            radius /= 2  # keep the best timing so far; try a smaller step
-            continue
-        x = np.array(result["x"]).ravel()
-        candidate = np.clip(x[: n + 1], 0.0, cap)
+        candidate = None
+        if solver == "fatrop":  # fast; its result is checked there, and IPOPT solves the pass if it fails
+            candidate = _fatrop_pass(path, drive, values, b, lbx_pass, ubx_pass, lbx[n + 1:2 * n + 2], max_duration,
+                                     a_max, tau_max, time_weight, cap, solver_stats)
+            x = None if candidate is None else np.concatenate([candidate, np.sqrt(candidate), np.zeros(NJ * n)])
+        if candidate is None:
+            outcome = _ipopt_pass(ipopt, names, values, ds, time_weight, x0, lbx_pass, ubx_pass, lbg, ubg, solver_stats)
+            if isinstance(outcome, str):  # IPOPT failed: its status
+                if outcome in ("Infeasible_Problem_Detected", "Restoration_Failed") and not math.isfinite(best[0]):
+                    raise TimingInfeasible(f"no timing of the path meets the velocity, acceleration and torque limits"
+                                           f"{f' within {max_duration:.4g} s' if max_duration else ''} (IPOPT: {outcome})")
+                if not math.isfinite(best[0]):
+                    raise RuntimeError(f"IPOPT did not solve the timing problem: {outcome}")
+                radius /= 2  # keep the best timing so far; try a smaller step
+                continue
+            candidate, x = np.clip(outcome[0], 0.0, cap), outcome[1]
         value = _energy(path, drive, candidate) + time_weight * _duration(path, candidate)
         improvement = best[0] - value
         if improvement > 0 or not math.isfinite(best[0]):
-            best, b, x0 = (value, candidate), candidate, x
+            best, b, x0 = (value, candidate), candidate, x  # x: the next IPOPT pass's start
             radius = min(2 * radius, 0.9) if math.isfinite(improvement) else radius
             if math.isfinite(improvement) and improvement < TOLERANCE * abs(value):
                 break
@@ -402,6 +428,69 @@ def plan_optimal_timing(blend: JointPath, model: pin.Model, v_max, a_max, tau_ma
     t = np.concatenate([[0.0], np.cumsum(2 * ds / np.maximum(root[:-1] + root[1:], 1e-300))])
     return OptimalTiming(blend=blend, s=path.s, b=b, t=t, planned_energy=_energy(path, drive, b),
                          solve_time=time.perf_counter() - start, passes=passes, solver_stats=solver_stats)
+
+
+def _minimum_time(path: PathData, drive: DriveParameters, lbx: np.ndarray, ubx: np.ndarray, lb_c: np.ndarray,
+                  a_max: np.ndarray, tau_max: np.ndarray, cap: np.ndarray, stats: dict) -> float | None:
+    """The path's minimum time under the grid limits (Fatrop, no energy terms), or None if Fatrop fails."""
+    n = path.n
+    zero = np.zeros((n, NJ))
+    values = {"dq0": path.dq[:, 0], "dq1": path.dq[:, 1], "dq2": path.dq[:, 2], "ddq0": path.ddq[:, 0],
+              "ddq2": path.ddq[:, 2], "m0": path.m[:, 0], "m1": path.m[:, 1], "m2": path.m[:, 2],
+              "c0": path.c[:, 0], "c1": path.c[:, 1], "c2": path.c[:, 2], "g0": path.g[:, 0], "g1": path.g[:, 1],
+              "g2": path.g[:, 2], "w_motoring": zero, "w_braking": zero, "inv_eta": zero, "eta": zero}
+    start = np.minimum(np.ones(n + 1), cap)
+    fastest = _fatrop_pass(path, drive, values, start, lbx, ubx, lb_c, None, a_max, tau_max, 1.0, cap, stats)
+    return None if fastest is None else _duration(path, fastest)
+
+
+def _ipopt_pass(ipopt, names, values, ds, time_weight, x0, lbx, ubx, lbg, ubg, stats: dict):
+    """One pass with IPOPT: (b, x) of its solution, or its return status (str) when it failed."""
+    p = np.concatenate([values[k].ravel() for k in names] + [ds, [time_weight]])  # (n, 7).ravel() = vec of (7, n)
+    result = ipopt(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+    _add_stats(stats, ipopt.stats())
+    stats["ipopt_passes"] += 1
+    if not ipopt.stats()["success"]:
+        return str(ipopt.stats()["return_status"])
+    x = np.array(result["x"]).ravel()
+    return x[: len(ds) + 1], x
+
+
+def _fatrop_pass(path: PathData, drive: DriveParameters, values: dict, b: np.ndarray, lbx: np.ndarray, ubx: np.ndarray,
+                 lb_c: np.ndarray, max_duration: float | None, a_max: np.ndarray, tau_max: np.ndarray,
+                 time_weight: float, cap: np.ndarray, stats: dict) -> np.ndarray | None:
+    """One pass with Fatrop (models/timing_fatrop.py): its timing b if it meets every grid limit
+    and the duration bound, else None (the caller then solves the pass with IPOPT)."""
+    n = path.n
+    ds = np.diff(path.s)
+    lb_b, ub_b = lbx[: n + 1], ubx[: n + 1]
+    data = dict(values, mech_motoring=path.dq[:, 1] * ds[:, None] * values["inv_eta"],
+                mech_braking=path.dq[:, 1] * ds[:, None] * values["eta"])
+    p = np.concatenate([data[k].ravel() for k in timing_fatrop.NAMES] + [ds, [time_weight]])
+    shrink = 1 - timing_fatrop.SHRINK
+    bounds = timing_fatrop.bounds(n, lb_b, ub_b * shrink, lb_c, lbx[-1], max_duration * shrink if max_duration else None,
+                                  a_max * MARGINS["acceleration"] * shrink, tau_max * MARGINS["torque"] * shrink,
+                                  one_branch=(data["mech_motoring"] == data["mech_braking"])
+                                  & (data["w_motoring"] == data["w_braking"]))
+    start = np.clip(b, lb_b, ub_b * shrink)
+    a = (np.diff(start) / (2 * ds))[:, None]
+    tau1 = path.m[:, 1] * a + path.c[:, 1] * (0.5 * (start[:-1] + start[1:]))[:, None] + path.g[:, 1]
+    solver = timing_fatrop.fatrop_solver(n)
+    result = solver(x0=timing_fatrop.initial_guess(start, ds, tau1, data, drive.recuperation), p=p,
+                    lbx=bounds[0], ubx=bounds[1], lbg=bounds[2], ubg=bounds[3])
+    solver_stats = solver.stats()
+    _add_stats(stats, solver_stats)
+    stats["fatrop_passes"] += 1
+    stats["fatrop_iterations"] += int(solver_stats.get("iter_count", 0))
+    candidate = np.clip(timing_fatrop.timing_of(result["x"], n), 0.0, cap)
+    # success, or stopped before the iteration limit (the "acceptable" tolerance reports the same failure status
+    # as the limit; the count tells them apart); an early stop for another reason is judged the same way: by the
+    # real limits here and by the exact energy in the caller, like every candidate
+    stopped = solver_stats["success"] or int(solver_stats.get("iter_count", 0)) < timing_fatrop.MAX_ITER
+    if not stopped or not _within_limits(path, candidate, cap, a_max, tau_max) or (
+            max_duration is not None and _duration(path, candidate) > max_duration):
+        return None
+    return candidate
 
 
 def _add_stats(total: dict, stats: dict) -> None:
@@ -510,7 +599,7 @@ class OptimalTimingTrajectory(TrajectoryGenerator):
         Variable("blend_duration", "output", unit="s", start=0.0,
                  description="duration of the parabolic blend (of the samples' own timing with path_file)"),
         Variable("planned_energy", "output", unit="J", start=0.0, description="electric energy of the planned timing on the planning grid (drive model, midpoint rule)"),
-        Variable("solve_time", "output", unit="s", start=0.0, description="time spent planning (path data + IPOPT)"),
+        Variable("solve_time", "output", unit="s", start=0.0, description="time spent planning (path data + solver passes)"),
     )
 
     def plan(self, waypoints: np.ndarray):

@@ -165,8 +165,11 @@ def test_study_specs_are_up_to_date_and_validate():
     make_specs = importlib.util.module_from_spec(module_spec)
     module_spec.loader.exec_module(make_specs)
     base = json.loads((FOLDER / "spec_coarse.json").read_text())
-    for name, raw in {"spec.json": make_specs.main_study(base), "spec_tradeoff.json": make_specs.tradeoff(base)}.items():
+    full = json.loads((FOLDER / "spec.json").read_text())
+    for name, raw in {"spec.json": make_specs.main_study(base), "spec_tradeoff.json": make_specs.tradeoff(base),
+                      "spec_full.json": make_specs.main_study(full)}.items():
         assert json.loads((folder / name).read_text()) == raw, f"{name} is stale: run make_specs.py"
         assert list(build_system(load_spec(folder / name)).order) == ["traj", "robot", "energy"]
     assert len(DesignSpace.from_spec(load_spec(folder / "spec.json"))) == 13 * 21 * 2
     assert len(DesignSpace.from_spec(load_spec(folder / "spec_tradeoff.json"))) == 9 * 8 * 2
+    assert len(DesignSpace.from_spec(load_spec(folder / "spec_full.json"))) == 121 * 141 * 2

@@ -20,7 +20,8 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-TABLES = {"spec.json": "results.parquet", "spec_tradeoff.json": "results_tradeoff.parquet"}
+TABLES = {"spec.json": "results.parquet", "spec_tradeoff.json": "results_tradeoff.parquet",
+          "spec_full.json": "results_full.parquet"}
 
 
 def run(spec: str, workers: int) -> None:

@@ -26,12 +26,14 @@ def waypoints(q2_2: float, q2_4: float):
     return thesis_to_urdf([[0] * 7, [-90, q2_2, 0, q2_4, 0, 0, 0], [-180, 0, 0, 0, 0, 0, 0]])
 
 
-def plan(design, mode):
+def plan(design, mode, solver="ipopt"):
+    """The reference plans are IPOPT's (tol 1e-8); ``solver="fatrop"`` is the planner's default."""
     blend = plan_parabolic_blend(waypoints(*design), LIMITS.qd_max, LIMITS.qdd_max)
     options = MODES[mode]
     bound = options["factor"] * blend.duration if "factor" in options else None
     return blend, plan_optimal_timing(blend, panda_model(), LIMITS.qd_max, LIMITS.qdd_max, LIMITS.tau_max,
-                                      max_duration=bound, time_weight=options.get("time_weight", 0.0))
+                                      max_duration=bound, time_weight=options.get("time_weight", 0.0),
+                                      solver=solver)
 
 
 def main() -> None:
