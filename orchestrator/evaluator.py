@@ -47,11 +47,10 @@ def check_timeout(timeout: float | None, error: type[UserError] = UserError) -> 
 
 
 def _dashboard_available() -> bool:
-    try:
-        import bokeh  # noqa: F401  (distributed serves its dashboard only with bokeh)
-    except ImportError:
-        return False
-    return True
+    """Whether bokeh is installed (distributed serves its dashboard only with it); found, not imported."""
+    import importlib.util
+
+    return importlib.util.find_spec("bokeh") is not None
 
 
 def _thread_count(client: Any) -> int:
@@ -60,19 +59,29 @@ def _thread_count(client: Any) -> int:
 
 def local_cluster(workers: int) -> Any:
     """The cluster cosim starts when given none: a LocalCluster of ``workers`` worker processes, one thread each,
-    on 127.0.0.1, its dashboard on a free port; a task may lose one worker (see :mod:`orchestrator.cluster`);
+    on 127.0.0.1, its dashboard on a free port, loaded when first opened (:mod:`orchestrator.dashboard_on_demand`);
+    a task may lose one worker (see :mod:`orchestrator.cluster`);
     the workers set up by :mod:`orchestrator.worker_setup`.  The caller closes it."""
     import dask
     from distributed import LocalCluster
 
     from .cluster import ALLOWED_FAILURES
+    from .dashboard_on_demand import serve_dashboard_on_demand
     from .interrupts import WORKER_PRELOAD
     from .worker_setup import WORKER_SETUP
 
     with dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES}):
-        return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                            dashboard_address="127.0.0.1:0", silence_logs=40,
-                            preload=[WORKER_PRELOAD, WORKER_SETUP])  # Ctrl-C ignored; a quick exit
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address="127.0.0.1:0", silence_logs=40,
+                               preload=[WORKER_PRELOAD, WORKER_SETUP],  # Ctrl-C ignored; a quick exit
+                               scheduler_kwargs={"dashboard": False})  # loaded when first opened, below
+    try:
+        if _dashboard_available():
+            serve_dashboard_on_demand(cluster)
+    except BaseException:
+        cluster.close()
+        raise
+    return cluster
 
 
 @contextmanager

@@ -118,6 +118,7 @@ from orchestrator.evaluator import dask_client
 
 if __name__ == "__main__":
     with dask_client(1) as (_, _, link):
+        urllib.request.urlopen(link, timeout=60).read()  # the dashboard is loaded when first opened
         try:
             status = urllib.request.urlopen(link.rsplit("/", 1)[0] + "/sitemap.json", timeout=30).status
         except urllib.error.HTTPError as exc:
