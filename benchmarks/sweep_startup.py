@@ -158,13 +158,38 @@ def main():
         return original_append(self, rows)
     results.ResultsStore.append = append
     wrap(sweep.Sweep, "_evaluate", "points")
+    original_evaluate = sweep.Sweep._evaluate
+    def evaluate(self, *args, **kwargs):
+        try:
+            return original_evaluate(self, *args, **kwargs)
+        finally:
+            cpu_census()
+    sweep.Sweep._evaluate = evaluate
     sys.argv = ["cosim", "sweep", *sys.argv[1:]]
     code = cli.main()  # as the console script calls it (the program's exit path)
     mark("command done")
     for t, name in STAMPS:
         print(f"{t:8.3f} s  {name}")
+    for line in CENSUS:
+        print(line)
     sys.stdout.flush()
     return code
+
+CENSUS = []
+
+def cpu_census():
+    """CPU seconds of this process and of every process it started, once the last rows are back."""
+    import psutil, resource
+    me = resource.getrusage(resource.RUSAGE_SELF)
+    CENSUS.append(f"cpu client (imports, spec check, scheduler, results): {me.ru_utime + me.ru_stime:.2f} s")
+    for proc in psutil.Process().children(recursive=True):
+        try:
+            line = " ".join(proc.cmdline())
+            times = proc.cpu_times()
+        except psutil.Error:
+            continue
+        kind = "point child" if "child_main" in line else "dask worker" if "multiprocessing" in line else line[:60]
+        CENSUS.append(f"cpu {kind} pid {proc.pid}: {times.user + times.system:.2f} s")
 
 if __name__ == "__main__":
     sys.exit(main())
@@ -190,6 +215,25 @@ print(f"{first:.3f} {second:.3f} {row['status']}")
 '''
 
 
+SERIAL_PROBE = r'''
+import sys, time
+t0, c0 = time.perf_counter(), time.process_time()
+from orchestrator import build_system, load_spec, run_point
+from orchestrator.design import DesignSpace
+t1, c1 = time.perf_counter(), time.process_time()
+system = build_system(load_spec(sys.argv[1]))
+units = {name: su.unit_type.instantiate(name) for name, su in system.units.items()}
+points = list(DesignSpace.from_spec(system.spec))
+t2, c2 = time.perf_counter(), time.process_time()
+for point in points:
+    run_point(system, point.values, units=units)
+    for unit in units.values():
+        unit.reset()
+t3, c3 = time.perf_counter(), time.process_time()
+print(f"{t1 - t0:.3f} {c1 - c0:.3f} {t2 - t1:.3f} {c2 - c1:.3f} {t3 - t2:.3f} {c3 - c2:.3f} {len(points)}")
+'''
+
+
 def breakdown(spec: Path, folder: Path) -> None:
     script = folder / "timeline.py"
     script.write_text(TIMELINE)
@@ -205,11 +249,20 @@ def breakdown(spec: Path, folder: Path) -> None:
     for line in done.stdout.splitlines():
         if " s  " in line:
             print("    " + line)
+    print("  CPU of each process once the last rows are back (before the cluster closes):")
+    for line in done.stdout.splitlines():
+        if line.startswith("cpu "):
+            print("    " + line[4:])
     print(f"    {total:8.3f} s  process exited (as seen from outside, incl. interpreter start and exit)")
     probe = subprocess.run([sys.executable, "-c", CHILD_PROBE, str(spec)], env=env(), capture_output=True,
                            text=True, check=True).stdout.split()
     print(f"  a worker's child process: start + imports + payload + units + first point {float(probe[0]):.3f} s; "
           f"one more point {float(probe[1]):.3f} s")
+    w = [float(x) for x in subprocess.run([sys.executable, "-c", SERIAL_PROBE, str(spec)], env=env(),
+                                          capture_output=True, text=True, check=True).stdout.split()]
+    print(f"  the serial loop in one process: imports {w[0]:.3f} s ({w[1]:.3f} s CPU), spec + system + units "
+          f"{w[2]:.3f} s ({w[3]:.3f} s CPU), {int(w[6])} points {w[4]:.3f} s ({w[5]:.3f} s CPU, "
+          f"{w[5] / w[6] * 1e3:.2f} ms a point)")
     for what in ("import distributed", "import orchestrator.isolation, orchestrator.point",
                  "import orchestrator.sweep, orchestrator.results, distributed"):
         seconds = min(timed([sys.executable, "-c", what]) for _ in range(3))

@@ -57,6 +57,14 @@ def _thread_count(client: Any) -> int:
     return sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values())
 
 
+# Dask keeps the last `distributed.admin.low-level-log-length` messages of every connection, and as many
+# transitions and events, for debugging (1000 by default).  A sweep's task messages carry its points, so the
+# client, the scheduler cosim runs in its process and the workers would hold the points of the last 1000 tasks
+# of every connection: hundreds of MB for a sweep of a million cheap points (2048 a task).  The clients and
+# clusters cosim starts keep LOG_LENGTH; the transitions of the last LOG_LENGTH tasks remain for a post-mortem.
+LOG_LENGTH = 50
+
+
 def local_cluster(workers: int) -> Any:
     """The cluster cosim starts when given none: a LocalCluster of ``workers`` worker processes, one thread each,
     on 127.0.0.1, its dashboard on a free port, loaded when first opened (:mod:`orchestrator.dashboard_on_demand`);
@@ -70,7 +78,8 @@ def local_cluster(workers: int) -> Any:
     from .interrupts import WORKER_PRELOAD
     from .worker_setup import WORKER_SETUP
 
-    with dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES}):
+    with dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES,
+                          "distributed.admin.low-level-log-length": LOG_LENGTH}):  # also the workers' (nanny)
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
                                dashboard_address="127.0.0.1:0", silence_logs=40,
                                preload=[WORKER_PRELOAD, WORKER_SETUP],  # Ctrl-C ignored; a quick exit
@@ -97,11 +106,15 @@ def dask_client(workers: int, scheduler: str | None = None, cluster_file: str | 
     ClusterError when the scheduler cannot be reached or has no workers within
     60 s (a cluster file's jobs: 10 min), ClusterFileError for a bad cluster file.
     Meanwhile the dashboard's web server logs its errors without tracebacks
-    (:mod:`orchestrator.dashboard`).
+    (:mod:`orchestrator.dashboard`), and Dask keeps LOG_LENGTH recent
+    messages of each connection (see LOG_LENGTH).
     """
+    import dask
+
     from .dashboard import web_server_tracebacks_as_lines
 
-    with web_server_tracebacks_as_lines():
+    # LOG_LENGTH for the client's connections, and for the scheduler and workers of a cluster started here
+    with dask.config.set({"distributed.admin.low-level-log-length": LOG_LENGTH}), web_server_tracebacks_as_lines():
         yield from _client(workers, scheduler, cluster_file, early)
 
 
