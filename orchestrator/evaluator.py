@@ -69,20 +69,24 @@ def local_cluster(workers: int) -> Any:
     """The cluster cosim starts when given none: a LocalCluster of ``workers`` worker processes, one thread each,
     on 127.0.0.1, its dashboard on a free port, loaded when first opened (:mod:`orchestrator.dashboard_on_demand`);
     a task may lose one worker (see :mod:`orchestrator.cluster`);
-    the workers set up by :mod:`orchestrator.worker_setup`.  The caller closes it."""
+    the workers started and set up by :mod:`orchestrator.worker_setup`.  The caller closes it."""
+    import os
+
     import dask
     from distributed import LocalCluster
 
     from .cluster import ALLOWED_FAILURES
     from .dashboard_on_demand import serve_dashboard_on_demand
     from .interrupts import WORKER_PRELOAD
-    from .worker_setup import WORKER_SETUP
+    from .worker_setup import WORKER_SETUP, start_method
 
     with dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES,
-                          "distributed.admin.low-level-log-length": LOG_LENGTH}):  # also the workers' (nanny)
+                          "distributed.admin.low-level-log-length": LOG_LENGTH,  # also the workers' (nanny)
+                          "distributed.worker.multiprocessing-method": start_method()}):
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
                                dashboard_address="127.0.0.1:0", silence_logs=40,
                                preload=[WORKER_PRELOAD, WORKER_SETUP],  # Ctrl-C ignored; a quick exit
+                               env=dict(os.environ),  # the environment now, not the fork server's (worker_setup)
                                scheduler_kwargs={"dashboard": False})  # loaded when first opened, below
     try:
         if _dashboard_available():

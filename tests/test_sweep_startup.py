@@ -4,6 +4,7 @@ benchmarks/sweep_memory.py; here, that these means keep every result and leave n
 
 from __future__ import annotations
 
+import multiprocessing
 import subprocess
 import sys
 
@@ -59,8 +60,15 @@ def test_an_early_started_cluster_runs_the_sweep_and_gives_every_point(write_spe
 
 
 def _dask_workers() -> set[int]:
-    return {p.pid for p in psutil.Process().children(recursive=True)
-            if "multiprocessing" in " ".join(p.cmdline()) and p.is_running()}
+    """Worker processes: spawned, or forked by the fork server (a child of this process that lives on, see
+    orchestrator.worker_setup; its forks have its command line)."""
+    me = psutil.Process()
+    found = set()
+    for p in me.children(recursive=True):
+        line = " ".join(p.cmdline())
+        if ("spawn_main" in line or ("forkserver import main" in line and p.ppid() != me.pid)) and p.is_running():
+            found.add(p.pid)
+    return found
 
 
 def test_a_sweep_that_cannot_start_closes_its_early_cluster(write_spec, tmp_path):
@@ -91,3 +99,29 @@ def test_the_local_cluster_workers_run_cosims_set_up():
     with local_cluster(1) as cluster, Client(cluster) as client:
         loaded = client.run(lambda: __import__("sys").modules.get("orchestrator.worker_setup") is not None)
     assert list(loaded.values()) == [True]
+
+
+def test_the_local_cluster_workers_are_forked_and_get_the_environment_of_their_start(monkeypatch):
+    """Forked by a fork server that imported Dask and cosim's worker modules once (orchestrator.worker_setup),
+    a worker still sees this process's environment as it is when its cluster starts, not the fork server's."""
+    from distributed import Client
+
+    from orchestrator.evaluator import local_cluster
+
+    with local_cluster(1):
+        pass  # the fork server runs from now on (if no earlier test started it)
+    monkeypatch.setenv("COSIM_TEST_WORKER_ENV", "set after the fork server started")
+
+    def seen() -> tuple[str | None, str, bool]:
+        import os
+        import sys
+
+        return (os.environ.get("COSIM_TEST_WORKER_ENV"), " ".join(psutil.Process().parent().cmdline()),
+                "orchestrator.sweep" in sys.modules)
+
+    with local_cluster(1) as cluster, Client(cluster) as client:
+        [(value, parent, imported)] = client.run(seen).values()
+    assert value == "set after the fork server started"
+    if "forkserver" in multiprocessing.get_all_start_methods():
+        assert "forkserver import main" in parent  # forked by the fork server, with run_batch's module loaded
+        assert imported
