@@ -285,6 +285,15 @@ class _Channel:
         threading.Thread(target=self._read, args=(conn,), daemon=True).start()
 
     def _read(self, conn: Connection) -> None:
+        try:
+            self._read_until_the_end(conn)
+        finally:
+            # This thread closes the pipe, not IsolatedRunner.close: closed under a thread about to read again,
+            # its descriptor number would go to the next child's pipe and this thread would steal that child's
+            # first bytes (seen as "junk on its channel while loading the system" after a recycled child).
+            conn.close()
+
+    def _read_until_the_end(self, conn: Connection) -> None:
         while True:
             try:
                 data = conn.recv_bytes(MAX_MESSAGE)
@@ -500,12 +509,12 @@ class IsolatedRunner:
         killed when ``force`` is true or it does not exit within 2 s.
         """
         proc, self._proc = self._proc, None
-        for conn in (self._outbox, self._inbox):  # EOF on its inbox tells the child to finish
-            if conn is not None:
-                try:
-                    conn.close()
-                except OSError:
-                    pass
+        if self._outbox is not None:  # EOF on its inbox tells the child to finish
+            try:
+                self._outbox.close()
+            except OSError:
+                pass
+        # the pipe from the child is closed by its reader thread at EOF, once the child is gone (see _Channel)
         self._outbox = self._inbox = None
         if proc is not None and proc.poll() is None:
             if not force:
