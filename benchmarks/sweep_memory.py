@@ -15,7 +15,8 @@ runs, sampled every second against the points stored, within 25 MB from 20 % to 
 growth over the baseline of every size, while running, while the cluster closes and during the final merge, is
 printed too), and the overhead per point <= 1 ms: the marginal wall time per point between the smallest and
 the largest size, on 2 workers (so 2 points are in progress at once). Under load the wall time says little, so the CPU time
-of the whole sweep (client, Dask workers, their child processes: ``getrusage(RUSAGE_CHILDREN)``) is printed
+of the whole sweep (client, Dask workers, their child processes: ``getrusage(RUSAGE_CHILDREN)``, the fork server's orphans
+reaped too: process_cpu.py) is printed
 too, and its marginal cost per point.
 """
 
@@ -33,6 +34,8 @@ import threading
 import time
 from pathlib import Path
 from typing import Any
+
+from process_cpu import become_subreaper, reap_orphans
 
 ROOT = Path(__file__).resolve().parent.parent
 FLAT_MB, TARGET_MS = 25.0, 1.0
@@ -144,6 +147,7 @@ def main() -> None:
         measure(*args.measure)
         return
     sizes = sorted(int(s) for s in args.sizes.split(","))
+    become_subreaper()
     print(f"machine: {os.cpu_count()} cores, {os.uname().machine}; {time.strftime('%Y-%m-%d %H:%M %Z')}")
     print(f"load before: {os.popen('uptime').read().strip()}")
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
@@ -155,6 +159,7 @@ def main() -> None:
             before = resource.getrusage(resource.RUSAGE_CHILDREN)
             done = subprocess.run([sys.executable, __file__, "--measure", str(spec), str(out)], env=env,
                                   capture_output=True, text=True)
+            reap_orphans()  # the fork server, with the workers' and their children's CPU time
             after = resource.getrusage(resource.RUSAGE_CHILDREN)
             if done.returncode != 0:
                 raise SystemExit(done.stderr[-3000:])

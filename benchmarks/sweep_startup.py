@@ -38,6 +38,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from process_cpu import become_subreaper, reap_orphans
+
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_SPEC = ROOT / "examples" / "pick_and_place" / "spec_coarse.json"
 TARGET_RATIO, TARGET_SECONDS = 0.8, 2.5
@@ -90,6 +92,7 @@ def timed(command: list[str]) -> float:
     started = time.perf_counter()
     done = subprocess.run(command, env=env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     elapsed = time.perf_counter() - started
+    reap_orphans()  # the fork server of the sweep's workers (process_cpu.py)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     CPU.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
     if done.returncode != 0:
@@ -179,7 +182,7 @@ CENSUS = []
 
 def cpu_census():
     """CPU seconds of this process and of every process it started, once the last rows are back."""
-    import psutil, resource
+    import os, psutil, resource
     me = resource.getrusage(resource.RUSAGE_SELF)
     CENSUS.append(f"cpu client (imports, spec check, scheduler, results): {me.ru_utime + me.ru_stime:.2f} s")
     for proc in psutil.Process().children(recursive=True):
@@ -188,7 +191,16 @@ def cpu_census():
             times = proc.cpu_times()
         except psutil.Error:
             continue
-        kind = "point child" if "child_main" in line else "dask worker" if "multiprocessing" in line else line[:60]
+        if "child_main" in line:
+            kind = "point child"
+        elif "resource_tracker" in line:
+            kind = "multiprocessing's resource tracker"
+        elif "forkserver" in line and proc.ppid() == os.getpid():
+            kind = "fork server (imports once what the workers need)"
+        elif "multiprocessing" in line:
+            kind = "dask worker"
+        else:
+            kind = line[:60]
         CENSUS.append(f"cpu {kind} pid {proc.pid}: {times.user + times.system:.2f} s")
 
 if __name__ == "__main__":
@@ -279,6 +291,7 @@ def main() -> None:
     if args.serial:
         serial(args.serial[0], args.serial[1] if len(args.serial) > 1 else None)
         return
+    become_subreaper()
     from cosim.fmus.build import ensure_built
 
     ensure_built("motor_gear_energy", 3)  # the FMU is built before timing (the target says so)
