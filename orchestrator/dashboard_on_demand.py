@@ -8,8 +8,11 @@ the dashboard pages (``Scheduler(dashboard=False)``; the server's own routes,
 ``/health``, ``/metrics``, ``/sitemap.json``, ... answer as before), and
 :func:`serve_dashboard_on_demand` adds a handler for every other path: the
 first request there loads the dashboard (:func:`distributed.dashboard.scheduler.connect`,
-what the scheduler would have done at start), removes the handler and
-redirects the browser to the same address, now served by the dashboard.  The
+what the scheduler would have done at start), removes the handler, calls
+``dashboard_loaded(scheduler)`` of the scheduler plugins that have it
+(:class:`orchestrator.dashboard_points.PointsPlugin` links its page from the
+navigation bar) and redirects the browser to the same address, now served by
+the dashboard.  The
 link printed when a sweep starts is the same; its first opening takes about
 half a second longer.
 """
@@ -38,6 +41,10 @@ def serve_dashboard_on_demand(cluster: Any) -> None:
         if loader in application.applications:
             application.applications.remove(loader)
             module.connect(application, scheduler.http_server, scheduler, prefix="/")
+            for plugin in list(scheduler.plugins.values()):  # e.g. the points page's link in the navigation bar
+                hook = getattr(plugin, "dashboard_loaded", None)
+                if callable(hook):
+                    hook(scheduler)
 
     class LoadDashboard(web.RequestHandler):
         async def get(self, *args: Any) -> None:

@@ -133,6 +133,10 @@ class PointsPlugin(SchedulerPlugin):
             application.add_handlers(r".*", handlers)
         _link_from_the_navigation_bar(scheduler)
 
+    def dashboard_loaded(self, scheduler: Any) -> None:
+        """The dashboard was built after this plugin started (see :mod:`orchestrator.dashboard_on_demand`)."""
+        _link_from_the_navigation_bar(scheduler)
+
     def log_event(self, topic: str, msg: Any) -> None:
         if topic != TOPIC or not isinstance(msg, dict):
             return
@@ -192,8 +196,14 @@ def _link_from_the_navigation_bar(scheduler: Any) -> None:
     """Add "cosim" to the pages of the dashboard's navigation bar (distributed's memoized template variables).
 
     Only a link: when distributed changes these internals the page is still
-    there, at its address.
+    there, at its address.  Only once the dashboard is loaded: the local
+    cluster cosim starts builds it when first opened
+    (:mod:`orchestrator.dashboard_on_demand`, which then calls
+    :meth:`PointsPlugin.dashboard_loaded`); importing it here would build it
+    at every sweep.
     """
+    if "distributed.dashboard.scheduler" not in sys.modules:
+        return
     try:
         from distributed.dashboard.scheduler import template_variables
 

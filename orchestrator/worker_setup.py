@@ -28,8 +28,9 @@ from typing import Any
 
 WORKER_SETUP = __name__  # the module name given to Dask's ``preload``
 # imported once by the fork server, so a forked worker has them: Dask's worker, the task function (run_batch)
-# and the two preloads
-FORK_SERVER_PRELOAD = ("distributed", "orchestrator.sweep", "orchestrator.interrupts", WORKER_SETUP)
+# with what it uses, and the two preloads
+FORK_SERVER_PRELOAD = ("distributed", "orchestrator.sweep", "orchestrator.dashboard_points", "orchestrator.interrupts",
+                       WORKER_SETUP)
 
 
 def start_method() -> str:

@@ -1,8 +1,9 @@
 """The dashboard of the local cluster cosim starts is built when a browser first opens it, not at every start.
 
 A fresh interpreter (so no earlier test has imported the dashboard) starts cosim's local cluster the way a
-sweep does, checks that the dashboard's code is not loaded, opens the printed link over real HTTP and checks
-that it is served then (after one redirect), as are the other dashboard pages and the web server's own routes.
+sweep does (with cosim's points page registered), checks that the dashboard's code is not loaded, opens the
+printed link over real HTTP and checks that it is served then (after one redirect) with the points page in its
+navigation bar, as are the other dashboard pages and the web server's own routes.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from .conftest import TESTS
 
 SCRIPT = """
 import sys, urllib.error, urllib.request
+from orchestrator.dashboard_points import open_board
 from orchestrator.evaluator import dask_client
 
 def status(url):
@@ -27,12 +29,14 @@ def status(url):
         return exc.code, url, ""
 
 if __name__ == "__main__":
-    with dask_client(1) as (_, _, link):
+    with dask_client(1) as (client, _, link):
         root = link.rsplit("/", 1)[0]
+        board = open_board(client, "sweep", "study", 10, dashboard=link)  # what a sweep registers
         print("loaded at start:", "distributed.dashboard.scheduler" in sys.modules)
         print("health:", status(root + "/health")[0])
+        print("points page:", status(board.link)[0])
         code, url, body = status(link)
-        print("link:", code, url == link, "bokeh" in body.lower())
+        print("link:", code, url == link, "bokeh" in body.lower(), 'href="cosim"' in body)
         print("loaded after:", "distributed.dashboard.scheduler" in sys.modules)
         print("progress page:", status(root + "/individual-progress")[0])
         print("unknown page:", status(root + "/no-such-page")[0])
@@ -49,7 +53,8 @@ def test_the_dashboard_is_loaded_when_its_link_is_first_opened(tmp_path):
     assert done.stdout.splitlines() == [
         "loaded at start: False",
         "health: 200",
-        "link: 200 True True",  # the same address, after the redirect, now a bokeh page
+        "points page: 200",  # cosim's points page (dashboard_points) is served without the dashboard
+        "link: 200 True True True",  # the same address, after the redirect, a bokeh page linking the points page
         "loaded after: True",
         "progress page: 200",
         "unknown page: 404",
