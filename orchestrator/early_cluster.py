@@ -25,6 +25,11 @@ class EarlyCluster:
     """
 
     def __init__(self, workers: int):
+        # Dask is imported here, not in the thread: the caller goes on importing modules that import parts of
+        # Dask (orchestrator.dashboard_points), and two threads importing one package with circular imports can
+        # see it half initialised (ImportError "partially initialized module 'distributed...'").
+        import distributed  # noqa: F401
+
         self._cluster: Any = None
         self._error: BaseException | None = None
         self._thread = threading.Thread(target=self._start, args=(workers,), name="cosim-early-cluster",
