@@ -22,7 +22,7 @@ rows agree with single runs to the solver's Newton tolerance (bounds and test:
 tolerance with its group's other points.
 
 Anything unusual makes the points run one by one instead, so a point's row
-never depends on its neighbours: a unit error, an exception, a unit ending the
+never depends on its neighbours (beyond such a stated tolerance): a unit error, an exception, a unit ending the
 simulation, a twin refusing the rows (:class:`~orchestrator.units.python_batch.NotBatchable`).
 Lock-step is used only where it pays and cannot change a result: no traces
 recorded, only numeric probes, Real connections, and at least one unit with
