@@ -72,6 +72,23 @@ def where(df, column, fn):
     return row[column], (int(row[Q22]), int(row[Q24]))
 
 
+def summary_table(pairs: pd.DataFrame) -> list[str]:
+    """The Markdown lines of the figures' table: median, minimum and maximum of each figure with their design."""
+    lines = ["| figure | median | min at (q2[2], q2[4]) | max at |", "|---|---|---|---|"]
+    for column, label, fmt in (("saved_pct", "energy saved at the same duration (%)", "{:.2f}"),
+                               ("saved_J", "energy saved at the same duration (J)", "{:.2f}"),
+                               ("time_saved_pct", "time saved at the same energy, lower bound (%)", "{:.1f}"),
+                               ("time_saved_s", "time saved at the same energy, lower bound (s)", "{:.3f}"),
+                               ("e_total_ref", "energy, slowed blend (J)", "{:.2f}"),
+                               ("e_total_opt", "energy, optimal timing (J)", "{:.2f}"),
+                               ("solve_time_opt", "planning time per path in the sweep (s)", "{:.3f}")):
+        lo, lo_at = where(pairs, column, "idxmin")
+        hi, hi_at = where(pairs, column, "idxmax")
+        lines.append(f"| {label} | {fmt.format(pairs[column].median())} | {fmt.format(lo)} {lo_at} | "
+                     f"{fmt.format(hi)} {hi_at} |")
+    return lines
+
+
 def main() -> None:
     main_df = pd.read_parquet(HERE / "results.parquet")
     trade = pd.read_parquet(HERE / "results_tradeoff.parquet")
@@ -124,17 +141,7 @@ def main() -> None:
     lines = ["# Optimal-timing study: numbers (written by analyze.py)", "",
              f"Designs: {len(pairs)} of the coarse grid at a duration bound of 1.25 x the full-speed blend's "
              f"({len(failed)} failed points).", "",
-             "| figure | median | min at (q2[2], q2[4]) | max at |", "|---|---|---|---|"]
-    for column, label, fmt in (("saved_pct", "energy saved at the same duration (%)", "{:.2f}"),
-                               ("saved_J", "energy saved at the same duration (J)", "{:.2f}"),
-                               ("time_saved_pct", "time saved at the same energy, lower bound (%)", "{:.1f}"),
-                               ("time_saved_s", "time saved at the same energy, lower bound (s)", "{:.3f}"),
-                               ("e_total_ref", "energy, slowed blend (J)", "{:.2f}"),
-                               ("e_total_opt", "energy, optimal timing (J)", "{:.2f}"),
-                               ("solve_time_opt", "planning time per path in the sweep (s)", "{:.3f}")):
-        lo, lo_at = where(pairs, column, "idxmin")
-        hi, hi_at = where(pairs, column, "idxmax")
-        lines.append(f"| {label} | {fmt.format(pairs[column].median())} | {fmt.format(lo)} {lo_at} | {fmt.format(hi)} {hi_at} |")
+             *summary_table(pairs)]
     worse = pairs[pairs["e_total_opt"] > pairs["e_total_ref"] * (1 + 1e-12)]  # not rounding-level ties
     lines += ["", f"Designs where the optimal timing used more energy than the slowed blend: {len(worse)}"
               + (f" (largest excess {(-worse['saved_pct']).max():.3f} %)" if len(worse) else "") + ".",

@@ -30,7 +30,8 @@ import pandas as pd  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from analyze import FACTOR, OPT, Q22, Q24, grid_plot, paired, time_at_reference_energy, where  # noqa: E402
+from analyze import (FACTOR, OPT, Q22, Q24, grid_plot, paired, summary_table,  # noqa: E402
+                     time_at_reference_energy, where)
 
 TABLE = HERE / "results_full.parquet"
 COLUMNS = ["point_id", Q22, Q24, FACTOR, OPT, "e_total", "duration", "blend_duration", "planned_energy", "solve_time",
@@ -69,18 +70,7 @@ def main() -> None:
     lines = ["# Optimal-timing study on the full grid: numbers (written by analyze_full.py)", "",
              f"Designs: {len(pairs)} of the thesis's 1-degree grid at a duration bound of 1.25 x the full-speed "
              f"blend's ({len(failed)} failed points).", "",
-             "| figure | median | min at (q2[2], q2[4]) | max at |", "|---|---|---|---|"]
-    for column, label, fmt in (("saved_pct", "energy saved at the same duration (%)", "{:.2f}"),
-                               ("saved_J", "energy saved at the same duration (J)", "{:.2f}"),
-                               ("time_saved_pct", "time saved at the same energy, lower bound (%)", "{:.1f}"),
-                               ("time_saved_s", "time saved at the same energy, lower bound (s)", "{:.3f}"),
-                               ("e_total_ref", "energy, slowed blend (J)", "{:.2f}"),
-                               ("e_total_opt", "energy, optimal timing (J)", "{:.2f}"),
-                               ("solve_time_opt", "planning time per path in the sweep (s)", "{:.3f}")):
-        lo, lo_at = where(pairs, column, "idxmin")
-        hi, hi_at = where(pairs, column, "idxmax")
-        lines.append(f"| {label} | {fmt.format(pairs[column].median())} | {fmt.format(lo)} {lo_at} | "
-                     f"{fmt.format(hi)} {hi_at} |")
+             *summary_table(pairs)]
     saved = pairs["saved_pct"]
     worse = pairs[pairs["e_total_opt"] > pairs["e_total_ref"] * (1 + 1e-12)]
     lines += ["", "Share of designs by energy saved at the same duration:", "",
