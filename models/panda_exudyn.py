@@ -186,6 +186,18 @@ def add_pendulum(mbs, tree, model: pin.Model, q0, qd0, bob_mass: float, rod_mass
     return body
 
 
+def solve_one_step(solver, mbs, settings: exu.SimulationSettings, start: float, end: float) -> None:
+    """One implicit step of ``mbs`` from ``start`` to ``end`` (both set every call, see PandaExudyn's notes).
+
+    Raises RuntimeError naming the interval and Exudyn's error when the solver fails.
+    """
+    it = solver.it
+    it.startTime = start
+    it.endTime = end
+    if not solver.SolveSteps(mbs, settings):
+        raise RuntimeError(f"Exudyn solver failed in [{start:g}, {end:g}] s: {solver.GetErrorString()}")
+
+
 def solver_settings() -> exu.SimulationSettings:
     """The simulation settings of every run: one implicit step per ``SolveSteps`` call, no files."""
     s = exu.SimulationSettings()
@@ -354,12 +366,7 @@ class PandaExudyn(PythonUnit):
             q_ref = self.q_ref
             self._start_ref = None
             self._set_servo(q_ref, self.qd_ref, self.qdd_ref)
-            solver = self._solver
-            it = solver.it
-            it.startTime = t
-            it.endTime = t + h
-            if not solver.SolveSteps(self._mbs, self._settings):
-                raise RuntimeError(f"Exudyn solver failed in [{t:g}, {t + h:g}] s: {solver.GetErrorString()}")
+            solve_one_step(self._solver, self._mbs, self._settings, t, t + h)
             self._read_outputs(q_ref)
             return
         if self.ref_timing not in REF_TIMINGS:
@@ -383,7 +390,7 @@ class PandaExudyn(PythonUnit):
         n_sub = max(1, math.ceil(h / self.substep - 1e-9))  # 1 for h <= substep * ONE_STEP
         dt = h / n_sub
         q_ref, qd_ref, qdd_ref = self.q_ref, self.qd_ref, self.qdd_ref  # float arrays, not modified here
-        solver, it, mbs, settings = self._solver, self._solver.it, self._mbs, self._settings
+        solver, mbs, settings = self._solver, self._mbs, self._settings
         for k in range(n_sub):
             tau_k = (k + self.ref_phase) * dt - shift  # reference time, relative to the input sample
             if tau_k == 0.0:  # the inputs are the reference (the study's step_end, ref_phase 1, one solver step)
@@ -392,10 +399,7 @@ class PandaExudyn(PythonUnit):
                 qd_r = qd_ref + qdd_ref * tau_k
                 # q + qd tau + qdd tau^2 / 2 = q + (qd + qd_r) tau / 2, with one temporary less
                 self._set_servo(q_ref + (qd_ref + qd_r) * (0.5 * tau_k), qd_r, qdd_ref)
-            it.startTime = t + k * dt
-            it.endTime = t + (k + 1) * dt
-            if not solver.SolveSteps(mbs, settings):
-                raise RuntimeError(f"Exudyn solver failed in [{it.startTime:g}, {it.endTime:g}] s: {solver.GetErrorString()}")
+            solve_one_step(solver, mbs, settings, t + k * dt, t + (k + 1) * dt)
         end = h - shift  # t + h relative to the input sample
         self._read_outputs(q_ref if end == 0.0 else q_ref + qd_ref * end + 0.5 * qdd_ref * end * end)
 
@@ -536,12 +540,7 @@ class PandaExudynBatch(PythonBatchUnit):
         if h > self.substep[0] * ONE_STEP:
             raise NotBatchable("PandaExudyn runs in lock-step only with one solver step per communication step")
         self._set_servo(self.active)
-        solver = self._solver
-        it = solver.it
-        it.startTime = t
-        it.endTime = t + h
-        if not solver.SolveSteps(self._mbs, self._settings):
-            raise RuntimeError(f"Exudyn solver failed in [{t:g}, {t + h:g}] s: {solver.GetErrorString()}")
+        solve_one_step(self._solver, self._mbs, self._settings, t, t + h)
         self._read_outputs()
 
     def _read_outputs(self) -> None:
