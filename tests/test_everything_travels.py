@@ -21,6 +21,7 @@ import pytest
 from orchestrator.sweep import Sweep
 
 from .sweep_fixtures import free_port, kill_group, wait_for_workers
+from .units_for_cluster import TABLE_GAIN_SOURCE
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -97,35 +98,13 @@ def test_module_unit_and_played_table_travel_to_foreign_workers(tmp_path, foreig
     assert list(df["y_sum"]) == [2.0, 4.0, 10.0]
 
 
-DATA_UNIT_SOURCE = '''
-import json
-
-from orchestrator import PythonUnit, Variable
-
-
-class TableGain(PythonUnit):
-    """y = gain * k, the gain read in initialize() from the JSON file named by 'table'."""
-
-    variables = (Variable("table", "parameter", type="String", start=""), Variable("k", "parameter", start=1.0),
-                 Variable("y", "output", start=0.0))
-    data_files = ("table",)
-
-    def initialize(self):
-        with open(self.table, encoding="utf-8") as f:
-            self.gain = json.load(f)["gain"]
-
-    def do_step(self, t, h):
-        self.y = self.gain * self.k
-'''
-
-
 def test_declared_data_files_travel_to_foreign_workers(tmp_path, foreign_workers):
     """A unit's data files (named by its declared String parameters, in the spec and in the design) travel too."""
     import json
 
     folder = tmp_path / "project"
     (folder / "tables").mkdir(parents=True)
-    (folder / "my_table_units.py").write_text(DATA_UNIT_SOURCE)
+    (folder / "my_table_units.py").write_text(TABLE_GAIN_SOURCE)
     gains = {"tables/slow.json": 2.0, "tables/fast.json": 7.0, "default.json": 3.0}
     for name, gain in gains.items():
         (folder / name).write_text(json.dumps({"gain": gain}))
@@ -156,7 +135,7 @@ def test_a_data_file_path_is_read_from_the_spec_folder_whatever_the_working_dire
 
     folder = tmp_path / "project"
     folder.mkdir()
-    (folder / "my_table_units_local.py").write_text(DATA_UNIT_SOURCE)
+    (folder / "my_table_units_local.py").write_text(TABLE_GAIN_SOURCE)
     (folder / "gain.json").write_text(json.dumps({"gain": 4.0}))
     spec = {"name": "data_local",
             "units": {"g": {"python": "my_table_units_local:TableGain", "parameters": {"table": "gain.json", "k": 2.5}}},
@@ -175,7 +154,7 @@ def test_data_files_must_name_string_parameters(write_spec, tmp_path):
     from orchestrator.problems import SpecError
     from orchestrator.validate import check_spec
 
-    (tmp_path / "bad_units.py").write_text(DATA_UNIT_SOURCE.replace('data_files = ("table",)', 'data_files = ("k",)'))
+    (tmp_path / "bad_units.py").write_text(TABLE_GAIN_SOURCE.replace('data_files = ("table",)', 'data_files = ("k",)'))
     spec = write_spec({"name": "bad", "units": {"g": {"python": "bad_units.py:TableGain"}},
                        "experiment": {"stop": 0.1, "step": 0.1}})
     with pytest.raises(SpecError) as info:

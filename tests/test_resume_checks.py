@@ -18,32 +18,12 @@ from orchestrator.file_digest import file_digest, path_digest
 from orchestrator.optimize import Optimization
 
 from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
-
-TABLE_UNIT = '''
-import json
-
-from orchestrator import PythonUnit, Variable
-
-
-class TableGain(PythonUnit):
-    """y = gain * k, the gain read in initialize() from the JSON file named by 'table'."""
-
-    variables = (Variable("table", "parameter", type="String", start=""), Variable("k", "parameter", start=1.0),
-                 Variable("y", "output", start=0.0))
-    data_files = ("table",)
-
-    def initialize(self):
-        with open(self.table, encoding="utf-8") as f:
-            self.gain = json.load(f)["gain"]
-
-    def do_step(self, t, h):
-        self.y = self.gain * self.k
-'''
+from .units_for_cluster import TABLE_GAIN_SOURCE
 
 
 def _table_study(folder: Path, gain: float, optimize: bool = False) -> Path:
     folder.mkdir(exist_ok=True)
-    (folder / "table_units.py").write_text(TABLE_UNIT)
+    (folder / "table_units.py").write_text(TABLE_GAIN_SOURCE)
     (folder / "tables").mkdir(exist_ok=True)
     (folder / "tables" / "gain.json").write_text(json.dumps({"gain": gain}))
     spec = {"name": "table", "units": {"g": {"python": "table_units.py:TableGain",
@@ -121,11 +101,11 @@ def test_an_optimize_resume_refuses_changed_unit_and_data_files(tmp_path, local_
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1
     table.write_text(json.dumps({"gain": 2.0}))  # restored: accepted again
 
-    unit_file.write_text(TABLE_UNIT.replace("self.gain * self.k", "2 * self.gain * self.k"))
+    unit_file.write_text(TABLE_GAIN_SOURCE.replace("self.gain * self.k", "2 * self.gain * self.k"))
     assert main(resume) == 2
     err = capsys.readouterr().err
     assert "unit 'g'" in err and "holds trials of other unit files" in err and "Traceback" not in err
 
-    unit_file.write_text(TABLE_UNIT)
+    unit_file.write_text(TABLE_GAIN_SOURCE)
     assert main(resume) == 0
     assert len(pd.read_parquet(out / "results.parquet")) == 6

@@ -1,4 +1,5 @@
-"""Python units for the cluster tests: a slow unit whose points can be caught in flight, one that kills its worker."""
+"""Python units for the cluster tests: a slow unit whose points can be caught in flight, one that kills its worker;
+and the source of a unit reading a declared data file, written into a spec's folder by the tests that ship it."""
 
 from __future__ import annotations
 
@@ -43,3 +44,26 @@ class SlowSquare(PythonUnit):
             time.sleep(60)  # cosim's child stops itself when it sees its parent gone
         time.sleep(self.delay)
         self.y = self.x ** 2
+
+
+# y = gain * k with the gain read from the JSON file its String parameter 'table' names (a declared data file)
+TABLE_GAIN_SOURCE = '''
+import json
+
+from orchestrator import PythonUnit, Variable
+
+
+class TableGain(PythonUnit):
+    """y = gain * k, the gain read in initialize() from the JSON file named by 'table'."""
+
+    variables = (Variable("table", "parameter", type="String", start=""), Variable("k", "parameter", start=1.0),
+                 Variable("y", "output", start=0.0))
+    data_files = ("table",)
+
+    def initialize(self):
+        with open(self.table, encoding="utf-8") as f:
+            self.gain = json.load(f)["gain"]
+
+    def do_step(self, t, h):
+        self.y = self.gain * self.k
+'''
