@@ -36,23 +36,11 @@ from pathlib import Path
 from typing import Any
 
 from process_cpu import become_subreaper, reap_orphans
+from sweep_throughput import trivial_spec
 
 ROOT = Path(__file__).resolve().parent.parent
 FLAT_MB, TARGET_MS = 25.0, 1.0
 CURVE_SECONDS = 1.0  # the client's RSS is recorded this often with the number of rows stored so far
-
-
-def trivial_spec(folder: Path, n: int) -> Path:
-    spec = {
-        "name": f"trivial_{n}",
-        "units": {"g": {"python": f"{ROOT / 'tests' / 'units_for_tests.py'}:Gain"}},
-        "experiment": {"stop": 1.0, "step": 1.0},
-        "objectives": {"y": {"signal": "g.y", "reduce": "final"}},
-        "design": {"parameters": {"g.k": {"min": 0, "max": n - 1, "step": 1}}},
-    }
-    path = folder / f"trivial_{n}.json"
-    path.write_text(json.dumps(spec))
-    return path
 
 
 def measure(spec: str, out: str) -> None:

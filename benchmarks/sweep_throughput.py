@@ -91,7 +91,8 @@ def part_efficiency(folder: Path, repeat: int, n_points: int) -> dict:
     return {"runs_per_s": rates, "median": med, "efficiency": efficiency}
 
 
-def _trivial_spec(folder: Path, n: int) -> Path:
+def trivial_spec(folder: Path, n: int) -> Path:
+    """A spec of n points (g.k = 0 .. n-1) of the tests' Gain unit, one step each, written into ``folder``; its path."""
     spec = {
         "name": f"trivial_{n}",
         "units": {"g": {"python": f"{ROOT / 'tests' / 'units_for_tests.py'}:Gain"}},
@@ -135,7 +136,7 @@ def memory_child(spec: str, out: str) -> None:
 def part_memory(folder: Path, sizes: list[int]) -> dict:
     results = {}
     for n in sizes:
-        spec = _trivial_spec(folder, n)
+        spec = trivial_spec(folder, n)
         out = folder / f"mem_{n}"
         shutil.rmtree(out, ignore_errors=True)
         text = subprocess.run([sys.executable, __file__, "--memory-child", str(spec), str(out)], check=True,
