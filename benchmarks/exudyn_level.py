@@ -181,7 +181,10 @@ class Level:
     def time_do_step(self) -> None:
         """Wrap the robot's do_step and its solver with timers (after a first run built the solver)."""
         robot = self.units["robot"]
-        module = sys.modules[type(robot).__module__]
+        self._wrap_with_timers(robot, sys.modules[type(robot).__module__])
+
+    def _wrap_with_timers(self, robot, module) -> None:
+        """Time ``robot``'s Newton-Jacobian callback (when it has one), its solver and its do_step."""
         jacobian = getattr(robot, "_jacobian", None)
         if jacobian is not None:  # today's unit: time the callback Exudyn makes into Python
             jacobian.__class__ = timed_jacobian_class(module.NewtonJacobian, self)
@@ -197,7 +200,11 @@ class Level:
             finally:
                 self.do_step_s += clock() - t0
                 self.do_step_calls += 1
+                self._count_step(robot)
         robot.do_step = do_step
+
+    def _count_step(self, robot) -> None:
+        """After each timed do_step; one point per step here (a lock-step level counts its active rows)."""
 
 
 class LockstepLevel(Level):
@@ -230,22 +237,10 @@ class LockstepLevel(Level):
 
     def time_do_step(self) -> None:
         robot = self.batches["robot"]
-        module = sys.modules[robot.single_class.__module__]
-        robot._jacobian.__class__ = timed_jacobian_class(module.NewtonJacobian, self)
-        self.solver = TimedSolver(robot._solver)
-        robot._solver = self.solver
-        plain = robot.do_step
-        clock = CLOCK[0]
+        self._wrap_with_timers(robot, sys.modules[robot.single_class.__module__])
 
-        def do_step(t, h):
-            t0 = clock()
-            try:
-                return plain(t, h)
-            finally:
-                self.do_step_s += clock() - t0
-                self.do_step_calls += 1
-                self.row_steps += len(robot.active)
-        robot.do_step = do_step
+    def _count_step(self, robot) -> None:
+        self.row_steps += len(robot.active)
 
 
 def wrapper_cost(n: int = 200_000) -> float:
