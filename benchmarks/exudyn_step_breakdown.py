@@ -34,6 +34,10 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import exudyn_level  # noqa: E402
 
+# NewtonJacobian.__call__ at a step without re-differentiation
+JACOBIAN = ("jacobian = solver.GetSystemMassMatrix(); jacobian *= jac._mass_factor; jacobian += jac._rhs_part; "
+            "solver.SetSystemJacobian(jacobian)")
+
 # (group, statement): the single unit's do_step in the study's configuration, then _read_outputs,
 # then the Newton-Jacobian callback made from inside SolveSteps (a step without re-differentiation)
 SINGLE = [
@@ -54,30 +58,20 @@ SINGLE = [
     ("outputs", "u.limit_violated = (max(ratio) > 1.0 or any(map(lt, q_list, u._q_min_list)) "
                 "or any(map(gt, q_list, u._q_max_list)) or any(abs(v) > m for v, m in zip(qd_list, u._qd_max_list))); "
                 "math.isfinite(sum(q_list))"),
-    ("Jacobian callback", "solver.SetSystemJacobian(jac._rhs_part + jac._mass_factor * solver.GetSystemMassMatrix())"),
+    ("Jacobian callback", JACOBIAN),
 ]
 
-# the twin's do_step, per lock-step step; "per row" statements are loops over the rows
+# the twin's do_step, per lock-step step (all rows active)
 BATCH = [
-    ("feed-forward (per row)", "for k in rows: (model, data, _), q_r, qd_r, qdd_r, ff = b._servo_rows[k]; "
-                               "ff[:] = pin.rnea(model, data, q_r, qd_r, qdd_r)"),
-    ("feed-forward", "np.add(b._kp * b.q_ref + b._kd * b.qd_ref, b._feed_forward, out=b._tau_const)"),
-    ("force parameter (per row)", "for k in rows: tree, tau = b._force_rows[k]; "
-                                  "b._mbs.SetObjectParameter(tree, 'jointForceVector', tau)"),
+    ("feed-forward: RNEA + servo constant, all rows (one compiled call)",
+     "b._kernels.servo(b._active_count, b._active_address)"),
+    ("force parameter: one forceVector for all rows", "b._mbs.SetObjectParameter(b._forces, 'forceVector', b._force_flat)"),
     ("solver call", "it.startTime = t; it.endTime = t + h"),
-    ("state", "sd = b._mbs.systemData; b.q[:] = sd.GetODE2Coordinates().reshape(shape); "
-              "b.qd[:] = sd.GetODE2Coordinates_t().reshape(shape); b.qdd[:] = sd.GetODE2Coordinates_tt().reshape(shape)"),
-    ("outputs", "np.subtract(b._tau_const - b._kp * b.q, b._kd * b.qd, out=b.tau)"),
-    ("TCP kinematics (per row)", "for k in rows: (model, data, frame), q_k, ee_k = b._kinematics_rows[k]; "
-                                 "pin.forwardKinematics(model, data, q_k); "
-                                 "ee_k[:] = pin.updateFramePlacement(model, data, frame).translation"),
-    ("outputs", "chord = b.ee_pos - b._path_done; b.ee_path_length += np.sqrt((chord * chord).sum(axis=1)); "
-                "b._path_done[:] = b.ee_pos"),
-    ("outputs", "b.tracking_error[:] = np.abs(b.q - b.q_ref).max(axis=1)"),
-    ("outputs", "np.divide(np.abs(b.tau), b.tau_max, out=b.tau_ratio); "
-                "outside = (b.tau_ratio > 1.0) | (b.q < b.q_min) | (b.q > b.q_max) | (np.abs(b.qd) > b.qd_max); "
-                "np.any(outside, axis=1, out=b.limit_violated); math.isfinite(sum(b.tracking_error.tolist()))"),
-    ("Jacobian callback", "solver.SetSystemJacobian(jac._rhs_part + jac._mass_factor * solver.GetSystemMassMatrix())"),
+    ("state", "sd = b._mbs.systemData; b._q_flat[:] = sd.GetODE2Coordinates(); "
+              "b._qd_flat[:] = sd.GetODE2Coordinates_t(); b._qdd_flat[:] = sd.GetODE2Coordinates_tt()"),
+    ("outputs: TCP kinematics, tau, path, errors, limits, all rows (one compiled call)",
+     "b._kernels.outputs(b._active_count, b._active_address)"),
+    ("Jacobian callback", JACOBIAN),
 ]
 
 
@@ -126,8 +120,9 @@ def main() -> None:
                   group.system.assignment_for("traj.waypoints[11]", c)] for a, c in points]
     exudyn_level.run_lockstep(group.system, overrides, group.batches)  # left in its end state
     b = group.batches["robot"]
+    b.active = np.arange(args.rows)  # every row, as in most steps of a group
     solver = b._solver
-    namespace = dict(globals(), b=b, rows=list(range(args.rows)), shape=(args.rows, 7), solver=solver, it=solver.it,
+    namespace = dict(globals(), b=b, solver=solver, it=solver.it,
                      jac=b._jacobian, t=1.0, h=0.002)
     report(f"lock-step twin (PandaExudynBatch), K={args.rows}, all rows active", time_statements(BATCH, namespace),
            per=args.rows)

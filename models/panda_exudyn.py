@@ -66,7 +66,8 @@ Lock-step
     :class:`PandaExudynBatch`, the unit's vectorised twin, runs K design points
     of a sweep as K kinematic trees in one Exudyn system, one ``SolveSteps``
     per communication step for all of them (``orchestrator.lockstep``; the
-    study's configuration only).  Its rows agree with single runs to the
+    study's configuration only), its per-row arithmetic in one compiled call
+    (:mod:`cosim.models.panda_rows`).  Its rows agree with single runs to the
     Newton tolerance (they share one Newton iteration), not bit for bit.
 
 The Exudyn system is built once per instance and rebuilt only when the payload
@@ -87,6 +88,7 @@ from exudyn.itemInterface import (
     MarkerBodyRigid,
     MarkerKinematicTreeRigid,
     NodeGenericODE2,
+    ObjectGenericODE2,
     ObjectJointSpherical,
     ObjectKinematicTree,
 )
@@ -97,6 +99,7 @@ from orchestrator.units.python import PythonUnit
 from orchestrator.units.python_batch import NotBatchable, PythonBatchUnit
 
 from .panda_model import EE_FRAME, GRAVITY, N_JOINTS, cached_model, ee_frame_id, payload_key, robot_variables
+from .panda_rows import KernelsUnavailable, PandaRowKernels
 
 # libfranka example joint_impedance_control.cpp: k_gains and d_gains.
 DEFAULT_KP = (600.0, 600.0, 600.0, 600.0, 250.0, 150.0, 50.0)  # N.m/rad
@@ -245,7 +248,11 @@ class NewtonJacobian:
             # it.newtonSteps > 1: the modified Newton method found the Jacobian poor and asks again
             self._differentiate(solver, mbs, h)
         self._age += 1
-        solver.SetSystemJacobian(self._rhs_part + self._mass_factor * solver.GetSystemMassMatrix())
+        # c M + J_rhs in the fresh array Exudyn hands out (no temporaries: at K lock-step rows they are 7K x 7K)
+        jacobian = solver.GetSystemMassMatrix()
+        jacobian *= self._mass_factor
+        jacobian += self._rhs_part
+        solver.SetSystemJacobian(jacobian)
         return True
 
     def _differentiate(self, solver, mbs, h: float) -> None:
@@ -445,24 +452,41 @@ class PandaExudynBatch(PythonBatchUnit):
     """:class:`PandaExudyn` for K design points at once (lock-step runs, :mod:`orchestrator.lockstep`).
 
     One Exudyn system holds K kinematic trees, one per row, and one
-    ``SolveSteps`` call advances them all: the Python around the solver (the
-    solver call, reading the state, the outputs, the Newton-Jacobian callback)
-    is paid once per communication step for the K points; only the pinocchio
-    calls (feed-forward RNEA, TCP kinematics) and one ``jointForceVector`` set
-    per tree remain per row.  The Newton Jacobian is :class:`NewtonJacobian`'s
-    (it works on the K blocks at once), the linear solver sparse (K
-    independent 7x7 blocks: linear in K, where a dense LU is cubic).
+    ``SolveSteps`` call advances them all.  Per communication step the Python
+    around the solver is a fixed number of calls for all K rows: one compiled
+    call for the feed-forward RNEA and servo constant of every active row
+    (:mod:`cosim.models.panda_rows`), one parameter set for all K constant
+    torques (an ``ObjectGenericODE2`` on the K trees' nodes carries them as its
+    ``forceVector``; the trees' own ``jointForceVector`` stays zero), the solver
+    call, three state reads, one compiled call for the outputs (servo torque,
+    TCP kinematics, path, tracking error, torque ratios, limit flags), and one
+    Newton-Jacobian callback (:class:`NewtonJacobian`, the K blocks at once).
+    The linear solver is sparse (K independent 7x7 blocks: linear in K, where
+    a dense LU is cubic).
 
     Same model, servo law and solver settings as the single unit, but the K
     trees share one Newton iteration, whose convergence test and step-size
-    control see all K residuals together: a row's results equal a single
-    run's to the Newton tolerance, not bit for bit (checked within the stated
-    bounds of ``tests/test_panda_exudyn_reference.py``).
+    control see all K residuals together, and the feed-forward and TCP come
+    from CasADi's generated C instead of pinocchio (equal to round-off): a
+    row's results equal a single run's to the Newton tolerance, not bit for
+    bit (checked within the stated bounds of ``tests/test_panda_exudyn_reference.py``).
 
     Only the study's configuration runs here: ``ref_timing = "step_end"``,
     ``ref_phase = 1``, one solver step per communication step, no pendulum;
     otherwise :class:`NotBatchable` is raised and the points run one by one.
+    Rows whose point has ended are still integrated (with their last torque)
+    but no longer computed or read.
     """
+
+    @property
+    def active(self) -> np.ndarray:
+        """The rows still running (int64 indices; the compiled calls read them in place)."""
+        return self._active
+
+    @active.setter
+    def active(self, rows: np.ndarray) -> None:
+        self._active = np.ascontiguousarray(rows, dtype=np.int64)
+        self._active_count, self._active_address = len(self._active), self._active.ctypes.data
 
     def initialize(self) -> None:
         if not (np.all(self.ref_timing == "step_end") and np.all(self.ref_phase == 1.0)):
@@ -479,38 +503,41 @@ class PandaExudynBatch(PythonBatchUnit):
         mbs = self._mbs
         mbs.systemData.SetODE2Coordinates(q0.ravel(), configuration=exu.ConfigurationType.Initial)
         mbs.systemData.SetODE2Coordinates_t(qd0.ravel(), configuration=exu.ConfigurationType.Initial)
-        self._kp = np.array(self.kp, dtype=float)
-        self._kd = np.array(self.kd, dtype=float)
         for k, tree in enumerate(self._trees):
-            mbs.SetObjectParameter(tree, "jointPControlVector", self._kp[k])
-            mbs.SetObjectParameter(tree, "jointDControlVector", self._kd[k])
-        self._feed_forward = np.zeros((self.rows, N_JOINTS))
-        self._tau_const = np.zeros((self.rows, N_JOINTS))
-        # per row, made once (the attributes are only ever written in place until the next reset):
-        # what the pinocchio calls and the force parameter need
-        self._servo_rows = list(zip(self._models, self.q_ref, self.qd_ref, self.qdd_ref, self._feed_forward))
-        self._force_rows = list(zip(self._trees, self._tau_const))
-        self._kinematics_rows = list(zip(self._models, self.q, self.ee_pos))
-        self._set_servo(np.arange(self.rows))
+            mbs.SetObjectParameter(tree, "jointPControlVector", self.kp[k])
+            mbs.SetObjectParameter(tree, "jointDControlVector", self.kd[k])
+        # the attributes are written in place until the next reset: the compiled calls keep their addresses
+        self._force = np.zeros((self.rows, N_JOINTS))  # kp q_ref + kd qd_ref + RNEA per row: Exudyn's constant torques
+        self._force_flat = self._force.reshape(-1)
+        self._q_flat, self._qd_flat, self._qdd_flat = self.q.reshape(-1), self.qd.reshape(-1), self.qdd.reshape(-1)
+        arrays = {name: getattr(self, name) for name in
+                  ("q_ref", "qd_ref", "qdd_ref", "kp", "kd", "payload_mass", "payload_com", "payload_inertia", "q_min",
+                   "q_max", "qd_max", "tau_max", "q", "qd", "tau", "ee_pos", "ee_path_length", "tracking_error",
+                   "tau_ratio", "limit_violated")}
+        try:
+            self._kernels = PandaRowKernels(dict(arrays, force=self._force, ee_last=np.zeros((self.rows, 3))), self.rows)
+        except KernelsUnavailable as exc:  # e.g. no C compiler: the single unit needs none
+            raise NotBatchable(str(exc)) from exc
+        everyone = np.arange(self.rows, dtype=np.int64)
+        self._set_servo(len(everyone), everyone.ctypes.data)
         st = self._settings.timeIntegration
         st.startTime = self.start_time
         st.endTime = self.start_time + float(self.substep[0])
         self._solver.InitializeSolver(mbs, self._settings)
         self._jacobian.reset()
-        self._path_done = None
-        self._read_outputs()
+        self._read_outputs(len(everyone), everyone.ctypes.data, first=True)
         self.ee_path_length[:] = 0.0
 
     def _build(self, keys, q0, qd0) -> None:
         self._sc = exu.SystemContainer()
         self._mbs = self._sc.AddSystem()
-        self._models, self._trees, by_key = [], [], {}
+        self._trees, nodes = [], []
         for k, key in enumerate(keys):
-            if key not in by_key:
-                model = cached_model(*key)
-                by_key[key] = (model, model.createData(), ee_frame_id(model))
-            self._models.append(by_key[key])
-            self._trees.append(add_kinematic_tree(self._mbs, by_key[key][0], q0[k], qd0[k])[1])
+            node, tree = add_kinematic_tree(self._mbs, cached_model(*key), q0[k], qd0[k])
+            nodes.append(node)
+            self._trees.append(tree)
+        # one force vector over all K trees' joints: one parameter set per step instead of K
+        self._forces = self._mbs.AddObject(ObjectGenericODE2(nodeNumbers=nodes, forceVector=[0.0] * (N_JOINTS * len(keys))))
         self._mbs.Assemble()
         self._settings = solver_settings()
         self._settings.linearSolver.solverType = exu.LinearSolverType.EigenSparse
@@ -519,62 +546,26 @@ class PandaExudynBatch(PythonBatchUnit):
         self._solver.SetUserFunctionComputeNewtonJacobian(self._mbs, self._jacobian)
         self._keys = keys
 
-    def _set_servo(self, rows: np.ndarray) -> None:
-        """Apply the servo law of ``rows`` for their reference inputs to the next solver step."""
-        rnea, servo_rows = pin.rnea, self._servo_rows
-        row_list = rows.tolist()
-        for k in row_list:
-            (model, data, _), q_r, qd_r, qdd_r, feed_forward = servo_rows[k]
-            feed_forward[:] = rnea(model, data, q_r, qd_r, qdd_r)
-        # kp q_r + kd qd_r + tau_ff, the order of the single unit's operations
-        if len(row_list) == self.rows:
-            np.add(self._kp * self.q_ref + self._kd * self.qd_ref, self._feed_forward, out=self._tau_const)
-        else:
-            self._tau_const[rows] = self._kp[rows] * self.q_ref[rows] + self._kd[rows] * self.qd_ref[rows] + self._feed_forward[rows]
-        set_parameter, force_rows = self._mbs.SetObjectParameter, self._force_rows
-        for k in row_list:
-            tree, tau = force_rows[k]
-            set_parameter(tree, "jointForceVector", tau)
+    def _set_servo(self, count: int, rows_address: int) -> None:
+        """Apply the servo law of the listed rows for their reference inputs to the next solver step."""
+        self._kernels.servo(count, rows_address)
+        self._mbs.SetObjectParameter(self._forces, "forceVector", self._force_flat)
 
     def do_step(self, t: float, h: float) -> None:
         if h > self.substep[0] * ONE_STEP:
             raise NotBatchable("PandaExudyn runs in lock-step only with one solver step per communication step")
-        self._set_servo(self.active)
+        count, address = self._active_count, self._active_address
+        self._set_servo(count, address)
         solve_one_step(self._solver, self._mbs, self._settings, t, t + h)
-        self._read_outputs()
+        self._read_outputs(count, address)
 
-    def _read_outputs(self) -> None:
-        """Every row's outputs from the end-of-step state.
-
-        Rows whose point has ended are still integrated and their outputs
-        recomputed (whole-array operations are cheaper than selecting rows;
-        nobody reads them), except the per-row pinocchio kinematics.
-        """
-        sd = self._mbs.systemData
-        shape = (self.rows, N_JOINTS)  # the trees' nodes, in row order, make up the system's ODE2 vector
-        q, qd = self.q, self.qd
-        q[:] = sd.GetODE2Coordinates().reshape(shape)
-        qd[:] = sd.GetODE2Coordinates_t().reshape(shape)
-        self.qdd[:] = sd.GetODE2Coordinates_tt().reshape(shape)
-        np.subtract(self._tau_const - self._kp * q, self._kd * qd, out=self.tau)  # the law at the end-of-step state
-        kinematics, placement, kinematics_rows = pin.forwardKinematics, pin.updateFramePlacement, self._kinematics_rows
-        for k in self.active.tolist():
-            (model, data, frame), q_k, ee_k = kinematics_rows[k]
-            kinematics(model, data, q_k)
-            ee_k[:] = placement(model, data, frame).translation
-        ee, last = self.ee_pos, self._path_done
-        if last is not None:  # one straight chord per communication step, as the single unit
-            chord = ee - last
-            self.ee_path_length += np.sqrt((chord * chord).sum(axis=1))
-            last[:] = ee
-        else:
-            self._path_done = ee.copy()
-        self.tracking_error[:] = np.abs(q - self.q_ref).max(axis=1)  # NaN where q is NaN
-        np.divide(np.abs(self.tau), self.tau_max, out=self.tau_ratio)
-        # max(tau_ratio) > 1 or a position or velocity out of its limits, per row
-        outside = (self.tau_ratio > 1.0) | (q < self.q_min) | (q > self.q_max) | (np.abs(qd) > self.qd_max)
-        np.any(outside, axis=1, out=self.limit_violated)
-        if not math.isfinite(sum(self.tracking_error.tolist())):
+    def _read_outputs(self, count: int, rows_address: int, first: bool = False) -> None:
+        """The listed rows' outputs from the end-of-step state (every row's q, qd, qdd are read)."""
+        sd = self._mbs.systemData  # the trees' nodes, in row order, make up the system's ODE2 vector
+        self._q_flat[:] = sd.GetODE2Coordinates()
+        self._qd_flat[:] = sd.GetODE2Coordinates_t()
+        self._qdd_flat[:] = sd.GetODE2Coordinates_tt()
+        if self._kernels.outputs(count, rows_address, first):
             raise RuntimeError("the simulation diverged (non-finite joint angles)")
 
 

@@ -102,6 +102,7 @@ def test_the_wheel_installs_nothing_generic_and_ships_its_data(wheel):
     top_level = {n.split("/")[0] for n in names if not n.split("/")[0].endswith(".dist-info")}
     assert top_level == {"orchestrator", "cosim"}
     for data in ("cosim/specs/spec.schema.json", "cosim/models/bin_picking_plant.json",
+                 "cosim/models/panda_rows_c/panda_rows.c", "cosim/models/panda_rows_c/panda_rows_casadi.h",
                  "cosim/fmus/motor_gear_energy/model.json", "cosim/fmus/common/fmi3.c",
                  "cosim/fmus/conformance/fmi3_runtime.c", "cosim/fmus/conformance/stair/modelDescription2.xml"):
         assert data in names, data

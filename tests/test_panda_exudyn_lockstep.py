@@ -118,3 +118,16 @@ def test_a_row_starts_on_its_reference_and_holds_still_at_rest():
     np.testing.assert_allclose(twin.tau[1], single.tau, rtol=1e-9, atol=1e-9)  # the holding torque of that pose
     np.testing.assert_allclose(twin.ee_pos[1], single.ee_pos, atol=1e-12)
     twin.terminate()
+
+
+def test_without_a_c_compiler_the_twin_refuses_and_the_points_run_one_by_one(tmp_path, monkeypatch):
+    """The twin's per-step arithmetic is C compiled at first use (models/panda_rows.py); the single unit needs none."""
+    from cosim.models import panda_rows
+
+    monkeypatch.setattr(panda_rows, "_LIBRARY", [])  # as in a fresh process
+    monkeypatch.setenv("COSIM_FMU_CACHE", str(tmp_path))  # nothing built yet
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
+    twin = _twin(2, ref_timing="step_end", ref_phase=1.0, substep=2e-3)
+    with pytest.raises(NotBatchable, match="Panda row kernels cannot be built: no C compiler"):
+        twin.exit_initialization()
+    twin.terminate()
