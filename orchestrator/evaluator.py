@@ -66,27 +66,30 @@ LOG_LENGTH = 50
 
 
 def local_cluster(workers: int) -> Any:
-    """The cluster cosim starts when given none: a LocalCluster of ``workers`` worker processes, one thread each,
-    on 127.0.0.1, its dashboard on a free port, loaded when first opened (:mod:`orchestrator.dashboard_on_demand`);
-    a task may lose one worker (see :mod:`orchestrator.cluster`);
-    the workers started and set up by :mod:`orchestrator.worker_setup`.  The caller closes it."""
-    import os
+    """The cluster cosim starts when given none: a LocalCluster whose scheduler and ``workers`` workers (one
+    thread each) run in this process, its dashboard on a free port of 127.0.0.1, loaded when first opened
+    (:mod:`orchestrator.dashboard_on_demand`).  The caller closes it.
 
+    Why no worker processes: a point never runs in a Dask worker, it runs in
+    the worker's child process (:mod:`orchestrator.isolation`), which is what
+    isolates a crashing or hanging unit, enforces timeouts and memory limits.
+    On this machine a worker only hands points to its child and rows back, so
+    a worker process would be a relay that costs a process start, the imports
+    of Dask and a serialisation of every task both ways (together about 0.4 s
+    of the README's main job of 2 s).  Clusters on other machines (a cluster
+    file, a scheduler address) keep their worker processes.
+    """
     import dask
-    from distributed import LocalCluster
+    from distributed import LocalCluster, Worker
 
     from .cluster import ALLOWED_FAILURES
     from .dashboard_on_demand import serve_dashboard_on_demand
-    from .interrupts import WORKER_PRELOAD
-    from .worker_setup import WORKER_SETUP, start_method
 
     with dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES,
-                          "distributed.admin.low-level-log-length": LOG_LENGTH,  # also the workers' (nanny)
-                          "distributed.worker.multiprocessing-method": start_method()}):
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address="127.0.0.1:0", silence_logs=40,
-                               preload=[WORKER_PRELOAD, WORKER_SETUP],  # Ctrl-C ignored; a quick exit
-                               env=dict(os.environ),  # the environment now, not the fork server's (worker_setup)
+                          "distributed.admin.low-level-log-length": LOG_LENGTH}):
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=False,
+                               dashboard_address="127.0.0.1:0", worker_dashboard_address="127.0.0.1:0",
+                               worker_class=_worker_without_pages(Worker), silence_logs=40,
                                scheduler_kwargs={"dashboard": False})  # loaded when first opened, below
     try:
         if _dashboard_available():
@@ -95,6 +98,21 @@ def local_cluster(workers: int) -> Any:
         cluster.close()
         raise
     return cluster
+
+
+def _worker_without_pages(worker: type) -> type:
+    """Dask's Worker, its web server (health, metrics) on the address given but without its own bokeh pages.
+
+    The workers cosim starts run in the client's process (local_cluster):
+    their pages would import bokeh there at every start (0.25 s); the
+    scheduler's dashboard shows the workers anyway.  (LocalCluster turns the
+    pages on whenever it is given the address the server should listen on.)
+    """
+    class LocalWorker(worker):
+        def __init__(self, *args: Any, **kwargs: Any):
+            super().__init__(*args, **{**kwargs, "dashboard": False})
+
+    return LocalWorker
 
 
 @contextmanager
@@ -149,7 +167,9 @@ def _client(workers: int, scheduler: str | None, cluster_file: str | None,
         dashboard = _dashboard_available()
         cluster = early.take() if early is not None else local_cluster(workers)
         client = Client(cluster)
-        link = cluster.dashboard_link if dashboard else "unavailable (install bokeh to get it)"
+        # not cluster.dashboard_link: that names the machine's address, the server listens on 127.0.0.1 only
+        link = (f"http://127.0.0.1:{cluster.scheduler.http_server.port}/status" if dashboard
+                else "unavailable (install bokeh to get it)")
     else:
         try:
             client = Client(scheduler, timeout=10)

@@ -1,15 +1,16 @@
 """Ctrl-C and ``kill`` stop cosim quietly: one line on stderr, exit 130, no tracebacks from any process.
 
 A terminal's Ctrl-C sends SIGINT to the whole process group: the ``cosim``
-client, the local Dask worker processes and their point children.  Only the
-client decides what happens (it stops the sweep, keeps the rows written so
-far and says ``cosim: interrupted``):
+client (with the workers of its local cluster, which run inside it), the
+point children, and the worker processes a cluster file starts on this
+machine.  Only the client decides what happens (it stops the sweep, keeps
+the rows written so far and says ``cosim: interrupted``):
 
 - :func:`stop_cleanly_on_signals` (called by ``cosim``'s ``main``) turns
   SIGINT and SIGTERM into KeyboardInterrupt in the client and, once a stop has
   begun, hushes what Dask logs while its half-stopped workers go down.
-- :func:`dask_setup` is a Dask *preload*: every local worker process cosim
-  starts runs it at start-up and ignores SIGINT from then on, so it neither
+- :func:`dask_setup` is a Dask *preload*: every worker process a cluster
+  file starts here runs it at start-up and ignores SIGINT from then on, so it neither
   prints a traceback nor dies before the client closes it.  The worker
   process ignores it itself; nothing it does not own (the nanny, the client's
   own handler while workers are restarted after a loss) is changed.

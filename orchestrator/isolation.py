@@ -338,8 +338,58 @@ def _register_exit_hook() -> None:
 
 
 def _kill_children() -> None:
+    stop_spare_children()  # no need to wait for a child that never had work
     for runner in list(_LIVE):
         runner.close()
+
+
+_SPARES: list["IsolatedRunner"] = []  # children started ahead of their payload (start_spare_children)
+_SPARES_LOCK = threading.Lock()
+
+
+def start_spare_children(count: int) -> None:
+    """Start ``count`` point children now, before any payload exists, for this process's next IsolatedRunners.
+
+    A child's start (a Python, and cosim's modules imported: about 0.15 s of
+    CPU) then overlaps what this process does meanwhile -- for ``cosim sweep``
+    on a local cluster, whose workers run in this process, its own imports and
+    the spec check -- instead of delaying the first points.  A spare child is
+    an ordinary child waiting for its payload: an IsolatedRunner takes one
+    started with the same limits (orchestrator.limits, read from this
+    process's environment now) or starts its own; spares never taken are
+    stopped at exit with every other child.
+    """
+    from .limits import settings
+
+    limits = settings()
+    for _ in range(count):
+        spare = IsolatedRunner({"key": None, "limits": limits})
+        spare._spawn(limits)
+        with _SPARES_LOCK:
+            _SPARES.append(spare)
+
+
+def preload_spare_children(payload: dict[str, Any]) -> None:
+    """Send ``payload`` to the spare children that have none yet: they load it (the units' imports, the unit
+    files written out) while this process goes on, and the runners of this payload that take them only wait
+    for them to be ready."""
+    with _SPARES_LOCK:
+        for spare in _SPARES:
+            if spare._loading is None and spare._limits == payload.get("limits", {}):
+                try:
+                    spare._outbox.send(("load", payload))
+                except OSError:
+                    continue  # gone: the runner that takes it finds it dead and starts its own
+                spare._loading = payload["key"]
+
+
+def stop_spare_children() -> None:
+    """Stop the spare children no runner took (the sweep runs elsewhere after all)."""
+    with _SPARES_LOCK:
+        spares = list(_SPARES)
+        _SPARES.clear()
+    for spare in spares:
+        spare.close(force=True)
 
 
 class IsolatedRunner:
@@ -353,39 +403,20 @@ class IsolatedRunner:
         self._outbox: Connection | None = None
         self._folder: str | None = None
         self._channel: _Channel | None = None
+        self._limits: dict[str, str] = {}  # the limits the child was started with
+        self._loading: str | None = None  # a spare child's: the key of the payload sent to it ahead of its runner
 
     def _start(self) -> str | None:
-        """Start a child and load the payload; None when ready, else why it failed."""
-        to_child_r, to_child_w = os.pipe()
-        from_child_r, from_child_w = os.pipe()
-        # The child's temporary files (payload, extracted FMUs) go into a folder this
-        # process owns and removes, also when the child had to be killed.
-        self._folder = tempfile.mkdtemp(prefix="cosim_worker_")
-        env = dict(os.environ, TMPDIR=self._folder)
-        for setting in LIMITS.values():  # the limits of the client that made the payload, not this worker's
-            env.pop(setting.env, None)
-        env.update(self.payload.get("limits", {}))
-        root = str(Path(__file__).resolve().parent.parent)
-        env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")  # works from a source checkout too
-        self._proc = subprocess.Popen(
-            # gc.freeze once child_main is done: the interpreter's final collections over the units' modules
-            # would only delay the exit the worker waits for
-            [sys.executable, "-c", "import sys; from orchestrator.isolation import child_main; "
-             "child_main(*map(int, sys.argv[1:])); import gc; gc.freeze()",
-             str(to_child_r), str(from_child_w), str(os.getpid())],
-            pass_fds=(to_child_r, from_child_w), env=env, stdin=subprocess.DEVNULL)
-        os.close(to_child_r)
-        os.close(from_child_w)
-        self._outbox = Connection(to_child_w, readable=False)
-        self._inbox = Connection(from_child_r, writable=False)
-        self._channel = _Channel(self._inbox)
-        if not _kill_children_registered:
-            _register_exit_hook()
-        _LIVE.add(self)
-        try:
-            self._outbox.send(("load", self.payload))
-        except OSError:
-            pass  # the child is already gone: the channel says so below
+        """Start a child (or take a spare one) and load the payload; None when ready, else why it failed."""
+        limits = self.payload.get("limits", {})
+        loading = self._adopt_spare(limits)  # None: no spare; else whether it is loading this payload already
+        if loading is None:
+            self._spawn(limits)
+        if not loading:
+            try:
+                self._outbox.send(("load", self.payload))
+            except OSError:
+                pass  # the child is already gone: the channel says so below
         message = self._channel.get(LOAD_TIMEOUT)
         if message is None:
             self.close(force=True)
@@ -399,6 +430,64 @@ class IsolatedRunner:
         why = f"died ({self._exit_text_now()})" if kind == "eof" else f"wrote junk on its channel ({body})"
         self.close(force=True)
         return f"the worker's child process {why} while loading the system"
+
+    def _spawn(self, limits: dict[str, str]) -> None:
+        """Start a child process that waits for its payload, with ``limits`` (orchestrator.limits) in its
+        environment."""
+        to_child_r, to_child_w = os.pipe()
+        from_child_r, from_child_w = os.pipe()
+        # The child's temporary files (payload, extracted FMUs) go into a folder this
+        # process owns and removes, also when the child had to be killed.
+        self._folder = tempfile.mkdtemp(prefix="cosim_worker_")
+        env = dict(os.environ, TMPDIR=self._folder)
+        for setting in LIMITS.values():  # the limits of the client that made the payload, not this worker's
+            env.pop(setting.env, None)
+        env.update(limits)
+        root = str(Path(__file__).resolve().parent.parent)
+        env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")  # works from a source checkout too
+        self._proc = subprocess.Popen(
+            # gc.freeze once child_main is done: the interpreter's final collections over the units' modules
+            # would only delay the exit the worker waits for
+            # SIGINT ignored first: the terminal's Ctrl-C reaches this child too, and the client decides
+            [sys.executable, "-c", "import signal; signal.signal(signal.SIGINT, signal.SIG_IGN); "
+             "import sys; from orchestrator.isolation import child_main; "
+             "child_main(*map(int, sys.argv[1:])); import gc; gc.freeze()",
+             str(to_child_r), str(from_child_w), str(os.getpid())],
+            pass_fds=(to_child_r, from_child_w), env=env, stdin=subprocess.DEVNULL)
+        os.close(to_child_r)
+        os.close(from_child_w)
+        self._outbox = Connection(to_child_w, readable=False)
+        self._inbox = Connection(from_child_r, writable=False)
+        self._channel = _Channel(self._inbox)
+        self._limits = dict(limits)
+        if not _kill_children_registered:
+            _register_exit_hook()
+        _LIVE.add(self)
+
+    def _adopt_spare(self, limits: dict[str, str]) -> bool | None:
+        """Take over a live spare child started with the same ``limits`` and loading nothing or this payload.
+
+        Returns None when there is none, else whether the child is loading this payload already
+        (:func:`preload_spare_children`).
+        """
+        def fits(spare: IsolatedRunner) -> bool:
+            return spare._limits == limits and spare._loading in (None, self.key)
+
+        while True:
+            with _SPARES_LOCK:
+                found = next((i for i, spare in enumerate(_SPARES) if fits(spare)), None)
+                if found is None:
+                    return None
+                spare = _SPARES.pop(found)
+            if spare._proc is not None and spare._proc.poll() is None:
+                break
+            spare.close()  # died waiting (killed from outside): try the next one
+        self._proc, self._inbox, self._outbox = spare._proc, spare._inbox, spare._outbox
+        self._folder, self._channel, self._limits = spare._folder, spare._channel, spare._limits
+        spare._proc = spare._inbox = spare._outbox = spare._folder = spare._channel = None
+        _LIVE.discard(spare)
+        _LIVE.add(self)
+        return spare._loading == self.key
 
     def run(self, points: Sequence[tuple[str, dict[str, Any]]], timeout: float | None = None,
             on_row: Callable[[dict], None] | None = None) -> list[dict]:

@@ -54,7 +54,7 @@ from .folder_lock import FolderLock
 from .unit_checksums import changed_files, data_file_checksums, unit_checksums
 from .errors import UserError
 from .evaluator import Reruns, ScatteredPayload, check_timeout, lost_rows
-from .isolation import IsolatedRunner, make_payload
+from .isolation import IsolatedRunner, make_payload, preload_spare_children
 from .table_columns import TAIL_COLUMNS
 
 if TYPE_CHECKING:
@@ -358,6 +358,7 @@ class Sweep:
             self.recompute = recompute
             self._check_folder()
             self.payload = make_payload(self.system)  # FMU bytes read now: workers never open these paths
+            preload_spare_children(self.payload)  # `cosim sweep`'s children for a local cluster, if any
         except BaseException:
             self.close()
             raise
@@ -369,6 +370,9 @@ class Sweep:
 
         if self.scheduler is None and self.cluster is None and configured_scheduler() is None:
             return EarlyCluster(self.workers)
+        from .isolation import stop_spare_children
+
+        stop_spare_children()  # started by `cosim sweep` for a local cluster (sweep_cli.cmd_sweep)
         return None
 
     def close(self) -> None:

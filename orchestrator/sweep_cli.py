@@ -8,6 +8,7 @@ to :func:`orchestrator.cli.main`).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -50,11 +51,17 @@ def add_cluster_options(p: argparse.ArgumentParser) -> None:
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     """Run (or dry-run) a sweep; returns the exit code. SpecError, SweepError and UsageError reach cli.main."""
+    if args.batch_size is not None and args.batch_size < 1:
+        raise UsageError("--batch-size must be at least 1")
+    if not args.dry_run and args.scheduler is None and args.cluster is None:
+        # most likely a local cluster, whose workers run in this process: their point children start now and
+        # import while this process imports the rest and checks the spec (stopped if the sweep runs elsewhere)
+        from .isolation import start_spare_children
+
+        start_spare_children(args.workers or os.cpu_count() or 1)
     from .cli_options import experiment_overrides
     from .sweep import Sweep
 
-    if args.batch_size is not None and args.batch_size < 1:
-        raise UsageError("--batch-size must be at least 1")
     from .results_folder import default_folder
 
     out = Path(args.out) if args.out else default_folder(args.spec)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import socket
@@ -9,6 +10,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Iterator
 
 import pytest
 
@@ -37,6 +39,31 @@ def local_cluster():
                            dashboard_address="127.0.0.1:0", silence_logs=40)
     yield cluster.scheduler_address
     cluster.close()
+
+
+@contextlib.contextmanager
+def worker_process_cluster() -> Iterator[str]:
+    """The address of a fresh distributed.LocalCluster of 2 worker processes (1 thread each, 127.0.0.1) whose
+    scheduler lets a task lose one worker, as on the clusters cosim starts: for tests that kill a worker
+    process (cosim's own local cluster runs its workers in the client's process, orchestrator.evaluator).
+    The workers get this process's environment as it is now."""
+    import dask
+    from distributed import LocalCluster
+
+    with dask.config.set({"distributed.scheduler.allowed-failures": 1}):
+        cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address="127.0.0.1:0", silence_logs=40)
+    try:
+        yield cluster.scheduler_address
+    finally:
+        cluster.close()
+
+
+@pytest.fixture
+def worker_processes():
+    """A fresh worker_process_cluster for one test."""
+    with worker_process_cluster() as address:
+        yield address
 
 
 def wait_for_workers(address: str, count: int, seconds: float) -> None:

@@ -108,3 +108,35 @@ def test_fmi3_library_and_handle(unzipped):
         assert lib.fmi3GetFloat64(handle, (ctypes.c_uint * 1)(vr["y"]), 1, values, 1) == 0
         assert values[0] == slave.getFloat64([vr["y"]])[0] == pytest.approx(3.0 * math.exp(-1.0), rel=1e-12)
         slave.terminate()
+
+
+@pytest.mark.parametrize("version, fmpy_class", [(2, "fmpy.fmi2:FMU2Slave"), (3, "fmpy.fmi3:FMU3Slave"),
+                                                 (2, "fmpy.fmi2:FMU2Model"), (3, "fmpy.fmi3:FMU3Model")])
+def test_cached_signatures_are_the_ones_fmpy_declares_and_survive_the_library_being_unloaded(unzipped, version,
+                                                                                           fmpy_class):
+    import importlib
+
+    module, name = fmpy_class.split(":")
+    original = getattr(importlib.import_module(module), name)
+    cached = fmpy_internals.with_cached_signatures(original)
+    assert cached.__name__ == original.__name__  # fmpy picks the function prefix from the class name
+    md, folder = unzipped(version)
+
+    def declared(slave) -> dict:
+        return {n: (f.__name__, f.argnames, f.argtypes, f.restype) for n, f in slave._functions.items()}
+
+    def make(cls):
+        return cls(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
+                   instanceName="probe")
+
+    fmpy_slave = make(original)
+    want = declared(fmpy_slave)
+    assert len(want) > 30
+    fmpy_slave.freeLibrary()
+    for _ in range(3):  # the first builds the table, the next use it; each frees the library (unloaded between)
+        slave = make(cached)
+        assert declared(slave) == want
+        for fname, (c_name, _, argtypes, restype) in want.items():
+            function = getattr(slave.dll, c_name)  # declared on this instance's library, not an older one's
+            assert function.argtypes == argtypes and function.restype == restype
+        slave.freeLibrary()

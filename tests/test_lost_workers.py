@@ -1,8 +1,9 @@
 """Lost workers cost nothing: a Dask worker process killed mid-sweep (kill -9, as the OOM killer or a lost node
 would) loses no point and gives no innocent point a wrong status; a point that kills its workers is `crashed`.
 
-Real LocalCluster worker processes (started by the sweep itself, which sets the scheduler's allowed-failures
-to 1) and a real SIGKILL; the units are tests/units_for_cluster.py.
+Real LocalCluster worker processes (a cluster of worker processes whose scheduler allows one failure, as the
+clusters cosim starts do: sweep_fixtures.worker_processes; cosim's own local cluster runs its workers inside the
+client) and a real SIGKILL; the units are tests/units_for_cluster.py.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import pytest
 import orchestrator
 
 from .conftest import TESTS
+from .sweep_fixtures import worker_process_cluster, worker_processes  # noqa: F401  (fixture)
 
 UNIT = f"{TESTS / 'units_for_cluster.py'}:SlowSquare"
 
@@ -51,7 +53,8 @@ def test_kill_9_of_a_worker_mid_sweep_loses_nothing(write_spec, tmp_path, monkey
     killer = threading.Thread(target=kill_a_busy_worker, daemon=True)
     killer.start()
     # 5 steps of 0.1 s: each point runs 0.5 s, so the kill lands inside a batch of 3 points
-    df = orchestrator.sweep(str(write_spec(square_spec(8, 0.1))), workers=2, batch_size=3, quiet=True)
+    with worker_process_cluster() as address:  # started now: its workers see SLOW_SQUARE_MARKERS
+        df = orchestrator.sweep(str(write_spec(square_spec(8, 0.1))), scheduler=address, batch_size=3, quiet=True)
     killer.join(timeout=5)
     assert len(killed) == 1
     with pytest.raises(ProcessLookupError):
@@ -62,11 +65,11 @@ def test_kill_9_of_a_worker_mid_sweep_loses_nothing(write_spec, tmp_path, monkey
 
 
 @pytest.mark.parametrize("batch_size", [3, 1])
-def test_a_point_that_kills_its_workers_is_crashed_and_the_others_are_ok(write_spec, batch_size):
+def test_a_point_that_kills_its_workers_is_crashed_and_the_others_are_ok(write_spec, batch_size, worker_processes):
     # Dask counts a worker's death against every task queued on it, not only the one running: innocent tasks
     # waiting behind the killer were crashed in about half the runs before points were blamed only when alone.
-    df = orchestrator.sweep(str(write_spec(square_spec(6, 0.0, kill_at=3.0))), workers=2, batch_size=batch_size,
-                            quiet=True)
+    df = orchestrator.sweep(str(write_spec(square_spec(6, 0.0, kill_at=3.0))), scheduler=worker_processes,
+                            batch_size=batch_size, quiet=True)
     assert len(df) == 6 and df["point_id"].is_unique
     killer = df[df["sq.x"] == 3.0].iloc[0]
     assert killer["status"] == "crashed"
@@ -77,7 +80,7 @@ def test_a_point_that_kills_its_workers_is_crashed_and_the_others_are_ok(write_s
     assert (innocent["y_end"] == innocent["sq.x"] ** 2).all()
 
 
-def test_the_optimizers_evaluator_blames_only_the_killer(write_spec):
+def test_the_optimizers_evaluator_blames_only_the_killer(write_spec, worker_processes):
     """cosim optimize and sensitivity evaluate through evaluator.Evaluator: the same rule holds there."""
     from orchestrator.evaluator import Evaluator, dask_client
     from orchestrator.isolation import make_payload
@@ -85,7 +88,7 @@ def test_the_optimizers_evaluator_blames_only_the_killer(write_spec):
 
     system = check_spec(write_spec(square_spec(6, 0.0, kill_at=3.0)))
     points = [(f"p{i}", {"sq.x": float(i)}) for i in range(6)]
-    with dask_client(2) as (client, n_workers, _):
+    with dask_client(2, scheduler=worker_processes) as (client, n_workers, _):
         rows = Evaluator(client, make_payload(system), n_workers).evaluate(points)
     assert [r["point_id"] for r in rows] == [pid for pid, _ in points]  # every point once, in order
     assert rows[3]["status"] == "crashed" and "while it ran alone" in rows[3]["message"]

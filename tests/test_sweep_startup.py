@@ -4,7 +4,6 @@ benchmarks/sweep_memory.py; here, that these means keep every result and leave n
 
 from __future__ import annotations
 
-import multiprocessing
 import subprocess
 import sys
 
@@ -59,25 +58,16 @@ def test_an_early_started_cluster_runs_the_sweep_and_gives_every_point(write_spe
     assert "__design_index" not in df.columns
 
 
-def _dask_workers() -> set[int]:
-    """Worker processes: spawned, or forked by the fork server (a child of this process that lives on, see
-    orchestrator.worker_setup; its forks have its command line)."""
-    me = psutil.Process()
-    found = set()
-    for p in me.children(recursive=True):
-        line = " ".join(p.cmdline())
-        if ("spawn_main" in line or ("forkserver import main" in line and p.ppid() != me.pid)) and p.is_running():
-            found.add(p.pid)
-    return found
-
-
 def test_a_sweep_that_cannot_start_closes_its_early_cluster(write_spec, tmp_path):
+    from distributed.deploy.spec import SpecCluster
+
     spec = write_spec(square_spec([1.0, 2.0]))
     Sweep(spec, workers=1, out=tmp_path / "out", quiet=True).run()  # the folder now holds results
-    before = _dask_workers()
+    before = set(SpecCluster._instances)
     with pytest.raises(SweepError, match="already holds results"):
         Sweep(spec, workers=2, out=tmp_path / "out", quiet=True, start_early=True)
-    assert _dask_workers() <= before  # the cluster started for it is gone again
+    started = set(SpecCluster._instances) - before
+    assert len(started) <= 1 and all(c.status.name == "closed" for c in started)  # started for it, closed again
 
 
 def test_the_command_skips_the_final_collections_only_as_a_program(write_spec, tmp_path):
@@ -91,37 +81,40 @@ def test_the_command_skips_the_final_collections_only_as_a_program(write_spec, t
         assert out.stdout.split()[-2:] == ["0", str(frozen)], out.stdout + out.stderr
 
 
-def test_the_local_cluster_workers_run_cosims_set_up():
+def test_the_local_clusters_workers_run_in_this_process_and_serve_only_127_0_0_1():
+    """Points never run in a Dask worker but in its child process (orchestrator.isolation): cosim's local
+    cluster keeps its workers in the client's process, without their bokeh pages."""
     from distributed import Client
 
     from orchestrator.evaluator import local_cluster
 
-    with local_cluster(1) as cluster, Client(cluster) as client:
-        loaded = client.run(lambda: __import__("sys").modules.get("orchestrator.worker_setup") is not None)
-    assert list(loaded.values()) == [True]
+    me = psutil.Process()
+    before = {c.laddr for c in me.net_connections(kind="inet") if c.status == psutil.CONN_LISTEN}
+    with local_cluster(2) as cluster, Client(cluster) as client:
+        pids = client.run(lambda: __import__("os").getpid())
+        listening = {c.laddr for c in me.net_connections(kind="inet") if c.status == psutil.CONN_LISTEN} - before
+        pages = client.run(lambda dask_worker: sorted(dask_worker.http_application.applications or []))
+    assert len(pids) == 2 and set(pids.values()) == {me.pid}
+    assert listening and all(address.ip == "127.0.0.1" for address in listening)  # dashboard, workers' health
+    assert all(not p for p in pages.values())  # no worker pages
 
 
-def test_the_local_cluster_workers_are_forked_and_get_the_environment_of_their_start(monkeypatch):
-    """Forked by a fork server that imported Dask and cosim's worker modules once (orchestrator.worker_setup),
-    a worker still sees this process's environment as it is when its cluster starts, not the fork server's."""
-    from distributed import Client
-
-    from orchestrator.evaluator import local_cluster
-
-    with local_cluster(1):
-        pass  # the fork server runs from now on (if no earlier test started it)
-    monkeypatch.setenv("COSIM_TEST_WORKER_ENV", "set after the fork server started")
-
-    def seen() -> tuple[str | None, str, bool]:
-        import os
-        import sys
-
-        return (os.environ.get("COSIM_TEST_WORKER_ENV"), " ".join(psutil.Process().parent().cmdline()),
-                "orchestrator.sweep" in sys.modules)
-
-    with local_cluster(1) as cluster, Client(cluster) as client:
-        [(value, parent, imported)] = client.run(seen).values()
-    assert value == "set after the fork server started"
-    if "forkserver" in multiprocessing.get_all_start_methods():
-        assert "forkserver import main" in parent  # forked by the fork server, with run_batch's module loaded
-        assert imported
+def test_a_point_that_kills_its_process_is_one_crashed_row_on_the_local_cluster(write_spec, tmp_path):
+    """The local cluster's isolation is the points' child processes: a unit killing its process (a segfault,
+    os._exit) costs its own point, never the client running the workers."""
+    unit = tmp_path / "killer.py"
+    unit.write_text("import os\nfrom orchestrator import PythonUnit, Variable\n\n"
+                    "class Killer(PythonUnit):\n"
+                    "    variables = (Variable('x', 'parameter', start=0.0), Variable('y', 'output', start=0.0))\n\n"
+                    "    def do_step(self, t, h):\n"
+                    "        if self.x == 2.0:\n"
+                    "            os._exit(9)\n"
+                    "        self.y = 10.0 * self.x\n")
+    spec = {"name": "killer", "units": {"k": {"python": f"{unit}:Killer"}},
+            "experiment": {"stop": 0.2, "step": 0.1},
+            "objectives": {"y_end": {"signal": "k.y", "reduce": "final"}},
+            "design": {"parameters": {"k.x": {"values": [0.0, 1.0, 2.0, 3.0, 4.0]}}}}
+    df = Sweep(write_spec(spec), workers=2, out=tmp_path / "out", quiet=True, start_early=True).run()
+    assert list(df["status"]) == ["ok", "ok", "crashed", "ok", "ok"]
+    assert "exit code 9" in df["message"][2]
+    assert list(df["y_end"][df["status"] == "ok"]) == [0.0, 10.0, 30.0, 40.0]

@@ -38,9 +38,13 @@ class SlowSquare(PythonUnit):
             # An out-of-memory kill hits a worker that has been running; so does this one.
             import psutil
 
-            started = psutil.Process(os.getppid()).create_time()
+            worker = psutil.Process(os.getppid())
+            if "multiprocessing" not in " ".join(worker.cmdline()):  # a Dask worker process is started by it
+                raise RuntimeError("kill_at needs Dask worker processes (sweep_fixtures.worker_processes): "
+                                   "a local cosim cluster's workers run in the client")
+            started = worker.create_time()
             time.sleep(max(0.0, started + 3.0 - time.time()))
-            os.kill(os.getppid(), signal.SIGKILL)
+            os.kill(worker.pid, signal.SIGKILL)
             time.sleep(60)  # cosim's child stops itself when it sees its parent gone
         time.sleep(self.delay)
         self.y = self.x ** 2

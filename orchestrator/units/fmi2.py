@@ -18,7 +18,7 @@ from fmpy.fmi2 import fmi2LastSuccessfulTime, fmi2Terminated
 
 from ..unit import SimulationEnded
 from .fmi_instance import FmiInstance, TypeGroup
-from .fmpy_internals import fmi2_allocator, instance_handle, library
+from .fmpy_internals import fmi2_allocator, instance_handle, library, with_cached_signatures
 
 
 class Fmi2Unit(FmiInstance):
@@ -33,7 +33,7 @@ class Fmi2Unit(FmiInstance):
     _vr_type = ctypes.c_uint
     _call_types = {"Enumeration": "Integer"}
     _prefix = "fmi2"
-    _slave_class: Any = FMU2Slave
+    _slave_class: Any = with_cached_signatures(FMU2Slave)
     _interface = "coSimulation"  # the attribute of fmpy's ModelDescription naming the interface used
 
     def __init__(self, name: str, unit_type: Any):

@@ -10,7 +10,7 @@ from fmpy.fmi3 import FMU3Slave
 
 from ..unit import Selection, SimulationEnded
 from .fmi_instance import FmiInstance, FmiSelection, TypeGroup
-from .fmpy_internals import instance_handle, library
+from .fmpy_internals import instance_handle, library, with_cached_signatures
 
 
 class Fmi3Unit(FmiInstance):
@@ -30,7 +30,7 @@ class Fmi3Unit(FmiInstance):
     _vr_type = ctypes.c_uint
     _call_types = {"Enumeration": "Int64"}
     _prefix = "fmi3"
-    _slave_class: Any = FMU3Slave
+    _slave_class: Any = with_cached_signatures(FMU3Slave)
     _interface = "coSimulation"  # the attribute of fmpy's ModelDescription naming the interface used
 
     def __init__(self, name: str, unit_type: Any):

@@ -43,6 +43,7 @@ from fmpy.fmi3 import FMU3Model
 from ..unit import Selection, SimulationEnded, UnitError
 from .fmi2 import Fmi2Unit
 from .fmi3 import Fmi3Unit
+from .fmpy_internals import with_cached_signatures
 
 MAX_EVENT_ITERATIONS = 100
 DEFAULT_TOLERANCE = 1e-6
@@ -315,7 +316,7 @@ def _close(a: float, b: float) -> bool:
 class Fmi2ModelExchangeUnit(_ModelExchangeStepping, Fmi2Unit):
     """A live FMI 2.0 Model Exchange instance, integrated by CVode inside each communication step."""
 
-    _slave_class = FMU2Model
+    _slave_class = with_cached_signatures(FMU2Model)
     _interface = "modelExchange"
     _update_call = "fmi2NewDiscreteStates"
 
@@ -334,7 +335,7 @@ class Fmi2ModelExchangeUnit(_ModelExchangeStepping, Fmi2Unit):
 class Fmi3ModelExchangeUnit(_ModelExchangeStepping, Fmi3Unit):
     """A live FMI 3.0 Model Exchange instance, integrated by CVode inside each communication step."""
 
-    _slave_class = FMU3Model
+    _slave_class = with_cached_signatures(FMU3Model)
     _interface = "modelExchange"
     _update_call = "fmi3UpdateDiscreteStates"
 
