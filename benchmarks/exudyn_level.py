@@ -23,8 +23,8 @@ Two passes over the same points:
 
 With lock-step groups (``--lockstep K``; by default the group size a sweep worker chooses from the time of a
 point run alone), the same two passes run the points K at a time through ``PandaExudynBatch`` as well,
-interleaved group by group; its figures per step are per point and communication step (the group's time
-divided by the active rows summed over its steps).
+interleaved group by group (with ``--before REV``, the twin as it was at REV too, if it had one); its figures
+per step are per point and communication step (the group's time divided by the active rows summed over its steps).
 
 Usage::
 
@@ -210,11 +210,15 @@ class Level:
 class LockstepLevel(Level):
     """The study's points in lock-step groups of ``rows`` (``PandaExudynBatch``), as a sweep worker runs them."""
 
-    def __init__(self, rows: int):
-        self.label = f"lock-step K={rows}"
+    def __init__(self, rows: int, robot_class=None, label: str = ""):
+        """``robot_class``: the single unit whose twin (its ``batch_class``) runs the robot; default today's."""
+        self.label = label or f"lock-step K={rows}"
         self.rows = rows
         self.system = build_system(load_spec(SPEC))
         self.batches = instantiate(self.system, rows)
+        if robot_class is not None:
+            self.batches["robot"].terminate()
+            self.batches["robot"] = robot_class.batch_class(robot_class, "robot", rows)
         self.units = self.batches
         self.walls = []  # per point: its group's time / the group's size
         self.do_step_s = 0.0
@@ -326,8 +330,11 @@ def main() -> None:
     rows = args.lockstep or group_size(CLOCK[0]() - t0)
     groups = [points[i:i + rows] for i in range(0, len(points), rows)] if rows > 1 else []
     groups = [g for g in groups if len(g) == rows]  # whole groups only: one size, one system
-    lockstep = LockstepLevel(rows) if groups else None
-    if lockstep:
+    lockstep_levels = [LockstepLevel(rows)] if groups else []
+    if groups and args.before and "batch_class" in vars(levels[0].units["robot"].__class__):
+        # the twin as it was at REV, interleaved group by group with today's
+        lockstep_levels.insert(0, LockstepLevel(rows, type(levels[0].units["robot"]), f"lock-step K={rows} at {args.before}"))
+    for lockstep in lockstep_levels:
         lockstep.run_group(groups[0])  # warm-up
 
     def interleaved(timed: bool) -> None:
@@ -339,7 +346,7 @@ def main() -> None:
                     level.run(q22, q24)
                     if not timed:
                         level.walls.append(CLOCK[0]() - t0)
-            if lockstep:
+            for lockstep in lockstep_levels:
                 t0 = CLOCK[0]()
                 lockstep.run_group(group)
                 if not timed:
@@ -347,7 +354,7 @@ def main() -> None:
 
     interleaved(timed=False)  # pass 1: clean time per point
     per_call = wrapper_cost()
-    every = levels + ([lockstep] if lockstep else [])
+    every = levels + lockstep_levels
     for level in every:
         level.time_do_step()
     interleaved(timed=True)  # pass 2: do_step and SolveSteps timed
@@ -368,7 +375,7 @@ def main() -> None:
         print(f"{level.label:22s} {mean * 1e3:8.1f}ms {statistics.median(level.walls) * 1e3:6.1f}ms "
               f"{projected:8.0f} s = {projected / 60:4.1f} min "
               f"{solver_s / steps * 1e6:9.1f}us {python_s / steps * 1e6:9.1f}us {python_s / solver_s * 100:10.1f} %")
-        if level is lockstep:
+        if level in lockstep_levels:
             print(f"{'':22s} (per point and step; {steps / level.do_step_calls:.2f} of {rows} rows active per step "
                   f"on average; per lock-step step: solver {solver_s / level.do_step_calls * 1e6:.0f} us, "
                   f"Python {python_s / level.do_step_calls * 1e6:.0f} us)")
@@ -378,7 +385,7 @@ def main() -> None:
     for level in levels:
         for unit in level.units.values():
             unit.terminate()
-    if lockstep:
+    for lockstep in lockstep_levels:
         for batch in lockstep.batches.values():
             batch.terminate()
     if args.full:
