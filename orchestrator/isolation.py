@@ -339,7 +339,10 @@ def _register_exit_hook() -> None:
 
 def _kill_children() -> None:
     stop_spare_children()  # no need to wait for a child that never had work
-    for runner in list(_LIVE):
+    runners = list(_LIVE)
+    for runner in runners:  # all asked first, so they finish (terminate their units) at the same time
+        runner.ask_to_finish()
+    for runner in runners:
         runner.close()
 
 
@@ -591,6 +594,15 @@ class IsolatedRunner:
                 return f"killed by signal {-code}"
         return f"exit code {code}"
 
+    def ask_to_finish(self) -> None:
+        """Tell the child to finish (EOF on its inbox) without waiting for it; :meth:`close` still has to follow."""
+        outbox, self._outbox = self._outbox, None
+        if outbox is not None:
+            try:
+                outbox.close()
+            except OSError:
+                pass
+
     def close(self, force: bool = False) -> None:
         """Stop the child and release its pipes and files.
 
@@ -598,13 +610,9 @@ class IsolatedRunner:
         killed when ``force`` is true or it does not exit within 2 s.
         """
         proc, self._proc = self._proc, None
-        if self._outbox is not None:  # EOF on its inbox tells the child to finish
-            try:
-                self._outbox.close()
-            except OSError:
-                pass
+        self.ask_to_finish()
         # the pipe from the child is closed by its reader thread at EOF, once the child is gone (see _Channel)
-        self._outbox = self._inbox = None
+        self._inbox = None
         if proc is not None and proc.poll() is None:
             if not force:
                 try:

@@ -248,7 +248,9 @@ class BatchSizer:
     def __init__(self, todo: int, n_workers: int, size: int | None = None):
         self.fixed = size
         self.n_workers = n_workers
-        self.first = size or max(1, min(64, math.ceil(todo / (n_workers * 8))))
+        # a quarter of each worker's share at most: the first tasks still spread over every worker, and a task
+        # of cheap points stays big enough for the lock-step groups of its child (orchestrator.lockstep)
+        self.first = size or max(1, min(64, math.ceil(todo / (n_workers * 4))))
         self.remaining = todo  # points not yet handed to a task
         self._seconds, self._count = 0.0, 0  # run time of the ok points so far, and how many
 

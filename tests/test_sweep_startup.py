@@ -41,6 +41,11 @@ def test_tasks_of_cheap_points_grow_and_shrink_again_towards_the_end():
     assert sizer.next() == 64  # never below the first size
 
 
+def test_the_first_tasks_of_a_small_sweep_are_a_quarter_of_each_workers_share():
+    assert BatchSizer(todo=273, n_workers=2).next() == 35  # the README's main job: 8 tasks before times are known
+    assert BatchSizer(todo=5, n_workers=4).next() == 1
+
+
 def test_a_given_batch_size_is_kept_and_take_counts_down():
     sizer = BatchSizer(todo=10, n_workers=2, size=4)
     sizer.observe([{"status": "ok", "run_time": 1e-6}] * 4)
