@@ -92,7 +92,7 @@ def timed(command: list[str]) -> float:
     started = time.perf_counter()
     done = subprocess.run(command, env=env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     elapsed = time.perf_counter() - started
-    reap_orphans()  # the fork server of the sweep's workers (process_cpu.py)
+    reap_orphans()  # any process the command left behind (process_cpu.py)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     CPU.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
     if done.returncode != 0:
@@ -182,9 +182,9 @@ CENSUS = []
 
 def cpu_census():
     """CPU seconds of this process and of every process it started, once the last rows are back."""
-    import os, psutil, resource
+    import psutil, resource
     me = resource.getrusage(resource.RUSAGE_SELF)
-    CENSUS.append(f"cpu client (imports, spec check, scheduler, results): {me.ru_utime + me.ru_stime:.2f} s")
+    CENSUS.append(f"cpu client (imports, spec check, scheduler and workers, results): {me.ru_utime + me.ru_stime:.2f} s")
     for proc in psutil.Process().children(recursive=True):
         try:
             line = " ".join(proc.cmdline())
@@ -195,10 +195,6 @@ def cpu_census():
             kind = "point child"
         elif "resource_tracker" in line:
             kind = "multiprocessing's resource tracker"
-        elif "forkserver" in line and proc.ppid() == os.getpid():
-            kind = "fork server (imports once what the workers need)"
-        elif "multiprocessing" in line:
-            kind = "dask worker"
         else:
             kind = line[:60]
         CENSUS.append(f"cpu {kind} pid {proc.pid}: {times.user + times.system:.2f} s")
