@@ -4,7 +4,7 @@
     python benchmarks/sweep_memory.py --sizes 10000,100000    # quicker
 
 Each size runs in a fresh process, the way ``cosim sweep`` runs (``Sweep.run_to_disk``: the table stays
-on disk; default local cluster of 2 worker processes, whose Dask scheduler lives in the client process).
+on disk; default local cluster of 2 workers, which with its Dask scheduler lives in the client process).
 The unit is a gain (tests/units_for_tests.py:Gain) with one step a point, so a point's time is nearly all
 overhead: design point, Dask task share, child process, row, part file, merge. A thread samples the
 client's resident memory (RSS) every 20 ms, separately while the points run and during the final merge
@@ -15,7 +15,7 @@ runs, sampled every second against the points stored, within 25 MB from 20 % to 
 growth over the baseline of every size, while running, while the cluster closes and during the final merge, is
 printed too), and the overhead per point <= 1 ms: the marginal wall time per point between the smallest and
 the largest size, on 2 workers (so 2 points are in progress at once). Under load the wall time says little, so the CPU time
-of the whole sweep (client, Dask workers, their child processes: ``getrusage(RUSAGE_CHILDREN)``, the fork server's orphans
+of the whole sweep (client with its workers, their child processes: ``getrusage(RUSAGE_CHILDREN)``, orphans
 reaped too: process_cpu.py) is printed
 too, and its marginal cost per point.
 """
