@@ -1,9 +1,9 @@
 """CPU time of the commands a benchmark starts, with every process they start (Linux; elsewhere as before).
 
 ``getrusage(RUSAGE_CHILDREN)`` counts a child once it has been waited for, and its own children through it.
-A process that outlives its parent is counted by whoever reaps it: the multiprocessing fork server of
-``cosim sweep``'s local cluster (orchestrator/worker_setup.py), whose forks are the Dask workers and which
-ends after the command, would be missed with all its workers and their point children. So the benchmark
+A process that outlives its parent is counted by whoever reaps it: a process the command leaves behind (in
+session 3 the multiprocessing fork server that forked the local cluster's worker processes; the local
+cluster's workers now run inside the command) would be missed with all its children. So the benchmark
 becomes a *subreaper* (``prctl(PR_SET_CHILD_SUBREAPER)``): such orphans become its children, and
 :func:`reap_orphans` waits for them before the CPU time is read.
 """
