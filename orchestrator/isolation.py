@@ -221,6 +221,10 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
     runner = grouped = None
     served = 0
     try:
+        # what every payload needs (the stepping loop, numpy, the lock-step runner), imported before it comes:
+        # a spare child (start_spare_children) is ready for it that much sooner
+        from . import lockstep, point  # noqa: F401
+
         kind, payload = inbox.recv()
         try:
             runner = PointRunner(load_payload(payload, folder))
