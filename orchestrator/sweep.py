@@ -54,7 +54,8 @@ from .folder_lock import FolderLock
 from .unit_checksums import changed_files, data_file_checksums, unit_checksums
 from .errors import UserError
 from .evaluator import Reruns, ScatteredPayload, check_timeout, lost_rows
-from .isolation import IsolatedRunner, make_payload, preload_spare_children
+from .early_cluster import EarlyCluster
+from .isolation import IsolatedRunner, make_payload, preload_spare_children, stop_spare_children
 from .table_columns import TAIL_COLUMNS
 
 if TYPE_CHECKING:
@@ -346,7 +347,15 @@ class Sweep:
         self._temporary = out is None
         if resume and out is None:
             raise SweepError("resume needs the results folder of the interrupted sweep (--out DIR)")
-        self._early = self._start_cluster_early() if start_early else None
+        if start_early and self._runs_on_a_local_cluster():
+            # the spare point children `cosim sweep` started load the system now, while this process starts
+            # the cluster (importing Dask) and prepares the results folder (importing pandas)
+            self.payload = make_payload(self.system)  # FMU bytes read now: workers never open these paths
+            preload_spare_children(self.payload)
+            self._early = EarlyCluster(self.workers)
+        else:
+            stop_spare_children()  # none of them will be used
+            self._early = None
         try:
             from .results import ResultsStore  # pandas and pyarrow only when a sweep is made
 
@@ -359,23 +368,17 @@ class Sweep:
             self.data_checksums = data_file_checksums(self.system)
             self.recompute = recompute
             self._check_folder()
-            self.payload = make_payload(self.system)  # FMU bytes read now: workers never open these paths
-            preload_spare_children(self.payload)  # `cosim sweep`'s children for a local cluster, if any
+            if self._early is None:
+                self.payload = make_payload(self.system)
         except BaseException:
             self.close()
             raise
 
-    def _start_cluster_early(self) -> Any:
-        """An EarlyCluster when this sweep will run on a local cluster, else None."""
+    def _runs_on_a_local_cluster(self) -> bool:
+        """Whether no cluster file, scheduler address or configured scheduler is given (a local cluster)."""
         from .cluster import configured_scheduler
-        from .early_cluster import EarlyCluster
 
-        if self.scheduler is None and self.cluster is None and configured_scheduler() is None:
-            return EarlyCluster(self.workers)
-        from .isolation import stop_spare_children
-
-        stop_spare_children()  # started by `cosim sweep` for a local cluster (sweep_cli.cmd_sweep)
-        return None
+        return self.scheduler is None and self.cluster is None and configured_scheduler() is None
 
     def close(self) -> None:
         """Stop the cluster started early if no run took it (a no-op otherwise)."""
