@@ -357,7 +357,7 @@ class Sweep:
             stop_spare_children()  # none of them will be used
             self._early = None
         try:
-            from .results import ResultsStore  # pandas and pyarrow only when a sweep is made
+            from .results import ResultsStore  # (pandas and pyarrow are imported when the first rows come)
 
             self.out = Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="cosim_sweep_"))
             with results_writes(self.out):
