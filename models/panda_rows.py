@@ -51,7 +51,6 @@ GENERATED = (f"{BASENAME}.c", f"{BASENAME}.h")
 SOURCES = ("panda_rows.c",) + GENERATED
 CFLAGS = ("-shared", "-fPIC", "-O2", "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-Wall")
 LIBRARY = "panda_rows.so"
-N_JOINTS = 7
 
 
 # code generation ------------------------------------------------------------------------------
