@@ -94,10 +94,15 @@ def test_the_local_clusters_workers_run_in_this_process_and_serve_only_127_0_0_1
     from orchestrator.evaluator import local_cluster
 
     me = psutil.Process()
-    before = {c.laddr for c in me.net_connections(kind="inet") if c.status == psutil.CONN_LISTEN}
+    connections = getattr(me, "net_connections", None) or me.connections  # psutil >= 6 / the declared 5.9
+
+    def listening_now() -> set:
+        return {c.laddr for c in connections(kind="inet") if c.status == psutil.CONN_LISTEN}
+
+    before = listening_now()
     with local_cluster(2) as cluster, Client(cluster) as client:
         pids = client.run(lambda: __import__("os").getpid())
-        listening = {c.laddr for c in me.net_connections(kind="inet") if c.status == psutil.CONN_LISTEN} - before
+        listening = listening_now() - before
         pages = client.run(lambda dask_worker: sorted(dask_worker.http_application.applications or []))
     assert len(pids) == 2 and set(pids.values()) == {me.pid}
     assert listening and all(address.ip == "127.0.0.1" for address in listening)  # dashboard, workers' health
