@@ -16,7 +16,6 @@ generated file fails the suite.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -42,20 +41,10 @@ def stale_files() -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m cosim.fmus.panda_inverse_dynamics_codegen", description=__doc__.splitlines()[0])
-    parser.add_argument("--check", action="store_true", help="only compare; exit 1 if the checked-in files are out of date")
-    args = parser.parse_args(argv)
-    if args.check:
-        stale = stale_files()
-        if stale:
-            print(f"out of date in {FMU_DIR}: {', '.join(stale)}; run python -m cosim.fmus.panda_inverse_dynamics_codegen",
-                  file=sys.stderr)
-            return 1
-        print("up to date")
-        return 0
-    for path in generate(FMU_DIR):
-        print(path)
-    return 0
+    from cosim.models.panda_symbolic import regenerate_or_check
+
+    return regenerate_or_check(argv, "cosim.fmus.panda_inverse_dynamics_codegen", __doc__.splitlines()[0],
+                               generate, FMU_DIR)
 
 
 if __name__ == "__main__":

@@ -34,7 +34,6 @@ same payload to 1e-10 N.m, the TCP to pinocchio's forward kinematics to
 
 from __future__ import annotations
 
-import argparse
 import ctypes
 import hashlib
 import os
@@ -196,20 +195,10 @@ class PandaRowKernels:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m cosim.models.panda_rows",
-                                     description="regenerate models/panda_rows_c/panda_rows_casadi.c and .h")
-    parser.add_argument("--check", action="store_true", help="only compare; exit 1 if the checked-in files are out of date")
-    args = parser.parse_args(argv)
-    if args.check:
-        stale = stale_files()
-        if stale:
-            print(f"out of date in {SOURCE_DIR}: {', '.join(stale)}; run python -m cosim.models.panda_rows", file=sys.stderr)
-            return 1
-        print("up to date")
-        return 0
-    for path in generate(SOURCE_DIR):
-        print(path)
-    return 0
+    from .panda_symbolic import regenerate_or_check
+
+    return regenerate_or_check(argv, "cosim.models.panda_rows",
+                               "regenerate models/panda_rows_c/panda_rows_casadi.c and .h", generate, SOURCE_DIR)
 
 
 if __name__ == "__main__":

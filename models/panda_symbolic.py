@@ -181,3 +181,29 @@ def stale_generated_files(generate: Callable[[Path], list[Path]], folder: Path) 
         fresh = generate(Path(tmp))
         return [f.name for f in fresh
                 if not (folder / f.name).is_file() or (folder / f.name).read_text() != f.read_text()]
+
+
+def regenerate_or_check(argv: list[str] | None, module: str, description: str,
+                        generate: Callable[[Path], list[Path]], folder: Path) -> int:
+    """The command line of a module whose C is generated and checked in (``python -m module [--check]``).
+
+    Without ``--check``: rewrite the files into ``folder`` and print their
+    paths.  With it: compare only; exit code 1 (naming the stale files and the
+    command that rewrites them) if they differ from a fresh generation.
+    """
+    import argparse
+    import sys
+
+    parser = argparse.ArgumentParser(prog=f"python -m {module}", description=description)
+    parser.add_argument("--check", action="store_true", help="only compare; exit 1 if the checked-in files are out of date")
+    args = parser.parse_args(argv)
+    if args.check:
+        stale = stale_generated_files(generate, folder)
+        if stale:
+            print(f"out of date in {folder}: {', '.join(stale)}; run python -m {module}", file=sys.stderr)
+            return 1
+        print("up to date")
+        return 0
+    for path in generate(folder):
+        print(path)
+    return 0
