@@ -17,9 +17,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from orchestrator.execution import Execution  # noqa: E402
-from orchestrator.spec import load_spec  # noqa: E402
-from orchestrator.system import build_system  # noqa: E402
+from cosim.execution.run import Execution  # noqa: E402
+from cosim.spec.loader import load_spec  # noqa: E402
+from cosim.system.builder import build_system  # noqa: E402
 
 SPEC = ROOT / "examples" / "bin_picking" / "spec.json"
 REPEATS = 5

@@ -57,11 +57,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from orchestrator.execution import Execution  # noqa: E402
-from orchestrator.limits import limit  # noqa: E402
-from orchestrator.lockstep import GROUP_SIZE, instantiate, run_lockstep  # noqa: E402
-from orchestrator.spec import load_spec  # noqa: E402
-from orchestrator.system import build_system  # noqa: E402
+from cosim.execution.lockstep import GROUP_SIZE, instantiate, run_lockstep  # noqa: E402
+from cosim.execution.run import Execution  # noqa: E402
+from cosim.spec.loader import load_spec  # noqa: E402
+from cosim.system.builder import build_system  # noqa: E402
+from cosim.util.limits import limit  # noqa: E402
 
 SPEC = ROOT / "examples" / "pick_and_place" / "spec_exudyn.json"
 STUDY_POINTS = 121 * 141  # the full grid of spec_exudyn.json
@@ -275,7 +275,7 @@ def wrapper_cost(n: int = 200_000) -> float:
 def full_study(out_parent: Path) -> float:
     """Wall seconds of ``cosim sweep spec_exudyn.json`` (2 workers) from the command to the written table."""
     out = out_parent / "exudyn_full_study"
-    command = [sys.executable, "-m", "orchestrator.cli", "sweep", str(SPEC), "--out", str(out), "--workers", str(WORKERS)]
+    command = [sys.executable, "-m", "cosim.cli.main", "sweep", str(SPEC), "--out", str(out), "--workers", str(WORKERS)]
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     print(f"full study: {' '.join(command[1:])}  (load before: {load_avg()})", flush=True)
     t0 = time.perf_counter()
@@ -300,7 +300,7 @@ def split(level: Level, per_call: float) -> tuple[float, float]:
 
 
 def group_size(single_point_seconds: float) -> int:
-    """The lock-step group size a sweep worker chooses for points that take this long alone (orchestrator.lockstep)."""
+    """The lock-step group size a sweep worker chooses for points that take this long alone (cosim.execution.lockstep)."""
     return max(1, min(GROUP_SIZE, int(limit("lockstep_seconds") / max(single_point_seconds, 1e-6))))
 
 

@@ -3,7 +3,7 @@
 For each configuration (a spec of ``examples/pick_and_place`` with the robot
 unit, communication step and reference sampling it names) this builds the
 system once, instantiates the units once and runs ``POINTS`` design points
-through :class:`orchestrator.Execution` with the units reused (``reset()``
+through :class:`cosim.Execution` with the units reused (``reset()``
 between points), as a sweep worker does.  The configurations run interleaved
 (all of them at one point, then the next point) so that a shared machine's
 changing load hits them alike: compare ratios within one run.  Every unit's ``do_step``, ``get``,
@@ -41,9 +41,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from orchestrator.execution import Execution  # noqa: E402
-from orchestrator.spec import spec_from_dict  # noqa: E402
-from orchestrator.system import build_system  # noqa: E402
+from cosim.execution.run import Execution  # noqa: E402
+from cosim.spec.loader import spec_from_dict  # noqa: E402
+from cosim.system.builder import build_system  # noqa: E402
 
 SPEC = ROOT / "examples" / "pick_and_place" / "spec.json"
 ID = "models.panda_inverse_dynamics:PandaInverseDynamics"

@@ -1,4 +1,4 @@
-"""Cost per point of the worker's child process channel (orchestrator.isolation), one code tree against another.
+"""Cost per point of the worker's child process channel (cosim.parallel.isolation), one code tree against another.
 
     python benchmarks/isolation_overhead.py --against /path/to/other/checkout [--points 2000] [--repeat 5]
 
@@ -25,7 +25,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 
 UNIT = '''
-from orchestrator import PythonUnit, Variable
+from cosim import PythonUnit, Variable
 
 class Gain(PythonUnit):
     variables = (Variable("k", "parameter", start=1.0), Variable("y", "output", start=0.0))
@@ -36,8 +36,8 @@ class Gain(PythonUnit):
 
 MEASURE = '''
 import json, sys, time
-from orchestrator.isolation import IsolatedRunner, make_payload
-from orchestrator.validate import check_spec
+from cosim.parallel.isolation import IsolatedRunner, make_payload
+from cosim.system.validate import check_spec
 
 spec, points = sys.argv[1], int(sys.argv[2])
 runner = IsolatedRunner(make_payload(check_spec(spec)))

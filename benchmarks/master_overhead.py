@@ -27,8 +27,8 @@ from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 
+from cosim import Execution, build_system, load_spec
 from cosim.fmus.build import ensure_built
-from orchestrator import Execution, build_system, load_spec
 
 
 def raw_fmpy(version: int, steps: int, h: float) -> tuple[float, float]:

@@ -30,9 +30,9 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from cosim.fmus.build import ensure_built  # noqa: E402
-from orchestrator.unit import ElementRef  # noqa: E402
-from orchestrator.units.fmu import FmuUnitType  # noqa: E402
-from orchestrator.units.model_exchange import SolverSettings  # noqa: E402
+from cosim.units.fmu.description import FmuUnitType  # noqa: E402
+from cosim.units.fmu.model_exchange import SolverSettings  # noqa: E402
+from cosim.units.protocol import ElementRef  # noqa: E402
 
 STEP = 1e-3
 

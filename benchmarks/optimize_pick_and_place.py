@@ -10,7 +10,7 @@ grid front's hypervolume is 1.21, and 99 % of it needs a design within about 1 %
 of the least energy at the shortest time.
 
 The simulation is deterministic, so the grid table *is* the objective function: the samplers run through
-`orchestrator.optimize.Optimization` exactly as `cosim optimize` does, with an evaluator that looks the design
+`cosim.studies.optimize.Optimization` exactly as `cosim optimize` does, with an evaluator that looks the design
 up in the grid table instead of simulating it (`--real` also runs one sampler through Dask with real
 simulations and checks that it proposes and gets exactly the same).  The Latin hypercube of equal budget is the
 design space a sweep with `"method": "lhs", "samples": BUDGET` would run, in its order.
@@ -50,10 +50,11 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from orchestrator.analysis.pareto import pareto_mask  # noqa: E402
-from orchestrator.design import DesignSpace  # noqa: E402
-from orchestrator.optimize import Optimization, hypervolume, normalised_losses  # noqa: E402
-from orchestrator.spec import load_spec  # noqa: E402
+from cosim.analysis.hypervolume import hypervolume, normalised_losses  # noqa: E402
+from cosim.analysis.pareto import pareto_mask  # noqa: E402
+from cosim.spec.design import DesignSpace  # noqa: E402
+from cosim.spec.loader import load_spec  # noqa: E402
+from cosim.studies.optimize import Optimization  # noqa: E402
 
 SPEC = ROOT / "examples" / "pick_and_place" / "spec.json"
 GRID = ROOT / "examples" / "pick_and_place" / "study" / "results.parquet"
@@ -142,7 +143,7 @@ def latin_hypercube(budget: int, seed: int, grid: GridEvaluator) -> np.ndarray:
 def real_run(sampler: str, seed: int, budget: int, scratch: Path, expected: pd.DataFrame) -> dict:
     """`cosim optimize` with real simulations on Dask; checks it matches the grid-table run of the same seed."""
     out = scratch / f"real_{sampler}_{seed}"
-    command = [sys.executable, "-m", "orchestrator.cli", "optimize", str(SPEC), "--min", "e_total", "--min",
+    command = [sys.executable, "-m", "cosim.cli.main", "optimize", str(SPEC), "--min", "e_total", "--min",
                "duration", "--budget", str(budget), "--sampler", sampler, "--seed", str(seed), "--out", str(out)]
     started = time.perf_counter()
     done = subprocess.run(command, env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True)
@@ -246,7 +247,7 @@ def write_report(args, results, scale, grid_size, real, uptime_before, uptime_af
         "and worst value of each over the grid, reference point 1.1; shares are of the grid front's hypervolume "
         "(1.21): 99 % needs a design within about 1 % of the energy range of the least energy at the shortest "
         "time. Samplers run through "
-        "`orchestrator.optimize.Optimization` (batches of 8; NSGA-II 20 = its population) with each design "
+        "`cosim.studies.optimize.Optimization` (batches of 8; NSGA-II 20 = its population) with each design "
         "answered from the grid table; a design proposed twice costs one evaluation. The Latin hypercube is "
         "the design a sweep with `\"method\": \"lhs\", \"samples\": " + str(budget) + "` runs, in its order.",
         "",

@@ -34,9 +34,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from orchestrator.execution import Execution  # noqa: E402
-from orchestrator.spec import spec_from_dict  # noqa: E402
-from orchestrator.system import build_system  # noqa: E402
+from cosim.execution.run import Execution  # noqa: E402
+from cosim.spec.loader import spec_from_dict  # noqa: E402
+from cosim.system.builder import build_system  # noqa: E402
 
 SPEC = ROOT / "examples" / "pick_and_place" / "spec_coarse.json"
 Q22, Q24 = "traj.waypoints[9]", "traj.waypoints[11]"

@@ -21,7 +21,7 @@ import numpy as np  # noqa: E402
 from cosim.models.panda_exudyn import PandaExudyn  # noqa: E402
 from cosim.models.panda_inverse_dynamics import PandaInverseDynamics  # noqa: E402
 from cosim.models.trajectory import N_MAX_WAYPOINTS, TrajectoryGenerator  # noqa: E402
-from orchestrator.unit import resolve_port  # noqa: E402
+from cosim.units.protocol import resolve_port  # noqa: E402
 
 H = 1e-3
 REPEATS = 5

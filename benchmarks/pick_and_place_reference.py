@@ -150,11 +150,11 @@ def main() -> None:
     import time
     from pathlib import Path
 
-    from orchestrator import build_system, load_spec
-    from orchestrator.point import assignments_for, run_point
+    from cosim import build_system, load_spec
+    from cosim.execution.point import assignments_for, run_point
 
     try:
-        from orchestrator.lockstep import instantiate, run_lockstep
+        from cosim.execution.lockstep import instantiate, run_lockstep
     except ImportError:  # a cosim from before lock-step (to measure the "before" figure)
         instantiate = run_lockstep = None
 
@@ -175,7 +175,7 @@ def main() -> None:
             for unit in units.values():
                 unit.reset()
 
-    def lockstep() -> None:  # as a sweep child runs a group of points (orchestrator.lockstep)
+    def lockstep() -> None:  # as a sweep child runs a group of points (cosim.execution.lockstep)
         results = run_lockstep(system, [assignments_for(system, v) for v in values], batches)
         assert all(r.ok for r in results)
         for batch in batches.values():

@@ -58,7 +58,7 @@ def main() -> None:
     committed = FOLDER / ("results_coarse.parquet" if args.coarse else "study/results.parquet")
     with tempfile.TemporaryDirectory(prefix="cosim_study_") as scratch:
         out = Path(scratch) / "sweep"
-        command = [sys.executable, "-m", "orchestrator.cli", "sweep", str(spec), "--out", str(out),
+        command = [sys.executable, "-m", "cosim.cli.main", "sweep", str(spec), "--out", str(out),
                    "--workers", str(args.workers)]
         started = time.perf_counter()
         done = subprocess.run(command, capture_output=True, text=True)  # the progress lines are not shown

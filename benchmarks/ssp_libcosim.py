@@ -47,9 +47,9 @@ def main() -> None:
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
     from libcosimpy.CosimObserver import CosimObserver
 
-    from orchestrator.execution import Execution
-    from orchestrator.ssp.writer import export_ssp
-    from orchestrator.validate import check_spec
+    from cosim.execution.run import Execution
+    from cosim.export.ssp import export_ssp
+    from cosim.system.validate import check_spec
     from tests.test_ssp_libcosim import RING
 
     log_output_level(CosimLogLevel.ERROR)

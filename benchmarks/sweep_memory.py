@@ -48,8 +48,8 @@ def measure(spec: str, out: str) -> None:
     import psutil
 
     sys.path.insert(0, str(ROOT))
-    from orchestrator import results
-    from orchestrator.sweep import Sweep
+    from cosim.results import store as results
+    from cosim.studies.sweep import Sweep
 
     proc = psutil.Process()
     sweep = Sweep(spec, workers=2, out=out, quiet=True)
@@ -104,7 +104,7 @@ def measure(spec: str, out: str) -> None:
     thread.join()
     not_ok = []
     if counts["ok"] < sum(counts.values()):
-        from orchestrator.sweep_cli import first_not_ok
+        from cosim.cli.sweep import first_not_ok
 
         not_ok = [f"{row['status']}: {row['message']}"[:300] for row in first_not_ok(sweep.store.table_path, 3)]
     print(json.dumps({"points": sum(counts.values()), "ok": counts["ok"], "counts": counts, "not_ok": not_ok, "baseline_mb": baseline / 1e6,

@@ -10,7 +10,7 @@ table is written before it exits), with the same Python (``sys.executable``):
   instantiates the units once and runs every point of the design space one after the other (``reset()``
   between points, as a sweep worker's child does), in one process, writing nothing;
 - sweep: ``cosim sweep SPEC --out DIR --workers 2`` (the console script next to ``sys.executable``, else
-  ``python -m orchestrator.cli``).
+  ``python -m cosim.cli.main``).
 
 The pairs are interleaved (serial, sweep, serial, sweep, ...), so a shared machine's load hits both alike;
 the ratio to trust is the median of the per-pair ratios. Targets (issue 16, 2 cores, idle machine): sweep
@@ -52,7 +52,7 @@ def env() -> dict[str, str]:
 
 def cosim_command() -> list[str]:
     script = Path(sys.executable).with_name("cosim")
-    return [str(script)] if script.exists() else [sys.executable, "-m", "orchestrator.cli"]
+    return [str(script)] if script.exists() else [sys.executable, "-m", "cosim.cli.main"]
 
 
 def load() -> str:
@@ -64,8 +64,8 @@ def load() -> str:
 
 def serial(spec_path: str, out: str | None) -> None:
     """Every point of the spec's design space, one after the other, in this process."""
-    from orchestrator import build_system, load_spec, run_point
-    from orchestrator.design import DesignSpace
+    from cosim import build_system, load_spec, run_point
+    from cosim.spec.design import DesignSpace
 
     system = build_system(load_spec(spec_path))
     units = {name: su.unit_type.instantiate(name) for name, su in system.units.items()}
@@ -144,8 +144,8 @@ def wrap(owner, attr, name):
 def main():
     from orchestrator import cli
     mark("cli imported")
-    import orchestrator.sweep
-    sweep = sys.modules["orchestrator.sweep"]
+    import cosim.studies.sweep
+    sweep = sys.modules["cosim.studies.sweep"]
     import distributed
     from orchestrator import results, validate
     mark("sweep, results, distributed imported")
@@ -205,9 +205,9 @@ if __name__ == "__main__":
 
 CHILD_PROBE = r'''
 import sys, time
-from orchestrator.validate import check_spec
-from orchestrator.isolation import IsolatedRunner, make_payload
-from orchestrator.design import DesignSpace
+from cosim.system.validate import check_spec
+from cosim.parallel.isolation import IsolatedRunner, make_payload
+from cosim.spec.design import DesignSpace
 system = check_spec(sys.argv[1])
 payload = make_payload(system)
 point = next(iter(DesignSpace.from_spec(system.spec)))
@@ -226,8 +226,8 @@ print(f"{first:.3f} {second:.3f} {row['status']}")
 SERIAL_PROBE = r'''
 import sys, time
 t0, c0 = time.perf_counter(), time.process_time()
-from orchestrator import build_system, load_spec, run_point
-from orchestrator.design import DesignSpace
+from cosim import build_system, load_spec, run_point
+from cosim.spec.design import DesignSpace
 t1, c1 = time.perf_counter(), time.process_time()
 system = build_system(load_spec(sys.argv[1]))
 units = {name: su.unit_type.instantiate(name) for name, su in system.units.items()}
@@ -271,8 +271,8 @@ def breakdown(spec: Path, folder: Path) -> None:
     print(f"  the serial loop in one process: imports {w[0]:.3f} s ({w[1]:.3f} s CPU), spec + system + units "
           f"{w[2]:.3f} s ({w[3]:.3f} s CPU), {int(w[6])} points {w[4]:.3f} s ({w[5]:.3f} s CPU, "
           f"{w[5] / w[6] * 1e3:.2f} ms a point)")
-    for what in ("import distributed", "import orchestrator.isolation, orchestrator.point",
-                 "import orchestrator.sweep, orchestrator.results, distributed"):
+    for what in ("import distributed", "import cosim.parallel.isolation, cosim.execution.point",
+                 "import cosim.studies.sweep, cosim.results.store, distributed"):
         seconds = min(timed([sys.executable, "-c", what]) for _ in range(3))
         print(f"  python -c '{what}': {seconds:.3f} s (best of 3, incl. interpreter start)")
 

@@ -51,7 +51,7 @@ def ode_spec(folder: Path, n_points: int, fmu: str) -> Path:
 
 
 def timed_sweep(spec: Path, address: str, out: Path) -> tuple[float, int]:
-    from orchestrator.sweep import Sweep
+    from cosim.studies.sweep import Sweep
 
     shutil.rmtree(out, ignore_errors=True)
     sweep = Sweep(spec, scheduler=address, out=out, quiet=True)
@@ -109,7 +109,7 @@ def memory_child(spec: str, out: str) -> None:
     """Run one sweep here, sampling this process's RSS; print JSON with baseline and peak."""
     import psutil
 
-    from orchestrator.sweep import Sweep
+    from cosim.studies.sweep import Sweep
 
     proc = psutil.Process()
     sweep = Sweep(spec, workers=2, out=out, quiet=True)
@@ -186,8 +186,8 @@ def part_bag(folder: Path, repeat: int, n_points: int) -> dict:
     from distributed import Client
 
     from cosim.fmus.build import ensure_built
-    from orchestrator.design import DesignSpace
-    from orchestrator.spec import load_spec
+    from cosim.spec.design import DesignSpace
+    from cosim.spec.loader import load_spec
 
     fmu = str(ensure_built("linear_ode", 2))
     spec = ode_spec(folder, n_points, fmu)

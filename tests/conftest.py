@@ -57,7 +57,7 @@ def panda_viewer():
     import importlib
     import re
 
-    from orchestrator.viewers import register_viewer, unregister_viewer
+    from cosim.analysis.viewers import register_viewer, unregister_viewer
 
     text = (Path(__file__).resolve().parent.parent / "pyproject.toml").read_text()
     module, _, name = re.search(r'^panda = "([^"]+)"', text, re.M).group(1).partition(":")

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from orchestrator import Execution, build_system, load_spec
-from orchestrator.execution import step_count
+from cosim import Execution, build_system, load_spec
+from cosim.execution.run import step_count
 
 from .conftest import python_unit
 

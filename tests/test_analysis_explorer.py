@@ -20,12 +20,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from orchestrator.analysis.explorer import SLIDER_STEPS, ExplorerState
-from .xwd import xwd_to_rgb
-from orchestrator.analysis.table import AnalysisError, load_results
+from cosim.analysis.explorer import SLIDER_STEPS, ExplorerState
+from cosim.analysis.table import AnalysisError, load_results
 
 from .conftest import python_unit, require_tool
 from .test_analysis_table import make_sweep_table
+from .xwd import xwd_to_rgb
 
 # -- state, no window --------------------------------------------------------------------------------------
 
@@ -127,7 +127,7 @@ def linear_ode_sweep(folder: Path, write_spec) -> Path:
 def test_explorer_window_slider_click_rerun_and_screenshot(xvfb, tmp_path, write_spec):
     import tkinter as tk
 
-    from orchestrator.analysis.explorer import ExplorerWindow
+    from cosim.analysis.explorer import ExplorerWindow
 
     display, framebuffer = xvfb
     table = load_results(make_sweep_table(tmp_path / "s"))
@@ -212,7 +212,7 @@ def test_explorer_window_slider_click_rerun_and_screenshot(xvfb, tmp_path, write
 def test_explorer_reruns_the_selected_design_and_shows_its_traces(xvfb, tmp_path, write_spec):
     import tkinter as tk
 
-    from orchestrator.analysis.explorer import ExplorerWindow
+    from cosim.analysis.explorer import ExplorerWindow
 
     table = load_results(linear_ode_sweep(tmp_path / "decay", write_spec))
     root = tk.Tk()
@@ -236,7 +236,7 @@ def test_explorer_reruns_the_selected_design_and_shows_its_traces(xvfb, tmp_path
 def test_explorer_animates_the_arm_of_a_rerun_robot_design(xvfb, tmp_path, panda_viewer):
     import tkinter as tk
 
-    from orchestrator.analysis.explorer import ExplorerWindow
+    from cosim.analysis.explorer import ExplorerWindow
 
     from .test_analysis_traces import PICK_AND_PLACE, robot_table
 
@@ -267,6 +267,6 @@ def test_explorer_animates_the_arm_of_a_rerun_robot_design(xvfb, tmp_path, panda
 def test_explore_without_a_display_is_a_usage_error(tmp_path):
     path = make_sweep_table(tmp_path / "s")
     env = {k: v for k, v in os.environ.items() if k != "DISPLAY"}
-    done = subprocess.run([sys.executable, "-m", "orchestrator.cli", "explore", str(path)], env=env,
+    done = subprocess.run([sys.executable, "-m", "cosim.cli.main", "explore", str(path)], env=env,
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 2 and "cannot open a window" in done.stderr and "Traceback" not in done.stderr

@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
-
 import matplotlib
 import numpy as np
 import pandas as pd
 import pytest
 
-from orchestrator.analysis.plots import new_figure, save, scatter_cloud
-from orchestrator.analysis.table import load_results
-from orchestrator.cli import main
+from cosim.analysis.plots import new_figure, save, scatter_cloud
+from cosim.analysis.table import load_results
+from cosim.cli.main import main
 
 from .reference import pareto_naive
 from .test_analysis_table import make_sweep_table
@@ -107,7 +106,7 @@ def test_pareto_plot_marks_the_front_over_the_cloud(tmp_path, capsys):
     table = load_results(path)
     expected = pareto_naive(np.column_stack([table.values("energy"), table.values("t_exec")]))
     # draw it again in memory to inspect the artists the command drew
-    from orchestrator.analysis.plots import draw_front
+    from cosim.analysis.plots import draw_front
 
     fig = new_figure()
     ax, _ = scatter_cloud(fig, table, "energy", "t_exec", color="traj.q_via[2]")

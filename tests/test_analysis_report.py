@@ -8,9 +8,9 @@ import re
 import numpy as np
 import pytest
 
-from orchestrator.analysis.sensitivity import correlation_ratio, spearman
-from orchestrator.analysis.table import load_results
-from orchestrator.cli import main
+from cosim.analysis.sensitivity import correlation_ratio, spearman
+from cosim.analysis.table import load_results
+from cosim.cli.main import main
 
 from .reference import pareto_naive
 from .test_analysis_table import make_sweep_table

@@ -8,9 +8,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from orchestrator.analysis.rerun import point_values
-from orchestrator.analysis.table import load_results
-from orchestrator.cli import main
+from cosim.analysis.rerun import point_values
+from cosim.analysis.table import load_results
+from cosim.cli.main import main
 
 from .conftest import python_unit
 from .test_analysis_explorer import linear_ode_sweep
@@ -76,7 +76,7 @@ def test_point_values_reassemble_array_parameters(tmp_path):
 
 def test_analysis_of_a_real_sweep(tmp_path, write_spec, capsys):
     """A real `cosim sweep` table: pareto, report and run --point agree with it."""
-    import orchestrator
+    import cosim
 
     spec = {"name": "decay2", "units": {"ode": {"python": python_unit("LinearOde")}},
             "experiment": {"start": 0.0, "stop": 1.0, "step": 0.05}, "record": ["ode.y"],
@@ -86,7 +86,7 @@ def test_analysis_of_a_real_sweep(tmp_path, write_spec, capsys):
                                       "ode.x0": {"values": [1.0, 2.0]}}}}
     spec_path = write_spec(spec)
     out = tmp_path / "sweep"
-    df = orchestrator.sweep(str(spec_path), workers=1, out=out, quiet=True)
+    df = cosim.sweep(str(spec_path), workers=1, out=out, quiet=True)
     assert len(df) == 10 and (df["status"] == "ok").all()
     table = load_results(out)
     assert table.label("ode.a") == "ode.a [1/s]" and table.objective_senses() == {"y_end": "min", "y_mean": "max"}
@@ -106,7 +106,7 @@ def test_analysis_of_a_real_sweep(tmp_path, write_spec, capsys):
 
 
 def test_spec_option_stands_in_for_missing_metadata(tmp_path, write_spec, capsys):
-    from orchestrator.analysis.rerun import rerun
+    from cosim.analysis.rerun import rerun
 
     table_path = linear_ode_sweep(tmp_path / "decay", write_spec)
     (tmp_path / "decay" / "metadata.json").unlink()
@@ -127,9 +127,9 @@ def test_spec_option_stands_in_for_missing_metadata(tmp_path, write_spec, capsys
 
 
 def test_run_point_loads_the_spec_once_and_builds_the_system_once(tmp_path, write_spec, capsys, monkeypatch):
-    import orchestrator.spec
-    import orchestrator.system
-    import orchestrator.validate
+    import cosim.spec.loader
+    import cosim.system.builder
+    import cosim.system.validate
 
     table = linear_ode_sweep(tmp_path / "decay", write_spec)
     calls = {"load": 0, "build": 0, "describe": 0}
@@ -140,12 +140,12 @@ def test_run_point_loads_the_spec_once_and_builds_the_system_once(tmp_path, writ
             return fn(*args, **kwargs)
         return wrapper
 
-    load, build = counted("load", orchestrator.spec.load_spec), counted("build", orchestrator.system.build_system)
-    for module in (orchestrator.spec, orchestrator.validate):
+    load, build = counted("load", cosim.spec.loader.load_spec), counted("build", cosim.system.builder.build_system)
+    for module in (cosim.spec.loader, cosim.system.validate):
         monkeypatch.setattr(module, "load_spec", load)
-    for module in (orchestrator.system, orchestrator.validate):
+    for module in (cosim.system.builder, cosim.system.validate):
         monkeypatch.setattr(module, "build_system", build)
-    from orchestrator.units.python import PythonUnitType
+    from cosim.units.python.unit import PythonUnitType
 
     monkeypatch.setattr(PythonUnitType, "describe", counted("describe", PythonUnitType.describe))
     assert main(["run", str(tmp_path / "spec.json"), "--point", "pb", "--results", str(table)]) == 0
@@ -154,24 +154,24 @@ def test_run_point_loads_the_spec_once_and_builds_the_system_once(tmp_path, writ
 
 
 def test_every_caller_runs_a_point_through_run_point(tmp_path, write_spec, monkeypatch):
-    """orchestrator.run, cosim run (with --set and --point), the re-run of a row and the sweep's child: one pipeline."""
-    import orchestrator
-    import orchestrator.point
-    from orchestrator.analysis.rerun import rerun
-    from orchestrator.isolation import PointRunner
-    from orchestrator.validate import check_spec
+    """cosim.run, cosim run (with --set and --point), the re-run of a row and the sweep's child: one pipeline."""
+    import cosim
+    import cosim.execution.point
+    from cosim.analysis.rerun import rerun
+    from cosim.parallel.isolation import PointRunner
+    from cosim.system.validate import check_spec
 
     table_path = linear_ode_sweep(tmp_path / "decay", write_spec)
     spec = str(tmp_path / "spec.json")
     seen = []
-    real = orchestrator.point.run_point
+    real = cosim.execution.point.run_point
 
     def spy(system, values=None, **kwargs):
         seen.append(dict(values or {}))
         return real(system, values, **kwargs)
 
-    monkeypatch.setattr(orchestrator.point, "run_point", spy)
-    assert orchestrator.run(spec, {"ode.a": -2.0}).objectives["y_end"] == pytest.approx(np.exp(-2.0), rel=1e-5)
+    monkeypatch.setattr(cosim.execution.point, "run_point", spy)
+    assert cosim.run(spec, {"ode.a": -2.0}).objectives["y_end"] == pytest.approx(np.exp(-2.0), rel=1e-5)
     assert main(["run", spec, "--set", "ode.a=-0.5"]) == 0
     assert main(["run", spec, "--point", "pb", "--results", str(table_path)]) == 0
     result, _ = rerun(load_results(table_path), 0)

@@ -9,11 +9,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from orchestrator.analysis.pareto import pareto_mask
+from cosim.analysis.pareto import pareto_mask
+from cosim.analysis.table import AnalysisError, identifier, load_results
+from cosim.cli.main import main
 
 from .reference import pareto_naive
-from orchestrator.analysis.table import AnalysisError, identifier, load_results
-from orchestrator.cli import main
 
 SPEC = {
     "name": "toy",

@@ -7,12 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import orchestrator
-from orchestrator.design import DesignSpace
-from orchestrator.spec import load_spec
+import cosim
 from cosim.models.collision import CellCollision
 from cosim.models.planner import COLLISION_PLANT, CartesianPlanner, PlantCollisionChecker
 from cosim.models.plant import load_plant
+from cosim.spec.design import DesignSpace
+from cosim.spec.loader import load_spec
 
 SPEC = Path(__file__).resolve().parents[1] / "examples" / "bin_picking" / "spec.json"
 
@@ -83,8 +83,8 @@ def test_execution_checker_flags_an_arm_inside_the_box():
 @pytest.fixture(scope="module")
 def runs():
     """The zero-offset point with and without the pendulum (~3-5 s each on 2 busy cores)."""
-    with_payload = orchestrator.run(str(SPEC), {"planner.offset_y": 0.0})
-    without = orchestrator.run(str(SPEC), {"robot.pendulum_bob_mass": 0.0, "robot.pendulum_rod_mass": 0.0})
+    with_payload = cosim.run(str(SPEC), {"planner.offset_y": 0.0})
+    without = cosim.run(str(SPEC), {"robot.pendulum_bob_mass": 0.0, "robot.pendulum_rod_mass": 0.0})
     assert with_payload.ok and without.ok, (with_payload.message, without.message)
     return with_payload, without
 

@@ -12,8 +12,8 @@ import os
 import time
 from multiprocessing.connection import Connection
 
-from orchestrator.isolation import IsolatedRunner, _Channel, make_payload
-from orchestrator.validate import check_spec
+from cosim.parallel.isolation import IsolatedRunner, _Channel, make_payload
+from cosim.system.validate import check_spec
 
 from .conftest import TESTS
 

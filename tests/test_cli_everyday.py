@@ -11,8 +11,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import orchestrator
-from orchestrator.cli import main
+import cosim
+from cosim.cli.main import main
 
 from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
 
@@ -21,7 +21,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 def cosim(*args: str, **kwargs) -> subprocess.Popen:
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]))
-    return subprocess.Popen([sys.executable, "-m", "orchestrator.cli", *args], env=env, text=True,
+    return subprocess.Popen([sys.executable, "-m", "cosim.cli.main", *args], env=env, text=True,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, **kwargs)
 
 
@@ -30,7 +30,7 @@ def test_version_prints_the_package_version(capsys):
         main(["--version"])
     except SystemExit as exc:
         assert exc.code == 0
-    assert capsys.readouterr().out.strip() == f"cosim {orchestrator.__version__}"
+    assert capsys.readouterr().out.strip() == f"cosim {cosim.__version__}"
 
 
 def test_output_into_a_pipe_closed_early_is_not_an_error(tmp_path):
@@ -81,9 +81,9 @@ def test_run_point_finds_the_sweep_written_with_out(tmp_path, monkeypatch, capsy
 
 
 def test_the_committed_full_study_is_a_sweep_folder_that_opens_without_spec(capsys):
-    from orchestrator.analysis.rerun import load_rerun_spec
-    from orchestrator.analysis.table import load_results
-    from orchestrator.spec import load_spec
+    from cosim.analysis.rerun import load_rerun_spec
+    from cosim.analysis.table import load_results
+    from cosim.spec.loader import load_spec
 
     study = REPO / "examples" / "pick_and_place" / "study"
     table = load_results(study)

@@ -18,10 +18,10 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-import orchestrator
-from orchestrator.cli import main
-from orchestrator.cluster import ClusterFileError, read_cluster_file
-from orchestrator.sweep import SweepError
+import cosim
+from cosim.cli.main import main
+from cosim.parallel.cluster import ClusterFileError, read_cluster_file
+from cosim.studies.sweep import SweepError
 
 from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
 
@@ -77,7 +77,7 @@ def test_spec_cluster_of_separate_worker_processes_json_file(write_spec, tmp_pat
         "type": "distributed.deploy.subprocess.SubprocessCluster",
         "kwargs": {"n_workers": 0, "threads_per_worker": 1, "dashboard_address": None},
         "scale": {"n": 2}}))
-    df = orchestrator.sweep(str(spec), cluster=cluster, quiet=True)
+    df = cosim.sweep(str(spec), cluster=cluster, quiet=True)
     assert_exact(df)
     assert df["worker"].str.startswith("tcp://127.0.0.1:").all()
 
@@ -90,10 +90,10 @@ def test_dask_jobqueue_in_its_test_mode_and_a_slurm_job_script(write_spec, tmp_p
     cluster = write(tmp_path, "jobqueue.yaml", "type: dask_jobqueue.local.LocalCluster\n"
                     "kwargs: {cores: 1, memory: 1GB, processes: 1, scheduler_options: {dashboard_address: ':0'}}\n"
                     "scale: {jobs: 2}\n")
-    df = orchestrator.sweep(str(spec), cluster=cluster, quiet=True)
+    df = cosim.sweep(str(spec), cluster=cluster, quiet=True)
     assert_exact(df)
     # the README's Slurm recipe: a real SLURMCluster renders its sbatch script from the file's kwargs
-    from orchestrator.cluster import import_cluster_class
+    from cosim.parallel.cluster import import_cluster_class
 
     slurm = read_cluster_file(write(tmp_path, "slurm.yaml", readme_cluster_file("slurm.yaml")))
     with import_cluster_class(slurm)(**slurm.kwargs) as made:
@@ -104,11 +104,11 @@ def test_dask_jobqueue_in_its_test_mode_and_a_slurm_job_script(write_spec, tmp_p
 def test_dask_scheduler_address_is_honoured(write_spec, local_cluster, monkeypatch, tmp_path):
     spec = write_spec(ode_spec())
     monkeypatch.setenv("DASK_SCHEDULER_ADDRESS", local_cluster)
-    orchestrator.sweep(str(spec), out=tmp_path / "out", quiet=True)
+    cosim.sweep(str(spec), out=tmp_path / "out", quiet=True)
     assert json.loads((tmp_path / "out" / "metadata.json").read_text())["runs"][-1]["scheduler"] == local_cluster
     monkeypatch.setenv("DASK_SCHEDULER_ADDRESS", "tcp://127.0.0.1:9")  # nothing listens there
     with pytest.raises(SweepError, match="DASK_SCHEDULER_ADDRESS"):
-        orchestrator.sweep(str(spec), quiet=True)
+        cosim.sweep(str(spec), quiet=True)
 
 
 @pytest.mark.parametrize("text, field, fragment", [
@@ -162,7 +162,7 @@ def test_cluster_and_scheduler_together_are_refused(write_spec, tmp_path, capsys
 def test_the_readme_kubernetes_file_is_accepted_and_fails_cleanly_without_kubernetes(write_spec, tmp_path):
     """No Kubernetes cluster here: the README's file is read and checked as --cluster reads it, then its start
     fails with one message (no credentials, or dask-kubernetes not installed), exit 2, no traceback."""
-    from orchestrator.cluster import ALLOWED_FAILURES, import_cluster_class
+    from cosim.parallel.cluster import ALLOWED_FAILURES, import_cluster_class
 
     kube = write(tmp_path, "kube.yaml", readme_cluster_file("kube.yaml"))
     config = read_cluster_file(kube)
@@ -170,7 +170,7 @@ def test_the_readme_kubernetes_file_is_accepted_and_fails_cleanly_without_kubern
     assert config.kwargs["worker_command"].split()[-2:] == ["--nthreads", "1"]
     assert config.kwargs["env"] == {"DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES": str(ALLOWED_FAILURES)}
     spec = write_spec(ode_spec())
-    done = subprocess.run([sys.executable, "-m", "orchestrator.cli", "sweep", str(spec), "--cluster", str(kube)],
+    done = subprocess.run([sys.executable, "-m", "cosim.cli.main", "sweep", str(spec), "--cluster", str(kube)],
                           capture_output=True, text=True, timeout=300, cwd=tmp_path,
                           env={k: v for k, v in os.environ.items() if not k.startswith("KUBE")})
     assert done.returncode == 2, done.stderr

@@ -37,7 +37,7 @@ CLUSTERS = {
 
 def _interrupted_sweep(spec: Path, out: Path, where: list[str]) -> tuple[int, str]:
     """Start `cosim sweep`, SIGINT its process group once some rows are written; (exit code, stderr)."""
-    proc = subprocess.Popen([sys.executable, "-m", "orchestrator.cli", "sweep", str(spec), "--out", str(out),
+    proc = subprocess.Popen([sys.executable, "-m", "cosim.cli.main", "sweep", str(spec), "--out", str(out),
                              "--batch-size", "2", *where], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=dict(os.environ, PYTHONPATH=str(REPO)), start_new_session=True)
     try:
@@ -64,7 +64,7 @@ def test_ctrl_c_on_a_cluster_file_sweep(tmp_path, cluster):
     assert "cosim: interrupted" in err and "Traceback" not in err and "Error" not in err, err
     stored = len(pd.concat(pd.read_parquet(p) for p in (out / "parts").glob("part-*.parquet")))
     assert 0 < stored < 40
-    resumed = subprocess.run([sys.executable, "-m", "orchestrator.cli", "sweep", str(spec), "--out", str(out),
+    resumed = subprocess.run([sys.executable, "-m", "cosim.cli.main", "sweep", str(spec), "--out", str(out),
                               "--cluster", str(tmp_path / "cluster.json"), "--resume"], capture_output=True,
                              text=True, env=dict(os.environ, PYTHONPATH=str(REPO)), timeout=300)
     assert resumed.returncode == 0, resumed.stderr
@@ -77,7 +77,7 @@ def test_ctrl_c_on_a_scheduler_sweep_leaves_the_cluster_running(tmp_path, dask_p
     code, err = _interrupted_sweep(spec, out, ["--scheduler", address])
     assert code == 130, err
     assert "cosim: interrupted" in err and "Traceback" not in err and "Error" not in err, err
-    resumed = subprocess.run([sys.executable, "-m", "orchestrator.cli", "sweep", str(spec), "--out", str(out),
+    resumed = subprocess.run([sys.executable, "-m", "cosim.cli.main", "sweep", str(spec), "--out", str(out),
                               "--scheduler", address, "--resume"], capture_output=True, text=True,
                              env=dict(os.environ, PYTHONPATH=str(REPO)), timeout=300)
     assert resumed.returncode == 0, resumed.stderr  # the same scheduler and workers, still there

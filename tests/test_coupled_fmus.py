@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-import orchestrator
-from orchestrator import Execution, build_system, load_spec
+import cosim
+from cosim import Execution, build_system, load_spec
 
 A1, B1, A2, B2 = -1.0, 0.5, -2.0, 1.5
 X0 = np.array([1.0, -0.5])
@@ -40,7 +40,7 @@ def coupled_spec(step: float, algorithm: str) -> dict:
 
 
 def final_error(write_spec, step: float, algorithm: str) -> float:
-    result = orchestrator.run(str(write_spec(coupled_spec(step, algorithm), f"s_{algorithm}_{step}.json")))
+    result = cosim.run(str(write_spec(coupled_spec(step, algorithm), f"s_{algorithm}_{step}.json")))
     assert result.ok, result.message
     return float(np.max(np.abs(np.array([result.objectives["x1"], result.objectives["x2"]]) - exact(STOP))))
 

@@ -15,8 +15,8 @@ import time
 import pytest
 from dask.utils import key_split
 
-import orchestrator
-from orchestrator.dashboard import task_key
+import cosim
+from cosim.parallel.dashboard import task_key
 
 from .conftest import TESTS
 from .sweep_fixtures import free_port, kill_group, local_cluster, wait_for_workers  # noqa: F401  (fixture)
@@ -44,7 +44,7 @@ def test_the_dashboard_shows_one_progress_bar_per_sweep_and_each_task_names_its_
     from distributed import Client, get_task_stream
 
     with Client(local_cluster) as client, get_task_stream(client) as stream:
-        df = orchestrator.sweep(str(write_spec(ode_spec(7))), scheduler=local_cluster, batch_size=3, quiet=True)
+        df = cosim.sweep(str(write_spec(ode_spec(7))), scheduler=local_cluster, batch_size=3, quiet=True)
         time.sleep(1)  # the task stream plugin hears of the last task a moment after the sweep has its row
     assert (df["status"] == "ok").all()
     keys = sorted(str(task["key"]) for task in stream.data)
@@ -92,10 +92,10 @@ def test_failing_points_are_rows_and_leave_no_traceback_in_any_log(write_spec, l
         "objectives": {"y_end": {"signal": "bad.y", "reduce": "final"}},
         "design": {"parameters": {"bad.fail_at": {"values": [0.35, 5.0, 0.05]}}},
     }
-    df = orchestrator.sweep(str(write_spec(faults, "faults.json")), scheduler=address, timeout=1.5, batch_size=2,
+    df = cosim.sweep(str(write_spec(faults, "faults.json")), scheduler=address, timeout=1.5, batch_size=2,
                             quiet=True)
     assert list(df["status"]) == ["ok", "crashed", "timeout", "failed", "failed"]
-    df = orchestrator.sweep(str(write_spec(raising, "raising.json")), scheduler=address, quiet=True)
+    df = cosim.sweep(str(write_spec(raising, "raising.json")), scheduler=address, quiet=True)
     assert list(df["status"]) == ["failed", "ok", "failed"]
     assert "boom" in df.loc[0, "message"]
     from distributed import Client
@@ -114,7 +114,7 @@ def test_failing_points_are_rows_and_leave_no_traceback_in_any_log(write_spec, l
 
 DASHBOARD_SCRIPT = """
 import sys, urllib.error, urllib.request
-from orchestrator.evaluator import dask_client
+from cosim.parallel.evaluator import dask_client
 
 if __name__ == "__main__":
     with dask_client(1) as (_, _, link):

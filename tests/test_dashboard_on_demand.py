@@ -18,8 +18,8 @@ from .conftest import TESTS
 
 SCRIPT = """
 import sys, urllib.error, urllib.request
-from orchestrator.dashboard_points import open_board
-from orchestrator.evaluator import dask_client
+from cosim.parallel.dashboard_points import open_board
+from cosim.parallel.evaluator import dask_client
 
 def status(url):
     try:

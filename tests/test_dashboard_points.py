@@ -1,4 +1,4 @@
-"""The dashboard's points page counts points as they finish inside a batch (orchestrator.dashboard_points).
+"""The dashboard's points page counts points as they finish inside a batch (cosim.parallel.dashboard_points).
 
 Real `cosim sweep` processes on a local cluster, a cluster file and a `dask
 scheduler` that cannot import cosim; the page is read with real HTTP requests.
@@ -29,7 +29,7 @@ GATE_UNIT = '''
 import os
 import time
 
-from orchestrator import PythonUnit, Variable
+from cosim import PythonUnit, Variable
 
 
 class Gate(PythonUnit):
@@ -81,7 +81,7 @@ class CosimProcess:
     """`cosim sweep` as a process; its stderr is read as it comes (the start line names the pages)."""
 
     def __init__(self, args: list[str], env: dict[str, str] | None = None):
-        self.proc = subprocess.Popen([sys.executable, "-m", "orchestrator.cli", "sweep", *args], text=True,
+        self.proc = subprocess.Popen([sys.executable, "-m", "cosim.cli.main", "sweep", *args], text=True,
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True,
                                      env={**os.environ, "PYTHONPATH": str(ROOT), **(env or {})})
         self.lines: list[str] = []
@@ -157,7 +157,7 @@ class NoCosim:
     """This scheduler cannot import cosim (as on a machine where it is not installed)."""
 
     def find_spec(self, name, path=None, target=None):
-        if name.split(".")[0] in ("orchestrator", "models", "fmus"):
+        if name.split(".")[0] in ("cosim", "orchestrator", "models", "fmus"):
             raise ModuleNotFoundError(f"No module named {name!r} (blocked by the test)")
         return None
 
@@ -225,8 +225,8 @@ def test_a_scheduler_that_cannot_import_cosim_is_refused_before_any_work(tmp_pat
     from distributed import Client
 
     address, _ = dask_commands(without_cosim=True)
-    with Client(address, timeout=10) as client, pytest.raises(ModuleNotFoundError, match="orchestrator"):
-        client.run_on_scheduler(importlib.import_module, "orchestrator")
+    with Client(address, timeout=10) as client, pytest.raises(ModuleNotFoundError, match="cosim"):
+        client.run_on_scheduler(importlib.import_module, "cosim")
     spec = _gate_spec(tmp_path / "project")
     cosim = CosimProcess([str(spec), "--out", str(tmp_path / "out"), "--scheduler", address])
     try:
@@ -245,7 +245,7 @@ def test_an_optimization_counts_its_evaluations_on_the_page(write_spec, tmp_path
 
     from distributed import Client
 
-    from orchestrator.optimize import Optimization
+    from cosim.studies.optimize import Optimization
 
     from .conftest import python_unit
 
@@ -273,7 +273,7 @@ def test_points_of_a_task_lost_with_its_workers_are_counted_once(write_spec, tmp
     import dask
     from distributed import LocalCluster
 
-    import orchestrator
+    import cosim
 
     from .conftest import TESTS
 
@@ -286,7 +286,7 @@ def test_points_of_a_task_lost_with_its_workers_are_counted_once(write_spec, tmp
                 "experiment": {"stop": 0.5, "step": 0.1},
                 "objectives": {"y_end": {"signal": "sq.y", "reduce": "final"}},
                 "design": {"parameters": {"sq.x": {"values": [float(i) for i in range(8)]}}}}
-        df = orchestrator.sweep(str(write_spec(spec)), scheduler=cluster.scheduler_address, batch_size=3,
+        df = cosim.sweep(str(write_spec(spec)), scheduler=cluster.scheduler_address, batch_size=3,
                                 quiet=True)
         assert len(df) == 8 and list(df["status"] != "ok") == [x == 4.0 for x in df["sq.x"]]
         final = _study(urljoin(cluster.dashboard_link, "cosim"),

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from orchestrator.design import DesignSpace, expression_name, range_values
-from orchestrator.problems import SpecError
-from orchestrator.spec import spec_from_dict
+from cosim.errors import SpecError
+from cosim.spec.design import DesignSpace, expression_name, range_values
+from cosim.spec.loader import spec_from_dict
 
 from .conftest import python_unit
 

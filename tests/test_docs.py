@@ -2,7 +2,7 @@
 
 Commands run in a scratch folder that mirrors the repository (its ``examples/`` copied, so that scripts
 writing beside themselves never touch the committed files); ``cosim`` is this checkout's CLI
-(``python -m orchestrator.cli``). Commands that take minutes (the full studies, the interactive window) are
+(``python -m cosim.cli.main``). Commands that take minutes (the full studies, the interactive window) are
 run by the ``slow`` tests: ``python -m pytest -m slow``.
 """
 
@@ -19,7 +19,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from orchestrator.cli import _parser
+from cosim.cli.main import _parser
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE_READMES = sorted((REPO / "examples").glob("*/README.md"))
@@ -44,7 +44,7 @@ def run_command(command: str, cwd: Path, timeout: float = 600) -> subprocess.Com
     """Run a documented command line; ``cosim`` and ``python`` are this checkout's CLI and interpreter."""
     argv = shlex.split(command)
     if argv[0] == "cosim":
-        argv = [sys.executable, "-m", "orchestrator.cli", *argv[1:]]
+        argv = [sys.executable, "-m", "cosim.cli.main", *argv[1:]]
     elif argv[0] == "python":
         argv = [sys.executable, *argv[1:]]
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]),
@@ -85,7 +85,7 @@ def test_readme_main_job_and_the_commands_that_look_at_it(scratch):
 
 
 def test_readme_python_api_block_runs_as_a_script(scratch):
-    (api,) = [b for b in fenced_blocks(REPO / "README.md", "python") if "orchestrator.sweep" in b]
+    (api,) = [b for b in fenced_blocks(REPO / "README.md", "python") if "cosim.studies.sweep" in b]
     script = scratch / "api_example.py"
     script.write_text(api)
     done = run_command(f"python {script}", scratch)
@@ -206,7 +206,7 @@ def run_shell_block(lines: list[str], root: Path, venv_dir: Path) -> None:
             assert done.returncode == 0, (line, done.stderr[-2000:])
             continue
         assert argv[0] in ("cosim", "python"), f"documented command not runnable by this test: {line}"
-        argv = [python, "-m", "orchestrator.cli", *argv[1:]] if argv[0] == "cosim" else [python, *argv[1:]]
+        argv = [python, "-m", "cosim.cli.main", *argv[1:]] if argv[0] == "cosim" else [python, *argv[1:]]
         env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]),
                    MPLBACKEND="Agg")
         done = subprocess.run(argv, cwd=cwd, env=env, capture_output=True, text=True, timeout=3600)

@@ -1,4 +1,4 @@
-"""The results-folder rules every driver shares (orchestrator/driver.py), through the real Sweep and Optimization.
+"""The results-folder rules every driver shares (src/cosim/studies/driver.py), through the real Sweep and Optimization.
 
 No Dask runs here: both drivers check their folder when they are made.
 """
@@ -7,10 +7,10 @@ from __future__ import annotations
 
 import pytest
 
-from orchestrator.optimize import Optimization, OptimizeError
-from orchestrator.results import ResultsStore
-from orchestrator.sweep import Sweep, SweepError
-from orchestrator.validate import check_spec
+from cosim.results.store import ResultsStore
+from cosim.studies.optimize import Optimization, OptimizeError
+from cosim.studies.sweep import Sweep, SweepError
+from cosim.system.validate import check_spec
 
 from .test_optimize import bowls_spec
 

@@ -6,23 +6,34 @@ import pickle
 
 import pytest
 
-from orchestrator import errors
-from orchestrator.cli import main
-from orchestrator.errors import (EXIT_INTERNAL, EXIT_OK, EXIT_RUN_FAILED, EXIT_USAGE, CosimError, InternalError,
-                                 Problem, UnitError, UsageError, UserError, exit_code)
+from cosim import errors
+from cosim.cli.main import main
+from cosim.errors import (
+    EXIT_INTERNAL,
+    EXIT_OK,
+    EXIT_RUN_FAILED,
+    EXIT_USAGE,
+    CosimError,
+    InternalError,
+    Problem,
+    UnitError,
+    UsageError,
+    UserError,
+    exit_code,
+)
 
 
 def old_names():
     """Every error class cosim had before the family, importable where it always was."""
+    from cosim.analysis.table import AnalysisError
+    from cosim.cli.main import UsageError as CliUsageError
+    from cosim.errors import SpecError
     from cosim.fmus.build import FmuBuildError
     from cosim.fmus.model_description import ModelJsonError
-    from orchestrator.analysis.table import AnalysisError
-    from orchestrator.cli import UsageError as CliUsageError
-    from orchestrator.expressions import ExpressionError
-    from orchestrator.problems import SpecError
-    from orchestrator.sweep import SweepError
-    from orchestrator.unit import UnitError as OldUnitError
-    from orchestrator.units.fmu import FmuProblems
+    from cosim.spec.expressions import ExpressionError
+    from cosim.studies.sweep import SweepError
+    from cosim.units.fmu.description import FmuProblems
+    from cosim.units.protocol import UnitError as OldUnitError
 
     return {"SpecError": SpecError, "UsageError": CliUsageError, "AnalysisError": AnalysisError,
             "ExpressionError": ExpressionError, "SweepError": SweepError, "FmuProblems": FmuProblems,
@@ -49,7 +60,7 @@ def test_exit_codes_come_from_one_mapping():
 
 
 def test_user_errors_carry_structured_problems_and_survive_pickling():
-    from orchestrator.units.fmu import FmuProblems
+    from cosim.units.fmu.description import FmuProblems
 
     problem = Problem("spec.json", "$.units.a.fmu", "file not found", "check the path")
     error = FmuProblems("a.fmu", [problem, "plain text"])
@@ -70,7 +81,7 @@ def test_every_subcommand_maps_errors_through_main(tmp_path, capsys, monkeypatch
         == EXIT_USAGE
     assert "no such results table" in capsys.readouterr().err
 
-    from orchestrator import validate
+    from cosim.system import validate
 
     def broken(path, experiment=None):  # check_spec's signature (experiment: command-line overrides)
         raise KeyError("an assumption of ours")

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.sweep import Sweep
+from cosim.studies.sweep import Sweep
 
 from .sweep_fixtures import free_port, kill_group, wait_for_workers
 from .units_for_cluster import TABLE_GAIN_SOURCE
@@ -26,7 +26,7 @@ from .units_for_cluster import TABLE_GAIN_SOURCE
 ROOT = Path(__file__).resolve().parent.parent
 
 UNIT_SOURCE = '''
-from orchestrator import PythonUnit, Variable
+from cosim import PythonUnit, Variable
 
 
 class Scale(PythonUnit):
@@ -131,7 +131,7 @@ def test_declared_data_files_travel_to_foreign_workers(tmp_path, foreign_workers
 def test_a_data_file_path_is_read_from_the_spec_folder_whatever_the_working_directory(tmp_path, monkeypatch):
     import json
 
-    from orchestrator import run
+    from cosim import run
 
     folder = tmp_path / "project"
     folder.mkdir()
@@ -151,8 +151,8 @@ def test_a_data_file_path_is_read_from_the_spec_folder_whatever_the_working_dire
 
 
 def test_data_files_must_name_string_parameters(write_spec, tmp_path):
-    from orchestrator.problems import SpecError
-    from orchestrator.validate import check_spec
+    from cosim.errors import SpecError
+    from cosim.system.validate import check_spec
 
     (tmp_path / "bad_units.py").write_text(TABLE_GAIN_SOURCE.replace('data_files = ("table",)', 'data_files = ("k",)'))
     spec = write_spec({"name": "bad", "units": {"g": {"python": "bad_units.py:TableGain"}},
@@ -167,7 +167,7 @@ def test_the_readme_data_files_unit_reads_its_table_from_the_spec_folder(tmp_pat
     import json
     import re
 
-    from orchestrator import run
+    from cosim import run
 
     readme = (ROOT / "README.md").read_text(encoding="utf-8")
     (block,) = [b for b in re.findall(r"```python\n(.*?)```", readme, re.S) if "class TableGain" in b]
@@ -189,7 +189,7 @@ ROBOT_UNIT_SOURCE = '''
 import re
 from pathlib import Path
 
-from orchestrator import PythonUnit, Variable
+from cosim import PythonUnit, Variable
 
 
 class RobotMass(PythonUnit):
@@ -243,7 +243,7 @@ def test_a_data_folder_travels_whole_to_foreign_workers(tmp_path, foreign_worker
 def test_a_data_folder_above_the_size_limit_is_refused_naming_it_and_the_fix(tmp_path, monkeypatch, capsys):
     import json
 
-    from orchestrator.cli import main
+    from cosim.cli.main import main
 
     folder = tmp_path / "project"
     folder.mkdir()

@@ -20,9 +20,9 @@ import pytest
 from fmpy import read_model_description, simulate_fmu
 from fmpy.fmi3 import FMU3Slave
 
-import orchestrator
+import cosim
+from cosim.cli.main import main
 from cosim.fmus.conformance import available, ensure_built
-from orchestrator.cli import main
 
 from .conftest import python_unit
 
@@ -55,7 +55,7 @@ def test_every_type_runs_like_fmpy(write_spec, types_fmu):
     outputs = [f"y_{t}" for t in INT_TYPES] + ["y_float32", "mode", "odd"]
     spec = {"units": {"t": {"fmu": str(types_fmu)}}, "experiment": {"stop": 0.5, "step": 0.1},
             "record": ["t.*"]}
-    result = orchestrator.run(str(write_spec(spec)), record=True)
+    result = cosim.run(str(write_spec(spec)), record=True)
     assert result.ok, result.message
     ours = result.traces
     strings, binaries = [], []
@@ -156,7 +156,7 @@ def test_structural_parameters_size_arrays(capsys, write_spec, n, m):
     path = write_spec(spec)
     code, text = cli(capsys, "inspect", str(path))
     assert code == 0 and "s: FMI 3.0" in text
-    result = orchestrator.run(str(path), record=True)
+    result = cosim.run(str(path), record=True)
     assert result.ok, result.message
     traces = result.traces
     assert [c for c in traces.columns if c.startswith("s.y")] == [f"s.y[{i}]" for i in range(1, n + 1)]
@@ -191,7 +191,7 @@ def test_stair_ends_the_run_early_like_fmpy(write_spec, version, step):
     spec = {"units": {"stair": {"fmu": str(fmu)}}, "experiment": {"stop": 10.0, "step": step},
             "record": ["stair.*"], "objectives": {"top": {"signal": "stair.counter", "reduce": "final"},
                                                   "t_top": {"signal": "stair.counter", "reduce": "time_of_max"}}}
-    result = orchestrator.run(str(write_spec(spec)), record=True)
+    result = cosim.run(str(write_spec(spec)), record=True)
     reference = simulate_fmu(str(fmu), stop_time=10.0, output_interval=step)
     assert result.ok and result.message.startswith("stopped early: unit 'stair' ended the simulation"), result.message
     assert result.end_time == pytest.approx(reference["time"][-1], abs=1e-12)
@@ -207,7 +207,7 @@ def test_early_stop_can_be_a_failure(write_spec):
     spec = {"units": {"stair": {"fmu": str(ensure_built("stair", 2))}},
             "experiment": {"stop": 10.0, "step": 0.5, "early_stop": "fail"},
             "objectives": {"top": {"signal": "stair.counter", "reduce": "final"}}}
-    result = orchestrator.run(str(write_spec(spec)))
+    result = cosim.run(str(write_spec(spec)))
     assert result.status == "failed" and result.exit_code == 1
     assert "stopped early" in result.message and "early_stop is 'fail'" in result.message
     assert result.end_time == 9.0
@@ -226,12 +226,12 @@ def test_string_outputs_in_a_recorded_table_do_not_break_a_player(write_spec, tm
     table = tmp_path / "rec.csv"
     pd.DataFrame({"time": [0.0, 1.0], "x": [1.0, 3.0], "label": ["a", "b"]}).to_csv(table, index=False)
     spec = {"units": {"p": {"player": "rec.csv"}}, "experiment": {"stop": 1.0, "step": 0.5}, "record": ["p.*"]}
-    result = orchestrator.run(str(write_spec(spec)), record=True)
+    result = cosim.run(str(write_spec(spec)), record=True)
     assert result.ok, result.message
     assert list(result.traces.columns) == ["time", "p.x"] and list(result.traces["p.x"]) == [1.0, 2.0, 3.0]
     spec["units"]["p"]["columns"] = ["label"]
-    with pytest.raises(orchestrator.SpecError, match="column\\(s\\) label are not numbers"):
-        orchestrator.build_system(orchestrator.load_spec(write_spec(spec, "s2.json")))
+    with pytest.raises(cosim.SpecError, match="column\\(s\\) label are not numbers"):
+        cosim.build_system(cosim.load_spec(write_spec(spec, "s2.json")))
 
 
 def _without_dependencies(source: Path, target: Path) -> Path:
@@ -290,8 +290,8 @@ def test_inspect_counts_fmi2_arrays_once_and_reports_needs_execution_tool(capsys
 
 
 def test_fmi_call_names_follow_the_fmi_version():
-    from orchestrator.units.fmi2 import Fmi2Unit
-    from orchestrator.units.fmi3 import Fmi3Unit
+    from cosim.units.fmu.fmi2 import Fmi2Unit
+    from cosim.units.fmu.fmi3 import Fmi3Unit
 
     assert Fmi2Unit.call_name(Fmi2Unit, "Set", "Enumeration") == "fmi2SetInteger"
     assert Fmi3Unit.call_name(Fmi3Unit, "Set", "Enumeration") == "fmi3SetInt64"
@@ -301,14 +301,14 @@ def test_fmi_call_names_follow_the_fmi_version():
 def test_a_python_unit_can_end_the_run_early(write_spec):
     spec = {"units": {"e": {"python": python_unit("EndsAtHalf")}}, "experiment": {"stop": 1.0, "step": 0.1},
             "record": ["e.n"], "objectives": {"n": {"signal": "e.n", "reduce": "final"}}}
-    result = orchestrator.run(str(write_spec(spec)), record=True)
+    result = cosim.run(str(write_spec(spec)), record=True)
     assert result.ok and result.message == "stopped early: unit 'e' reached its end at t=0.5 (stop time 1)"
     assert list(result.traces["e.n"]) == [0, 1, 2, 3, 4, 5] and result.objectives["n"] == 5.0
 
 
 def test_reference_check_script_on_our_own_fmus(tmp_path):
-    """fmus/conformance/reference_check.py (used on the Modelica Reference FMUs, see docs/fmi-support.md)."""
-    from cosim.fmus.conformance.reference_check import check
+    """cosim.cli.reference_check (used on the Modelica Reference FMUs, see docs/fmi-support.md)."""
+    from cosim.cli.reference_check import check
 
     stair = check(ensure_built("stair", 3), tmp_path)
     assert stair["result"] == "exact" and "to t=9, stopped early" in stair["detail"]
@@ -330,11 +330,11 @@ def test_every_conformance_fmu_goes_through_cosim_inspect(capsys, name, version)
 def test_trace_figures_leave_text_columns_out(write_spec):
     from matplotlib.figure import Figure
 
-    from orchestrator.analysis.traces import trace_groups, traces_figure
+    from cosim.analysis.traces import trace_groups, traces_figure
 
     spec = {"units": {"t": {"fmu": str(ensure_built("types", 3))}}, "experiment": {"stop": 0.3, "step": 0.1},
             "record": ["t.*"]}
-    traces = orchestrator.run(str(write_spec(spec)), record=True).traces
+    traces = cosim.run(str(write_spec(spec)), record=True).traces
     names = [c for _, cols in trace_groups(traces) for c in cols]
     assert "t.label" not in names and "t.data_out" not in names and "t.y_int8" in names
     assert len(traces_figure(Figure(), traces)) == len(trace_groups(traces))

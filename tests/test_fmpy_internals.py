@@ -1,4 +1,4 @@
-"""The fmpy internals behind orchestrator/units/fmpy_internals.py still mean what cosim assumes.
+"""The fmpy internals behind src/cosim/units/fmu/fmpy_internals.py still mean what cosim assumes.
 
 Checked on real FMUs (built from fmus/linear_ode) with fmpy's own slave classes: the direct library calls
 give what fmpy's public wrappers give, within the fmpy version range pyproject.toml declares.
@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 from packaging.requirements import Requirement
 
-from orchestrator.units import fmpy_internals
+from cosim.units.fmu import fmpy_internals
 
 ROOT = Path(__file__).resolve().parent.parent
 

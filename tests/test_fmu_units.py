@@ -10,10 +10,10 @@ import tempfile
 import numpy as np
 import pytest
 
-import orchestrator
-from orchestrator import Execution, build_system, load_spec
-from orchestrator.unit import resolve_port
-from orchestrator.units.fmu import EXTRACTED, FmuUnitType
+import cosim
+from cosim import Execution, build_system, load_spec
+from cosim.units.fmu.description import EXTRACTED, FmuUnitType
+from cosim.units.protocol import resolve_port
 
 from .conftest import python_unit
 
@@ -48,7 +48,7 @@ def test_an_fmi_error_names_unit_time_status_and_log(built_fmu, write_spec, vers
         "experiment": {"stop": 1.0, "step": 0.1},
         "objectives": {"y": {"signal": "f.y", "reduce": "final"}},
     })
-    result = orchestrator.run(str(spec))
+    result = cosim.run(str(spec))
     assert result.status == "failed"
     assert f"unit 'f' at t=0.4: fmi{version}DoStep returned Error" in result.message
     assert "FMU log:" in result.message
@@ -61,7 +61,7 @@ def test_nan_output_fails_the_run(built_fmu, write_spec):
         "experiment": {"stop": 1.0, "step": 0.1},
         "objectives": {"y": {"signal": "f.y", "reduce": "max"}},
     })
-    result = orchestrator.run(str(spec))
+    result = cosim.run(str(spec))
     assert result.status == "failed" and "not finite: y" in result.message
 
 
@@ -77,7 +77,7 @@ def test_units_are_terminated_and_temporary_folders_removed(built_fmu, write_spe
     })
     tmp = tmp_path / "tmp"
     tmp.mkdir()
-    code = ("import orchestrator, sys, glob, os; r = orchestrator.run(sys.argv[1]); "
+    code = ("import cosim, sys, glob, os; r = cosim.run(sys.argv[1]); "
             "print(r.status, len(glob.glob(os.path.join(sys.argv[2], 'cosim_fmu_*'))))")
     out = subprocess.run([sys.executable, "-c", code, str(spec), str(tmp)], capture_output=True, text=True,
                          env={**os.environ, "TMPDIR": str(tmp)}, check=True).stdout.split()
@@ -139,8 +139,8 @@ def energy_spec(energy_unit: dict) -> dict:
     {"python": "models.motor_gear_energy:MotorGearEnergy"},
 ])
 def test_energy_fmu_and_python_unit_are_interchangeable(write_spec, energy_unit):
-    reference = orchestrator.run(str(write_spec(energy_spec({"fmu": "builtin:motor_gear_energy_fmi3"}), "ref.json")))
-    other = orchestrator.run(str(write_spec(energy_spec(energy_unit), "other.json")))
+    reference = cosim.run(str(write_spec(energy_spec({"fmu": "builtin:motor_gear_energy_fmi3"}), "ref.json")))
+    other = cosim.run(str(write_spec(energy_spec(energy_unit), "other.json")))
     assert reference.ok and other.ok, (reference.message, other.message)
     assert reference.objectives["energy"] > 1.0  # a real, non-trivial amount of energy
     assert reference.objectives["no_recuperation"] > reference.objectives["energy"]  # braking phases exist

@@ -16,16 +16,16 @@ from pathlib import Path
 
 import pytest
 
-import orchestrator
-from orchestrator.archive import ArchiveError, ArchiveLimits, check_archive, safe_extract
-from orchestrator.units.fmu import FmuProblems, FmuUnitType, platform_folders
+import cosim
+from cosim.units.fmu.description import FmuProblems, FmuUnitType, platform_folders
+from cosim.util.archive import ArchiveError, ArchiveLimits, check_archive, safe_extract
 
 REPO = Path(__file__).resolve().parent.parent
 
 
 def _cosim(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
     full_env = dict(os.environ, PYTHONPATH=str(REPO), **(env or {}))
-    return subprocess.run([sys.executable, "-m", "orchestrator.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "cosim.cli.main", *args], capture_output=True, text=True,
                           env=full_env, timeout=120)
 
 
@@ -74,7 +74,7 @@ def test_a_model_identifier_with_a_path_is_refused(built_fmu, write_spec, tmp_pa
 
 def test_the_plain_model_identifier_still_runs(built_fmu, write_spec, tmp_path):
     fmu = _rewrite(built_fmu("linear_ode", 2), tmp_path / "copy.fmu")
-    result = orchestrator.run(str(_spec(write_spec, fmu)))
+    result = cosim.run(str(_spec(write_spec, fmu)))
     assert result.status == "ok", result.message
     assert result.objectives["y"] == pytest.approx(math.exp(-0.2), rel=1e-9)  # x0 = 1, a = -1, u = 0
 
@@ -151,8 +151,8 @@ def test_members_leaving_the_folder_are_refused(built_fmu, tmp_path, name):
 
 def test_a_sweep_worker_refuses_an_fmu_the_client_was_allowed_to_use(built_fmu, write_spec, tmp_path, monkeypatch):
     """The limits travel with the payload: a worker child applies the client's limits, not its own."""
-    from orchestrator.isolation import IsolatedRunner, make_payload
-    from orchestrator.validate import check_spec
+    from cosim.parallel.isolation import IsolatedRunner, make_payload
+    from cosim.system.validate import check_spec
 
     fmu = _rewrite(built_fmu("linear_ode", 2), tmp_path / "bomb.fmu",
                    extra=[(zipfile.ZipInfo("resources/noise.bin"), os.urandom(8 << 20))])

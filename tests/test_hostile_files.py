@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.sweep import OutputError, Sweep
+from cosim.studies.sweep import OutputError, Sweep
 
 from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
 
@@ -24,7 +24,7 @@ REPO = Path(__file__).resolve().parent.parent
 
 UNIT = """
 import time
-from orchestrator import PythonUnit, Variable
+from cosim import PythonUnit, Variable
 
 class Triple(PythonUnit):
     variables = (Variable("k", "parameter", start=1.0), Variable("pause", "parameter", start=0.0),
@@ -54,7 +54,7 @@ def _exact(table, points: int) -> None:
 
 
 def _cosim(*args: str, timeout: float = 180, **popen) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "orchestrator.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "cosim.cli.main", *args], capture_output=True, text=True,
                           env=dict(os.environ, PYTHONPATH=str(REPO)), timeout=timeout, **popen)
 
 
@@ -137,7 +137,7 @@ def test_a_full_filesystem_mid_sweep_then_resume_after_freeing_space(tmp_path):
 def test_ctrl_c_and_kill_print_no_traceback_and_resume_is_exact(tmp_path, how):
     spec = _spec(tmp_path, 40, pause=0.05)
     out = tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "orchestrator.cli", "sweep", str(spec), "--out", str(out),
+    proc = subprocess.Popen([sys.executable, "-m", "cosim.cli.main", "sweep", str(spec), "--out", str(out),
                              "--workers", "2", "--batch-size", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=dict(os.environ, PYTHONPATH=str(REPO)), start_new_session=True)
     deadline = time.monotonic() + 120

@@ -12,12 +12,12 @@ from pathlib import Path
 
 import pytest
 
-import orchestrator
-from orchestrator.cli import main
-from orchestrator.design import DesignSpace
-from orchestrator.expressions import Expression, ExpressionError
-from orchestrator.problems import SpecError
-from orchestrator.spec import load_spec
+import cosim
+from cosim.cli.main import main
+from cosim.errors import SpecError
+from cosim.spec.design import DesignSpace
+from cosim.spec.expressions import Expression, ExpressionError
+from cosim.spec.loader import load_spec
 
 from .conftest import python_unit
 
@@ -48,7 +48,7 @@ def _validate(capsys, path: Path) -> tuple[int, str]:
 
 def _cosim(*args: str, env: dict | None = None, timeout: float = 120) -> subprocess.CompletedProcess:
     full_env = dict(os.environ, PYTHONPATH=str(REPO), **(env or {}))
-    return subprocess.run([sys.executable, "-m", "orchestrator.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "cosim.cli.main", *args], capture_output=True, text=True,
                           env=full_env, timeout=timeout)
 
 
@@ -184,7 +184,7 @@ def test_a_hostile_constraint_through_the_command_line(tmp_path):
 def test_a_hostile_objective_fails_its_point_at_once(tmp_path):
     spec = _base()
     spec["objectives"]["big"] = {"expr": "9**9**9 * y"}
-    result = orchestrator.run(str(_write(tmp_path, json.dumps(spec))))
+    result = cosim.run(str(_write(tmp_path, json.dumps(spec))))
     assert result.status == "failed" and "the result is too large" in result.message
 
 

@@ -15,15 +15,15 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.folder_lock import FolderInUse, FolderLock
-from orchestrator.sweep import Sweep, SweepError
+from cosim.results.lock import FolderInUse, FolderLock
+from cosim.studies.sweep import Sweep, SweepError
 
 from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
 
 REPO = Path(__file__).resolve().parent.parent
 
 SCALE_UNIT = """
-from orchestrator import PythonUnit, Variable
+from cosim import PythonUnit, Variable
 
 class Scale(PythonUnit):
     variables = (Variable("k", "parameter", start=1.0), Variable("y", "output", start=0.0))
@@ -35,7 +35,7 @@ class Scale(PythonUnit):
 
 def _cosim(*args: str, env: dict | None = None, timeout: float = 120, cwd: Path | None = None):
     full_env = dict(os.environ, PYTHONPATH=str(REPO), **(env or {}))
-    return subprocess.run([sys.executable, "-m", "orchestrator.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "cosim.cli.main", *args], capture_output=True, text=True,
                           env=full_env, timeout=timeout, cwd=cwd)
 
 
@@ -86,7 +86,7 @@ def test_a_second_sweep_on_the_same_folder_sees_the_lock(tmp_path):
     out = tmp_path / "out"
     holder = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
         import sys, time
-        from orchestrator.folder_lock import FolderLock
+        from cosim.results.lock import FolderLock
         lock = FolderLock({str(out)!r})
         lock.acquire()
         print("locked", flush=True)
@@ -187,7 +187,7 @@ def test_a_module_unit_that_ends_the_process_at_import_is_reported(tmp_path):
 @pytest.mark.parametrize("value", ["nan", "inf", "-1", "0"])
 def test_nonsense_timeouts_are_refused(tmp_path, capsys, command, value):
     """Every driver refuses a timeout that would crash every point or never stop one, before any work."""
-    from orchestrator.cli import main
+    from cosim.cli.main import main
 
     spec = _scale_spec(tmp_path, 1.0)
     code = main([command, str(spec), "--out", str(tmp_path / "out"), f"--timeout={value}"])

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.isolation import IsolatedRunner, make_payload
-from orchestrator.sweep import Sweep
-from orchestrator.validate import check_spec
+from cosim.parallel.isolation import IsolatedRunner, make_payload
+from cosim.studies.sweep import Sweep
+from cosim.system.validate import check_spec
 
 from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
 
@@ -21,7 +21,7 @@ REPO = Path(__file__).resolve().parent.parent
 
 UNIT = '''
 import os, pickle, struct, sys, time
-from orchestrator import PythonUnit, Variable
+from cosim import PythonUnit, Variable
 
 _LEAK = []
 
@@ -33,7 +33,7 @@ class Misbehave(PythonUnit):
                  Variable("pid", "output", start=0.0), Variable("y", "output", start=0.0))
 
     def do_step(self, t, h):
-        channel = int(sys.argv[2])  # the child's pipe to its worker (see orchestrator.isolation)
+        channel = int(sys.argv[2])  # the child's pipe to its worker (see cosim.parallel.isolation)
         if self.mode == 1:
             os.write(channel, b"\\xff\\xff\\xff\\x7fjunk")  # a length header of 2 GB
         elif self.mode == 2:
@@ -125,7 +125,7 @@ def test_the_memory_limit_of_a_child_fails_the_point_not_the_machine(tmp_path, m
 
 
 def _cosim(*args: str, env: dict, timeout: float = 180) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "orchestrator.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "cosim.cli.main", *args], capture_output=True, text=True,
                           env=dict(os.environ, PYTHONPATH=str(REPO), **env), timeout=timeout)
 
 

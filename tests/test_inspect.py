@@ -5,7 +5,7 @@ from __future__ import annotations
 import pandas as pd
 import pytest
 
-from orchestrator.cli import main
+from cosim.cli.main import main
 
 from .conftest import TESTS
 

@@ -66,7 +66,7 @@ def test_the_readmes_kube_yaml_stops_with_one_message_before_any_cluster(tmp_pat
         port = free_port()  # nothing listens there
         (tmp_path / "kubeconfig").write_text(KUBECONFIG.format(port=port))
         env["KUBECONFIG"] = str(tmp_path / "kubeconfig")
-    done = subprocess.run([str(kubernetes_python), "-m", "orchestrator.cli", "sweep",
+    done = subprocess.run([str(kubernetes_python), "-m", "cosim.cli.main", "sweep",
                            str(REPO / "examples" / "bouncing_ball" / "spec.json"), "--out", str(tmp_path / "out"),
                            "--cluster", str(tmp_path / "kube.yaml")], capture_output=True, text=True, env=env,
                           timeout=300)

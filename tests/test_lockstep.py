@@ -1,4 +1,4 @@
-"""Lock-step runs (orchestrator.lockstep): K points through one stepping loop give the single runs' results.
+"""Lock-step runs (cosim.execution.lockstep): K points through one stepping loop give the single runs' results.
 
 The pick-and-place system has vectorised twins for its trajectory and robot
 units and K instances of its energy FMU; every objective, the step count and
@@ -16,10 +16,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from orchestrator import build_system, load_spec
-from orchestrator.isolation import PointRunner
-from orchestrator.lockstep import LockstepRunner, can_run_in_lockstep, instantiate, run_lockstep
-from orchestrator.point import assignments_for, run_point
+from cosim import build_system, load_spec
+from cosim.execution.lockstep import LockstepRunner, can_run_in_lockstep, instantiate, run_lockstep
+from cosim.execution.point import assignments_for, run_point
+from cosim.parallel.isolation import PointRunner
 
 FOLDER = Path(__file__).resolve().parents[1] / "examples" / "pick_and_place"
 Q22, Q24 = "traj.waypoints[9]", "traj.waypoints[11]"
@@ -143,8 +143,8 @@ def test_the_runner_times_two_points_alone_then_groups_the_rest():
 
 
 def test_a_sweep_child_runs_its_points_in_lockstep_groups(monkeypatch):
-    """Through the sweep's child process (orchestrator.isolation): rows of one group share their run time."""
-    from orchestrator.isolation import IsolatedRunner, make_payload
+    """Through the sweep's child process (cosim.parallel.isolation): rows of one group share their run time."""
+    from cosim.parallel.isolation import IsolatedRunner, make_payload
 
     monkeypatch.setenv("COSIM_LOCKSTEP_SECONDS", "1000")  # groups of the largest size however loaded the machine
 
@@ -166,8 +166,8 @@ def test_a_sweep_child_runs_its_points_in_lockstep_groups(monkeypatch):
 @pytest.mark.parametrize("mode, status, fragment", [(1, "crashed", "SIGSEGV"), (2, "timeout", "timeout of 5 s")])
 def test_a_point_that_kills_or_hangs_its_lockstep_group_alone_gets_the_blame(tmp_path, monkeypatch, mode, status,
                                                                              fragment):
-    """The child announces each group; when a group dies, its points run again one by one (orchestrator.isolation)."""
-    from orchestrator.isolation import IsolatedRunner, make_payload
+    """The child announces each group; when a group dies, its points run again one by one (cosim.parallel.isolation)."""
+    from cosim.parallel.isolation import IsolatedRunner, make_payload
 
     monkeypatch.setenv("COSIM_LOCKSTEP_SECONDS", "1000")  # the culprit surely runs in a group (travels in the payload)
 

@@ -15,7 +15,7 @@ import time
 
 import pytest
 
-import orchestrator
+import cosim
 
 from .conftest import TESTS
 from .sweep_fixtures import worker_process_cluster, worker_processes  # noqa: F401  (fixture)
@@ -54,7 +54,7 @@ def test_kill_9_of_a_worker_mid_sweep_loses_nothing(write_spec, tmp_path, monkey
     killer.start()
     # 5 steps of 0.1 s: each point runs 0.5 s, so the kill lands inside a batch of 3 points
     with worker_process_cluster() as address:  # started now: its workers see SLOW_SQUARE_MARKERS
-        df = orchestrator.sweep(str(write_spec(square_spec(8, 0.1))), scheduler=address, batch_size=3, quiet=True)
+        df = cosim.sweep(str(write_spec(square_spec(8, 0.1))), scheduler=address, batch_size=3, quiet=True)
     killer.join(timeout=5)
     assert len(killed) == 1
     with pytest.raises(ProcessLookupError):
@@ -68,7 +68,7 @@ def test_kill_9_of_a_worker_mid_sweep_loses_nothing(write_spec, tmp_path, monkey
 def test_a_point_that_kills_its_workers_is_crashed_and_the_others_are_ok(write_spec, batch_size, worker_processes):
     # Dask counts a worker's death against every task queued on it, not only the one running: innocent tasks
     # waiting behind the killer were crashed in about half the runs before points were blamed only when alone.
-    df = orchestrator.sweep(str(write_spec(square_spec(6, 0.0, kill_at=3.0))), scheduler=worker_processes,
+    df = cosim.sweep(str(write_spec(square_spec(6, 0.0, kill_at=3.0))), scheduler=worker_processes,
                             batch_size=batch_size, quiet=True)
     assert len(df) == 6 and df["point_id"].is_unique
     killer = df[df["sq.x"] == 3.0].iloc[0]
@@ -82,9 +82,9 @@ def test_a_point_that_kills_its_workers_is_crashed_and_the_others_are_ok(write_s
 
 def test_the_optimizers_evaluator_blames_only_the_killer(write_spec, worker_processes):
     """cosim optimize and sensitivity evaluate through evaluator.Evaluator: the same rule holds there."""
-    from orchestrator.evaluator import Evaluator, dask_client
-    from orchestrator.isolation import make_payload
-    from orchestrator.validate import check_spec
+    from cosim.parallel.evaluator import Evaluator, dask_client
+    from cosim.parallel.isolation import make_payload
+    from cosim.system.validate import check_spec
 
     system = check_spec(write_spec(square_spec(6, 0.0, kill_at=3.0)))
     points = [(f"p{i}", {"sq.x": float(i)}) for i in range(6)]

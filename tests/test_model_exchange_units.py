@@ -20,13 +20,13 @@ import numpy as np
 import pytest
 from fmpy import simulate_fmu
 
-import orchestrator
-from orchestrator import Execution, build_system, load_spec
-from orchestrator.cli import main
-from orchestrator.units.fmi2 import Fmi2Unit
-from orchestrator.units.fmi3 import Fmi3Unit
-from orchestrator.units.fmu import FmuUnitType
-from orchestrator.units.model_exchange import Fmi2ModelExchangeUnit, Fmi3ModelExchangeUnit, SolverSettings
+import cosim
+from cosim import Execution, build_system, load_spec
+from cosim.cli.main import main
+from cosim.units.fmu.description import FmuUnitType
+from cosim.units.fmu.fmi2 import Fmi2Unit
+from cosim.units.fmu.fmi3 import Fmi3Unit
+from cosim.units.fmu.model_exchange import Fmi2ModelExchangeUnit, Fmi3ModelExchangeUnit, SolverSettings
 
 from .conftest import python_unit
 from .test_fmu_model_exchange import bounce_times
@@ -296,7 +296,7 @@ def test_a_sweep_runs_a_model_exchange_unit_in_dask_workers(write_spec, tmp_path
             "experiment": {"stop": 1.0, "step": 0.01},
             "objectives": {"first_bounce": {"signal": "ball.t_bounce", "reduce": "max"}},
             "design": {"parameters": {"ball.h0": {"values": [0.5, 2.0]}}}}
-    df = orchestrator.sweep(str(write_spec(spec)), workers=1, out=tmp_path / "out")
+    df = cosim.sweep(str(write_spec(spec)), workers=1, out=tmp_path / "out")
     assert list(df["status"]) == ["ok", "ok"]
     for h0, got in zip(df["ball.h0"], df["first_bounce"]):
         times = [t for t in bounce_times(h0, 9.81, 0.7, 0.1) if t <= 1.0]
@@ -306,7 +306,7 @@ def test_a_sweep_runs_a_model_exchange_unit_in_dask_workers(write_spec, tmp_path
 def test_without_cvode_an_me_unit_is_a_clear_spec_problem(write_spec, capsys, monkeypatch):
     """fmpy ships SUNDIALS for x86_64 Linux/Windows and arm64 macOS only; elsewhere (e.g. aarch64 Linux,
     which cannot be had here, hence the monkeypatch) an ME unit is refused when the spec is checked."""
-    import orchestrator.units.model_exchange as model_exchange
+    import cosim.units.fmu.model_exchange as model_exchange
 
     monkeypatch.setattr(model_exchange, "solver_problem", lambda: "model exchange needs CVode from fmpy (test)")
     path = write_spec({"units": {"ball": {"fmu": "builtin:bouncing_ball_fmi3"}},
@@ -323,12 +323,12 @@ def test_terminate_simulation_ends_the_run_cleanly_at_the_event(write_spec, vers
     spec = {"units": {"ball": {"fmu": f"builtin:bouncing_ball_fmi{version}", "tolerance": RTOL,
                                "parameters": {"stop_at_rest": True}}},
             "experiment": {"stop": 4.0, "step": 0.01}, "record": ["ball.h", "ball.bounces"]}
-    result = orchestrator.run(str(write_spec(spec)))
+    result = cosim.run(str(write_spec(spec)))
     rest = bounce_times(h0=1.0, g=9.81, e=0.7, v_min=0.1)[-1]
     update = "fmi3UpdateDiscreteStates" if version == 3 else "fmi2NewDiscreteStates"
     assert result.ok and f"unit 'ball' ended the simulation ({update}: terminateSimulation)" in result.message
     assert result.traces["time"].iloc[-1] == pytest.approx(rest, abs=1000 * RTOL)
     assert result.traces["ball.bounces"].iloc[-1] == 11
     spec["experiment"]["early_stop"] = "fail"
-    failed = orchestrator.run(str(write_spec(spec, "fail.json")))
+    failed = cosim.run(str(write_spec(spec, "fail.json")))
     assert not failed.ok and "experiment.early_stop is 'fail'" in failed.message

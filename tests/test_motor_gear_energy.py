@@ -280,9 +280,8 @@ def test_python_unit_has_the_fmu_ports():
 
 
 def test_python_unit_refuses_bad_values():
-    from orchestrator.unit import UnitError
-
     from cosim.models.motor_gear_energy import MotorGearEnergy
+    from cosim.units.protocol import UnitError
 
     unit = MotorGearEnergy("e")
     unit.set_values({"r_terminal": -1.0})
@@ -298,9 +297,8 @@ def test_python_unit_refuses_bad_values():
 @pytest.mark.parametrize("version", [2, 3])
 def test_swapping_fmu_and_python_unit_through_the_engine(version):
     """The engine's FMU unit and the Python unit answer the same calls with the same values."""
-    from orchestrator.units.fmu import FmuUnitType
-
     from cosim.models.motor_gear_energy import MotorGearEnergy
+    from cosim.units.fmu.description import FmuUnitType
 
     rng = np.random.default_rng(5)
     units = [FmuUnitType(str(ensure_built("motor_gear_energy", version))).instantiate("e"), MotorGearEnergy("e")]

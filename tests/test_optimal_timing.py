@@ -15,7 +15,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-import orchestrator
+import cosim
 from cosim.models.optimal_timing import DriveParameters, TimingInfeasible, plan_optimal_timing
 from cosim.models.panda_model import FRANKA_DOC_LIMITS as LIMITS
 from cosim.models.panda_model import panda_model, thesis_to_urdf
@@ -120,8 +120,8 @@ def test_unit_swaps_in_with_one_line_and_saves_energy_in_the_whole_pipeline(tmp_
     raw["units"]["traj"]["parameters"].update(v_max=list(LIMITS.qd_max), a_max=list(LIMITS.qdd_max),
                                               max_duration_factor=factor)
     optimal_spec.write_text(json.dumps(raw))
-    blend = orchestrator.run(str(blend_spec), record=False)
-    optimal = orchestrator.run(str(optimal_spec), record=False)
+    blend = cosim.run(str(blend_spec), record=False)
+    optimal = cosim.run(str(optimal_spec), record=False)
     assert blend.ok and optimal.ok, (blend.message, optimal.message)
     assert optimal.objectives["duration"] <= blend.objectives["duration"] * (1 + 1e-9)
     assert optimal.objectives["e_total"] < blend.objectives["e_total"] * 0.99  # -3.4 % at this design
@@ -135,7 +135,7 @@ def test_unit_reports_an_infeasible_timing_as_a_failed_run(tmp_path):
     raw["units"]["traj"]["parameters"]["tau_max"] = [5.0] * 7
     spec = tmp_path / "spec.json"
     spec.write_text(json.dumps(raw))
-    result = orchestrator.run(str(spec), record=False)
+    result = cosim.run(str(spec), record=False)
     assert not result.ok and "no timing of the path" in result.message
 
 
@@ -146,7 +146,7 @@ def test_unit_plays_the_slowed_blend_as_the_reference_when_not_optimizing(tmp_pa
     raw["units"]["traj"]["parameters"].update(max_duration_factor=1.25, optimize=False)
     spec = tmp_path / "spec.json"
     spec.write_text(json.dumps(raw))
-    result = orchestrator.run(str(spec), record=False)
+    result = cosim.run(str(spec), record=False)
     assert result.ok, result.message
     slowed = blend_of((-45.0, 70.0), 1.25)
     assert result.objectives["duration"] == pytest.approx(slowed.duration, rel=1e-12)
@@ -156,9 +156,9 @@ def test_unit_plays_the_slowed_blend_as_the_reference_when_not_optimizing(tmp_pa
 def test_study_specs_are_up_to_date_and_validate():
     import importlib.util
 
-    from orchestrator.design import DesignSpace
-    from orchestrator.spec import load_spec
-    from orchestrator.system import build_system
+    from cosim.spec.design import DesignSpace
+    from cosim.spec.loader import load_spec
+    from cosim.system.builder import build_system
 
     folder = FOLDER.parent / "optimal_timing"
     module_spec = importlib.util.spec_from_file_location("make_specs_optimal", folder / "make_specs.py")

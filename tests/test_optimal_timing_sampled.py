@@ -16,7 +16,7 @@ import pandas as pd
 import pinocchio as pin
 import pytest
 
-import orchestrator
+import cosim
 from cosim.models.optimal_timing import plan_optimal_timing
 from cosim.models.panda_model import FRANKA_DOC_LIMITS as LIMITS
 from cosim.models.panda_model import panda_model, thesis_to_urdf
@@ -133,7 +133,7 @@ def test_unit_re_times_a_recorded_path_in_the_whole_pipeline(tmp_path):
         raw["units"]["traj"]["parameters"]["optimize"] = optimize
         spec = tmp_path / f"spec_{optimize}.json"
         spec.write_text(json.dumps(raw))
-        results[optimize] = orchestrator.run(str(spec), record=False)
+        results[optimize] = cosim.run(str(spec), record=False)
         assert results[optimize].ok, results[optimize].message
     # the samples' own timing is the blend's: the reference is the blend slowed down to 1.25 x
     assert results[False].objectives["duration"] == pytest.approx(1.25 * blend.duration, rel=1e-9)
@@ -150,5 +150,5 @@ def test_unit_reports_a_table_without_the_path_columns(tmp_path):
     raw["units"]["traj"]["parameters"].update(path_file=str(recorded), path_columns="robot.q")
     spec = tmp_path / "spec.json"
     spec.write_text(json.dumps(raw))
-    result = orchestrator.run(str(spec), record=False)
+    result = cosim.run(str(spec), record=False)
     assert not result.ok and "no column 'robot.q[1]'" in result.message and "recorded.parquet" in result.message

@@ -14,9 +14,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from orchestrator.analysis.pareto import pareto_mask
-from orchestrator.cli import main
-from orchestrator.optimize import Optimization, hypervolume, normalised_losses
+from cosim.analysis.hypervolume import hypervolume, normalised_losses
+from cosim.analysis.pareto import pareto_mask
+from cosim.cli.main import main
+from cosim.studies.optimize import Optimization
 
 from .conftest import python_unit
 from .sweep_fixtures import kill_group, local_cluster  # noqa: F401  (fixture)
@@ -127,7 +128,7 @@ def test_resume_after_kill_gives_the_table_of_an_uninterrupted_run(write_spec, t
     spec = write_spec(bowls_spec(budget=64, batch=8, seed=11, constraints=["f1 <= 3"]))
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     # the client is killed (kill -9 of its process group); the cluster is the test's, as with --scheduler in use
-    command = [sys.executable, "-m", "orchestrator.cli", "optimize", str(spec), "--scheduler", local_cluster]
+    command = [sys.executable, "-m", "cosim.cli.main", "optimize", str(spec), "--scheduler", local_cluster]
     whole = subprocess.run(command + ["--out", str(tmp_path / "whole")], env=env, capture_output=True, text=True,
                            timeout=300)
     assert whole.returncode == 0, whole.stderr
@@ -204,9 +205,9 @@ def staircase_area(points: np.ndarray, reference: float) -> float:
 
 
 def test_hypervolume_and_its_history_in_the_report(tmp_path):
-    from orchestrator.analysis.report import build_report
-    from orchestrator.analysis.table import load_results
-    from orchestrator.optimize import hypervolume_history
+    from cosim.analysis.hypervolume import hypervolume_history
+    from cosim.analysis.report import build_report
+    from cosim.analysis.table import load_results
 
     rng = np.random.default_rng(4)
     losses = rng.random((40, 2))

@@ -16,9 +16,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from orchestrator.analysis.pareto import pareto_mask
-from orchestrator.cli import main
-from orchestrator.optimize import hypervolume, normalised_losses
+from cosim.analysis.hypervolume import hypervolume, normalised_losses
+from cosim.analysis.pareto import pareto_mask
+from cosim.cli.main import main
 
 from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
 from .test_optimize import bowls_spec
@@ -80,7 +80,7 @@ class NoTorch(importlib.abc.MetaPathFinder):
         return None
 
 sys.meta_path.insert(0, NoTorch())
-from orchestrator.cli import main
+from cosim.cli.main import main
 sys.exit(main(sys.argv[1:]))
 """
 

@@ -34,7 +34,7 @@ def _clean_env(**extra: str) -> dict[str, str]:
 def test_no_code_imports_the_generic_top_level_names():
     """Every import of the built-in units and FMU sources goes through cosim.models / cosim.fmus."""
     offenders = []
-    for folder in ("orchestrator", "models", "fmus", "cosim", "tests", "examples", "benchmarks"):
+    for folder in ("src", "tests", "examples", "benchmarks"):
         for path in (REPO / folder).rglob("*.py"):
             for match in GENERIC_IMPORT.finditer(path.read_text(encoding="utf-8")):
                 line = path.read_text(encoding="utf-8")[:match.start()].count("\n") + 2
@@ -42,22 +42,24 @@ def test_no_code_imports_the_generic_top_level_names():
     assert offenders == [], f"import cosim.models / cosim.fmus instead of models / fmus at {offenders}"
 
 
-def test_pyproject_lists_every_package():
-    """The package list is explicit (because of the cosim.* mapping): a new subpackage must be added to it."""
-    declared = set(tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
-    found = set(setuptools.find_packages(str(REPO), include=["orchestrator", "orchestrator.*"]))
-    found |= {"cosim." + p for p in setuptools.find_packages(str(REPO), include=["models*", "fmus*"])}
-    assert found - declared == set(), "add these to [tool.setuptools] packages in pyproject.toml"
+def test_every_folder_of_python_code_is_a_package_the_wheel_finds():
+    """setuptools finds packages by their __init__.py: a folder of modules without one would be left out."""
+    find = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]["find"]
+    found = set(setuptools.find_packages(str(REPO / find["where"][0]), include=find["include"]))
+    folders = {".".join(p.parent.relative_to(REPO / "src").parts) for p in (REPO / "src").rglob("*.py")
+               if "__pycache__" not in p.parts}
+    assert folders - found == set(), "add an __init__.py to these folders"
+    assert {"cosim", "cosim.units.fmu", "cosim.models", "cosim.fmus.conformance", "orchestrator"} <= found
 
 
 def test_a_spec_reference_to_a_builtin_unit_loads_the_one_canonical_module(tmp_path):
     """``models.NAME:Class`` in a spec and ``cosim.models.NAME`` in code are the same class object."""
     code = (
         "import sys, json\n"
-        "import orchestrator\n"
+        "import cosim\n"
         "from cosim.models.motor_gear_energy import MotorGearEnergy\n"
-        "orchestrator.build_system(orchestrator.load_spec(sys.argv[1]))  # loads the spec's unit class\n"
-        "from orchestrator.units.python import PythonUnitType\n"
+        "cosim.build_system(cosim.load_spec(sys.argv[1]))  # loads the spec's unit class\n"
+        "from cosim.units.python.unit import PythonUnitType\n"
         "loaded = PythonUnitType('models.motor_gear_energy:MotorGearEnergy').load_class()\n"
         "print(json.dumps({'same': loaded is MotorGearEnergy,\n"
         "                  'generic': sorted(m for m in sys.modules if m.split('.')[0] in ('models', 'fmus'))}))\n"
@@ -76,9 +78,9 @@ def test_schema_and_plant_are_read_as_package_data():
 
     from cosim.models.plant import DEFAULT_PLANT
 
-    schema = importlib.resources.files("cosim.specs").joinpath("spec.schema.json")
+    schema = importlib.resources.files("cosim.spec").joinpath("spec.schema.json")
     assert schema.is_file() and Path(DEFAULT_PLANT).is_file()
-    assert Path(DEFAULT_PLANT).parent == REPO / "models"
+    assert Path(DEFAULT_PLANT).parent == REPO / "src" / "cosim" / "models"
 
 
 @pytest.fixture(scope="module")
@@ -93,7 +95,7 @@ def wheel(tmp_path_factory) -> Path:
                              "-w", str(out), str(source)], capture_output=True, text=True, timeout=300,
                             cwd=out)
     assert result.returncode == 0, result.stderr
-    (path,) = out.glob("cosim-*.whl")
+    (path,) = out.glob("fmi_cosim-*.whl")
     return path
 
 
@@ -101,7 +103,7 @@ def test_the_wheel_installs_nothing_generic_and_ships_its_data(wheel):
     names = zipfile.ZipFile(wheel).namelist()
     top_level = {n.split("/")[0] for n in names if not n.split("/")[0].endswith(".dist-info")}
     assert top_level == {"orchestrator", "cosim"}
-    for data in ("cosim/specs/spec.schema.json", "cosim/models/bin_picking_plant.json",
+    for data in ("cosim/spec/spec.schema.json", "cosim/models/bin_picking_plant.json",
                  "cosim/models/panda_rows_c/panda_rows.c", "cosim/models/panda_rows_c/panda_rows_casadi.h",
                  "cosim/fmus/motor_gear_energy/model.json", "cosim/fmus/common/fmi3.c",
                  "cosim/fmus/conformance/fmi3_runtime.c", "cosim/fmus/conformance/stair/modelDescription2.xml"):
@@ -125,8 +127,8 @@ def test_the_installed_wheel_runs_a_spec_from_an_empty_folder(wheel, tmp_path):
     empty.mkdir()
     spec = REPO / "examples" / "drive_energy" / "spec.json"
     env = _clean_env(COSIM_FMU_CACHE=str(tmp_path / "fmu_cache"))
-    where = subprocess.run([str(python), "-c", "import orchestrator, cosim.models, cosim.fmus.build as b; "
-                            "print(orchestrator.__file__); print(b.FMUS_DIR)"],
+    where = subprocess.run([str(python), "-c", "import cosim, cosim.models, cosim.fmus.build as b; "
+                            "print(cosim.__file__); print(b.FMUS_DIR)"],
                            cwd=empty, env=env, capture_output=True, text=True, timeout=60)
     assert where.returncode == 0, where.stderr
     assert all(line.startswith(site) for line in where.stdout.split()), where.stdout

@@ -15,11 +15,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from cosim import build_system, load_spec
+from cosim.execution.lockstep import can_run_in_lockstep, instantiate, run_lockstep
+from cosim.execution.point import assignments_for
 from cosim.models.panda_exudyn import PandaExudyn, PandaExudynBatch
-from orchestrator import build_system, load_spec
-from orchestrator.lockstep import can_run_in_lockstep, instantiate, run_lockstep
-from orchestrator.point import assignments_for
-from orchestrator.units.python_batch import NotBatchable
+from cosim.units.python.batch import NotBatchable
 
 ROOT = Path(__file__).resolve().parents[1]
 FOLDER = ROOT / "examples" / "pick_and_place"

@@ -61,9 +61,9 @@ def test_symbolic_rnea_matches_pinocchio_at_1000_random_states():
 
 
 def test_generated_c_is_up_to_date_with_the_urdf_and_the_symbolic_model():
-    from cosim.fmus.panda_inverse_dynamics_codegen import stale_files
+    from cosim.models.panda_inverse_dynamics_codegen import stale_files
 
-    assert stale_files() == [], "run python -m cosim.fmus.panda_inverse_dynamics_codegen"
+    assert stale_files() == [], "run python -m cosim.models.panda_inverse_dynamics_codegen"
 
 
 @pytest.mark.parametrize("version", [2, 3])

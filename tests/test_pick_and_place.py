@@ -16,13 +16,12 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-import orchestrator
-from orchestrator.execution import Execution
-from orchestrator.spec import load_spec, spec_from_dict
-from orchestrator.system import build_system
-
+import cosim
+from cosim.execution.run import Execution
 from cosim.models.panda_model import FRANKA_DOC_LIMITS, cached_model, ee_frame_id, thesis_to_urdf
 from cosim.models.trajectory import plan_parabolic_blend
+from cosim.spec.loader import load_spec, spec_from_dict
+from cosim.system.builder import build_system
 
 FOLDER = Path(__file__).resolve().parents[1] / "examples" / "pick_and_place"
 SPEC = FOLDER / "spec.json"
@@ -87,7 +86,7 @@ def test_specs_validate_and_variants_are_up_to_date():
     for name in ["spec.json", *expected]:
         system = build_system(load_spec(FOLDER / name))
         assert list(system.order) == ["traj", "robot", "energy"]
-    from orchestrator.design import DesignSpace
+    from cosim.spec.design import DesignSpace
 
     assert len(DesignSpace.from_spec(load_spec(SPEC))) == 121 * 141 == 17061
     assert len(DesignSpace.from_spec(load_spec(FOLDER / "spec_coarse.json"))) == 273
@@ -98,7 +97,7 @@ def test_specs_validate_and_variants_are_up_to_date():
 
 def test_objectives_agree_with_traces_and_an_independent_computation():
     q22, q24 = -45.0, 70.0
-    result = orchestrator.run(str(SPEC), {Q22: q22, Q24: q24}, record=True)
+    result = cosim.run(str(SPEC), {Q22: q22, Q24: q24}, record=True)
     assert result.ok, result.message
     o, tr = result.objectives, result.traces
     ref = reference_objectives(q22, q24)
@@ -214,7 +213,7 @@ def test_exudyn_follows_the_reference_of_the_step_end_under_gauss_seidel():
 
 def test_trajectory_step_midpoint_sampling_reports_the_step_just_taken():
     from cosim.models.trajectory import TrajectoryGenerator
-    from orchestrator.unit import UnitError
+    from cosim.units.protocol import UnitError
 
     unit = TrajectoryGenerator("traj")
     unit.waypoints[:21] = thesis_waypoints(-45.0, 70.0).ravel()

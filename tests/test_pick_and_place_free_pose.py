@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator.design import DesignSpace
-from orchestrator.optimize import OptimizeSettings, distributions
-from orchestrator.validate import check_spec
+from cosim.spec.design import DesignSpace
+from cosim.studies.optimize import OptimizeSettings, distributions
+from cosim.system.validate import check_spec
 
 FOLDER = Path(__file__).resolve().parents[1] / "examples" / "pick_and_place_free_pose"
 
@@ -53,9 +53,9 @@ def test_the_committed_optimisation_opens_in_every_analysis_command(tmp_path, ca
     unchanged, and the re-run of the least-energy feasible design gives the table's energy again."""
     import pandas as pd
 
-    from orchestrator.analysis.explorer import ExplorerState
-    from orchestrator.analysis.table import load_results
-    from orchestrator.cli import main
+    from cosim.analysis.explorer import ExplorerState
+    from cosim.analysis.table import load_results
+    from cosim.cli.main import main
 
     folder = FOLDER / "results_optimize"
     df = pd.read_parquet(folder / "results.parquet")

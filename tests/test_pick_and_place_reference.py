@@ -17,8 +17,8 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator import build_system, load_spec
-from orchestrator.point import run_point
+from cosim import build_system, load_spec
+from cosim.execution.point import run_point
 
 ROOT = Path(__file__).resolve().parents[1]
 RELATIVE_TOLERANCE = 1e-9

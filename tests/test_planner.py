@@ -7,8 +7,17 @@ import pytest
 
 from cosim.models.collision import READY_POSE, CellCollision
 from cosim.models.panda_model import FRANKA_DOC_LIMITS as L
-from cosim.models.planner import (COLLISION_PLANT, JOINT_JUMP, JOINT_LIMIT, OK, UNREACHABLE, CartesianPlanner,
-                            PlannerSettings, keyframes, time_parameterize)
+from cosim.models.planner import (
+    COLLISION_PLANT,
+    JOINT_JUMP,
+    JOINT_LIMIT,
+    OK,
+    UNREACHABLE,
+    CartesianPlanner,
+    PlannerSettings,
+    keyframes,
+    time_parameterize,
+)
 from cosim.models.plant import Obstacle, tcp_down_rotation
 
 DOWN = tcp_down_rotation(0.0)

@@ -10,8 +10,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from orchestrator.cli import main
-from orchestrator.units.player import PlayerUnitType
+from cosim.cli.main import main
+from cosim.units.player import PlayerUnitType
 
 from .conftest import python_unit
 from .test_fmu_units import energy_spec
@@ -19,7 +19,7 @@ from .test_fmu_units import energy_spec
 
 def cosim(*args: str) -> subprocess.CompletedProcess:
     """The real console entry point, in a separate process."""
-    return subprocess.run([sys.executable, "-m", "orchestrator.cli", *args], capture_output=True, text=True)
+    return subprocess.run([sys.executable, "-m", "cosim.cli.main", *args], capture_output=True, text=True)
 
 
 @pytest.mark.parametrize("suffix", [".parquet", ".csv"])
@@ -81,10 +81,10 @@ def test_energy_fmu_alone_against_recorded_signals_matches_the_whole_system(writ
     assert main(["run", str(write_spec(whole, "whole.json")), "--out", str(traces)]) == 0
     alone = energy_spec({"fmu": "builtin:motor_gear_energy_fmi3"})
     alone["units"]["drive"] = {"player": "recorded.parquet"}  # the one-line change
-    import orchestrator
+    import cosim
 
-    a = orchestrator.run(str(write_spec(whole, "whole.json")), record=False)
-    b = orchestrator.run(str(write_spec(alone, "alone.json")), record=False)
+    a = cosim.run(str(write_spec(whole, "whole.json")), record=False)
+    b = cosim.run(str(write_spec(alone, "alone.json")), record=False)
     assert a.ok and b.ok, b.message
     for name, value in a.objectives.items():
         assert b.objectives[name] == pytest.approx(value, rel=1e-12), name
@@ -115,7 +115,7 @@ def test_player_refuses_leaving_the_recording_when_asked(tmp_path, write_spec):
     path = write_spec({"units": {"p": {"player": str(table), "extrapolation": "error"}},
                        "experiment": {"stop": 2.0, "step": 0.5},
                        "objectives": {"x": {"signal": "p.x", "reduce": "final"}}})
-    import orchestrator
+    import cosim
 
-    result = orchestrator.run(str(path))
+    result = cosim.run(str(path))
     assert result.status == "failed" and "leaves the recorded time range [0, 1]" in result.message

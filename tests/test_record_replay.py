@@ -12,9 +12,9 @@ import json
 import pandas as pd
 import pytest
 
-import orchestrator
-from orchestrator.cli import main
-from orchestrator.sweep import Sweep, SweepError
+import cosim
+from cosim.cli.main import main
+from cosim.studies.sweep import Sweep, SweepError
 
 from .conftest import python_unit
 from .test_fmu_units import energy_spec
@@ -47,14 +47,14 @@ def test_a_player_replaces_a_recorded_unit_with_the_spec_otherwise_unchanged(wri
     # the one-line change: parameters, connections into it, objectives on it and the design all stay
     replay["units"][replaced] = {"player": "rec.parquet", **{k: v for k, v in whole["units"][replaced].items()
                                                               if k == "parameters"}}
-    a = orchestrator.run(str(write_spec(whole, "whole.json")), record=False)
-    b = orchestrator.run(str(write_spec(replay, "replay.json")), record=True)
+    a = cosim.run(str(write_spec(whole, "whole.json")), record=False)
+    b = cosim.run(str(write_spec(replay, "replay.json")), record=True)
     assert a.ok and b.ok, b.message
     assert b.objectives.keys() == a.objectives.keys()
     for name, value in a.objectives.items():
         assert b.objectives[name] == pytest.approx(value, rel=1e-9, abs=1e-12), name
     # recording the replayed unit again gives the recorded names, not '<unit>.<unit>.<port>'
-    again = orchestrator.build_system(orchestrator.load_spec(write_spec(replay, "replay.json"))).recording_all_outputs()
+    again = cosim.build_system(cosim.load_spec(write_spec(replay, "replay.json"))).recording_all_outputs()
     names = set(again.recorded)
     assert f"{replaced}.{replaced}." not in " ".join(names)
     assert (f"{replaced}.e_total" if replaced == "energy" else f"{replaced}.tau[1]") in " ".join(names)
@@ -74,7 +74,7 @@ def test_a_recorded_boolean_replays_as_a_boolean_that_can_stop_the_run(write_spe
     replay = {**clock, "units": {"clock": {"player": "rec.parquet", "parameters": {"t_end": 0.35}}},
               "experiment": {"stop": 1.0, "step": 0.05, "stop_when": "clock.done"},
               "record": ["clock.done"], "objectives": {"t_stop": {"signal": "clock.time", "reduce": "final"}}}
-    result = orchestrator.run(str(write_spec(replay, "replay.json")))
+    result = cosim.run(str(write_spec(replay, "replay.json")))
     assert result.ok, result.message
     # stepped at 0.05 s: linear interpolation would make 'done' 0.5 at t = 0.35 and stop early; held, it
     # becomes true at the recorded sample t = 0.4, where the recorded clock also stopped

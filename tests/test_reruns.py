@@ -12,8 +12,8 @@ from concurrent.futures import CancelledError
 
 from distributed import KilledWorker
 
-import orchestrator
-from orchestrator.evaluator import RERUN_GROUP, Reruns
+import cosim
+from cosim.parallel.evaluator import RERUN_GROUP, Reruns
 
 from .sweep_fixtures import worker_processes  # noqa: F401  (fixture)
 from .test_lost_workers import square_spec
@@ -47,7 +47,7 @@ def test_only_a_single_point_lost_alone_is_blamed_and_other_errors_are_rows():
 
 def test_a_killer_in_a_task_of_many_points_is_crashed_and_the_others_are_ok(write_spec, worker_processes):
     n = 2 * RERUN_GROUP + 2  # one task of three groups
-    df = orchestrator.sweep(str(write_spec(square_spec(n, 0.0, kill_at=70.0))), scheduler=worker_processes,
+    df = cosim.sweep(str(write_spec(square_spec(n, 0.0, kill_at=70.0))), scheduler=worker_processes,
                             batch_size=n, quiet=True)
     assert len(df) == n and df["point_id"].is_unique
     killer = df[df["sq.x"] == 70.0].iloc[0]

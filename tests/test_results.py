@@ -6,7 +6,7 @@ import math
 
 import pandas as pd
 
-from orchestrator.results import DESIGN_INDEX, STATUSES, ResultsStore
+from cosim.results.store import DESIGN_INDEX, STATUSES, ResultsStore
 
 
 def counts_by_status(df: pd.DataFrame) -> dict[str, int]:
@@ -64,7 +64,7 @@ def test_metadata_round_trip(tmp_path):
 
 
 def test_compaction_streams_in_windows_and_keeps_design_order(tmp_path, monkeypatch):
-    import orchestrator.results as results
+    import cosim.results.store as results
 
     monkeypatch.setattr(results, "COMPACT_WINDOW", 3)  # force several windows over 8 rows
     store = ResultsStore(tmp_path)
@@ -81,7 +81,7 @@ def test_compaction_streams_in_windows_and_keeps_design_order(tmp_path, monkeypa
 
 
 def test_parts_are_merged_as_they_accumulate_without_losing_rows(tmp_path, monkeypatch):
-    import orchestrator.results as results
+    import cosim.results.store as results
 
     monkeypatch.setattr(results, "MERGE_PARTS", 3)
     store = ResultsStore(tmp_path)
@@ -103,7 +103,7 @@ def indexed(ids_and_indices, status="ok", **extra):
 
 
 def test_rows_with_the_design_index_are_merged_by_it_in_windows_latest_row_winning(tmp_path, monkeypatch):
-    import orchestrator.results as results
+    import cosim.results.store as results
 
     monkeypatch.setattr(results, "COMPACT_WINDOW", 3)  # several windows over 10 points
     monkeypatch.setattr(results, "MERGE_PARTS", 3)  # and parts merged (streaming) on the way

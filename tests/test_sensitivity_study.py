@@ -10,8 +10,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from orchestrator.cli import main
-from orchestrator.sensitivity_study import SensitivityStudy
+from cosim.cli.main import main
+from cosim.studies.sensitivity import SensitivityStudy
 
 from .conftest import python_unit
 from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)

@@ -10,13 +10,15 @@ import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
+ENGINE = ROOT / "src" / "cosim"
 
 
 def test_algorithm_names_come_from_the_algorithms_module():
-    from orchestrator import algorithms, spec
-    from orchestrator.cli import _parser
+    from cosim.cli.main import _parser
+    from cosim.master import algorithms
+    from cosim.spec import loader as spec
 
-    schema = json.loads((ROOT / "specs" / "spec.schema.json").read_text())
+    schema = json.loads((ROOT / "src" / "cosim" / "spec" / "spec.schema.json").read_text())
     in_file = schema["$defs"]["experiment"]["properties"]["algorithm"]
     assert in_file["enum"] == list(algorithms.ALGORITHMS) == list(spec.ALGORITHMS)  # the file repeats them
     assert in_file["default"] == algorithms.DEFAULT_ALGORITHM == spec.ExperimentSpec(0, 1, 1).algorithm
@@ -25,8 +27,8 @@ def test_algorithm_names_come_from_the_algorithms_module():
 
 
 def test_reduction_names_are_the_reducers():
-    from orchestrator.observers import REDUCERS
-    from orchestrator.spec import REDUCTIONS
+    from cosim.master.observers import REDUCERS
+    from cosim.spec.loader import REDUCTIONS
 
     assert REDUCTIONS == tuple(REDUCERS)
     t, x = np.array([0.0, 1.0, 3.0]), np.array([[1.0], [3.0], [-1.0]])
@@ -37,27 +39,28 @@ def test_reduction_names_are_the_reducers():
 
 
 def test_tail_columns_and_statuses_are_defined_once():
-    from orchestrator import results, table_columns
-    from orchestrator.analysis import table
+    from cosim.analysis import table
+    from cosim.results import columns as table_columns
+    from cosim.results import store as results
 
     assert results.TAIL_COLUMNS is table_columns.TAIL_COLUMNS is table.TAIL
     assert results.STATUSES is table_columns.STATUSES
-    for path in (ROOT / "orchestrator").rglob("*.py"):
-        if path.name != "table_columns.py":
+    for path in ENGINE.rglob("*.py"):
+        if path.name != "columns.py":
             assert '"status", "message", "run_time", "worker"' not in path.read_text(), path
 
 
 def test_exit_codes_are_defined_once():
     pattern = re.compile(r"^\s*EXIT_\w+\s*(,\s*EXIT_\w+\s*)*=", re.M)
-    defining = [p.name for p in (ROOT / "orchestrator").rglob("*.py") if pattern.search(p.read_text())]
+    defining = [p.name for p in ENGINE.rglob("*.py") if pattern.search(p.read_text())]
     assert defining == ["errors.py"]
 
 
 @pytest.mark.parametrize("name, expected", [("traj.q_via[2]", "traj_q_via_2"), ("e_el[1]", "e_el_1"),
                                             ("run_time", "run_time"), ("1st.x", "c_1st_x"), ("[3]", "c_3")])
 def test_one_identifier_rule_for_columns_and_design_parameters(name, expected):
-    from orchestrator.analysis.table import identifier
-    from orchestrator.design import expression_name
+    from cosim.analysis.table import identifier
+    from cosim.spec.design import expression_name
 
     assert identifier(name) == expression_name(name) == expected
 
@@ -65,14 +68,14 @@ def test_one_identifier_rule_for_columns_and_design_parameters(name, expected):
 def test_one_cli_entry_dispatches_to_subcommand_modules_that_never_import_it():
     import ast
 
-    from orchestrator import cli
+    from cosim.cli import main as cli
 
     commands = set(cli._parser()._subparsers._group_actions[0].choices)
     assert {"validate", "run", "inspect", "sweep", "plot", "pareto", "report", "explore"} <= commands
-    for path in (ROOT / "orchestrator").rglob("*.py"):
-        if path.name == "cli.py":
+    for path in ENGINE.rglob("*.py"):
+        if path.relative_to(ENGINE).parts[0] == "cli":
             continue
         for node in ast.walk(ast.parse(path.read_text())):
             if isinstance(node, ast.ImportFrom):
                 module = "." * node.level + (node.module or "")
-                assert module not in (".cli", "..cli", "orchestrator.cli"), path
+                assert module not in (".cli", "..cli", "cosim.cli", "cosim.cli.main"), path

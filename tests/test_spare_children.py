@@ -2,7 +2,7 @@
 
 `cosim sweep` on a local cluster starts one child per worker as its first act, sends them the payload as soon
 as it is made, and the workers (in the same process) take them instead of starting their own: a child's start
-and the system's load then overlap the client's imports and spec check (orchestrator.isolation).
+and the system's load then overlap the client's imports and spec check (cosim.parallel.isolation).
 """
 
 from __future__ import annotations
@@ -15,14 +15,19 @@ from pathlib import Path
 import psutil
 import pytest
 
-from orchestrator import isolation
-from orchestrator.isolation import (IsolatedRunner, make_payload, preload_spare_children, start_spare_children,
-                                    stop_spare_children)
-from orchestrator.validate import check_spec
+from cosim.parallel import isolation
+from cosim.parallel.isolation import (
+    IsolatedRunner,
+    make_payload,
+    preload_spare_children,
+    start_spare_children,
+    stop_spare_children,
+)
+from cosim.system.validate import check_spec
 
 UNIT = """
 import os
-from orchestrator import PythonUnit, Variable
+from cosim import PythonUnit, Variable
 
 class Pid(PythonUnit):
     variables = (Variable("k", "parameter", start=1.0), Variable("pid", "output", start=0.0),
@@ -115,7 +120,7 @@ def test_a_sweep_refused_after_starting_its_spares_leaves_no_child_and_no_folder
                        "design": {"parameters": {"u.k": {"values": [1.0]}}}})
     temp = tmp_path / "tmp"
     temp.mkdir()
-    done = subprocess.run([sys.executable, "-m", "orchestrator.cli", "sweep", str(spec), "--out", str(tmp_path / "o")],
+    done = subprocess.run([sys.executable, "-m", "cosim.cli.main", "sweep", str(spec), "--out", str(tmp_path / "o")],
                           capture_output=True, text=True, env={**__import__("os").environ, "TMPDIR": str(temp)})
     assert done.returncode == 2, done.stderr
     assert "nowhere.py" in done.stderr and "Traceback" not in done.stderr

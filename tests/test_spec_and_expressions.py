@@ -8,11 +8,11 @@ import shutil
 import numpy as np
 import pytest
 
-import orchestrator
-from orchestrator.expressions import Expression, ExpressionError
-from orchestrator.problems import SpecError
-from orchestrator.spec import load_spec
-from orchestrator.validate import check_spec
+import cosim
+from cosim.errors import SpecError
+from cosim.spec.expressions import Expression, ExpressionError
+from cosim.spec.loader import load_spec
+from cosim.system.validate import check_spec
 
 from .conftest import TESTS
 
@@ -30,7 +30,7 @@ def test_relative_paths_resolve_against_the_spec_folder(tmp_path, built_fmu, mon
         "objectives": {"g": {"signal": "gain.y", "reduce": "final"}},
     }))
     monkeypatch.chdir(tmp_path)  # somewhere else than the spec's folder
-    result = orchestrator.run("study/spec.json")
+    result = cosim.run("study/spec.json")
     assert result.ok, result.message
     assert result.objectives["g"] == pytest.approx(2.0 * np.exp(-1.0), rel=1e-12)
 
@@ -44,7 +44,7 @@ def test_port_mapping_lets_a_replacement_fmu_use_other_names(write_spec):
         "record": ["ode.state"],
         "objectives": {"x": {"signal": "ode.state", "reduce": "final"}},
     }
-    result = orchestrator.run(str(write_spec(spec)))
+    result = cosim.run(str(write_spec(spec)))
     assert result.ok, result.message
     assert result.objectives["x"] == pytest.approx(0.5 * (1 - np.exp(-6.0)), rel=1e-12)
     assert list(result.traces.columns) == ["time", "ode.state"]

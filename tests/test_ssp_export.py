@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from lxml import etree
 
-from orchestrator.cli import main
-from orchestrator.execution import Execution
-from orchestrator.problems import SpecError
-from orchestrator.ssp.writer import export_ssp
-from orchestrator.ssp.xml import NS
-from orchestrator.validate import check_spec
+from cosim.cli.main import main
+from cosim.errors import SpecError
+from cosim.execution.run import Execution
+from cosim.export.ssp import export_ssp
+from cosim.ssp.xml import NS
+from cosim.system.validate import check_spec
 
 from .conftest import python_unit
 from .ssp_fixtures import nested_expected, nested_files, write_archive
@@ -71,7 +71,7 @@ def test_exported_archive_layout_and_parameter_files(tmp_path, built_fmu):
     assert (connection.get("endElement"), connection.get("endConnector")) == ("g", "u[2]")
     companion = json.loads((tmp_path / "out" / "ring.spec.json").read_text())
     assert companion["system"] == "ring.ssp" and companion["objectives"] == spec["objectives"]
-    from orchestrator import run
+    from cosim import run
 
     direct, again = run(tmp_path / "spec.json"), run(tmp_path / "out" / "ring.spec.json")
     assert direct.objectives == again.objectives
@@ -119,8 +119,8 @@ def test_player_units_are_refused(tmp_path, write_spec):
 
 @pytest.mark.parametrize("cls", ["Gain", "Clock"])
 def test_export_fmu_keeps_ports_units_parameters_and_feedthrough(tmp_path, capsys, cls):
-    from orchestrator.units.fmu import FmuUnitType
-    from orchestrator.units.python import PythonUnitType
+    from cosim.units.fmu.description import FmuUnitType
+    from cosim.units.python.unit import PythonUnitType
 
     target = python_unit(cls)
     assert main(["export-fmu", target, "-o", str(tmp_path / "gain.fmu")]) == 0
@@ -150,7 +150,7 @@ def test_port_mappings_survive_the_export(tmp_path):
     }
     (tmp_path / "spec.json").write_text(json.dumps(spec))
     export_ssp(check_spec(tmp_path / "spec.json"), tmp_path / "mapped.ssp")
-    from orchestrator import run
+    from cosim import run
 
     direct, again = run(tmp_path / "spec.json"), run(tmp_path / "mapped.spec.json")
     assert direct.objectives == again.objectives == {"state": 2.0}  # 4 steps of 0.25 s, b = 1, u = 2

@@ -7,11 +7,11 @@ import zipfile
 
 import pytest
 
-import orchestrator
-from orchestrator.cli import main
-from orchestrator.problems import SpecError
-from orchestrator.ssp import read_ssp
-from orchestrator.validate import check_spec
+import cosim
+from cosim.cli.main import main
+from cosim.errors import SpecError
+from cosim.ssp import read_ssp
+from cosim.system.validate import check_spec
 
 from .ssp_fixtures import RPM, nested_expected, nested_files, nested_ssd, write_archive, write_folder
 
@@ -21,7 +21,7 @@ def _final(result, column):
 
 
 def _run(path, algorithm="jacobi", **experiment):
-    from orchestrator.execution import Execution
+    from cosim.execution.run import Execution
 
     system = check_spec(path, {"algorithm": algorithm, **experiment})
     result = Execution(system, record=True).run()
@@ -239,10 +239,10 @@ def test_spec_takes_its_system_from_an_ssp_and_overrides_it(tmp_path):
         "design": {"parameters": {"sink.b": {"values": [1.0, 2.0]}}},
     }
     (tmp_path / "spec.json").write_text(json.dumps(spec))
-    result = orchestrator.run(tmp_path / "spec.json")
+    result = cosim.run(tmp_path / "spec.json")
     assert result.objectives["sink_final"] == pytest.approx(nested_expected("jacobi", sink_b=2.0)["sink.y"],
                                                             rel=1e-12)
-    table = orchestrator.sweep(tmp_path / "spec.json", workers=1)
+    table = cosim.sweep(tmp_path / "spec.json", workers=1)
     by_b = dict(zip(table["sink.b"], table["sink_final"]))
     for b in (1.0, 2.0):
         assert by_b[b] == pytest.approx(nested_expected("jacobi", sink_b=b)["sink.y"], rel=1e-12)
@@ -255,7 +255,7 @@ def test_sweep_of_an_ssp_resumes_in_a_new_process(tmp_path):
     import sys
 
     path = write_archive(tmp_path / "nested.ssp", nested_files())
-    command = [sys.executable, "-m", "orchestrator.cli", "sweep", str(path), "--out", str(tmp_path / "out"),
+    command = [sys.executable, "-m", "cosim.cli.main", "sweep", str(path), "--out", str(tmp_path / "out"),
                "--workers", "1", "--step", "0.1"]
     first = subprocess.run(command, capture_output=True, text=True, timeout=300)
     assert first.returncode == 0, first.stderr

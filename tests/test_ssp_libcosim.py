@@ -19,9 +19,9 @@ import zipfile
 import numpy as np
 import pytest
 
-from orchestrator.execution import Execution
-from orchestrator.ssp.writer import export_ssp
-from orchestrator.validate import check_spec
+from cosim.execution.run import Execution
+from cosim.export.ssp import export_ssp
+from cosim.system.validate import check_spec
 
 RING = {
     "name": "ring",

@@ -5,8 +5,8 @@ from __future__ import annotations
 import zipfile
 from pathlib import Path
 
-import orchestrator
-from orchestrator.cli import main
+import cosim
+from cosim.cli.main import main
 
 SPEC = Path(__file__).resolve().parent.parent / "examples" / "pick_and_place" / "spec_coarse.json"
 
@@ -20,12 +20,12 @@ def test_exported_pick_and_place_gives_the_objectives_of_its_spec(tmp_path):
     assert fmus == ["resources/PandaInverseDynamics.fmu", "resources/TrajectoryGenerator.fmu",
                     "resources/motor_gear_energy_fmi3.fmu"]
     companion = tmp_path / "pick_and_place.spec.json"
-    exported = orchestrator.load_spec(companion)
+    exported = cosim.load_spec(companion)
     assert {u.name: u.kind for u in exported.units} == {"traj": "fmu", "robot": "fmu", "energy": "fmu"}
     # two designs of the coarse grid (the spec's default and one corner), each a full run
     for values in ({}, {"traj.waypoints[9]": -100, "traj.waypoints[11]": 140}):
-        original = orchestrator.run(SPEC, values, record=False)
-        again = orchestrator.run(companion, values, record=False)
+        original = cosim.run(SPEC, values, record=False)
+        again = cosim.run(companion, values, record=False)
         assert original.ok and again.ok, (original.message, again.message)
         assert again.objectives == original.objectives  # bit for bit
         assert original.objectives["e_total"] > 0

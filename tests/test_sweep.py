@@ -15,11 +15,11 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-import orchestrator
-from orchestrator.cli import main
-from orchestrator.design import DesignSpace
-from orchestrator.spec import load_spec
-from orchestrator.sweep import Sweep, SweepError
+import cosim
+from cosim.cli.main import main
+from cosim.spec.design import DesignSpace
+from cosim.spec.loader import load_spec
+from cosim.studies.sweep import Sweep, SweepError
 
 from .conftest import TESTS
 from .sweep_fixtures import dask_processes, local_cluster  # noqa: F401  (fixtures)
@@ -49,7 +49,7 @@ def assert_exact(df: pd.DataFrame) -> None:
 
 def test_api_on_default_local_cluster_returns_every_point(write_spec, tmp_path):
     spec_path = write_spec(ode_spec())
-    df = orchestrator.sweep(str(spec_path), workers=2, out=tmp_path / "out")
+    df = cosim.sweep(str(spec_path), workers=2, out=tmp_path / "out")
     ids = [p.id for p in DesignSpace.from_spec(load_spec(spec_path))]
     assert list(df["point_id"]) == ids  # every point once, in design order
     assert list(df.columns) == ["point_id", "ode.a", "ode.x0", "y_end", "y_max", "status", "message", "run_time",
@@ -74,7 +74,7 @@ def test_array_parameter_and_python_unit_on_local_cluster(write_spec, local_clus
         "objectives": {"out": {"signal": "gain.y", "reduce": "final"}},
         "design": {"parameters": {"gain.k": {"min": 0.5, "max": 2.0, "step": 0.5}}, "constraint": "k != 1.5"},
     }
-    df = orchestrator.sweep(str(write_spec(spec)), scheduler=local_cluster, batch_size=1)
+    df = cosim.sweep(str(write_spec(spec)), scheduler=local_cluster, batch_size=1)
     assert list(df["gain.k"]) == [0.5, 1.0, 2.0]
     assert (df["status"] == "ok").all() and list(df["out"]) == pytest.approx([0.5, 1.0, 2.0])
 
@@ -124,7 +124,7 @@ def test_cli_exit_codes_and_dry_run(write_spec, tmp_path, capsys, local_cluster)
 
 def test_resume_of_another_spec_is_refused(write_spec, tmp_path, local_cluster):
     out = tmp_path / "out"
-    orchestrator.sweep(str(write_spec(ode_spec())), scheduler=local_cluster, out=out, quiet=True)
+    cosim.sweep(str(write_spec(ode_spec())), scheduler=local_cluster, out=out, quiet=True)
     other = write_spec(ode_spec(step=0.02), "other.json")
     with pytest.raises(SweepError, match="different spec"):
         Sweep(other, out=out, resume=True)
@@ -135,7 +135,7 @@ def test_resume_after_kill_9_of_the_client_runs_only_missing_points(write_spec, 
     spec_path = write_spec(ode_spec(step=0.0002, **design))  # 2500 steps a point: a sweep of a few seconds
     total = len(DesignSpace.from_spec(load_spec(spec_path)))
     out = tmp_path / "out"
-    command = [sys.executable, "-m", "orchestrator.cli", "sweep", str(spec_path), "--out", str(out),
+    command = [sys.executable, "-m", "cosim.cli.main", "sweep", str(spec_path), "--out", str(out),
                "--workers", "2", "--batch-size", "2"]
     client = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     deadline = time.monotonic() + 60
@@ -150,7 +150,7 @@ def test_resume_after_kill_9_of_the_client_runs_only_missing_points(write_spec, 
         os.killpg(client.pid, signal.SIGTERM)  # ...then its orphaned local cluster
     except ProcessLookupError:
         pass
-    from orchestrator.results import ResultsStore
+    from cosim.results.store import ResultsStore
 
     before = ResultsStore(out).read()
     assert 0 < len(before) < total

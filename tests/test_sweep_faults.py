@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import pytest
 
-import orchestrator
-from orchestrator.isolation import IsolatedRunner, make_payload
-from orchestrator.validate import check_spec
+import cosim
+from cosim.parallel.isolation import IsolatedRunner, make_payload
+from cosim.system.validate import check_spec
 
 from .conftest import TESTS
 from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
@@ -36,7 +36,7 @@ def fault_spec(version: int) -> dict:
 @pytest.mark.parametrize("version", [2, 3])
 def test_each_fault_gets_its_status_and_every_other_point_is_ok(write_spec, local_cluster, version):
     spec_path = write_spec(fault_spec(version), f"faults{version}.json")
-    df = orchestrator.sweep(str(spec_path), scheduler=local_cluster, timeout=TIMEOUT, batch_size=10, quiet=True)
+    df = cosim.sweep(str(spec_path), scheduler=local_cluster, timeout=TIMEOUT, batch_size=10, quiet=True)
     assert len(df) == 10 and df["point_id"].is_unique
     for _, row in df.iterrows():
         if row["f.trigger_time"] > 0.2:  # the fault would come after the stop time: a normal run
@@ -59,7 +59,7 @@ def test_python_unit_exception_and_bad_value_are_failed_rows(write_spec, local_c
         "objectives": {"y_end": {"signal": "bad.y", "reduce": "final"}},
         "design": {"parameters": {"bad.fail_at": {"values": [0.35, 5.0]}}},
     }
-    df = orchestrator.sweep(str(write_spec(spec)), scheduler=local_cluster, quiet=True)
+    df = cosim.sweep(str(write_spec(spec)), scheduler=local_cluster, quiet=True)
     assert list(df["status"]) == ["failed", "ok"]
     assert "boom" in df.loc[0, "message"] and "t=0.4" in df.loc[0, "message"]
     assert df.loc[1, "y_end"] == pytest.approx(0.9)

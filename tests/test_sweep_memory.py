@@ -2,7 +2,7 @@
 
 Dask keeps the last messages of every connection for debugging (1000 by default) and a sweep's task
 messages carry its points, so every process of a cluster cosim starts keeps evaluator.LOG_LENGTH; and a task's
-points travel as one pickled bytes object (sweep.PointBatch), which the scheduler passes on without unpickling.
+points travel as one pickled bytes object (cosim.parallel.tasks.PointBatch), which the scheduler passes on without unpickling.
 The client's memory over 10^6 points is measured in benchmarks/sweep_memory.py.
 """
 
@@ -12,8 +12,8 @@ import pickle
 
 import numpy as np
 
-from orchestrator.evaluator import LOG_LENGTH, dask_client
-from orchestrator.sweep import PointBatch
+from cosim.parallel.evaluator import LOG_LENGTH, dask_client
+from cosim.parallel.tasks import PointBatch
 
 
 def test_a_point_batch_travels_as_one_bytes_object_and_is_unpickled_when_read():

@@ -10,7 +10,7 @@ import sys
 import psutil
 import pytest
 
-from orchestrator.sweep import BatchSizer, Sweep, SweepError
+from cosim.studies.sweep import BatchSizer, Sweep, SweepError
 
 from .conftest import TESTS
 
@@ -77,7 +77,7 @@ def test_a_sweep_that_cannot_start_closes_its_early_cluster(write_spec, tmp_path
 
 def test_the_command_skips_the_final_collections_only_as_a_program(write_spec, tmp_path):
     spec = write_spec(square_spec([1.0]))
-    code = ("import gc, sys; from orchestrator.cli import main; how, args = sys.argv[1], sys.argv[2:]; "
+    code = ("import gc, sys; from cosim.cli.main import main; how, args = sys.argv[1], sys.argv[2:]; "
             "sys.argv = ['cosim', *args]; code = main(args) if how == 'given' else main(); "
             "print(code, gc.get_freeze_count() > 0)")
     for how, frozen in (("given", False), ("program", True)):
@@ -87,11 +87,11 @@ def test_the_command_skips_the_final_collections_only_as_a_program(write_spec, t
 
 
 def test_the_local_clusters_workers_run_in_this_process_and_serve_only_127_0_0_1():
-    """Points never run in a Dask worker but in its child process (orchestrator.isolation): cosim's local
+    """Points never run in a Dask worker but in its child process (cosim.parallel.isolation): cosim's local
     cluster keeps its workers in the client's process, without their bokeh pages."""
     from distributed import Client
 
-    from orchestrator.evaluator import local_cluster
+    from cosim.parallel.evaluator import local_cluster
 
     me = psutil.Process()
     connections = getattr(me, "net_connections", None) or me.connections  # psutil >= 6 / the declared 5.9
@@ -113,7 +113,7 @@ def test_a_point_that_kills_its_process_is_one_crashed_row_on_the_local_cluster(
     """The local cluster's isolation is the points' child processes: a unit killing its process (a segfault,
     os._exit) costs its own point, never the client running the workers."""
     unit = tmp_path / "killer.py"
-    unit.write_text("import os\nfrom orchestrator import PythonUnit, Variable\n\n"
+    unit.write_text("import os\nfrom cosim import PythonUnit, Variable\n\n"
                     "class Killer(PythonUnit):\n"
                     "    variables = (Variable('x', 'parameter', start=0.0), Variable('y', 'output', start=0.0))\n\n"
                     "    def do_step(self, t, h):\n"

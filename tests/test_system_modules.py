@@ -6,21 +6,21 @@ import json
 
 import pytest
 
-from orchestrator.cli import main
-from orchestrator.design import DesignSpace, range_problem, range_values
-from orchestrator.problems import SpecError
+from cosim.cli.main import main
+from cosim.errors import SpecError
+from cosim.spec.design import DesignSpace, range_problem, range_values
 
 from .conftest import python_unit
 
 
 def test_old_import_paths_of_the_system_still_work():
-    from orchestrator import system
-    from orchestrator.connection_checks import check_connections
-    from orchestrator.signals import resolve_signal
-    from orchestrator.stepping import check_algebraic_loops, stepping_order, strongly_connected
-    from orchestrator.study_checks import check_design
-    from orchestrator.system_parts import Assignment, Connection, Signal, SystemUnit
-    from orchestrator.value_checks import SETTABLE_AS_PARAMETER, assignment
+    from cosim.system import builder as system
+    from cosim.system.connection_checks import check_connections
+    from cosim.system.parts import Assignment, Connection, Signal, SystemUnit
+    from cosim.system.signals import resolve_signal
+    from cosim.system.stepping import check_algebraic_loops, stepping_order, strongly_connected
+    from cosim.system.study_checks import check_design
+    from cosim.system.value_checks import SETTABLE_AS_PARAMETER, assignment
 
     assert (system.Assignment, system.Connection, system.Signal, system.SystemUnit) == \
         (Assignment, Connection, Signal, SystemUnit)
@@ -30,7 +30,7 @@ def test_old_import_paths_of_the_system_still_work():
 
 
 def test_strongly_connected_components_and_order():
-    from orchestrator.stepping import strongly_connected
+    from cosim.system.stepping import strongly_connected
 
     edges = {"a": {"b"}, "b": {"c"}, "c": {"b", "d"}, "d": set()}
     components = strongly_connected(["a", "b", "c", "d"], edges)
@@ -59,7 +59,7 @@ def test_one_range_check_for_validate_and_the_design_space(tmp_path, capsys, lo,
         assert code == 0
         return
     assert code == 2 and f"$.design.parameters.g.k: {message}" in err  # validate's words ...
-    from orchestrator.spec import load_spec
+    from cosim.spec.loader import load_spec
 
     with pytest.raises(SpecError, match=message.replace("(", r"\(").replace(")", r"\)")):
         DesignSpace.from_spec(load_spec(spec))  # ... are the design space's

@@ -151,7 +151,7 @@ def test_unit_outputs_are_valid_in_initialization_mode():
 
 
 def test_unit_rejects_bad_parameters():
-    from orchestrator.unit import UnitError
+    from cosim.units.protocol import UnitError
 
     u = TrajectoryGenerator("traj")
     u.set_values({"convention": "degrees"})

@@ -14,9 +14,10 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from orchestrator import errors, unit_kinds
-from orchestrator.cli import main
-from orchestrator.unit_kinds import UnitKind, register_unit_kind, unregister_unit_kind
+from cosim import errors
+from cosim.cli.main import main
+from cosim.units import registry as unit_kinds
+from cosim.units.registry import UnitKind, register_unit_kind, unregister_unit_kind
 
 ROOT = Path(__file__).resolve().parent.parent
 PLUGIN = ROOT / "examples" / "plugin_unit_kind"
@@ -46,7 +47,7 @@ def install_plugin(site: Path) -> None:
 
 def test_builtin_kinds_own_the_unit_fields_of_the_schema_file():
     """specs/spec.schema.json lists the built-in kinds' fields for editors; they must be the registry's."""
-    schema = json.loads((ROOT / "specs" / "spec.schema.json").read_text())
+    schema = json.loads((ROOT / "src" / "cosim" / "spec" / "spec.schema.json").read_text())
     in_file = schema["$defs"]["unit"]["properties"]
     owned = {name: fragment for kind in unit_kinds.BUILTIN_KINDS.values() for name, fragment in kind.fields.items()}
     assert {k: v for k, v in in_file.items() if k not in unit_kinds.COMMON_FIELDS} == owned
@@ -61,7 +62,7 @@ def test_a_kind_installed_from_outside_runs_in_validate_run_and_sweep(tmp_path):
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(site), str(ROOT), os.environ.get("PYTHONPATH", "")]))
 
     def cosim(*args: str) -> subprocess.CompletedProcess:
-        return subprocess.run([sys.executable, "-m", "orchestrator.cli", *args], cwd=tmp_path, env=env,
+        return subprocess.run([sys.executable, "-m", "cosim.cli.main", *args], cwd=tmp_path, env=env,
                               capture_output=True, text=True, timeout=300)
 
     done = cosim("validate", "spec.json")

@@ -15,8 +15,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import orchestrator
-from orchestrator.quantities import IncompatibleUnits, UnitDefinition, UnknownUnit, conversion, parse_unit
+import cosim
+from cosim.util.quantities import IncompatibleUnits, UnitDefinition, UnknownUnit, conversion, parse_unit
 from tests.conftest import python_unit
 
 RPM = math.pi / 30.0
@@ -68,7 +68,7 @@ def measured_spec(**connection_options) -> dict:
 
 
 def test_connections_convert_rpm_degC_mm_exactly(write_spec):
-    result = orchestrator.run(str(write_spec(measured_spec())))
+    result = cosim.run(str(write_spec(measured_spec())))
     assert result.ok, result.message
     tr = result.traces
     # Gauss-Seidel: the source steps first, so at t_k the sink has received (and echoes) the source at t_k
@@ -80,7 +80,7 @@ def test_connections_convert_rpm_degC_mm_exactly(write_spec):
 
 
 def test_convert_false_passes_values_unchanged(write_spec):
-    result = orchestrator.run(str(write_spec(measured_spec(convert=False))))
+    result = cosim.run(str(write_spec(measured_spec(convert=False))))
     assert result.ok, result.message
     tr = result.traces
     np.testing.assert_array_equal(tr["sink.omega_seen"].to_numpy()[1:], tr["src.speed"].to_numpy()[1:])
@@ -95,7 +95,7 @@ def test_rpm_into_a_real_fmu_is_converted(write_spec):
         "experiment": {"stop": 0.5, "step": 0.1},
         "record": ["src.speed", "energy.omega[2]"],
     }
-    result = orchestrator.run(str(write_spec(spec)))
+    result = cosim.run(str(write_spec(spec)))
     assert result.ok, result.message
     tr = result.traces
     np.testing.assert_array_equal(tr["energy.omega[2]"].to_numpy()[1:], tr["src.speed"].to_numpy()[1:] * RPM)
@@ -110,7 +110,7 @@ def test_player_columns_with_units_are_converted(write_spec, tmp_path):
         "experiment": {"stop": 1.0, "step": 0.25},
         "record": ["play.n", "sink.omega_seen"],
     }
-    result = orchestrator.run(str(write_spec(spec)))
+    result = cosim.run(str(write_spec(spec)))
     assert result.ok, result.message
     tr = result.traces
     np.testing.assert_array_equal(tr["sink.omega_seen"].to_numpy()[1:], tr["play.n"].to_numpy()[1:] * RPM)
@@ -120,7 +120,7 @@ def test_incompatible_connection_is_refused_by_validate(write_spec):
     spec = measured_spec()
     spec["connections"].append({"from": "src.torque", "to": "sink.current"})
     path = write_spec(spec)
-    done = subprocess.run([sys.executable, "-m", "orchestrator.cli", "validate", str(path)],
+    done = subprocess.run([sys.executable, "-m", "cosim.cli.main", "validate", str(path)],
                           capture_output=True, text=True)
     assert done.returncode == 2, done.stdout + done.stderr
     out = done.stdout + done.stderr
@@ -130,28 +130,28 @@ def test_incompatible_connection_is_refused_by_validate(write_spec):
     assert "\"convert\": false" in out
     # the fix it names works: with convert false the spec validates
     spec["connections"][3]["convert"] = False
-    assert subprocess.run([sys.executable, "-m", "orchestrator.cli", "validate", str(write_spec(spec))],
+    assert subprocess.run([sys.executable, "-m", "cosim.cli.main", "validate", str(write_spec(spec))],
                           capture_output=True, text=True).returncode == 0
 
 
 def test_player_units_naming_no_column_is_refused(write_spec, tmp_path):
     (tmp_path / "t.csv").write_text("time,n\n0,1\n1,2\n")
     spec = {"units": {"play": {"player": "t.csv", "units": {"speed": "rpm"}}}, "experiment": {"stop": 1, "step": 0.5}}
-    with pytest.raises(orchestrator.SpecError, match=r"\$\.units\.play\.player: .*'units' names speed"):
-        orchestrator.build_system(orchestrator.load_spec(write_spec(spec)))
+    with pytest.raises(cosim.SpecError, match=r"\$\.units\.play\.player: .*'units' names speed"):
+        cosim.build_system(cosim.load_spec(write_spec(spec)))
 
 
 def test_a_relative_quantity_converts_without_the_offset(write_spec):
     spec = {"units": {"src": {"python": python_unit("TemperatureRise")}, "sink": {"python": python_unit("SiSink")}},
             "connections": [{"from": "src.rise", "to": "sink.temperature"}],
             "experiment": {"stop": 0.2, "step": 0.1}, "record": ["sink.temperature_seen"]}
-    result = orchestrator.run(str(write_spec(spec)))
+    result = cosim.run(str(write_spec(spec)))
     assert result.ok, result.message
     assert list(result.traces["sink.temperature_seen"])[1:] == [2.0, 2.0]  # a rise of 2 degC is 2 K, not 275.15 K
 
 
 def test_a_recorded_parquet_table_keeps_its_units_for_a_player(write_spec, tmp_path):
-    from orchestrator.cli import main
+    from cosim.cli.main import main
 
     recording = measured_spec()
     recording["record"] = ["src.speed"]
@@ -160,7 +160,7 @@ def test_a_recorded_parquet_table_keeps_its_units_for_a_player(write_spec, tmp_p
     spec = {"units": {"src": {"player": "rec.parquet"}, "sink": {"python": python_unit("SiSink")}},
             "connections": [{"from": "src.speed", "to": "sink.omega"}],
             "experiment": {"stop": 1.0, "step": 0.1}, "record": ["src.speed", "sink.omega_seen"]}
-    result = orchestrator.run(str(write_spec(spec, "replay.json")))
+    result = cosim.run(str(write_spec(spec, "replay.json")))
     assert result.ok, result.message
     tr = result.traces
     np.testing.assert_array_equal(tr["sink.omega_seen"].to_numpy()[1:], tr["src.speed"].to_numpy()[1:] * RPM)

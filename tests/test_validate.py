@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.cli import main
+from cosim.cli.main import main
 
 from .conftest import python_unit
 
@@ -149,8 +149,8 @@ def test_fmu_escaping_its_folder_is_refused(tmp_path, capsys, built_fmu):
 
 def test_fmu_found_unsafe_only_when_instantiated_is_a_user_error(tmp_path, built_fmu):
     """An FMU replaced by an unsafe archive after the check: the run fails as the user's, never as internal."""
-    from orchestrator import Execution, build_system, load_spec
-    from orchestrator.errors import EXIT_USAGE
+    from cosim import Execution, build_system, load_spec
+    from cosim.errors import EXIT_USAGE
 
     fmu = tmp_path / "a.fmu"
     shutil.copy(built_fmu("linear_ode", 2), fmu)

@@ -7,7 +7,7 @@ import os
 import signal
 import time
 
-from orchestrator import PythonUnit, Variable
+from cosim import PythonUnit, Variable
 
 
 class SlowSquare(PythonUnit):
@@ -54,7 +54,7 @@ class SlowSquare(PythonUnit):
 TABLE_GAIN_SOURCE = '''
 import json
 
-from orchestrator import PythonUnit, Variable
+from cosim import PythonUnit, Variable
 
 
 class TableGain(PythonUnit):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from orchestrator import PythonUnit, Variable
+from cosim import PythonUnit, Variable
 
 
 class LinearOde(PythonUnit):
@@ -162,7 +162,7 @@ class EndsAtHalf(PythonUnit):
     variables = (Variable("n", "output", type="Integer", start=0),)
 
     def do_step(self, t, h):
-        from orchestrator.unit import SimulationEnded
+        from cosim.units.protocol import SimulationEnded
 
         self.n += 1
         if t + h >= 0.5 - 1e-12:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from orchestrator import PythonUnit, Variable
+from cosim import PythonUnit, Variable
 
 
 class DriveProfile(PythonUnit):

@@ -30,8 +30,7 @@ import pandas as pd  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from analyze import (FACTOR, OPT, Q22, Q24, grid_plot, paired, summary_table,  # noqa: E402
-                     time_at_reference_energy, where)
+from analyze import FACTOR, OPT, Q22, Q24, grid_plot, paired, summary_table, time_at_reference_energy, where  # noqa: E402
 
 TABLE = HERE / "results_full.parquet"
 COLUMNS = ["point_id", Q22, Q24, FACTOR, OPT, "e_total", "duration", "blend_duration", "planned_energy", "solve_time",

@@ -1,6 +1,6 @@
 """Run the optimal-timing study's sweeps and store their tables beside this file (zstd Parquet).
 
-Uses the engine's sweep (``orchestrator.sweep``: Dask worker processes, units
+Uses the engine's sweep (``cosim.sweep``: Dask worker processes, units
 reused per worker).  Writes ``results.parquet`` (spec.json) and
 ``results_tradeoff.parquet`` (spec_tradeoff.json), each with a ``*_run.json``
 (points, status counts, wall time, machine load).
@@ -25,11 +25,11 @@ TABLES = {"spec.json": "results.parquet", "spec_tradeoff.json": "results_tradeof
 
 
 def run(spec: str, workers: int) -> None:
-    import orchestrator
+    import cosim
 
     started = time.perf_counter()
     with tempfile.TemporaryDirectory() as out:
-        df = orchestrator.sweep(HERE / spec, workers=workers, out=out)
+        df = cosim.sweep(HERE / spec, workers=workers, out=out)
     wall = time.perf_counter() - started
     table = TABLES[spec]
     df.to_parquet(HERE / table, index=False, compression="zstd")

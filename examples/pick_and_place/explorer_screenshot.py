@@ -48,10 +48,10 @@ def main() -> None:
         try:
             import tkinter as tk
 
-            from orchestrator.analysis.explorer import ExplorerState, ExplorerWindow
+            from cosim.analysis.explorer import ExplorerState, ExplorerWindow
             sys.path.insert(0, str(HERE.parent.parent))  # the repository: the frame-buffer decoder is a test tool
+            from cosim.analysis.table import load_results
             from tests.xwd import xwd_to_rgb
-            from orchestrator.analysis.table import load_results
 
             table = load_results(HERE / "study")
             root = tk.Tk()

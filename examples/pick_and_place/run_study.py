@@ -1,6 +1,6 @@
 """Run the full pick-and-place study (17061 points) and store its table as zstd Parquet.
 
-Uses the engine's sweep (``orchestrator.sweep``: Dask worker processes, units
+Uses the engine's sweep (``cosim.sweep``: Dask worker processes, units
 reused per worker, rows streamed to a results folder), then writes the table
 as ``study/results.parquet`` (zstd) with the sweep's ``metadata.json`` and prints the wall time.
 
@@ -32,10 +32,10 @@ def main() -> None:
     parser.add_argument("--resume", action="store_true")
     args = parser.parse_args()
 
-    import orchestrator
+    import cosim
 
     started = time.perf_counter()
-    df = orchestrator.sweep(HERE / args.spec, workers=args.workers, out=args.out, resume=args.resume)
+    df = cosim.sweep(HERE / args.spec, workers=args.workers, out=args.out, resume=args.resume)
     wall = time.perf_counter() - started
     table = HERE / args.table
     table.parent.mkdir(parents=True, exist_ok=True)

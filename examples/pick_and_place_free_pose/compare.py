@@ -17,9 +17,9 @@ import pandas as pd
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parents[1]))
 
-from orchestrator.analysis.pareto import pareto_mask  # noqa: E402
-from orchestrator.analysis.plots import new_figure, save  # noqa: E402
-from orchestrator.optimize import hypervolume, normalised_losses  # noqa: E402
+from cosim.analysis.hypervolume import hypervolume, normalised_losses  # noqa: E402
+from cosim.analysis.pareto import pareto_mask  # noqa: E402
+from cosim.analysis.plots import new_figure, save  # noqa: E402
 
 OBJ = ["e_total", "duration"]
 JOINTS = [f"traj.waypoints[{8 + j}]" for j in range(7)]

@@ -15,9 +15,9 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
-from orchestrator import PythonUnit, Variable
-from orchestrator.unit import UnitDescription, UnitType
-from orchestrator.unit_kinds import UnitKind
+from cosim import PythonUnit, Variable
+from cosim.units.protocol import UnitDescription, UnitType
+from cosim.units.registry import UnitKind
 
 SHAPES = {
     "sine": lambda cycles: math.sin(2.0 * math.pi * cycles),

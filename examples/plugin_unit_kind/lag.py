@@ -2,7 +2,7 @@
 
 import math
 
-from orchestrator import PythonUnit, Variable
+from cosim import PythonUnit, Variable
 
 
 class Lag(PythonUnit):

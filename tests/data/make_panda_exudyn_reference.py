@@ -31,13 +31,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from orchestrator.execution import Execution  # noqa: E402
-from orchestrator.spec import load_spec  # noqa: E402
-from orchestrator.system import build_system  # noqa: E402
-
+from cosim.execution.run import Execution  # noqa: E402
 from cosim.models.panda_exudyn import PandaExudyn  # noqa: E402
 from cosim.models.panda_model import FRANKA_DOC_LIMITS, thesis_to_urdf  # noqa: E402
 from cosim.models.trajectory import plan_parabolic_blend  # noqa: E402
+from cosim.spec.loader import load_spec  # noqa: E402
+from cosim.system.builder import build_system  # noqa: E402
 
 OUT = Path(__file__).with_name("panda_exudyn_reference.json")
 SPEC = ROOT / "examples" / "pick_and_place" / "spec_exudyn.json"

@@ -1,0 +1,110 @@
+"""Non-dominated (Pareto-optimal) rows of a table of objective values.
+
+Rules:
+
+- A row *dominates* another when it is no worse in every objective and
+  strictly better in at least one.
+- Rows with the same objective values (ties) do not dominate each other:
+  when one of them is on the front, all of them are.
+- A row with a missing value (NaN) in any chosen objective is never on the
+  front and never dominates another row.
+
+Two objectives use an O(n log n) sweep over the lexicographically sorted
+unique rows; more objectives use a cull that removes, vectorized, every row
+dominated by the next front member (O(n * front size)).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Sequence
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from cosim.analysis.table import ResultsTable
+
+
+def pareto_mask(values: np.ndarray, senses: Sequence[str] | None = None) -> np.ndarray:
+    """Boolean mask of the non-dominated rows of ``values`` (n rows, k objectives).
+
+    ``senses`` gives 'min' or 'max' per column (default: all 'min').
+    Raises ValueError when the shapes do not fit or a sense is unknown.
+    """
+    values = np.asarray(values, dtype=float)
+    if values.ndim != 2:
+        raise ValueError("values must be a 2-D array (rows x objectives)")
+    n, k = values.shape
+    senses = list(senses) if senses is not None else ["min"] * k
+    if len(senses) != k:
+        raise ValueError(f"{k} objective column(s) but {len(senses)} sense(s)")
+    signs = np.array([_sign(s) for s in senses])
+    mask = np.zeros(n, dtype=bool)
+    if n == 0 or k == 0:
+        return mask
+    finite = ~np.isnan(values).any(axis=1)
+    rows = values[finite] * signs  # every objective is now minimized
+    if len(rows) == 0:
+        return mask
+    unique, inverse = np.unique(rows, axis=0, return_inverse=True)
+    inverse = np.asarray(inverse).reshape(-1)
+    front_unique = _front_2d(unique) if k == 2 else (_front_1d(unique) if k == 1 else _front_cull(unique))
+    mask[np.flatnonzero(finite)] = front_unique[inverse]
+    return mask
+
+
+def _sign(sense: str) -> float:
+    s = sense.lower()
+    if s in ("min", "minimize"):
+        return 1.0
+    if s in ("max", "maximize"):
+        return -1.0
+    raise ValueError(f"unknown sense '{sense}': use min or max")
+
+
+def _front_1d(unique: np.ndarray) -> np.ndarray:
+    out = np.zeros(len(unique), dtype=bool)
+    out[0] = True  # np.unique sorts ascending: the smallest value is the only optimum
+    return out
+
+
+def _front_2d(unique: np.ndarray) -> np.ndarray:
+    """Unique rows sorted lexicographically: a row is dominated iff an earlier row has f2 <= its f2."""
+    f2 = unique[:, 1]
+    best_before = np.concatenate(([np.inf], np.minimum.accumulate(f2)[:-1]))
+    return f2 < best_before
+
+
+def _front_cull(unique: np.ndarray) -> np.ndarray:
+    """The lexicographically first remaining row is always non-dominated; drop what it dominates."""
+    remaining = np.arange(len(unique))
+    front: list[int] = []
+    while remaining.size:
+        p = remaining[0]
+        front.append(p)
+        rest = unique[remaining[1:]]
+        dominated = np.all(unique[p] <= rest, axis=1)  # rows are unique, so <= everywhere means strictly somewhere
+        remaining = remaining[1:][~dominated]
+    out = np.zeros(len(unique), dtype=bool)
+    out[front] = True
+    return out
+
+
+def front_of(table: "ResultsTable", objectives: list[tuple[str, str]], where: str | None = None):
+    """(mask of front rows, rows considered): ok, feasible rows passing ``where``, every objective present."""
+    considered = table.ok_mask() & table.feasible_mask() & table.where(where)
+    values = np.column_stack([table.values(name) for name, _ in objectives])
+    values[~considered] = np.nan
+    return pareto_mask(values, [s for _, s in objectives]), considered
+
+
+def resolve_objectives(table: "ResultsTable", given: list[tuple[str, str]] | None) -> list[tuple[str, str]]:
+    """The (column, sense) pairs asked for, or the spec's objectives with a sense; raises AnalysisError."""
+    from cosim.analysis.table import AnalysisError
+
+    if given:
+        return [(table.check_column(name), sense) for name, sense in given]
+    senses = table.objective_senses()
+    if not senses:
+        raise AnalysisError("no objectives: name them with --min OBJ / --max OBJ (the table's metadata gives "
+                            "no objective with a 'sense')")
+    return list(senses.items())

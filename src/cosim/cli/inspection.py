@@ -1,0 +1,140 @@
+"""``cosim inspect``: the ports of a unit, whatever it is, or of every unit of a spec.
+
+A target is an FMU (``model.fmu``, ``builtin:NAME_fmi3``), a Python unit (``file.py:Class``,
+``package.module:Class``), a recorded table a player would play (``.parquet``/``.csv``) or a spec.json. Every
+port is listed with its causality, type, shape, unit, start value and range, so that the names the error
+messages mention ("no variable 'x'; run cosim inspect") can be looked up.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable
+
+from cosim.errors import EXIT_OK, UsageError
+from cosim.units.protocol import UnitDescription, UnitType
+
+HEADER = ("name", "causality", "type", "shape", "unit", "start", "range", "description")
+
+
+def unit_type_of(target: str) -> UnitType:
+    """The blueprint of the unit ``target`` names (FMU, Python class or recorded table).
+
+    Raises UsageError when the target names nothing cosim can load, with what it expected.
+    """
+    from cosim.units.fmu.description import FmuUnitType
+    from cosim.units.player import PlayerUnitType
+    from cosim.units.python.unit import PythonUnitType
+    from cosim.units.registry import resolve_fmu_path
+
+    suffix = Path(target).suffix.lower()
+    try:
+        if suffix == ".fmu" or target.startswith("builtin:"):
+            return FmuUnitType(resolve_fmu_path(target), target)
+        if suffix in (".parquet", ".csv"):
+            unit_type: UnitType = PlayerUnitType(target)
+        elif ":" in target:
+            module = target.rpartition(":")[0]
+            base = Path(module).parent if module.endswith(".py") else Path.cwd()
+            unit_type = PythonUnitType(target, base_dir=str(base.resolve()))
+        else:
+            raise UsageError(f"'{target}' is not something cosim inspect knows: give a spec.json, a model.fmu or "
+                             "builtin:NAME_fmi3, a Python unit file.py:Class or package.module:Class, or a "
+                             "recorded .parquet/.csv table")
+        unit_type.describe()  # load it now, so that a missing file or class is reported here
+        return unit_type
+    except (FileNotFoundError, ImportError, ValueError, TypeError) as exc:
+        raise UsageError(f"cannot inspect '{target}': {exc}") from None
+
+
+def listed_variables(description: UnitDescription) -> list:
+    """The ports to show: scalars x[1]..x[n] that are also offered as the array x (an FMI 2.0 FMU's, a
+    player's columns) are left out, and so are local variables."""
+    arrays = {v.name for v in description.variables if v.is_array}
+    return [v for v in description.variables
+            if v.causality != "local" and not (not v.is_array and v.name.split("[")[0] in arrays)]
+
+
+def port_rows(description: UnitDescription) -> list[tuple[str, ...]]:
+    """One row per port (HEADER's columns)."""
+    rows = []
+    for v in listed_variables(description):
+        shape = "x".join(map(str, v.shape)) if v.shape else "scalar"
+        rng = "" if v.min is None and v.max is None else f"[{_fmt(v.min) or '-inf'}, {_fmt(v.max) or 'inf'}]"
+        rows.append((v.name, v.causality, v.fmi_type or v.type, shape, v.unit or "",
+                     _fmt(v.start), rng, v.description[:60]))
+    return rows
+
+
+def print_table(rows: list[tuple[str, ...]], indent: str = "  ", out: Callable[[str], Any] = print) -> None:
+    table = [HEADER, *rows]
+    widths = [max(len(r[i]) for r in table) for i in range(len(HEADER))]
+    for row in table:
+        out(indent + "  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip())
+
+
+def inspect_unit(target: str) -> int:
+    """Print the ports of one unit; returns the exit code."""
+    unit_type = unit_type_of(target)
+    d = unit_type.describe()
+    offered: list[str] = []
+    if d.kind == "fmu":
+        from cosim.units.fmu.description import offered_interfaces
+
+        offered = offered_interfaces(unit_type.model_description())
+    kind = {"fmu": f"FMI {d.fmi_version} {' and '.join(offered)} FMU", "python": "Python unit",
+            "player": "player of a recorded table"}.get(d.kind, d.kind)
+    print(f"{target}: {d.name}, {kind}" + (f", default step {d.default_step:g} s" if d.default_step else ""))
+    if len(offered) > 1:
+        print(f"  runs as {unit_type.interface} unless the spec's unit sets \"interface\": \"model-exchange\"")
+    if d.description:
+        print(f"  {d.description}")
+    if d.kind == "fmu" and getattr(unit_type.model_description().coSimulation, "needsExecutionTool", False):
+        print("  needsExecutionTool: the FMU drives its exporting tool, which must be installed and licensed "
+              "on every machine that runs it (also every Dask worker)")
+    print_table(port_rows(d))
+    return EXIT_OK
+
+
+def inspect_spec(path: str, experiment: dict[str, Any] | None = None) -> int:
+    """Print a spec's (or an SSP's) units with their ports, its connections and stepping order; returns the exit
+    code. ``experiment`` overrides the experiment's fields (what an SSP often lacks)."""
+    from cosim.system.validate import check_spec
+
+    system = check_spec(path, experiment or None)
+    print(f"spec {path}: {system.spec.name}")
+    for name, unit in system.units.items():
+        d = unit.description
+        kind = f"FMI {d.fmi_version}" if d.kind == "fmu" else d.kind
+        if d.kind == "fmu" and unit.unit_type.interface == "model-exchange":
+            kind += " model-exchange"  # co-simulation, the usual case, goes without saying
+        ports = listed_variables(d)  # FMI 2.0 scalars x[1]..x[n] count once, as their array x
+        inputs = sum(v.causality == "input" for v in ports)
+        outputs = sum(v.causality == "output" for v in ports)
+        print(f"unit {name}: {kind} {unit.spec.source} ({inputs} inputs, {outputs} outputs)")
+        print_table(port_rows(d))
+    print("connections:")
+    for c in system.connections:
+        scaled = f" (x {c.factor:.17g} + {c.offset:.17g})" if c.transforms else ""
+        print(f"  {c.source.text} -> {c.target.text}{scaled}")
+    exp = system.spec.experiment
+    print(f"experiment: {exp.start:g} .. {exp.stop:g} s, step {exp.step:g} s, {exp.algorithm}")
+    print(f"stepping order: {' -> '.join(system.order)}")
+    return EXIT_OK
+
+
+def inspect_target(target: str, experiment: dict[str, Any] | None = None) -> int:
+    """``cosim inspect TARGET``: a spec (``.json``) or SSP (``.ssp``), or any one unit."""
+    if Path(target).suffix.lower() in (".json", ".ssp"):
+        return inspect_spec(target, experiment)
+    return inspect_unit(target)
+
+
+def _fmt(value: Any) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, bytes):
+        return value.hex() or '""'  # FMI 3.0 Binary: the bytes in hex, as the trace columns hold them
+    if isinstance(value, (tuple, list)):
+        return "(" + ", ".join(_fmt(v) for v in value[:4]) + (", ..." if len(value) > 4 else "") + ")"
+    return f"{value:g}" if isinstance(value, float) else str(value)

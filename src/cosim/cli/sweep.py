@@ -1,0 +1,144 @@
+"""``cosim sweep``: evaluate a spec's design space on Dask (see :mod:`cosim.studies.sweep`).
+
+Exit codes: 0 every point ok, 1 some points not ok (failed, timeout,
+crashed), 2 a bad spec, results folder or command line (a UserError raised
+to :func:`cosim.cli.main.main`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+from cosim.errors import EXIT_OK, EXIT_RUN_FAILED, UsageError
+
+
+def add_sweep_parser(sub: Any) -> None:
+    """Register the ``sweep`` subcommand on an argparse sub-parser collection."""
+    p = sub.add_parser("sweep", help="evaluate every design point of a spec on Dask; write a results table")
+    p.add_argument("spec", help="path to spec.json, or an SSP (.ssp, .ssd, or a folder with SystemStructure.ssd)")
+    p.add_argument("--out", metavar="DIR", help="results folder (default: results/<spec name> in the current folder)")
+    p.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: one per core)")
+    add_cluster_options(p)
+    p.add_argument("--timeout", type=float, metavar="S", help="seconds a point may run before it is stopped")
+    p.add_argument("--resume", action="store_true", help="run only the points missing in --out")
+    p.add_argument("--recompute", action="store_true",
+                   help="with --resume: when a unit's file or a data file it reads changed since the stored rows, discard them and run "
+                        "every point again (without it such a resume is refused)")
+    p.add_argument("--csv", action="store_true", help="also write DIR/results.csv")
+    p.add_argument("--batch-size", type=int, metavar="N", help="points per Dask task (default: automatic)")
+    from cosim.cli.options import add_experiment_options
+    add_experiment_options(p)
+    p.add_argument("--dry-run", action="store_true",
+                   help="print the number of points, the first few and a time estimate from sample runs of "
+                        "points spread over the whole space (the first, the last and between)")
+    p.set_defaults(handler=cmd_sweep)
+
+
+def add_cluster_options(p: argparse.ArgumentParser) -> None:
+    """--scheduler and --cluster, shared by ``sweep`` and ``optimize`` (see :mod:`cosim.parallel.cluster`)."""
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="use a running Dask scheduler, e.g. tcp://host:8786 (default: $DASK_SCHEDULER_ADDRESS, "
+                            "else a local cluster)")
+    where.add_argument("--cluster", metavar="FILE",
+                       help="start the Dask cluster a YAML/JSON file names (type, kwargs, scale or adapt), "
+                            "e.g. Slurm or Kubernetes")
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    """Run (or dry-run) a sweep; returns the exit code. SpecError, SweepError and UsageError reach cli.main."""
+    if args.batch_size is not None and args.batch_size < 1:
+        raise UsageError("--batch-size must be at least 1")
+    if not args.dry_run and args.scheduler is None and args.cluster is None:
+        # most likely a local cluster, whose workers run in this process: their point children start now and
+        # import while this process imports the rest and checks the spec (stopped if the sweep runs elsewhere)
+        from cosim.parallel.isolation import start_spare_children
+
+        start_spare_children(args.workers or os.cpu_count() or 1)
+    from cosim.cli.options import experiment_overrides
+    from cosim.results.folder import default_folder
+    from cosim.studies.sweep import Sweep
+
+    out = Path(args.out) if args.out else default_folder(args.spec)
+    if args.dry_run:
+        return _dry_run(args)
+    sweep = Sweep(args.spec, workers=args.workers, out=out, scheduler=args.scheduler, cluster=args.cluster,
+                  timeout=args.timeout,
+                  resume=args.resume, batch_size=args.batch_size, csv=args.csv, experiment=experiment_overrides(args),
+                  recompute=args.recompute,
+                  start_early=True)  # the local cluster starts while the results folder and payload are prepared
+    counts = sweep.run_to_disk()  # a huge sweep's table never sits in memory
+    total = sum(counts.values())
+    summary = ", ".join(f"{n} {s}" for s, n in sorted(counts.items()) if n)
+    print(f"{total} points: {summary or 'none'}; table: {sweep.store.table_path}")
+    not_ok = total - counts.get("ok", 0)
+    if not_ok:
+        for row in first_not_ok(sweep.store.table_path, 5):
+            print(f"  {row['point_id']} {row['status']}: {str(row['message'])[:120]}", file=sys.stderr)
+        if not_ok > 5:
+            print(f"  ... and {not_ok - 5} more (see the 'message' column)", file=sys.stderr)
+    return EXIT_OK if not_ok == 0 else EXIT_RUN_FAILED
+
+
+def first_not_ok(table: Path, n: int) -> list[dict]:
+    """The first ``n`` rows whose status is not ok, reading only three columns (also for ``cosim optimize``)."""
+    import pyarrow.compute as pc
+    import pyarrow.parquet as pq
+
+    rows = pq.read_table(table, columns=["point_id", "status", "message"])
+    return rows.filter(pc.not_equal(rows.column("status"), "ok")).slice(0, n).to_pylist()
+
+
+def _dry_run(args: argparse.Namespace) -> int:
+    import os
+    import tempfile
+
+    from cosim.cli.options import experiment_overrides
+    from cosim.studies.sweep import Sweep
+
+    with tempfile.TemporaryDirectory(prefix="cosim_dry_") as scratch:
+        sweep = Sweep(args.spec, workers=args.workers, out=scratch, timeout=args.timeout, quiet=True,
+                      experiment=experiment_overrides(args))
+        total = len(sweep.space)
+        print(f"{sweep.spec.name}: {total} points ({sweep.space.method}; parameters: "
+              f"{', '.join(sweep.space.targets) or 'none'})")
+        for point in sweep.space.head(5):
+            print(f"  {point.id}  " + ", ".join(f"{k}={v}" for k, v in point.values.items()))
+        if total > 5:
+            print(f"  ... and {total - 5} more")
+        samples = sweep.sample_runs(4)
+    for row in samples:
+        print(f"sample {row['point_id']}: {row['status']} in {row['run_time']:.3f} s"
+              + (f" ({row['message'][:100]})" if row["message"] else ""))
+    times = [r["run_time"] for r in samples if r["status"] == "ok"]
+    if times:
+        # the first run also instantiates the units; the others show the steady cost per point
+        steady = sorted(times[1:] or times)
+        per_point = steady[len(steady) // 2]
+        workers = args.workers or os.cpu_count() or 1
+        if args.scheduler or args.cluster:
+            print(f"estimate: {per_point:.3f} s per point; {total * per_point:.0f} s of work in total "
+                  "(divide by the scheduler's worker count)")
+        else:
+            print(f"estimate: {per_point:.3f} s per point, about {_fmt_time(total * per_point / workers)} "
+                  f"on {workers} worker(s)")
+        if args.timeout is None:
+            from cosim.studies.sweep import TIMEOUT_FACTOR, default_timeout
+
+            print(f"timeout: {default_timeout(steady * 3):.0f} s per point by default ({TIMEOUT_FACTOR} x the "
+                  "measured point time, within COSIM_TIMEOUT_FLOOR .. COSIM_TIMEOUT_FIRST); --timeout S sets it")
+    else:
+        print("estimate: none (no sample run succeeded)")
+    return EXIT_OK
+
+
+def _fmt_time(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"

@@ -1,0 +1,522 @@
+"""Several design points of one system in lock-step: one stepping loop for K points.
+
+A point of the pick-and-place study costs a few microseconds of physics per
+communication step but tens of microseconds of Python calls (units, transfers,
+probes, observers).  Run K points side by side and most of that is paid once
+per step for all K: a unit with a vectorised twin
+(:mod:`cosim.units.python.batch`) advances every point with one call,
+any other unit is K ordinary instances called in a tight loop
+(:class:`InstanceBatch`: FMUs, Python units without a twin).
+
+The semantics are those of K separate runs (:class:`~cosim.execution.run.Execution`):
+every point's units see the same communication points, in the same order of
+the master algorithm, with the same initialization; a point that reaches its
+``stop_when`` is no longer stepped (its FMU instances) or read (its rows of a
+twin); its objectives are reduced from its own samples with the same
+reducer.  The results are those of the single runs bit for bit
+(``tests/test_lockstep.py``), except where a twin states a tolerance: the
+Exudyn arm's twin (``models.panda_exudyn.PandaExudynBatch``) integrates its K
+arms in one Exudyn system whose Newton iteration sees all K residuals, so its
+rows agree with single runs to the solver's Newton tolerance (bounds and test:
+``tests/test_panda_exudyn_lockstep.py``), and a row may move within that
+tolerance with its group's other points.
+
+Anything unusual makes the points run one by one instead, so a point's row
+never depends on its neighbours (beyond such a stated tolerance): a unit error, an exception, a unit ending the
+simulation, a twin refusing the rows (:class:`~cosim.units.python.batch.NotBatchable`).
+Lock-step is used only where it pays and cannot change a result: no traces
+recorded, only numeric probes, Real connections, and at least one unit with
+a twin.  An FMU's outputs that no objective needs before a point's end (only
+``final`` reductions) are read at that point's last sample only.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any, Callable, Iterator, Mapping, Sequence
+
+import numpy as np
+
+from cosim.execution.run import FAILED, OK, UNIT_FAILURE, RunResult, step_count
+from cosim.master.observers import ObjectiveReducer, flatten_objectives
+from cosim.spec.expressions import evaluate_expressions
+from cosim.system.builder import Assignment, Connection, System
+from cosim.units.fmu.instance import FmiInstance
+from cosim.units.protocol import NUMERIC_TYPES, Selection, Unit
+from cosim.units.python.batch import NotBatchable, PythonBatchUnit, batch_class_of
+from cosim.units.python.unit import PythonUnitType
+from cosim.util.limits import limit
+
+GROUP_SIZE = 32  # points per lock-step group at most: enough to share the per-step cost
+# A group's rows come together when it ends, so a group is made to last about COSIM_LOCKSTEP_SECONDS
+# (cosim.util.limits; 0.25 s by default), from the time of a point run alone.
+
+
+class InstanceBatch:
+    """K live instances of one unit, driven like a vectorised twin (``get`` gives a (K, n) array).
+
+    Only the rows in ``active`` are set, stepped and read during the run, so
+    a point that has ended sees no further step.  Errors are not wrapped per
+    instance: any exception makes the caller run the points one by one, where
+    each gets its own message.
+    """
+
+    def __init__(self, units: Sequence[Unit]):
+        self.units = list(units)
+        self.name = self.units[0].name
+        self.description = self.units[0].description
+        self.rows = len(self.units)
+        self.active = np.arange(self.rows)
+        self._steps = [unit.do_step for unit in self.units]
+
+    @property
+    def active(self) -> np.ndarray:
+        """The rows still running (their indices)."""
+        return self._active
+
+    @active.setter
+    def active(self, rows: np.ndarray) -> None:
+        self._active, self._active_list = rows, rows.tolist()  # the list is what the loops below walk
+
+    def select(self, refs: Sequence[Any]) -> tuple[list[Selection], list[Any], list[Any]]:
+        selections = [unit.select(refs) for unit in self.units]
+        # bound once: the unit's fastest reader (an FMU's is a view of its buffer) and its set
+        readers = [unit.reader(s) for unit, s in zip(self.units, selections)]
+        setters = [unit.writer(s) for unit, s in zip(self.units, selections)]
+        return selections, readers, setters
+
+    def get(self, selection: tuple[list[Selection], list[Any], list[Any]]) -> np.ndarray:
+        readers = selection[1]
+        out = np.zeros((self.rows, len(selection[0][0])))
+        for k in self._active_list:
+            out[k] = readers[k]()
+        return out
+
+    def get_rows(self, selection: tuple[list[Selection], list[Any], list[Any]], rows: list[int]) -> np.ndarray:
+        readers = selection[1]
+        return np.array([readers[k]() for k in rows], dtype=float).reshape(len(rows), len(selection[0][0]))
+
+    def set(self, selection: tuple[list[Selection], list[Any], list[Any]], values: np.ndarray) -> None:
+        setters = selection[2]
+        for k in self._active_list:
+            setters[k](values[k])
+
+    def set_row(self, selection: tuple[list[Selection], list[Any], list[Any]], row: int, values: Sequence[Any]) -> None:
+        self.units[row].set(selection[0][row], list(values))
+
+    def setup(self, start_time: float, stop_time: float | None) -> None:
+        for unit in self.units:
+            unit.setup(start_time, stop_time)
+
+    def enter_initialization(self) -> None:
+        for unit in self.units:
+            unit.enter_initialization()
+
+    def exit_initialization(self) -> None:
+        for unit in self.units:
+            unit.exit_initialization()
+
+    def step(self, t: float, h: float) -> None:
+        steps = self._steps
+        for k in self._active_list:
+            steps[k](t, h)
+
+    def reset(self) -> None:
+        for unit in self.units:
+            unit.reset()
+        self.active = np.arange(self.rows)
+
+    def terminate(self) -> None:
+        for unit in self.units:
+            try:
+                unit.terminate()
+            except Exception:
+                pass  # terminating every instance matters more than one instance's complaint
+
+
+def has_twin(system: System) -> bool:
+    """Whether some unit of ``system`` is a Python unit with a vectorised twin."""
+    for system_unit in system.units.values():
+        unit_type = system_unit.unit_type
+        if isinstance(unit_type, PythonUnitType) and batch_class_of(unit_type.load_class()) is not None:
+            return True
+    return False
+
+
+def can_run_in_lockstep(system: System) -> bool:
+    """Whether points of ``system`` may run in lock-step (module docstring): a twin, Real connections,
+    numeric probes."""
+    if not has_twin(system):
+        return False
+    # connections carry Real values only (batches hand values on as float arrays; an Integer or Boolean
+    # input keeps its exact type on the one-by-one path)
+    if any(c.target.variable.type != "Real" or c.source.variable.type != "Real" for c in system.connections):
+        return False
+    return all(s.variable.type in NUMERIC_TYPES and s.variable.fmi_type not in ("Int64", "UInt64")
+               for s in system.probes)
+
+
+class Batches(dict):
+    """Unit name -> live batch (a twin or an :class:`InstanceBatch`), with the wiring between them built
+    once (transfers, probe, selections): the batches are reused group after group."""
+
+    wiring: "_Wiring | None" = None
+
+
+def instantiate(system: System, rows: int) -> Batches:
+    """One batch per unit of ``system`` for ``rows`` points: its twin, or ``rows`` instances."""
+    batches = Batches()
+    try:
+        for name, system_unit in system.units.items():
+            unit_type = system_unit.unit_type
+            twin = batch_class_of(unit_type.load_class()) if isinstance(unit_type, PythonUnitType) else None
+            if twin is not None:
+                batches[name] = twin(unit_type.load_class(), name, rows)
+            else:
+                batches[name] = InstanceBatch([unit_type.instantiate(name) for _ in range(rows)])
+    except BaseException:
+        terminate(batches)
+        raise
+    return batches
+
+
+def terminate(batches: Mapping[str, Any]) -> None:
+    for batch in batches.values():
+        try:
+            batch.terminate()
+        except Exception:
+            pass
+
+
+class _Transfer:
+    """Output elements of one batch to input elements of another, all rows at once (factor and offset applied)."""
+
+    def __init__(self, source: Any, target: Any, connections: Sequence[Connection]):
+        self.source, self.target = source, target
+        self.source_selection = source.select([r for c in connections for r in c.source.refs])
+        self.target_selection = target.select([r for c in connections for r in c.target.refs])
+        self.factor = self.offset = None
+        if any(c.transforms for c in connections):
+            self.factor = np.array([c.factor for c in connections for _ in c.source.refs])
+            self.offset = np.array([c.offset for c in connections for _ in c.source.refs])
+
+    def read(self) -> np.ndarray:
+        values = self.source.get(self.source_selection)
+        return values if self.factor is None else values * self.factor + self.offset
+
+    def write(self, values: np.ndarray) -> None:
+        self.target.set(self.target_selection, values)
+
+    def run(self) -> None:
+        self.write(self.read())
+
+
+def _transfers(batches: Mapping[str, Any], connections: Sequence[Connection]) -> list[_Transfer]:
+    groups: dict[tuple[str, str], list[Connection]] = {}
+    for c in connections:
+        groups.setdefault((c.source.unit, c.target.unit), []).append(c)
+    return [_Transfer(batches[s], batches[t], cs) for (s, t), cs in groups.items()]
+
+
+class _BatchProbe:
+    """Probed scalars of every row: ``read()`` gives a (K, columns) array in :class:`Probe`'s column order.
+
+    ``columns`` are all probe columns; only those in ``keep`` are read (the others stay 0).
+    """
+
+    def __init__(self, system: System, batches: Mapping[str, Any], columns: Sequence[str], keep: set[str]):
+        index = {c: i for i, c in enumerate(columns)}
+        per_unit: dict[str, tuple[list, list[int]]] = {}
+        for signal in system.probes:
+            for ref, column in zip(signal.refs, signal.columns):
+                refs, where = per_unit.setdefault(signal.unit, ([], []))
+                if column in index and column in keep and index[column] not in where:
+                    refs.append(ref)
+                    where.append(index[column])
+        self._reads = [(batches[name], batches[name].select(refs), np.array(where))
+                       for name, (refs, where) in per_unit.items() if refs]
+        self.width = len(columns)
+
+    def read(self, rows: int) -> np.ndarray:
+        values = np.zeros((rows, self.width))
+        for batch, selection, where in self._reads:
+            values[:, where] = batch.get(selection)
+        return values
+
+    def fill(self, values: np.ndarray, rows: np.ndarray) -> None:
+        """Read this probe's columns of ``rows`` only, into ``values`` (a sample already taken)."""
+        for batch, selection, where in self._reads:
+            values[np.ix_(rows, where)] = batch.get_rows(selection, rows.tolist())
+
+
+def _end_only_columns(system: System, batches: Mapping[str, Any], columns: Sequence[str]) -> set[str]:
+    """Columns of FMU instances that no objective needs before a point's end: read only then.
+
+    A column only reduced by ``final`` (or ``initial``: the first sample is read whole) or not used at all
+    needs no sample but the last; an FMU's get has no side effect, so reading it then gives the same value
+    (a Python unit's get may compute its outputs, so Python units are read every step).
+    """
+    needed = {system.spec.experiment.stop_when} if system.spec.experiment.stop_when else set()
+    for o in system.spec.objectives:
+        if o.signal and o.reduce not in ("final", "initial"):
+            needed.update(_columns_of(system, o.signal))
+    fmu_units = {name for name, batch in batches.items()
+                 if isinstance(batch, InstanceBatch) and isinstance(batch.units[0], FmiInstance)}
+    return {c for s in system.probes if s.unit in fmu_units for c in s.columns if c not in needed} & set(columns)
+
+
+def run_lockstep(system: System, points: Sequence[Sequence[Assignment]], batches: Mapping[str, Any]) -> list[RunResult]:
+    """Run ``points`` (each its override assignments) in lock-step on ``batches`` (from :func:`instantiate`,
+    fresh or reset, with at least as many rows as points); one RunResult per point, in order.
+
+    Raises NotBatchable, UnitError, SimulationEnded or any other exception of
+    a unit: the caller then runs the points one by one (:class:`LockstepRunner`),
+    after resetting or re-instantiating the batches.
+    """
+    started = time.perf_counter()
+    exp = system.spec.experiment
+    rows = next(iter(batches.values())).rows
+    n = len(points)
+    if not 0 < n <= rows:
+        raise ValueError(f"{n} points for batches of {rows} rows")
+    wiring = batches.wiring if isinstance(batches, Batches) else None
+    if wiring is None or wiring.system is not system:
+        wiring = _Wiring(system, batches)
+        if isinstance(batches, Batches):
+            batches.wiring = wiring
+    padded = list(points) + [points[0]] * (rows - n)  # spare rows copy the first point; never read
+    wiring.initialize(padded)
+    columns, probe, plan = wiring.columns, wiring.probe, wiring.step
+    stop_column = columns.index(exp.stop_when) if exp.stop_when else None
+    n_steps = step_count(exp.start, exp.stop, exp.step)
+    start, h, last = exp.start, exp.step, n_steps - 1
+    end_probe = wiring.end_probe
+    samples = [probe.read(rows)]
+    end_probe.fill(samples[0], np.arange(rows))
+    times = [exp.start]
+    active = np.arange(n)
+    ends = np.full(n, -1)  # per point: the index of its last sample
+    _set_active(batches, active)
+    for k in range(n_steps):
+        t = start + k * h  # whole steps counted, as Execution does
+        t_next = exp.stop if k == last else start + (k + 1) * h
+        plan(t, t_next - t)
+        values = probe.read(rows)
+        samples.append(values)
+        times.append(t_next)
+        if stop_column is not None:
+            done = values[active, stop_column] != 0
+            if done.any():
+                ends[active[done]] = k + 1
+                end_probe.fill(values, active[done])  # their last sample: now the end-only columns too
+                active = active[~done]
+                if not len(active):
+                    break
+                _set_active(batches, active)
+    if len(active) and ends[active[0]] < 0:  # still running at the stop time: the last sample is theirs
+        end_probe.fill(samples[-1], active)
+    ends[ends < 0] = len(samples) - 1
+    data = np.stack(samples)  # (samples, rows, columns)
+    t_all = np.array(times)
+    elapsed = (time.perf_counter() - started) / n
+    results = []
+    reducer = wiring.reducer  # one reducer, loaded with each point's samples in turn
+    for i in range(n):
+        reducer.load(t_all[:ends[i] + 1], data[:ends[i] + 1, i, :])
+        flat = flatten_objectives(evaluate_expressions(system.spec.objectives, reducer.results()))
+        nan = [name for name, v in flat.items() if not math.isfinite(v)]
+        end_time = float(t_all[ends[i]])
+        if nan:
+            results.append(RunResult(FAILED, f"objective(s) not finite: {', '.join(nan)}", flat, None, elapsed,
+                                     int(ends[i]), end_time, failure=UNIT_FAILURE))
+        else:
+            results.append(RunResult(OK, "", flat, None, elapsed, int(ends[i]), end_time))
+    return results
+
+
+def probe_columns(system: System) -> list[str]:
+    """The numeric columns :class:`~cosim.execution.run.Probe` reads, in its order."""
+    columns: list[str] = []
+    for signal in system.probes:
+        if signal.variable.type in NUMERIC_TYPES:
+            columns.extend(c for c in signal.columns if c not in columns)
+    return columns
+
+
+def _columns_of(system: System, signal: str | None) -> list[str]:
+    for s in system.probes:
+        if s.text == signal:
+            return list(s.columns)
+    raise KeyError(signal)
+
+
+def _set_active(batches: Mapping[str, Any], active: np.ndarray) -> None:
+    for batch in batches.values():
+        batch.active = active
+
+
+class _Wiring:
+    """What connects the batches of one system, built once: transfers, the probe, selections, the step."""
+
+    def __init__(self, system: System, batches: Mapping[str, Any]):
+        self.system, self.batches = system, batches
+        into: dict[str, list] = {}
+        for connection in system.init_order:
+            into.setdefault(connection.target.unit, []).append(connection)
+        self.into = [(batches[name], _transfers(batches, into.get(name, []))) for name in system.order]
+        self.after_init = _transfers(batches, system.init_order)
+        self.columns = probe_columns(system)
+        end_only = _end_only_columns(system, batches, self.columns)
+        self.probe = _BatchProbe(system, batches, self.columns, set(self.columns) - end_only)
+        self.end_probe = _BatchProbe(system, batches, self.columns, end_only)
+        self.step = _plan(system, batches)
+        self.reducer = ObjectiveReducer(self.columns, [(o.name, o.reduce, _columns_of(system, o.signal))
+                                                       for o in system.spec.objectives if o.signal])
+        self._selections: dict[tuple[str, tuple], Any] = {}
+
+    def initialize(self, points: Sequence[Sequence[Assignment]]) -> None:
+        """As :meth:`Execution._initialize`, for every row: the spec's assignments, then each point's overrides."""
+        system, batches = self.system, self.batches
+        exp = system.spec.experiment
+        for batch in batches.values():
+            batch.setup(exp.start, exp.stop)
+        for row, overrides in enumerate(points):
+            for assignment in tuple(system.assignments) + tuple(overrides):
+                batch = batches[assignment.unit]
+                key = (assignment.unit, assignment.refs)
+                if key not in self._selections:
+                    self._selections[key] = batch.select(assignment.refs)
+                batch.set_row(self._selections[key], row, list(assignment.values))
+        for batch in batches.values():
+            batch.enter_initialization()
+        # units leave initialization in stepping order, each after receiving its sources' initial outputs
+        for batch, transfers in self.into:
+            for transfer in transfers:
+                transfer.run()
+            batch.exit_initialization()
+        for transfer in self.after_init:
+            transfer.run()
+
+
+def _plan(system: System, batches: Mapping[str, Any]):
+    """The master algorithm's step over batches (Gauss-Seidel or Jacobi, as :mod:`cosim.master.algorithms`)."""
+    algorithm = system.spec.experiment.algorithm
+    if algorithm == "gauss-seidel":
+        order = [(batches[name], _transfers(batches, [c for c in system.connections if c.target.unit == name]))
+                 for name in system.order]
+
+        def gauss_seidel(t: float, h: float) -> None:
+            for batch, transfers in order:
+                for transfer in transfers:
+                    transfer.run()
+                batch.step(t, h)
+
+        return gauss_seidel
+    if algorithm == "jacobi":
+        transfers = _transfers(batches, system.connections)
+        stepped = [batches[name] for name in system.order]
+
+        def jacobi(t: float, h: float) -> None:
+            values = [transfer.read() for transfer in transfers]
+            for transfer, v in zip(transfers, values):
+                transfer.write(v)
+            for batch in stepped:
+                batch.step(t, h)
+
+        return jacobi
+    raise NotBatchable(f"no lock-step version of the master algorithm '{algorithm}'")
+
+
+class LockstepRunner:
+    """A sweep child's points in lock-step groups where that is possible, else one by one.
+
+    Wraps the child's :class:`~cosim.parallel.isolation.PointRunner` and gives
+    the same rows (point_id, status, message, run_time, objectives).  The
+    first two points run alone, which times a point; then groups of up to
+    GROUP_SIZE points, as many as take about COSIM_LOCKSTEP_SECONDS, run in lock-step; if the system does not
+    qualify (:func:`can_run_in_lockstep`) or anything in the group goes wrong,
+    the group's points run one by one through the PointRunner, so every row is
+    that of a single run.  A row's ``run_time`` is its group's time divided
+    by the group's size.
+    """
+
+    def __init__(self, single: Any):
+        self.single = single
+        self.system = single.system
+        self.enabled = can_run_in_lockstep(self.system)
+        self.group_size: int | None = None if self.enabled else 1
+        self._single_times: list[float] = []
+        self._batches: dict[int, dict[str, Any]] = {}  # rows -> live batches, reused between groups
+        self._announce: Callable[[int], None] | None = None
+
+    def rows(self, points: Sequence[tuple[str, dict[str, Any]]],
+             announce: Callable[[int], None] | None = None) -> Iterator[dict[str, Any]]:
+        """One row per point, in order (a generator: a group's rows come when the group is done).
+
+        ``announce(n)`` is called before a lock-step group of n points starts: the sweep's parent
+        then knows that a crash or hang in the next n rows is not the first point's own (it runs
+        those points again one by one, cosim.parallel.isolation).
+        """
+        self._announce = announce
+        points = list(points)
+        while points and self.enabled and self.group_size is None:  # first measure a point run alone
+            row = self.single.run(*points.pop(0))
+            if row["status"] == "ok":
+                self._single_times.append(row["run_time"])
+            if len(self._single_times) == 2:  # the first run also instantiated the units: take the faster
+                seconds = limit("lockstep_seconds")
+                self.group_size = max(1, min(GROUP_SIZE, int(seconds / max(min(self._single_times), 1e-6))))
+            yield row
+        size = self.group_size or 1
+        if size < 2:
+            for point_id, values in points:
+                yield self.single.run(point_id, values)
+            return
+        for first in range(0, len(points), size):
+            group = points[first:first + size]
+            if len(group) < 2:
+                yield self.single.run(*group[0])
+            else:
+                yield from self._group(group)
+
+    def _group(self, group: Sequence[tuple[str, dict[str, Any]]]) -> Iterator[dict[str, Any]]:
+        from cosim.execution.point import assignments_for
+
+        results = None
+        try:
+            overrides = [assignments_for(self.system, values) for _, values in group]
+            batches = self._batches.pop(len(group), None) or instantiate(self.system, len(group))
+        except Exception:  # a value that does not fit, a unit that cannot be instantiated: the single path reports it
+            overrides = batches = None
+        if batches is not None:
+            try:
+                if self._announce is not None:
+                    self._announce(len(group))
+                results = run_lockstep(self.system, overrides, batches)
+                if all(r.ok for r in results):
+                    for batch in batches.values():
+                        batch.reset()
+                    self._keep(len(group), batches)
+                else:
+                    terminate(batches)  # after a failed point trust no state, as PointRunner does
+            except Exception:
+                terminate(batches)
+                results = None
+        if results is None:
+            for point_id, values in group:
+                yield self.single.run(point_id, values)
+            return
+        for (point_id, _), result in zip(group, results):
+            yield {"point_id": point_id, "status": result.status, "message": result.message,
+                   "run_time": result.elapsed, "objectives": result.objectives}
+
+    def _keep(self, rows: int, batches: dict[str, Any]) -> None:
+        self._batches[rows] = batches
+        while len(self._batches) > 2:  # a full group size and the last, smaller group of a batch
+            terminate(self._batches.pop(next(iter(self._batches))))
+
+    def close(self) -> None:
+        for batches in self._batches.values():
+            terminate(batches)
+        self._batches.clear()

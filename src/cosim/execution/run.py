@@ -1,0 +1,260 @@
+"""One run of one design point: the co-simulation loop.
+
+:class:`Execution` instantiates (or reuses) the units of a
+:class:`~cosim.system.builder.System`, sets parameters, initializes, steps with
+the master algorithm and feeds observers.  It does no file or network I/O.
+Whatever goes wrong inside a run becomes data: the returned :class:`RunResult`
+carries the status and a message naming the unit, the time and the cause.
+Units it created are always terminated, also after a failure.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from cosim.errors import EXIT_INTERNAL, EXIT_OK, EXIT_RUN_FAILED, EXIT_USAGE, UnitError, UserError
+from cosim.master.algorithms import group_transfers, make_algorithm
+from cosim.master.observers import ExactColumns, ObjectiveReducer, Observer, TraceRecorder, flatten_objectives
+from cosim.spec.expressions import evaluate_expressions
+from cosim.system.builder import Assignment, System
+from cosim.units.protocol import NUMERIC_TYPES, SimulationEnded, Unit
+
+OK, FAILED = "ok", "failed"
+# Why a run failed, for RunResult.failure: a unit (or a non-finite objective),
+# a user's file found unusable only while running, or a bug in cosim.
+UNIT_FAILURE, USER_FAILURE, INTERNAL_FAILURE = "unit", "user", "internal"
+_EXIT_CODES = {"": EXIT_OK, UNIT_FAILURE: EXIT_RUN_FAILED, USER_FAILURE: EXIT_USAGE, INTERNAL_FAILURE: EXIT_INTERNAL}
+
+
+@dataclass
+class RunResult:
+    """What one run produced.
+
+    ``objectives`` is flat (array objectives as ``name[i]``); ``traces`` is a
+    pandas DataFrame when recording was asked for, else None.  ``failure``
+    says why a failed run failed: ``"unit"`` (a unit, or a non-finite
+    objective), ``"user"`` (a user's file found unusable only while running,
+    e.g. an FMU archive that escapes its folder) or ``"internal"`` (a bug).
+    """
+
+    status: str
+    message: str = ""
+    objectives: dict[str, float] = field(default_factory=dict)
+    traces: Any = None
+    elapsed: float = 0.0
+    steps: int = 0
+    end_time: float = math.nan
+    failure: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return self.status == OK
+
+    @property
+    def exit_code(self) -> int:
+        """The command line's exit code for this run (see :func:`cosim.errors.exit_code`)."""
+        return EXIT_OK if self.ok else _EXIT_CODES.get(self.failure, EXIT_RUN_FAILED)
+
+
+def step_count(start: float, stop: float, h: float) -> int:
+    """Number of communication steps from start to stop; the last may be shorter.
+
+    A ratio within 1e-9 of a whole number counts as that number, so 1.0/0.1
+    gives 10 steps, not 11.
+    """
+    ratio = (stop - start) / h
+    nearest = round(ratio)
+    if abs(ratio - nearest) <= 1e-9 * max(1.0, abs(ratio)):
+        return int(nearest)
+    return int(math.ceil(ratio))
+
+
+class Probe:
+    """Reads every probed signal of the system into one float vector.
+
+    Signals whose values are not floats (String, Binary) or do not fit one
+    exactly (64-bit integers) are also read as Python objects by
+    :meth:`read_exact`, for the trace recorder; only numbers enter the vector.
+    """
+
+    def __init__(self, system: System, units: Mapping[str, Unit]):
+        self.columns: list[str] = []
+        self.types: dict[str, tuple[str, str | None]] = {}
+        self.units: dict[str, str] = {}  # column -> unit of measure, for the recorded table's metadata
+        per_unit: dict[str, list] = {}
+        positions: dict[str, list[int]] = {}
+        exact: dict[str, list] = {}
+        self.exact_columns: list[str] = []
+        for signal in system.probes:
+            for ref, column in zip(signal.refs, signal.columns):
+                if column in self.types:
+                    continue
+                variable = signal.variable
+                self.types[column] = (variable.type, variable.fmi_type)
+                if variable.unit:
+                    self.units[column] = variable.unit
+                if variable.type not in NUMERIC_TYPES or variable.fmi_type in ("Int64", "UInt64"):
+                    exact.setdefault(signal.unit, []).append(ref)
+                    self.exact_columns.append(column)
+                if variable.type not in NUMERIC_TYPES:
+                    continue
+                positions.setdefault(signal.unit, []).append(len(self.columns))
+                per_unit.setdefault(signal.unit, []).append(ref)
+                self.columns.append(column)
+        self._exact_reads = [(units[name].select(refs), units[name]) for name, refs in exact.items()]
+        self.values = np.zeros(len(self.columns))
+        self._reads = []
+        for name, refs in per_unit.items():
+            where = np.array(positions[name], dtype=int)
+            contiguous = bool(np.all(np.diff(where) == 1))
+            # a contiguous run is written through a slice, cheaper than fancy indexing
+            target = slice(int(where[0]), int(where[-1]) + 1) if contiguous else where
+            self._reads.append((units[name].reader(units[name].select(refs)), target))
+
+    def read(self) -> np.ndarray:
+        values = self.values
+        for read, where in self._reads:
+            values[where] = read()
+        return values
+
+    def read_exact(self) -> list[Any]:
+        """The values of ``exact_columns``, as the units give them (str, bytes, int)."""
+        out: list[Any] = []
+        for selection, unit in self._exact_reads:
+            out.extend(unit.get(selection))
+        return out
+
+
+class Execution:
+    """Runs one point of a system.
+
+    ``overrides`` are applied after the spec's own parameters (design-point
+    values). ``units``: live instances to reuse (the caller owns them and must
+    pass them freshly instantiated or reset); when None, the execution
+    instantiates its own and terminates them at the end. ``record`` keeps the
+    full traces of the recorded signals.
+    """
+
+    def __init__(self, system: System, overrides: Sequence[Assignment] = (), record: bool = False,
+                 units: Mapping[str, Unit] | None = None, observers: Sequence[Observer] = ()):
+        self.system = system
+        self.overrides = tuple(overrides)
+        self.record = record
+        self._given_units = units
+        self.extra_observers = list(observers)
+
+    def run(self) -> RunResult:
+        """Run to the stop time (or until ``stop_when`` is true); never raises for a unit's failure."""
+        started = time.perf_counter()
+        exp = self.system.spec.experiment
+        units: dict[str, Unit] = dict(self._given_units or {})
+        owned = self._given_units is None
+        t = exp.start
+        steps = 0
+        try:
+            if owned:
+                for name, system_unit in self.system.units.items():
+                    units[name] = system_unit.unit_type.instantiate(name)
+            n_steps = step_count(exp.start, exp.stop, exp.step)
+            self._initialize(units)
+            probe = Probe(self.system, units)
+            exact = ExactColumns(probe.exact_columns, probe.read_exact) if probe.exact_columns else None
+            recorder = TraceRecorder(probe.columns, self.system.recorded, n_steps + 1, exact,
+                                     probe.types, probe.units) if self.record else None
+            reducer = ObjectiveReducer(probe.columns, [(o.name, o.reduce, self._columns_of(o.signal)) for o in
+                                                       self.system.spec.objectives if o.signal])
+            observers = [o for o in (recorder, reducer) if o is not None] + self.extra_observers
+            stop_column = probe.columns.index(exp.stop_when) if exp.stop_when else None
+
+            algorithm = make_algorithm(exp.algorithm)
+            algorithm.bind(units, self.system.order, self.system.connections)
+            values = probe.read()
+            for observer in observers:
+                observer.initialized(t, values)
+            start, h, last = exp.start, exp.step, n_steps - 1
+            step, read = algorithm.step, probe.read
+            hooks = [observer.step for observer in observers]
+            ended: SimulationEnded | None = None
+            for k in range(n_steps):
+                t = start + k * h  # whole steps counted, never summed: no drift
+                t_next = exp.stop if k == last else start + (k + 1) * h
+                try:
+                    step(t, t_next - t)
+                except SimulationEnded as stop:  # a unit ends the run: record where it got to, then stop
+                    ended, t_next = stop, stop.time
+                t = t_next
+                steps += 1
+                values = read()
+                for hook in hooks:
+                    hook(t, values)
+                if ended is not None or stop_column is not None and values[stop_column]:
+                    break
+            for observer in observers:
+                observer.finished(t)
+            objectives = evaluate_expressions(self.system.spec.objectives, reducer.results())
+            flat = flatten_objectives(objectives)
+            nan = [name for name, v in flat.items() if not math.isfinite(v)]
+            if nan:
+                return RunResult(FAILED, f"objective(s) not finite: {', '.join(nan)}", flat,
+                                 recorder.frame() if recorder else None, time.perf_counter() - started, steps, t,
+                                 failure=UNIT_FAILURE)
+            if ended is not None:
+                message = f"stopped early: {ended} (stop time {exp.stop:g})"
+                if exp.early_stop == "fail":  # the spec says a run must reach its stop time
+                    return RunResult(FAILED, message + "; experiment.early_stop is 'fail'", flat,
+                                     recorder.frame() if recorder else None, time.perf_counter() - started,
+                                     steps, t, failure=UNIT_FAILURE)
+                return RunResult(OK, message, flat, recorder.frame() if recorder else None,
+                                 time.perf_counter() - started, steps, t)
+            return RunResult(OK, "", flat, recorder.frame() if recorder else None,
+                             time.perf_counter() - started, steps, t)
+        except UnitError as exc:
+            return RunResult(FAILED, str(exc), elapsed=time.perf_counter() - started, steps=steps, end_time=t,
+                             failure=UNIT_FAILURE)
+        except UserError as exc:  # e.g. an FMU archive found unsafe when it is extracted
+            return RunResult(FAILED, str(exc).replace("\n", " "), elapsed=time.perf_counter() - started,
+                             steps=steps, end_time=t, failure=USER_FAILURE)
+        except Exception as exc:  # an orchestrator bug must still become a row, not a lost point
+            return RunResult(FAILED, f"internal error at t={t:g}: {type(exc).__name__}: {exc}",
+                             elapsed=time.perf_counter() - started, steps=steps, end_time=t,
+                             failure=INTERNAL_FAILURE)
+        finally:
+            if owned:
+                for unit in units.values():
+                    try:
+                        unit.terminate()
+                    except Exception:
+                        pass  # terminating every unit matters more than one unit's complaint
+
+    def _columns_of(self, signal: str | None) -> list[str]:
+        for s in self.system.probes:
+            if s.text == signal:
+                return list(s.columns)
+        raise KeyError(signal)
+
+    def _initialize(self, units: Mapping[str, Unit]) -> None:
+        exp = self.system.spec.experiment
+        for unit in units.values():
+            unit.setup(exp.start, exp.stop)
+        for assignment in self.system.assignments + self.overrides:
+            unit = units[assignment.unit]
+            unit.set(unit.select(assignment.refs), list(assignment.values))
+        for unit in units.values():
+            unit.enter_initialization()
+        # Units leave initialization in stepping order, each after receiving the
+        # initial outputs of its sources, so a unit's initialize() sees
+        # consistent inputs (e.g. a robot starts where its trajectory starts).
+        into: dict[str, list] = {}
+        for connection in self.system.init_order:
+            into.setdefault(connection.target.unit, []).append(connection)
+        for name in self.system.order:
+            for transfer in group_transfers(units, into.get(name, [])):
+                transfer.run()
+            units[name].exit_initialization()
+        for transfer in group_transfers(units, self.system.init_order):  # outputs may change when it ends
+            transfer.run()

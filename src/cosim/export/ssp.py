@@ -1,0 +1,246 @@
+"""Export a spec's system as an SSP 2.0 archive.
+
+:func:`export_ssp` writes ``SystemStructure.ssd`` with one flat root system:
+one ``ssd:Component`` per unit (FMUs copied to ``resources/``; Python units
+built into FMI 2.0 FMUs with pythonfmu, see :mod:`cosim.export.fmu`),
+its connectors, one ``resources/<unit>.ssv`` per unit with the spec's
+parameter and start values (written with 17 significant digits, so they read
+back bit for bit), the connections (a factor or offset as a
+``LinearTransformation``; ``suppressUnitConversion`` because cosim itself does
+not convert), ``DefaultExperiment`` and the fixed step size both as
+OMSimulator's ``FixedStepMaster`` and OSP's ``FixedStepAlgorithm``
+annotation, and cosim's own master algorithm as a ``org.cosim`` annotation.
+Array ports are connected element by element (``x[1]`` .. ``x[n]``: the
+scalar variables of an FMI 2.0 FMU, as tools reading FMI 2.0 expect; the
+elements of an FMI 3.0 array).  Next to the
+archive, ``<name>.spec.json`` keeps what an SSP cannot hold (objectives,
+design space, recorded signals, ``stop_when``) and names the archive as its
+``system``.  The written SSD is checked against the official schema.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+import zipfile
+from pathlib import Path
+from typing import Any
+
+from lxml import etree
+
+from cosim.errors import Problem, SpecError
+from cosim.ssp.xml import NS, schema_problems
+from cosim.system.builder import System
+from cosim.units.protocol import parse_port
+
+OMS_NS = "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd"
+OSP_NS = "http://opensimulationplatform.com/SSP/OSPAnnotations"
+COSIM_NS = "urn:cosim:ssp"
+_SSC_TYPE = {"Real": "Real", "Integer": "Integer", "Boolean": "Boolean", "String": "String"}
+
+
+def _e(parent: Any, prefix: str, element_tag: str, **attributes: Any) -> Any:
+    """A child element ``prefix:element_tag`` with the attributes that are not None."""
+    namespace = {"oms": OMS_NS, "osp": OSP_NS, "cosim": COSIM_NS}.get(prefix) or NS[prefix]
+    element = etree.SubElement(parent, f"{{{namespace}}}{element_tag}")
+    for key, value in attributes.items():
+        if value is not None:
+            element.set(key, value if isinstance(value, str) else _number(value))
+    return element
+
+
+def _number(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return repr(value)  # shortest text that reads back to the same double
+    return str(value)
+
+
+def export_ssp(system: System, out: str | Path, spec_copy: bool = True) -> Path:
+    """Write ``system`` as an SSP 2.0 archive at ``out``; returns its path.
+
+    Raises SpecError for a unit that cannot go into an SSP: only FMUs and
+    Python units (built into FMUs) can; not a player, nor a plug-in's kind.
+    """
+    out = Path(out)
+    spec = system.spec
+    problems = [Problem(spec.path, f"$.units.{u.name}", f"a {u.kind} unit cannot be exported to an SSP",
+                        "only FMU and Python units go into an SSP: make it one of those (e.g. an FMU), or export "
+                        "the system without it")
+                for u in spec.units if u.kind not in ("fmu", "python")]
+    if problems:
+        raise SpecError(problems)
+    with tempfile.TemporaryDirectory(prefix="cosim_ssp_export_") as scratch:
+        root = Path(scratch)
+        (root / "resources").mkdir()
+        fmus = _write_fmus(system, root / "resources")
+        ssd = _ssd(system, fmus, root / "resources")
+        problems = schema_problems(ssd, f"{out}:SystemStructure.ssd", "ssd")
+        if problems:  # our own writer broke the schema: a bug, not the user's mistake
+            raise RuntimeError("the exported SSD breaks the SSP schema: " + "; ".join(map(str, problems)))
+        (root / "SystemStructure.ssd").write_bytes(
+            etree.tostring(ssd.getroottree(), xml_declaration=True, encoding="UTF-8", pretty_print=True))
+        out.parent.mkdir(parents=True, exist_ok=True)
+        partial = out.with_name(out.name + ".part")
+        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:
+            for path in sorted(root.rglob("*")):
+                if path.is_file():
+                    zf.write(path, path.relative_to(root).as_posix())
+        shutil.move(partial, out)
+    if spec_copy:
+        _write_companion_spec(system, out)
+    return out
+
+
+def companion_spec_path(out: Path) -> Path:
+    """``system.spec.json`` beside ``system.ssp``."""
+    return out.with_name(out.stem + ".spec.json")
+
+
+def _write_companion_spec(system: System, out: Path) -> None:
+    raw = system.spec.raw
+    companion: dict[str, Any] = {"name": system.spec.name, "system": out.name}
+    if system.spec.description:
+        companion["description"] = system.spec.description
+    experiment = {k: v for k, v in (raw.get("experiment") or {}).items() if k in ("algorithm", "stop_when")}
+    if experiment:
+        companion["experiment"] = experiment
+    ports = {u.name: {"ports": dict(u.ports)} for u in system.spec.units if u.ports}
+    if ports:  # the SSP names ports as the units do; the spec's own names map onto them again
+        companion["units"] = ports
+    for key in ("record", "objectives", "design"):
+        if raw.get(key):
+            companion[key] = raw[key]
+    companion_spec_path(out).write_text(json.dumps(companion, indent=2) + "\n", encoding="utf-8")
+
+
+def _write_fmus(system: System, resources: Path) -> dict[str, tuple[str, str]]:
+    """Each unit's FMU in resources/: unit name -> (source attribute, FMI version)."""
+    from cosim.export.fmu import export_python_unit
+    from cosim.units.fmu.description import FmuUnitType
+
+    result: dict[str, tuple[str, str]] = {}
+    copied: dict[str, str] = {}
+    for name, unit in system.units.items():
+        if unit.spec.kind == "fmu":
+            unit_type: FmuUnitType = unit.unit_type  # type: ignore[assignment]
+            if unit_type.digest not in copied:
+                file_name = _unique(resources, Path(unit_type.path).stem)
+                shutil.copyfile(unit_type.path, resources / file_name)
+                copied[unit_type.digest] = file_name
+            result[name] = (f"resources/{copied[unit_type.digest]}", unit.description.fmi_version or "2.0")
+        else:  # a Python unit, built into an FMI 2.0 FMU
+            file_name = _unique(resources, unit.spec.source.rpartition(":")[2])
+            export_python_unit(unit.spec.source, resources / file_name, system.spec.folder)
+            result[name] = (f"resources/{file_name}", "2.0")
+    return result
+
+
+def _unique(folder: Path, stem: str) -> str:
+    candidate, n = f"{stem}.fmu", 1
+    while (folder / candidate).exists():
+        n += 1
+        candidate = f"{stem}_{n}.fmu"
+    return candidate
+
+
+def _port_names(variable: Any, fmi_version: str) -> list[str]:
+    """The connector names of a variable: FMI 2.0 arrays as their scalars."""
+    return variable.element_names() if variable.is_array and fmi_version == "2.0" else [variable.name]
+
+
+def _ssd(system: System, fmus: dict[str, tuple[str, str]], resources: Path) -> Any:
+    spec = system.spec
+    nsmap = {**{k: NS[k] for k in ("ssd", "ssc", "ssv")}, "oms": OMS_NS, "osp": OSP_NS, "cosim": COSIM_NS}
+    root = etree.Element(f"{{{NS['ssd']}}}SystemStructureDescription", nsmap=nsmap)
+    root.set("version", "2.0")
+    root.set("name", spec.name)
+    root.set("generationTool", "cosim")
+    if spec.description:
+        root.set("description", spec.description)
+    top = _e(root, "ssd", "System", name=spec.name)
+    elements = _e(top, "ssd", "Elements")
+    values = _unit_values(system)
+    for name, unit in system.units.items():
+        source, fmi_version = fmus[name]
+        component = _e(elements, "ssd", "Component", name=name, type="application/x-fmu-sharedlibrary",
+                       source=source)
+        connectors = _e(component, "ssd", "Connectors")
+        for variable in unit.description.variables:
+            if variable.causality not in ("input", "output", "parameter", "calculatedParameter",
+                                          "structuralParameter"):
+                continue
+            if variable.is_array and fmi_version != "2.0":
+                continue  # FMI 3.0 arrays: reached through their elements' names in connections
+            for port in _port_names(variable, fmi_version):
+                connector = _e(connectors, "ssd", "Connector", name=port, kind=variable.causality
+                               if variable.causality != "structuralParameter" else "parameter")
+                _e(connector, "ssc", _SSC_TYPE[variable.type],
+                   **({"unit": variable.unit} if variable.unit and variable.type == "Real" else {}))
+        if values.get(name):
+            ssv = _ssv(name, values[name])
+            (resources / f"{name}.ssv").write_bytes(
+                etree.tostring(ssv.getroottree(), xml_declaration=True, encoding="UTF-8", pretty_print=True))
+            bindings = _e(component, "ssd", "ParameterBindings")
+            _e(bindings, "ssd", "ParameterBinding", source=f"resources/{name}.ssv")
+    connections = _e(top, "ssd", "Connections")
+    for c in system.connections:
+        for start, end in zip(_element_names(c.source), _element_names(c.target), strict=True):
+            connection = _e(connections, "ssd", "Connection", startElement=c.source.unit, startConnector=start,
+                            endElement=c.target.unit, endConnector=end, suppressUnitConversion="true")
+            if c.transforms:
+                _e(connection, "ssc", "LinearTransformation", factor=c.factor, offset=c.offset)
+    exp = spec.experiment
+    annotations = _e(top, "ssd", "Annotations")
+    oms = _e(_e(_e(annotations, "ssc", "Annotation", type="org.openmodelica"), "oms", "Annotations"),
+             "oms", "SimulationInformation")
+    _e(oms, "oms", "FixedStepMaster", description="oms-ma", stepSize=exp.step)
+    _e(_e(annotations, "ssc", "Annotation", type="org.cosim"), "cosim", "Experiment", algorithm=exp.algorithm)
+    default = _e(root, "ssd", "DefaultExperiment", startTime=exp.start, stopTime=exp.stop)
+    osp = _e(_e(_e(default, "ssd", "Annotations"), "ssc", "Annotation", type="com.opensimulationplatform"),
+             "osp", "Algorithm")
+    _e(osp, "osp", "FixedStepAlgorithm", baseStepSize=exp.step)
+    return root
+
+
+def _element_names(signal: Any) -> list[str]:
+    """Connector names of a connection end, one per scalar element (``x[1]`` .. ``x[n]`` for arrays).
+
+    FMI 2.0 FMUs (and Python units exported as such) have these scalars as
+    variables; for an FMI 3.0 array they name its elements.
+    """
+    name = signal.variable.name
+    if not signal.variable.is_array:
+        return [name]
+    return [f"{name}[{ref.offset + 1}]" for ref in signal.refs]
+
+
+def _unit_values(system: System) -> dict[str, list[tuple[str, str, Any]]]:
+    """Per unit: (connector name, type, value) of every parameter and start value the spec sets."""
+    result: dict[str, list[tuple[str, str, Any]]] = {}
+    for assignment in system.assignments:
+        unit = system.units[assignment.unit]
+        by_name = unit.description.by_name
+        for ref, value in zip(assignment.refs, assignment.values):
+            variable = by_name[ref.variable]
+            name = f"{variable.name}[{ref.offset + 1}]" if variable.is_array else variable.name
+            entries = result.setdefault(assignment.unit, [])
+            entries[:] = [e for e in entries if e[0] != name]  # a later assignment wins
+            entries.append((name, variable.type, value))
+    return result
+
+
+def _ssv(name: str, entries: list[tuple[str, str, Any]]) -> Any:
+    root = etree.Element(f"{{{NS['ssv']}}}ParameterSet", nsmap={"ssv": NS["ssv"]})
+    root.set("version", "2.0")
+    root.set("name", name)
+    parameters = _e(root, "ssv", "Parameters")
+    for port, kind, value in entries:
+        parameter = _e(parameters, "ssv", "Parameter", name=port)
+        _e(parameter, "ssv", _SSC_TYPE[kind], value=value)
+    problems = schema_problems(root, f"resources/{name}.ssv", "ssv")
+    if problems:
+        raise RuntimeError("the exported SSV breaks the SSP schema: " + "; ".join(map(str, problems)))
+    return root

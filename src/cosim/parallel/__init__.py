@@ -1,0 +1,2 @@
+"""Running points in parallel: the Dask cluster, the evaluator, point child processes, the dashboard pages.
+"""

@@ -1,0 +1,333 @@
+"""A page of the Dask dashboard counting a sweep's *points* (done, failed, of how many) as they finish.
+
+Dask's own progress bars count tasks, and a cosim task runs a batch of
+points, so they cannot show how many points are done.  This module adds a
+page to the dashboard that can:
+
+- Workers: :class:`BatchProgress`, used by ``cosim.parallel.tasks.run_batch``, sends the
+  number of points of its task done and not ok so far as a Dask event
+  (``Worker.log_event``, topic ``cosim-points``) while the batch runs (at
+  most every ``EVERY`` seconds) and once when it ends.
+- Scheduler: :class:`PointsPlugin`, a scheduler plugin, reads those events
+  (``SchedulerPlugin.log_event``), keeps per study the counts of its tasks
+  (dropping an attempt lost with its worker: ``transition`` out of
+  ``processing`` to anything but ``memory``), and serves ``/cosim`` (an HTML
+  page, refreshed every 2 s) and ``/cosim/points.json`` on the dashboard's
+  web server.  It adds "Cosim" to the dashboard's navigation bar.
+- Client: :func:`open_board` registers the plugin and announces the study
+  (its total and the points already stored when resuming); the returned
+  :class:`Board` says where the page is, or why there is none.
+
+The plugin is sent to the scheduler *by value* (cloudpickle), so the page
+does not depend on the cosim version installed where the scheduler runs (it
+must have cosim anyway: Dask's scheduler unpickles every task, see
+:mod:`cosim.parallel.scheduler_check`).  It needs the client's Python version
+there; when the plugin cannot be installed the study runs as before and its
+start line says that there is no page and why.  Everything the plugin uses is
+in this module, the standard library, tornado and distributed: nothing else
+may be imported at module level here.  The page is served at the web
+server's root (``/cosim``), not under a ``--dashboard-prefix``.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import sys
+import time
+from contextlib import contextmanager
+from typing import Any, Iterator
+
+from distributed.diagnostics.plugin import SchedulerPlugin
+from tornado import web
+
+TOPIC = "cosim-points"
+PLUGIN_NAME = "cosim-points-1"  # the version of the event protocol: a scheduler may keep an older plugin
+ROUTE = "cosim"  # the page; its data: ROUTE + "/points.json"
+EVERY = 0.5  # seconds between a worker's events for one running task
+KEPT_STUDIES = 20  # the page lists the studies of this scheduler, the most recent this many
+
+
+def study_of(key: Any) -> str | None:
+    """The study id a task key carries (``...-<study>.<unique>``, see ``dashboard.task_key``), or None."""
+    if not isinstance(key, str) or "-" not in key:
+        return None
+    study, dot, _ = key.rpartition("-")[2].partition(".")
+    return study if dot and study else None
+
+
+# -- worker side -----------------------------------------------------------------------
+
+
+class BatchProgress:
+    """Counts the rows of the batch running in this Dask task and sends them as events (module docstring).
+
+    Outside a Dask worker (a sample run, a test) it does nothing.
+    """
+
+    def __init__(self) -> None:
+        self.done = self.failed = 0
+        self._sent_at = time.monotonic()
+        self._flush_pending = self._closed = False
+        try:
+            from distributed import get_worker
+
+            self._worker = get_worker()
+            self._key = self._worker.get_current_task()
+        except (ImportError, ValueError):  # not on a worker
+            self._worker, self._key = None, None
+        if study_of(self._key) is None:
+            self._worker = None
+
+    def row(self, row: dict[str, Any]) -> None:
+        """One more point finished with ``row``: sent now, or within EVERY seconds (the next point may take hours)."""
+        self.done += 1
+        self.failed += row.get("status") != "ok"
+        if self._worker is None:
+            return
+        wait = EVERY - (time.monotonic() - self._sent_at)
+        if wait <= 0:
+            self._send()
+        elif not self._flush_pending:  # later, from the worker's event loop (this is the task's thread)
+            self._flush_pending = True
+            loop = self._worker.loop
+            loop.add_callback(loop.call_later, wait, self._flush)
+
+    def close(self) -> None:
+        """The batch ended: its final counts (sent before Dask reports the task done: same stream, in order)."""
+        self._closed = True
+        if self._worker is not None:
+            self._send()
+
+    def _flush(self) -> None:
+        self._flush_pending = False
+        if not self._closed:
+            self._send()
+
+    def _send(self) -> None:
+        self._sent_at = time.monotonic()
+        try:
+            self._worker.log_event(TOPIC, {"key": self._key, "done": self.done, "failed": self.failed})
+        except Exception:  # a closing worker: the counts are the page's only, never the point's business
+            pass
+
+
+# -- scheduler side ---------------------------------------------------------------------
+
+
+class PointsPlugin(SchedulerPlugin):
+    """Per study: total, points stored before this run, and per task the latest counts (module docstring)."""
+
+    idempotent = True  # a second sweep on the same scheduler keeps the plugin and its history
+
+    def __init__(self) -> None:
+        self.studies: dict[str, dict[str, Any]] = {}
+        self.tasks: dict[str, dict[str, tuple[int, int]]] = {}  # study -> task key -> (done, failed)
+        self.running: dict[str, set[str]] = {}  # study -> keys of tasks still running
+
+    async def start(self, scheduler: Any) -> None:
+        handlers = [(rf"/{ROUTE}", PageHandler, {"plugin": self}),
+                    (rf"/{ROUTE}/points.json", JsonHandler, {"plugin": self})]
+        application = getattr(scheduler, "http_application", None)
+        if application is not None:
+            application.add_handlers(r".*", handlers)
+        _link_from_the_navigation_bar(scheduler)
+
+    def dashboard_loaded(self, scheduler: Any) -> None:
+        """The dashboard was built after this plugin started (see :mod:`cosim.parallel.dashboard_on_demand`)."""
+        _link_from_the_navigation_bar(scheduler)
+
+    def log_event(self, topic: str, msg: Any) -> None:
+        if topic != TOPIC or not isinstance(msg, dict):
+            return
+        if msg.get("op") == "start":
+            self._start(msg)
+        elif msg.get("op") == "end":
+            study = self.studies.get(msg.get("study"))
+            if study is not None:
+                study.update(state=str(msg.get("state", "ended")), ended=time.time())
+        elif "key" in msg:
+            study = study_of(msg["key"])
+            if study in self.tasks:
+                self.tasks[study][msg["key"]] = (int(msg.get("done", 0)), int(msg.get("failed", 0)))
+                if not msg.get("final"):  # final: rows the client made for a task lost with its workers
+                    self.running[study].add(msg["key"])
+
+    def _start(self, msg: dict[str, Any]) -> None:
+        study = str(msg.get("study"))
+        self.studies[study] = {"study": study, "name": str(msg.get("name", "")), "kind": str(msg.get("kind", "")),
+                               "total": int(msg.get("total", 0)), "before": int(msg.get("before", 0)),
+                               "client": msg.get("client"),
+                               "state": "running", "started": time.time(), "ended": None}
+        self.tasks[study], self.running[study] = {}, set()
+        for old in list(self.studies)[:-KEPT_STUDIES]:
+            for table in (self.studies, self.tasks, self.running):
+                table.pop(old, None)
+
+    def transition(self, key: Any, start: str, finish: str, *args: Any, **kwargs: Any) -> None:
+        if start != "processing":
+            return
+        study = study_of(key)
+        if study not in self.tasks or key not in self.tasks[study]:
+            return
+        self.running[study].discard(key)
+        if finish != "memory":  # this attempt was lost with its worker: its points run again
+            del self.tasks[study][key]
+
+    def remove_client(self, scheduler: Any, client: str) -> None:
+        for study in self.studies.values():
+            if study["client"] == client and study["state"] == "running":
+                study.update(state="client gone", ended=time.time())
+
+    def summary(self) -> list[dict[str, Any]]:
+        """Every study kept, the most recent first: points done (of total), not ok (this run), tasks running."""
+        out = []
+        for sid, study in reversed(self.studies.items()):
+            counts = self.tasks.get(sid, {}).values()
+            done = study["before"] + sum(d for d, _ in counts)
+            failed = sum(f for _, f in counts)  # of this run (a resume's stored rows are not read)
+            out.append({"study": sid, "name": study["name"], "kind": study["kind"], "total": study["total"],
+                        "done": done, "failed": failed, "running_tasks": len(self.running.get(sid, ())),
+                        "state": study["state"], "started": study["started"], "ended": study["ended"]})
+        return out
+
+
+def _link_from_the_navigation_bar(scheduler: Any) -> None:
+    """Add "cosim" to the pages of the dashboard's navigation bar (distributed's memoized template variables).
+
+    Only a link: when distributed changes these internals the page is still
+    there, at its address.  Only once the dashboard is loaded: the local
+    cluster cosim starts builds it when first opened
+    (:mod:`cosim.parallel.dashboard_on_demand`, which then calls
+    :meth:`PointsPlugin.dashboard_loaded`); importing it here would build it
+    at every sweep.
+    """
+    if "distributed.dashboard.scheduler" not in sys.modules:
+        return
+    try:
+        from distributed.dashboard.scheduler import template_variables
+
+        pages = template_variables(scheduler)["pages"]
+        if ROUTE not in pages:
+            pages.append(ROUTE)
+    except Exception:
+        pass
+
+
+class JsonHandler(web.RequestHandler):
+    """``/cosim/points.json``: ``{"studies": PointsPlugin.summary()}``."""
+
+    def initialize(self, plugin: PointsPlugin) -> None:
+        self.plugin = plugin
+
+    def get(self) -> None:
+        self.set_header("Content-Type", "application/json")
+        self.write(json.dumps({"studies": self.plugin.summary()}))
+
+
+class PageHandler(JsonHandler):
+    """``/cosim``: one line per study with a bar, refreshed every 2 seconds."""
+
+    def get(self) -> None:
+        rows = []
+        for s in self.plugin.summary():
+            share = s["done"] / s["total"] if s["total"] else 1.0
+            rows.append(
+                f"<tr><td>{html.escape(s['kind'])} {html.escape(s['name'])}</td>"
+                f"<td><progress max='{s['total']}' value='{s['done']}'></progress></td>"
+                f"<td class='points'>{s['done']} / {s['total']}</td><td class='failed'>{s['failed']}</td>"
+                f"<td>{s['running_tasks']}</td><td>{html.escape(s['state'])}</td><td>{100 * share:.0f} %</td></tr>")
+        body = "".join(rows) or "<tr><td colspan='7'>no cosim study has run on this scheduler yet</td></tr>"
+        self.set_header("Content-Type", "text/html; charset=utf-8")
+        self.write(PAGE.format(rows=body))
+
+
+PAGE = """<!DOCTYPE html>
+<html><head><meta charset="utf-8"><meta http-equiv="refresh" content="2"><title>cosim: points</title>
+<style>body {{font-family: sans-serif; margin: 1.5em}} td, th {{padding: 0.2em 0.8em; text-align: left}}
+progress {{width: 20em}}</style></head>
+<body><p><a href="status">&larr; Dask dashboard</a></p>
+<h2>cosim: points of each study on this scheduler</h2>
+<table><tr><th>study</th><th></th><th>points done</th><th>not ok (this run)</th><th>tasks running</th><th>state</th><th></th></tr>
+{rows}</table>
+<p>Points done counts every point with a row (ok or not); a task lost with its worker is counted again when it
+runs again. Data: <a href="cosim/points.json">cosim/points.json</a>.</p></body></html>
+"""
+
+
+# -- client side ------------------------------------------------------------------------
+
+
+class Board:
+    """A study announced to the scheduler's :class:`PointsPlugin`; ``link`` is its page, or ``why_not`` says."""
+
+    def __init__(self, client: Any, study: str, link: str | None, why_not: str = ""):
+        self.client, self.study, self.link, self.why_not = client, study, link, why_not
+
+    @property
+    def run(self) -> str:
+        """What the study's task keys carry (``dashboard.task_key(run=...)``); '' without a page: workers then send
+        nothing."""
+        return self.study if self.link else ""
+
+    def describe(self) -> str:
+        """For the study's start line: the page's address, or why there is none."""
+        return f"points: {self.link}" if self.link else f"no points page ({self.why_not})"
+
+    @contextmanager
+    def running(self) -> Iterator[None]:
+        """The study runs within the block; it ends ``finished``, ``interrupted`` (Ctrl-C) or ``failed``."""
+        try:
+            yield
+        except KeyboardInterrupt:
+            self.end("interrupted")
+            raise
+        except BaseException:
+            self.end("failed")
+            raise
+        self.end("finished")
+
+    def rows_made_here(self, key: str, rows: list[dict[str, Any]]) -> None:
+        """Rows the client made for the points of task ``key`` (lost with its workers): counted on the page."""
+        self._send({"key": key, "done": len(rows), "failed": sum(r.get("status") != "ok" for r in rows),
+                    "final": True})
+
+    def end(self, state: str) -> None:
+        """Tell the page the study ended (``finished``, ``interrupted``, ``failed``); never raises."""
+        self._send({"op": "end", "study": self.study, "state": state})
+
+    def _send(self, msg: dict[str, Any]) -> None:
+        if self.link is None:
+            return
+        try:
+            self.client.sync(self.client.scheduler.log_event, topic=TOPIC, msg=msg, callback_timeout=5)
+        except BaseException:  # also while Ctrl-C stops the study: the page's counts are not worth a traceback
+            pass
+
+
+def open_board(client: Any, kind: str, name: str, total: int, before: int = 0,
+               dashboard: str | None = None) -> Board:
+    """Register the plugin on ``client``'s scheduler and announce a study; never raises.
+
+    ``before``: the points already stored (a resume), counted as done.
+    ``dashboard`` is the dashboard's link (its ``status`` page); the returned
+    Board's ``link`` is the points page beside it, None when the plugin could
+    not be registered or there is no dashboard.
+    """
+    import uuid
+    from urllib.parse import urljoin
+
+    import cloudpickle
+
+    study = uuid.uuid4().hex[:12]
+    if not dashboard or not dashboard.startswith("http"):
+        return Board(client, study, None, "no Dask dashboard")
+    try:
+        cloudpickle.register_pickle_by_value(sys.modules[__name__])  # whatever cosim version the scheduler has
+        client.register_plugin(PointsPlugin(), name=PLUGIN_NAME)
+        client.log_event(TOPIC, {"op": "start", "study": study, "kind": kind, "name": name, "total": total,
+                                 "before": before, "client": client.id})
+    except Exception as exc:
+        reason = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
+        return Board(client, study, None, f"the scheduler did not take cosim's plugin: {reason[:200]}")
+    return Board(client, study, urljoin(dashboard, ROUTE))

@@ -1,0 +1,401 @@
+"""One evaluator for every driver: design points in, one row per point out, on Dask.
+
+``cosim sweep``, ``cosim optimize`` and ``cosim sensitivity`` differ only in
+*which* points they ask for and when; all of them evaluate points here, so
+they share the cluster set-up, the payload (system + unit files, scattered
+once), the per-worker child processes of :mod:`cosim.parallel.isolation` with
+their timeouts, and the rule that a fault is a row, never an exception:
+
+- :func:`dask_client` starts the cluster of a cluster file, connects to a
+  running scheduler (given, or from Dask's configuration) or starts a local
+  cluster of worker processes (one thread each, 127.0.0.1), and closes what
+  it started (see :mod:`cosim.parallel.cluster`).
+- :class:`Evaluator` runs a list of points on that client in parallel and
+  returns one row per point in the order given (``evaluate``).
+- A task lost with its worker process is run again by the scheduler on
+  another worker; the points of a task lost again then run in small groups,
+  each alone on the cluster, and the points of a group lost alone one at a
+  time, so only a point that kills its workers while alone gets ``crashed``
+  (:class:`Reruns`, :func:`lost_rows`) and every other point its true row.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+import time
+from contextlib import contextmanager
+from typing import Any, Iterator, Sequence
+
+from cosim.errors import UserError
+
+
+class ClusterError(UserError):
+    """No Dask workers can be had (scheduler unreachable or without workers)."""
+
+
+def check_timeout(timeout: float | None, error: type[UserError] = UserError) -> None:
+    """Refuse a per-point timeout that is not a positive, finite number of seconds (None: the default timeout).
+
+    Every driver (sweep, optimize, sensitivity) checks its ``timeout`` here
+    before any work.  Raises ``error`` (a UserError, so exit code 2): NaN,
+    infinity, zero or a negative number would make every point ``crashed`` or
+    never stop a hanging one.
+    """
+    if timeout is not None and not (isinstance(timeout, (int, float)) and math.isfinite(timeout) and timeout > 0):
+        raise error(f"the timeout must be a positive number of seconds, got {timeout}")
+
+
+def _dashboard_available() -> bool:
+    """Whether bokeh is installed (distributed serves its dashboard only with it); found, not imported."""
+    import importlib.util
+
+    return importlib.util.find_spec("bokeh") is not None
+
+
+def _thread_count(client: Any) -> int:
+    return sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values())
+
+
+# Dask keeps the last `distributed.admin.low-level-log-length` messages of every connection, and as many
+# transitions and events, for debugging (1000 by default).  A sweep's task messages carry its points, so the
+# client, the scheduler cosim runs in its process and the workers would hold the points of the last 1000 tasks
+# of every connection: hundreds of MB for a sweep of a million cheap points (2048 a task).  The clients and
+# clusters cosim starts keep LOG_LENGTH; the transitions of the last LOG_LENGTH tasks remain for a post-mortem.
+LOG_LENGTH = 50
+
+
+def local_cluster(workers: int) -> Any:
+    """The cluster cosim starts when given none: a LocalCluster whose scheduler and ``workers`` workers (one
+    thread each) run in this process, its dashboard on a free port of 127.0.0.1, loaded when first opened
+    (:mod:`cosim.parallel.dashboard_on_demand`).  The caller closes it.
+
+    Why no worker processes: a point never runs in a Dask worker, it runs in
+    the worker's child process (:mod:`cosim.parallel.isolation`), which is what
+    isolates a crashing or hanging unit, enforces timeouts and memory limits.
+    On this machine a worker only hands points to its child and rows back, so
+    a worker process would be a relay that costs a process start, the imports
+    of Dask and a serialisation of every task both ways (together about 0.4 s
+    of the README's main job of 2 s).  Clusters on other machines (a cluster
+    file, a scheduler address) keep their worker processes.
+    """
+    import dask
+    from distributed import LocalCluster, Worker
+
+    from cosim.parallel.cluster import ALLOWED_FAILURES
+    from cosim.parallel.dashboard_on_demand import serve_dashboard_on_demand
+
+    with dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES,
+                          "distributed.admin.low-level-log-length": LOG_LENGTH}):
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=False,
+                               dashboard_address="127.0.0.1:0", worker_dashboard_address="127.0.0.1:0",
+                               worker_class=_worker_without_pages(Worker), silence_logs=40,
+                               scheduler_kwargs={"dashboard": False})  # loaded when first opened, below
+    try:
+        if _dashboard_available():
+            serve_dashboard_on_demand(cluster)
+    except BaseException:
+        cluster.close()
+        raise
+    return cluster
+
+
+def _worker_without_pages(worker: type) -> type:
+    """Dask's Worker, its web server (health, metrics) on the address given but without its own bokeh pages.
+
+    The workers cosim starts run in the client's process (local_cluster):
+    their pages would import bokeh there at every start (0.25 s); the
+    scheduler's dashboard shows the workers anyway.  (LocalCluster turns the
+    pages on whenever it is given the address the server should listen on.)
+    """
+    class LocalWorker(worker):
+        def __init__(self, *args: Any, **kwargs: Any):
+            super().__init__(*args, **{**kwargs, "dashboard": False})
+
+    return LocalWorker
+
+
+@contextmanager
+def dask_client(workers: int, scheduler: str | None = None, cluster_file: str | None = None,
+                early: Any = None) -> Iterator[tuple[Any, int, str]]:
+    """Yields ``(client, worker threads, dashboard link)``; closes the client and any cluster it started.
+
+    ``cluster_file`` (a path, see :mod:`cosim.parallel.cluster`) comes first,
+    then ``scheduler``, then Dask's configured scheduler address; without any
+    a ``LocalCluster`` of ``workers`` processes is started, or taken from
+    ``early`` (an :class:`~cosim.parallel.early_cluster.EarlyCluster` started
+    before, which the caller closes if it is not used here).  Raises
+    ClusterError when the scheduler cannot be reached or has no workers within
+    60 s (a cluster file's jobs: 10 min), ClusterFileError for a bad cluster file.
+    Meanwhile the dashboard's web server logs its errors without tracebacks
+    (:mod:`cosim.parallel.dashboard`), and Dask keeps LOG_LENGTH recent
+    messages of each connection (see LOG_LENGTH).
+    """
+    import dask
+
+    from cosim.parallel.dashboard import web_server_tracebacks_as_lines
+
+    # LOG_LENGTH for the client's connections, and for the scheduler and workers of a cluster started here
+    with dask.config.set({"distributed.admin.low-level-log-length": LOG_LENGTH}), web_server_tracebacks_as_lines():
+        yield from _client(workers, scheduler, cluster_file, early)
+
+
+def _client(workers: int, scheduler: str | None, cluster_file: str | None,
+            early: Any) -> Iterator[tuple[Any, int, str]]:
+    from distributed import Client
+
+    from cosim.parallel.cluster import configured_scheduler, read_cluster_file, start_cluster
+
+    cluster = None
+    wait, hint, origin = 60, "start some with: dask worker ADDRESS --nthreads 1", ""
+    if scheduler is None and cluster_file is None and (scheduler := configured_scheduler()) is not None:
+        origin = "DASK_SCHEDULER_ADDRESS (or Dask's scheduler-address setting)"
+        hint = f"start workers, or unset {origin} to use a local cluster"
+        origin = f" (from {origin})"
+    if cluster_file is not None:
+        config = read_cluster_file(cluster_file)  # checked before anything starts
+        cluster = start_cluster(config)
+        try:
+            client = Client(cluster)
+        except BaseException:
+            cluster.close()
+            raise
+        link = cluster.dashboard_link if _dashboard_available() else "unavailable (install bokeh to get it)"
+        scheduler = f"{cluster.scheduler_address} ({config.type} of {cluster_file})"
+        wait, hint = 600, f"check that the jobs of {config.type} start (its scale/adapt and job system)"
+    elif scheduler is None:
+        dashboard = _dashboard_available()
+        cluster = early.take() if early is not None else local_cluster(workers)
+        client = Client(cluster)
+        # not cluster.dashboard_link: that names the machine's address, the server listens on 127.0.0.1 only
+        link = (f"http://127.0.0.1:{cluster.scheduler.http_server.port}/status" if dashboard
+                else "unavailable (install bokeh to get it)")
+    else:
+        try:
+            client = Client(scheduler, timeout=10)
+        except OSError as exc:
+            raise ClusterError(f"cannot reach the Dask scheduler at {scheduler}{origin}: {exc}") from None
+        link = client.dashboard_link
+    try:
+        if cluster_file is not None or scheduler is not None:  # a scheduler of another environment
+            _check_scheduler_imports_cosim(client, f"{scheduler}{origin}")
+        n_workers = _thread_count(client)
+        if n_workers == 0:
+            try:
+                client.wait_for_workers(1, timeout=wait)
+            except TimeoutError:
+                raise ClusterError(f"the scheduler at {scheduler} has no workers (waited {wait} s); {hint}") from None
+            n_workers = _thread_count(client)
+        yield client, n_workers, link
+    finally:
+        client.close()
+        if cluster is not None:
+            try:
+                cluster.close()
+            except OSError:  # its processes are already gone (a kill reached them): nothing left to close
+                pass
+
+
+def _check_scheduler_imports_cosim(client: Any, where: str) -> None:
+    """Raise ClusterError when the scheduler cannot import cosim (it could run none of the tasks)."""
+    from cosim.parallel.scheduler_check import scheduler_import_problem
+
+    problem = scheduler_import_problem(client)
+    if problem:
+        raise ClusterError(f"the Dask scheduler at {where} cannot import cosim ({problem}); Dask's scheduler "
+                           "unpickles every task, so it needs the modules the tasks name: install cosim (the "
+                           "version of this client) where the scheduler runs")
+
+
+SCATTER_TRIES = 5  # sending the payload to the workers, when workers die meanwhile
+WORKER_WAIT = 120.0  # seconds to wait for a worker when all died (a loaded machine restarts them slowly)
+
+
+def worker_died(exc: BaseException) -> bool:
+    """Whether a task failed because every worker process that ran it died (Dask's KilledWorker).
+
+    The scheduler has then already run it again elsewhere (``allowed-failures``
+    times, 1 on the clusters cosim starts).
+    """
+    from distributed import KilledWorker
+
+    return isinstance(exc, KilledWorker)
+
+
+RERUN_GROUP = 64  # points of a lost task rerun together, alone on the cluster, before any is run by itself
+
+
+class Reruns:
+    """Where the points of a task that failed with its workers go next.
+
+    Dask counts a worker's death against *every* task the scheduler had sent
+    to that worker (:attr:`TaskState.suspicious`), also tasks only waiting
+    there behind the one running, so a KilledWorker says "this task was on
+    workers that died", not "this task killed them"; and when the workers
+    that died held the last copies of the scattered payload, the tasks using
+    it are cancelled instead.  Blame is therefore only given to a point that
+    ran *alone*: the points of a task lost either way become ``suspects``,
+    one point each (a task of more than RERUN_GROUP points: groups of
+    RERUN_GROUP); the driver stops submitting new work, lets the tasks in
+    flight finish, then runs the suspects one task at a time, with nothing
+    else on the cluster (the scheduler still re-runs such a task
+    ``allowed-failures`` times).  A group lost while it runs alone holds a
+    point that kills its workers: its points become suspects of one point
+    each.  A single point whose task is lost while it runs alone is the
+    one that kills its workers: it gets ``crashed`` (:func:`lost_rows`); every
+    other suspect gets its true row.
+
+    Why groups: a sweep's task may hold thousands of cheap points
+    (:class:`cosim.studies.sweep.BatchSizer`); rerun one per task, one task at
+    a time, they would cost a scheduler round trip each (a minute or more
+    for a lost worker), where a group costs one.  The group holding the
+    killer costs one more round of worker deaths.
+    """
+
+    def __init__(self, group: int = RERUN_GROUP) -> None:
+        self.group = group
+        self.suspects: collections.deque[list[Any]] = collections.deque()  # each entry: one task's points
+
+    def after_failure(self, points: Sequence[Any], exc: BaseException, alone: bool) -> bool:
+        """True when ``points`` became suspects (run again later, alone); False: they get :func:`lost_rows`."""
+        from concurrent.futures import CancelledError
+
+        if not (worker_died(exc) or isinstance(exc, CancelledError)):
+            return False  # the task could not run at all (e.g. unpicklable arguments): a row
+        if not alone:
+            size = self.group if len(points) > self.group else 1  # a task of at most `group` points: one by one
+            self.suspects.extend(list(points[i:i + size]) for i in range(0, len(points), size))
+            return True
+        if len(points) > 1:  # one of them kills its workers: find it, one point at a time
+            self.suspects.extend([point] for point in points)
+            return True
+        return False  # lost while alone: this point kills its workers
+
+
+class ScatteredPayload:
+    """The payload scattered to every worker; scattered anew when the workers holding it are all gone.
+
+    Scattered data lives only on workers: when every worker that held it
+    dies (a cluster of two both killed, a lost node), its tasks are cancelled.
+    """
+
+    def __init__(self, client: Any, payload: dict[str, Any]):
+        self.client, self.payload, self._future = client, payload, None
+
+    def future(self) -> Any:
+        """The payload's future; scattered anew if it is lost (the workers holding it all died).
+
+        The payload is lost when every worker holding it died, and then there
+        may be no worker for a while (their nannies restart them): it waits up
+        to WORKER_WAIT seconds for one, then raises ClusterError.  A worker that dies while the payload
+        is being sent to it fails the scatter (CommClosedError, an OSError, or
+        a ValueError from the broadcast): it is tried again, at most
+        SCATTER_TRIES times.
+        """
+        if self._future is None or not _alive(self._future):
+            for attempt in range(SCATTER_TRIES):
+                try:
+                    self._wait_for_a_worker()
+                    self._future = self.client.scatter(self.payload, broadcast=True, hash=False)
+                    break
+                # OSError, also TimeoutError: "No valid workers found" when the last one just died; ValueError: "Can
+                # not use replicate to delete data" when the workers changed while the payload was sent to them all
+                except (OSError, ValueError):
+                    if attempt == SCATTER_TRIES - 1:
+                        raise
+                    time.sleep(1.0)  # the scheduler removes the dead worker meanwhile
+        return self._future
+
+    def _wait_for_a_worker(self) -> None:
+        """Raises ClusterError when no worker is there within WORKER_WAIT seconds (all died, none came back)."""
+        try:
+            self.client.wait_for_workers(1, timeout=WORKER_WAIT)
+        except TimeoutError:
+            raise ClusterError(f"every Dask worker died and none came back within {WORKER_WAIT:g} s (a Dask nanny "
+                               "does not restart a worker killed while it starts); the rows so far are kept: start "
+                               "workers, or run again with --resume") from None
+
+
+def _alive(scattered: Any) -> bool:
+    """Whether every future of a scattered object (a dict is scattered value by value) still holds its data."""
+    futures = scattered.values() if isinstance(scattered, dict) else [scattered]
+    return all(f.status == "finished" for f in futures)
+
+
+def lost_rows(point_ids: Sequence[str], exc: BaseException, alone: bool = False) -> list[dict[str, Any]]:
+    """``crashed`` rows for points whose task failed with its workers (``alone``: see :class:`Reruns`)."""
+    from concurrent.futures import CancelledError
+
+    if alone and (worker_died(exc) or isinstance(exc, CancelledError)):
+        # A cancelled task here means the workers holding its scattered data all died while it ran alone.
+        cause = (f"Dask: {exc}" if worker_died(exc) else
+                 f"its workers died and took the task's data with them; Dask: {type(exc).__name__}: {exc}")
+        message = ("every Dask worker process that ran this point died, also while it ran alone on the cluster "
+                   f"(the point kills them, e.g. by using up the memory); {cause}")
+    else:
+        message = f"the task running this point failed: {type(exc).__name__}: {exc}"
+    return [{"point_id": pid, "status": "crashed", "message": message,
+             "run_time": float("nan"), "worker": "", "objectives": {}} for pid in point_ids]
+
+
+class Evaluator:
+    """Evaluates batches of points on ``client`` (see the module docstring).
+
+    ``payload`` is :func:`cosim.parallel.isolation.make_payload` of the system;
+    it is scattered to the workers once.  ``timeout`` is the seconds one point
+    may run before its child process is killed (row status ``timeout``).
+    ``study`` names the tasks on the Dask dashboard (:func:`cosim.parallel.dashboard.task_key`);
+    ``board`` (:func:`cosim.parallel.dashboard_points.open_board`) counts their points on its page.
+    """
+
+    def __init__(self, client: Any, payload: dict[str, Any], n_workers: int, timeout: float | None = None,
+                 study: str = "", board: Any = None):
+        self.client, self.n_workers, self.timeout, self.study = client, max(1, n_workers), timeout, study
+        self.board = board
+        self._payload = ScatteredPayload(client, payload)
+
+    def evaluate(self, points: Sequence[tuple[str, dict[str, Any]]]) -> list[dict[str, Any]]:
+        """One row per ``(point_id, values)``, in the order given; never raises for a failing point.
+
+        The points are split into one task per worker, so a batch of K runs
+        K / workers points per process.  A row has point_id, status, message,
+        run_time, worker and objectives (a flat dict).  Points of a task lost
+        with its workers are run again (:class:`Reruns`).
+        """
+        if not points:
+            return []
+        size = math.ceil(len(points) / self.n_workers)
+        rows: list[dict[str, Any] | None] = [None] * len(points)
+        reruns = Reruns()
+        chunks = [list(range(i, min(i + size, len(points)))) for i in range(0, len(points), size)]
+        in_flight = [(chunk, False, self._submit(points, chunk)) for chunk in chunks]  # (indices, alone, future)
+        while in_flight or reruns.suspects:
+            if not in_flight:  # every other task is done: the next suspect runs alone
+                suspect = reruns.suspects.popleft()
+                in_flight = [(suspect, True, self._submit(points, suspect))]
+            for indices, alone, future in in_flight:
+                try:
+                    done = future.result()  # waits; the others run meanwhile
+                except Exception as exc:  # the worker process itself died, or the task could not run
+                    if reruns.after_failure(indices, exc, alone):
+                        continue
+                    done = lost_rows([points[i][0] for i in indices], exc, alone)
+                    if self.board is not None:
+                        self.board.rows_made_here(future.key, done)
+                finally:
+                    future.release()
+                for i, row in zip(indices, done):
+                    rows[i] = row
+            in_flight = []
+        return rows  # type: ignore[return-value]  (every index was filled)
+
+    def _submit(self, points: Sequence[tuple[str, dict[str, Any]]], indices: list[int]) -> Any:
+        """The task future for the points at ``indices``."""
+        from cosim.parallel.dashboard import task_key
+        from cosim.parallel.tasks import run_batch
+
+        chunk = [points[i] for i in indices]
+        key = task_key("optimize", self.study, indices, len(points),  # the dashboard's names: points of this batch
+                       run=self.board.run if self.board is not None else "")
+        return self.client.submit(run_batch, self._payload.future(), chunk, self.timeout, pure=False, retries=0,
+                                  key=key)

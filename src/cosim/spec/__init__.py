@@ -1,0 +1,3 @@
+"""The spec.json format: reading it (:mod:`.loader`), its JSON Schema (spec.schema.json), the design space
+(:mod:`.design`) and the arithmetic of objectives and constraints (:mod:`.expressions`).
+"""

@@ -1,0 +1,90 @@
+"""SSP (System Structure and Parameterization, Modelica Association) import and export.
+
+``cosim validate | inspect | run | sweep system.ssp`` read an SSP through
+:func:`ssp_raw_spec`, which flattens its system into the content of a
+spec.json (see :mod:`.reader`); a spec.json with ``"system": "file.ssp"``
+gets that content merged under its own (:func:`merge_system`).
+:mod:`.writer` exports a spec as an SSP 2.0 archive.
+"""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+from typing import Any, Mapping
+
+from cosim.errors import Problem, SpecError
+from cosim.ssp.archive import is_ssp
+from cosim.ssp.reader import SspSystem, read_ssp
+from cosim.units.registry import unit_kinds
+
+__all__ = ["is_ssp", "merge_system", "read_ssp", "ssp_raw_spec", "SspSystem"]
+
+
+def ssp_raw_spec(path: str | Path, experiment: Mapping[str, Any] | None = None) -> dict:
+    """The spec content of the SSP at ``path``, with ``experiment`` fields (command line) on top.
+
+    Raises SpecError for every problem of the SSP, and when it gives no stop
+    time or step size and ``experiment`` does not either.
+    """
+    system = read_ssp(path)
+    raw = system.raw
+    raw["experiment"].update(experiment or {})
+    missing = [k for k in ("stop", "step") if k not in raw["experiment"]]
+    if missing:
+        what = {"stop": "stop time (ssd:DefaultExperiment stopTime)",
+                "step": "step size (OMSimulator FixedStepMaster or OSP FixedStepAlgorithm annotation)"}
+        raise SpecError([Problem(system.files.label(system.files.ssd), "/ssd:SystemStructureDescription",
+                                 f"the SSP gives no {what[k]}",
+                                 f"pass --{k} on the command line, or name the SSP in a spec.json "
+                                 f"(\"system\": \"{Path(path).name}\") with \"experiment\": {{\"{k}\": ...}}")
+                         for k in missing])
+    return raw
+
+
+def merge_system(spec: dict, spec_path: Path) -> dict:
+    """A spec.json whose ``"system"`` names an SSP, with the SSP's units and connections merged in.
+
+    The spec's own entries win: a unit of the same name has its fields
+    replaced (``parameters`` and ``start`` merged value by value), a spec
+    connection into an input the SSP already feeds replaces the SSP's, and
+    the spec's experiment fields override the SSP's.  The spec's connections
+    come first, so JSON paths of problems in them match the spec file.
+    Raises SpecError for problems of the SSP.
+    """
+    source = Path(spec["system"])
+    if not source.is_absolute():
+        source = spec_path.resolve().parent / source
+    if not source.exists():
+        raise SpecError([Problem(str(spec_path), "$.system", f"'{spec['system']}' not found",
+                                 "name an .ssp archive, an .ssd file or a folder with SystemStructure.ssd, "
+                                 "relative to the spec's folder")])
+    if not is_ssp(source):
+        raise SpecError([Problem(str(spec_path), "$.system", f"'{spec['system']}' is not an SSP",
+                                 "name an .ssp archive, an .ssd file or a folder with SystemStructure.ssd")])
+    ssp = read_ssp(source).raw
+    merged = copy.deepcopy(spec)
+    units = copy.deepcopy(ssp["units"])
+    for name, own in (spec.get("units") or {}).items():
+        if name in units and isinstance(own, dict):
+            base = units[name]
+            kinds = unit_kinds()  # the spec's own kind replaces the SSP's (fmu, python, player or a plug-in's)
+            if any(k in own for k in kinds):
+                base = {k: v for k, v in base.items() if k not in kinds}
+            for key, value in own.items():
+                if key in ("parameters", "start") and isinstance(value, dict):
+                    base[key] = {**base.get(key, {}), **value}
+                else:
+                    base[key] = value
+            units[name] = base
+        else:
+            units[name] = own
+    merged["units"] = units
+    own_connections = list(spec.get("connections") or [])
+    fed = {c.get("to") for c in own_connections if isinstance(c, dict)}
+    merged["connections"] = own_connections + [c for c in ssp["connections"] if c["to"] not in fed]
+    merged["experiment"] = {**ssp["experiment"], **(spec.get("experiment") or {})}
+    if "record" not in spec:
+        merged["record"] = ssp["record"]
+    merged.setdefault("name", ssp["name"])
+    return merged

@@ -1,0 +1,90 @@
+"""Where the files of an SSP are: an .ssp archive, a folder, or one .ssd file.
+
+An archive is extracted once per process into a temporary folder that is
+removed when the process exits (the FMUs of its components are read from
+there), by :func:`cosim.util.archive.safe_extract`: members that would leave
+the folder, links, special files and archives that unpack beyond the limits
+are refused.
+"""
+
+from __future__ import annotations
+
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+from cosim.errors import Problem, SpecError
+from cosim.util.archive import MEMBER_SEPARATOR, ArchiveError, extracted_ssp
+
+SSD_NAME = "SystemStructure.ssd"
+
+
+def is_ssp(path: str | Path) -> bool:
+    """True for an .ssp archive, an .ssd file, or a folder holding SystemStructure.ssd."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    return suffix in (".ssp", ".ssd") or (path.is_dir() and (path / SSD_NAME).is_file())
+
+
+@dataclass(frozen=True)
+class SspFiles:
+    """The files of one SSP: ``root`` holds the SSD; ``beside`` is the folder around an archive."""
+
+    given: str  # the path as the user gave it, for messages
+    root: Path
+    ssd: Path
+    beside: Path | None
+    archive: Path | None = None
+
+    def label(self, path: Path) -> str:
+        """How a message names a file of this SSP: ``system.ssp:resources/a.ssv``."""
+        try:
+            inner = path.resolve().relative_to(self.root.resolve()).as_posix()
+        except ValueError:
+            return str(path)
+        return f"{self.given}:{inner}"
+
+    def reference(self, path: Path) -> str:
+        """How a spec names a file of this SSP: ``/abs/system.ssp!/resources/a.fmu`` for an archive member.
+
+        The name stays the same in every process (the extraction folder does
+        not), so a spec read from an SSP keeps its digest; see :func:`cosim.util.archive.member_file`.
+        """
+        if self.archive is not None and self.inside(path):
+            return f"{self.archive}{MEMBER_SEPARATOR}{path.resolve().relative_to(self.root.resolve()).as_posix()}"
+        return str(path)
+
+    def inside(self, path: Path) -> bool:
+        resolved = path.resolve()
+        root = self.root.resolve()
+        return resolved == root or root in resolved.parents
+
+
+def open_ssp(path: str | Path) -> SspFiles:
+    """The files of the SSP at ``path``; raises SpecError when there is none."""
+    path = Path(path)
+    given = str(path)
+    if not path.exists():
+        raise SpecError([Problem(given, "/", "file not found", "check the path of the SSP")])
+    if path.is_dir():
+        ssd = path / SSD_NAME
+        if not ssd.is_file():
+            raise SpecError([Problem(given, "/", f"the folder has no {SSD_NAME}",
+                                     "give an .ssp archive, an .ssd file, or the folder an SSP was unpacked into")])
+        return SspFiles(given, path, ssd, None)
+    if path.suffix.lower() == ".ssd":
+        return SspFiles(str(path.parent), path.parent, path, None)
+    if not zipfile.is_zipfile(path):
+        raise SpecError([Problem(given, "/", "not a zip archive", "an .ssp file is a zip archive with "
+                                 f"{SSD_NAME} at its root; re-export it from its tool")])
+    try:
+        folder = extracted_ssp(path)
+    except ArchiveError as exc:
+        raise SpecError(exc.problems) from None
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise SpecError([Problem(given, "/", f"cannot extract the archive: {exc}", "re-export the SSP")]) from None
+    ssd = folder / SSD_NAME
+    if not ssd.is_file():
+        raise SpecError([Problem(given, "/", f"the archive has no {SSD_NAME} at its root",
+                                 f"an SSP archive holds its system in {SSD_NAME} at the top level")])
+    return SspFiles(given, folder, ssd, path.resolve().parent, path.resolve())

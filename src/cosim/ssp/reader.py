@@ -1,0 +1,676 @@
+"""Read an SSP's system and flatten it into the content of a spec.json.
+
+:func:`read_ssp` walks the root ``ssd:System``: every ``ssd:Component`` (an
+FMU) becomes a unit named by its path below the root system, e.g.
+``SuT.edrive_mass``; nested systems only contribute their connectors.  A
+connection chain ``A.y -> system connector -> ... -> B.u`` becomes one
+connection ``A.y -> B.u`` whose factor and offset compose the unit
+conversions (from ``ssd:Units``, unless ``suppressUnitConversion``; a system
+connector without a unit passes the unit through) and
+``LinearTransformation``s along the chain (SSP: target = factor * converted
+source + offset).  Parameter bindings (inline or .ssv, with ``prefix`` and
+.ssm mappings) become unit parameters and start values; bindings of a higher
+system win over lower ones, later bindings over earlier ones at one level.
+The experiment comes from ``DefaultExperiment`` and the step size from
+OMSimulator's ``FixedStepMaster`` or OSP's ``FixedStepAlgorithm``
+annotations; what is missing is left to the spec or the command line.
+
+Every problem is collected (file in the archive, element path, fix) and
+raised at the end as one SpecError.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+import urllib.parse
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from lxml import etree
+
+from cosim.errors import Problem, SpecError, did_you_mean
+from cosim.master.algorithms import ALGORITHMS
+from cosim.ssp.archive import SspFiles, open_ssp
+from cosim.ssp.xml import element_path, parse_file, schema_problems, short_name, tag
+from cosim.util.quantities import BASE_UNITS, IncompatibleUnits, UnitDefinition, UnknownUnit, conversion
+
+log = logging.getLogger("cosim.ssp")
+
+_REAL = {"Real", "Float64", "Float32"}
+_INTEGER = {"Integer", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64"}
+_TYPE_OF = {**{t: "Real" for t in _REAL}, **{t: "Integer" for t in _INTEGER}, "Boolean": "Boolean",
+            "String": "String", "Enumeration": "Integer"}
+FMU_TYPES = ("application/x-fmu-sharedlibrary",)
+_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_LOGGED: set[tuple[str, str]] = set()
+
+
+@dataclass
+class Connector:
+    name: str
+    kind: str
+    type: str | None
+    unit: str | None
+    element: Any = None  # the ssd:Connector, for messages
+
+
+@dataclass
+class Node:
+    """A component or system of the SSP, by its path below the root system."""
+
+    path: tuple[str, ...]
+    kind: str  # "component" | "system"
+    element: Any
+    connectors: dict[str, Connector] = field(default_factory=dict)
+    children: dict[str, "Node"] = field(default_factory=dict)
+    fmu: Path | None = None
+    variables: dict[str, Any] = field(default_factory=dict)  # component: the FMU's variables by name
+    unit_definitions: dict[str, Any] = field(default_factory=dict)  # component: the FMU's <UnitDefinitions>
+
+
+@dataclass
+class Edge:
+    """One ssd:Connection: its ends (element path, connector), LinearTransformation and suppressUnitConversion."""
+
+    start: tuple[tuple[str, ...], str]
+    end: tuple[tuple[str, ...], str]
+    factor: float  # LinearTransformation: end = factor * (start converted to the end's unit) + offset
+    offset: float
+    suppress: bool
+    element: Any
+
+
+@dataclass
+class SspSystem:
+    """An SSP read and flattened: ``raw`` is the content of an equivalent spec.json."""
+
+    files: SspFiles
+    raw: dict
+    notes: list[str]
+
+
+def read_ssp(path: str | Path) -> SspSystem:
+    """Read, check and flatten the SSP at ``path`` (.ssp, folder or .ssd); raises SpecError."""
+    return _Reader(open_ssp(path)).read()
+
+
+class _Reader:
+    def __init__(self, files: SspFiles):
+        self.files = files
+        self.label = files.label(files.ssd)
+        self.problems: list[Problem] = []
+        self.notes: list[str] = []
+        self.units: dict[str, UnitDefinition] = {}  # ssd:Units
+        self.nodes: dict[tuple[str, ...], Node] = {}
+        self.edges: list[Edge] = []
+        self.bindings: list[tuple[int, int, tuple[tuple[str, ...], str], Any, str | None, Any, str]] = []
+        self._order = 0
+
+    # --- the document ---------------------------------------------------
+
+    def read(self) -> SspSystem:
+        root, problems = parse_file(self.files.ssd, self.label, "ssd")
+        self.problems.extend(problems)
+        if root is None or problems:
+            raise SpecError(self.problems)
+        self.units.update(self._read_units(root, self.label))
+        system = root.find(tag("ssd", "System"))
+        self._read_system(system, ())
+        self._read_bindings_everywhere(system, ())
+        experiment = self._experiment(root)
+        if self.problems:
+            raise SpecError(self.problems)
+        unit_names = self._unit_names()
+        if self.problems:
+            raise SpecError(self.problems)
+        units = {unit_names[n.path]: {"fmu": self.files.reference(n.fmu)} for n in self._components()}
+        connections = self._connections(unit_names)
+        self._apply_bindings(units, unit_names)
+        if self.problems:
+            raise SpecError(self.problems)
+        raw = {"name": root.get("name", self.files.ssd.stem), "units": units, "connections": connections,
+               "experiment": experiment, "record": [f"{name}.*" for name in units]}
+        if root.get("description"):
+            raw["description"] = root.get("description")
+        return SspSystem(self.files, raw, self.notes)
+
+    def _note(self, text: str) -> None:
+        self.notes.append(text)
+        if (self.files.given, text) not in _LOGGED:  # an SSP is often read twice (validate, then run)
+            _LOGGED.add((self.files.given, text))
+            log.warning("%s: %s", self.files.given, text)
+
+    def _problem(self, element: Any, message: str, fix: str, label: str | None = None) -> None:
+        where = element_path(element) if element is not None else "/"
+        self.problems.append(Problem(label or self.label, where, message, fix))
+
+    # --- units (ssd:Units / ssv:Units) ------------------------------------
+
+    @staticmethod
+    def _read_units(root: Any, label: str) -> dict[str, UnitDefinition]:
+        """The ssd:Units (or ssv:Units) definitions: SI value = factor * value + offset."""
+        units = {}
+        container = root.find(tag("ssd", "Units"))
+        if container is None:
+            container = root.find(tag("ssv", "Units"))
+        if container is None:
+            return units
+        for unit in container.findall(tag("ssc", "Unit")):
+            base = unit.find(tag("ssc", "BaseUnit"))
+            get = (lambda k, d=0: base.get(k, d)) if base is not None else (lambda k, d=0: d)
+            exponents = tuple(int(get(k)) for k in BASE_UNITS)
+            name = unit.get("name")
+            units[name] = UnitDefinition(name, exponents, float(get("factor", 1)), float(get("offset", 0)))
+        return units
+
+    def _conversion(self, source: tuple | None, target: tuple | None, element: Any,
+                    units: dict | None = None, label: str | None = None) -> tuple[float, float]:
+        """(a, b) with value_in_target = a * value_in_source + b.
+
+        ``source`` and ``target`` are (unit name, the FMU's own unit
+        definitions); ssd:Units (and an .ssv's Units) define names first, then
+        the FMU's, then :mod:`cosim.util.quantities` reads the name.
+        Identity when a unit is missing or both are equal.
+        """
+        if not source or not target or not source[0] or not target[0] or source[0] == target[0]:
+            return 1.0, 0.0
+        ssd_units = {**self.units, **(units or {})}
+        try:
+            return conversion(source[0], target[0], {**source[1], **ssd_units}, {**target[1], **ssd_units})
+        except UnknownUnit as exc:
+            self._problem(element, f"cannot convert '{source[0]}' to '{target[0]}': {exc}",
+                          "define the unit under ssd:Units (ssc:Unit with its ssc:BaseUnit), or set "
+                          "suppressUnitConversion=\"true\"", label)
+        except IncompatibleUnits as exc:
+            self._problem(element, f"units '{source[0]}' and '{target[0]}' measure different quantities: {exc}",
+                          "connect compatible quantities, or set suppressUnitConversion=\"true\" and give a "
+                          "LinearTransformation", label)
+        return 1.0, 0.0
+
+    # --- systems, components, connectors ----------------------------------
+
+    def _read_system(self, element: Any, path: tuple[str, ...]) -> Node:
+        node = Node(path, "system", element, self._connectors(element))
+        self.nodes[path] = node
+        elements = element.find(tag("ssd", "Elements"))
+        for child in (elements if elements is not None else []):
+            if not isinstance(child.tag, str):
+                continue
+            name = child.get("name", "")
+            child_path = (*path, name)
+            if name in node.children:
+                self._problem(child, f"a second element named '{name}' in this system",
+                              "give every element of a system its own name")
+                continue
+            if child.tag == tag("ssd", "System"):
+                node.children[name] = self._read_system(child, child_path)
+            elif child.tag == tag("ssd", "Component"):
+                node.children[name] = self._read_component(child, child_path)
+            else:
+                self._problem(child, f"{short_name(child.tag)} is not supported by cosim",
+                              "flatten signal dictionaries into plain connections")
+        connections = element.find(tag("ssd", "Connections"))
+        for connection in (connections if connections is not None else []):
+            if isinstance(connection.tag, str) and connection.tag == tag("ssd", "Connection"):
+                self._read_connection(connection, node)
+        return node
+
+    def _connectors(self, element: Any) -> dict[str, Connector]:
+        result = {}
+        container = element.find(tag("ssd", "Connectors"))
+        for c in (container if container is not None else []):
+            if not isinstance(c.tag, str) or c.tag != tag("ssd", "Connector"):
+                continue
+            kind_type, unit = None, None
+            for child in c:
+                if isinstance(child.tag, str) and child.tag.startswith(f"{{{tag('ssc', '')[1:-1]}}}"):
+                    local = child.tag.split("}")[1]
+                    if local in _TYPE_OF:
+                        kind_type, unit = _TYPE_OF[local], child.get("unit")
+            result[c.get("name")] = Connector(c.get("name"), c.get("kind"), kind_type, unit, c)
+        return result
+
+    def _read_component(self, element: Any, path: tuple[str, ...]) -> Node:
+        node = Node(path, "component", element, self._connectors(element))
+        self.nodes[path] = node
+        kind = element.get("type", FMU_TYPES[0])
+        if kind not in FMU_TYPES:
+            self._problem(element, f"component type '{kind}' is not supported (only FMUs: {FMU_TYPES[0]})",
+                          "export the component as an FMU, or inline its SSD as an ssd:System")
+            return node
+        source = element.get("source")
+        if not source:
+            self._problem(element, "the component has no 'source'", "set source=\"resources/model.fmu\"")
+            return node
+        fmu = self._resolve(source, self.files.ssd.parent)
+        if fmu is None:
+            where = "in the archive" if self.files.beside else "in the SSP's folder"
+            self._problem(element, f"FMU '{source}' not found {where}"
+                          + (" nor next to the archive" if self.files.beside else ""),
+                          "put the FMU under resources/ of the SSP, or fix the component's 'source'")
+            return node
+        node.fmu = fmu
+        from cosim.units.fmu.description import FmuProblems, FmuUnitType
+
+        try:
+            description = FmuUnitType(fmu, reference=source).describe()
+        except FmuProblems as exc:
+            self._problem(element, f"FMU '{source}' cannot be used: " + "; ".join(exc.problems),
+                          "re-export the FMU for co-simulation (FMI 2.0 or 3.0) with a binary for this platform")
+            return node
+        node.variables = {v.name: v for v in description.variables}
+        node.unit_definitions = dict(description.unit_definitions)
+        for name, connector in node.connectors.items():
+            if _variable(node, name) is None:
+                self._problem(connector.element, f"connector '{name}' is not a variable of FMU '{source}'."
+                              + did_you_mean(name, node.variables),
+                              f"use a variable the FMU has (cosim inspect {Path(source).name} lists them), "
+                              "or remove the connector")
+        return node
+
+    def _resolve(self, uri: str, base: Path) -> Path | None:
+        """A file a component or binding refers to: inside the SSP first, then next to the archive."""
+        parsed = urllib.parse.urlparse(uri)
+        if parsed.scheme == "file":
+            candidate = Path(urllib.parse.unquote(parsed.path))
+            return candidate if candidate.is_file() else None
+        if parsed.scheme:
+            return None  # no network: http(s) sources are not fetched
+        relative = urllib.parse.unquote(parsed.path)
+        candidate = base / relative
+        if self.files.inside(candidate) and candidate.is_file():
+            return candidate
+        if self.files.beside is not None:
+            beside = self.files.beside / relative
+            if beside.is_file():
+                return beside
+            beside = self.files.beside / Path(relative).name
+            if beside.is_file():
+                return beside
+        return None
+
+    def _read_connection(self, element: Any, system: Node) -> None:
+        ends = []
+        for side in ("start", "end"):
+            owner_name = element.get(f"{side}Element")
+            connector = element.get(f"{side}Connector")
+            if owner_name is None:
+                owner = system
+            elif owner_name in system.children:
+                owner = system.children[owner_name]
+            else:
+                self._problem(element, f"{side}Element '{owner_name}' is not an element of system "
+                              f"'{element_path(system.element)}'.{did_you_mean(owner_name, system.children)}",
+                              "name a component or sub-system of this system, or leave it out for the "
+                              "system's own connector")
+                return
+            if connector not in owner.connectors and _variable(owner, connector) is None:
+                what = "system" if owner.kind == "system" else "component"
+                known = list(owner.connectors) or list(owner.variables)
+                self._problem(element, f"{side}Connector '{connector}' is not a connector of {what} "
+                              f"'{'.'.join(owner.path) or 'the root system'}'.{did_you_mean(connector, known)}",
+                              f"use one of: {', '.join(known[:12])}" if known else "declare the connector")
+                return
+            ends.append((owner.path, connector))
+        suppress = element.get("suppressUnitConversion", "false") in ("true", "1")
+        linear = element.find(tag("ssc", "LinearTransformation"))
+        f, o = 1.0, 0.0
+        if linear is not None:
+            f, o = float(linear.get("factor", 1.0)), float(linear.get("offset", 0.0))
+        for other in (tag("ssc", "BooleanMappingTransformation"), tag("ssc", "IntegerMappingTransformation"),
+                      tag("ssc", "EnumerationMappingTransformation")):
+            if element.find(other) is not None:
+                self._problem(element, f"{short_name(other)} is not supported", "map the values inside an FMU")
+        self.edges.append(Edge(ends[0], ends[1], f, o, suppress, element))
+
+    def _unit_of(self, path: tuple[str, ...], connector: str) -> tuple[str | None, dict]:
+        """The unit of a connector: as the SSD declares it, else the FMU variable's; with the FMU's definitions."""
+        node = self.nodes[path]
+        if connector in node.connectors and node.connectors[connector].unit:
+            return node.connectors[connector].unit, node.unit_definitions
+        variable = _variable(node, connector) if node.kind == "component" else None
+        return (getattr(variable, "unit", None) if variable is not None else None), node.unit_definitions
+
+    def _components(self) -> list[Node]:
+        return [n for n in self.nodes.values() if n.kind == "component" and n.fmu is not None]
+
+    def _unit_names(self) -> dict[tuple[str, ...], str]:
+        names: dict[tuple[str, ...], str] = {}
+        seen: dict[str, tuple[str, ...]] = {}
+        for node in self._components():
+            # a component's own name may hold dots (an SSP exported from a flattened system)
+            parts = [p if _NAME_RE.match(p) else re.sub(r"\W", "_", p if p[:1].isalpha() or p[:1] == "_" else f"_{p}")
+                     for p in ".".join(node.path).split(".")]
+            name = ".".join(parts)
+            if name != ".".join(node.path):
+                self._note(f"component '{'.'.join(node.path)}' is called '{name}' (names keep letters, digits, _)")
+            if name in seen:
+                self._problem(node.element, f"two components flatten to the same unit name '{name}'",
+                              "rename one of them")
+            seen[name] = node.path
+            names[node.path] = name
+        return names
+
+    # --- connections, flattened ---------------------------------------------
+
+    def _connections(self, unit_names: dict[tuple[str, ...], str]) -> list[dict]:
+        into: dict[tuple, Edge] = {}
+        for edge in self.edges:
+            if edge.end in into:
+                self._problem(edge.element, f"connector '{edge.end[1]}' of '{'.'.join(edge.end[0])}' is "
+                              "already fed by another connection", "an input takes exactly one source")
+                continue
+            into[edge.end] = edge
+        self._into = into
+        connections = []
+        for end, edge in into.items():
+            node = self.nodes[end[0]]
+            if node.kind != "component" or node.fmu is None:
+                continue
+            variable = _variable(node, end[1])
+            if variable is None or variable.causality != "input":
+                continue  # parameters fed from system connectors are handled with the bindings
+            chain = self._chain(end)
+            source, through = chain[0].start, chain[0]
+            if self.nodes[source[0]].kind != "component":
+                continue  # a system connector fed by nothing (or a loop): no connection
+            factor, offset = self._compose(chain, self._unit_of(*source))
+            source_node = self.nodes[source[0]]
+            source_variable = _variable(source_node, source[1])
+            if source_variable is None or source_variable.causality != "output":
+                causality = getattr(source_variable, "causality", "unknown")
+                self._problem(through.element, f"'{'.'.join(source[0])}.{source[1]}' is {causality}, not an "
+                              "output", "a connection chain starts at a component's output")
+                continue
+            # the SSP's unit conversions are all in factor and offset: cosim must not convert again
+            entry: dict[str, Any] = {"from": f"{unit_names[source[0]]}.{source[1]}",
+                                     "to": f"{unit_names[end[0]]}.{end[1]}", "convert": False}
+            if factor != 1.0 or offset != 0.0:
+                entry.update(factor=factor, offset=offset)
+            connections.append(entry)
+        return connections
+
+    def _chain(self, end: tuple) -> list[Edge]:
+        """The connections from a component (or a system connector fed by nothing) to ``end``, in flow order."""
+        chain = [self._into[end]]
+        visited = {end}
+        while True:
+            start = chain[0].start
+            if self.nodes[start[0]].kind == "component" or start in visited or start not in self._into:
+                return chain
+            visited.add(start)
+            chain.insert(0, self._into[start])
+
+    def _compose(self, chain: list[Edge], unit: tuple) -> tuple[float, float]:
+        """(factor, offset) of a chain: per connection, units converted (unless suppressed), then its transformation.
+
+        ``unit`` is the (name, definitions) of the value entering the chain.  A
+        system connector that declares no unit passes the unit through, so a
+        chain rpm -> (no unit) -> rad/s still converts.
+        """
+        factor, offset = 1.0, 0.0
+        for edge in chain:
+            end_unit = self._unit_of(*edge.end)
+            a, b = (1.0, 0.0) if edge.suppress else self._conversion(unit, end_unit, edge.element)
+            f, o = edge.factor * a, edge.factor * b + edge.offset
+            factor, offset = f * factor, f * offset + o
+            if end_unit[0] or edge.suppress:
+                unit = end_unit  # after a suppressed conversion only a declared unit is known
+        return factor, offset
+
+    # --- experiment -----------------------------------------------------------
+
+    def _experiment(self, root: Any) -> dict:
+        experiment: dict[str, Any] = {}
+        default = root.find(tag("ssd", "DefaultExperiment"))
+        if default is not None:
+            if default.get("startTime") is not None:
+                experiment["start"] = float(default.get("startTime"))
+            if default.get("stopTime") is not None:
+                experiment["stop"] = float(default.get("stopTime"))
+        step = None
+        for element in root.iter():
+            if not isinstance(element.tag, str):
+                continue
+            local = element.tag.split("}")[-1]
+            if local == "FixedStepMaster" and element.get("stepSize"):
+                step = float(element.get("stepSize"))  # OMSimulator
+            elif local == "FixedStepAlgorithm" and (element.get("baseStepSize") or element.get("stepSize")):
+                step = float(element.get("baseStepSize") or element.get("stepSize"))  # OSP / libcosim
+            if step is not None:
+                break
+        if step is not None:
+            experiment["step"] = step
+        for annotation in root.iter(tag("ssc", "Annotation")):
+            if annotation.get("type") == "org.cosim":  # written by cosim export: its master algorithm
+                for child in annotation:
+                    if isinstance(child.tag, str) and child.get("algorithm") in ALGORITHMS:
+                        experiment["algorithm"] = child.get("algorithm")
+        if "stop" not in experiment:
+            self._note("no stop time (ssd:DefaultExperiment stopTime): take it from the spec or --stop")
+        if step is None:
+            self._note("no step size (no OMSimulator FixedStepMaster or OSP FixedStepAlgorithm annotation): "
+                       "take it from the spec or --step")
+        return experiment
+
+    # --- parameter bindings ---------------------------------------------------
+
+    def _read_bindings_everywhere(self, element: Any, path: tuple[str, ...]) -> None:
+        self._read_bindings(element, path)
+        elements = element.find(tag("ssd", "Elements"))
+        for child in (elements if elements is not None else []):
+            if isinstance(child.tag, str) and child.tag in (tag("ssd", "System"), tag("ssd", "Component")):
+                child_path = (*path, child.get("name", ""))
+                if child.tag == tag("ssd", "System"):
+                    self._read_bindings_everywhere(child, child_path)
+                else:
+                    self._read_bindings(child, child_path)
+
+    def _read_bindings(self, element: Any, path: tuple[str, ...]) -> None:
+        container = element.find(tag("ssd", "ParameterBindings"))
+        if container is None or path not in self.nodes:
+            return
+        owner = self.nodes[path]
+        for binding in container.findall(tag("ssd", "ParameterBinding")):
+            prefix = binding.get("prefix", "")
+            base = self.files.ssd.parent
+            if binding.get("sourceBase") == "component":
+                self._problem(binding, "sourceBase=\"component\" is not supported",
+                              "put the parameter file into the SSP and refer to it from the SSD")
+                continue
+            parameters, label, units = self._parameter_set(binding, base)
+            if parameters is None:
+                continue
+            mapping = self._mapping(binding, base)
+            if mapping is None:
+                continue
+            for name, (value, unit, type_, where) in parameters.items():
+                name = prefix + name
+                transform = None
+                if name in mapping:
+                    name, transform = mapping[name]
+                target = self._find_target(owner, name)
+                if target is None and self.problems:
+                    continue  # an FMU that did not load has no variables to match: already reported
+                if target is None:
+                    self._note(f"parameter '{name}' of {label} matches no variable of "
+                               f"'{'.'.join(path) or 'the root system'}' and is ignored (as SSP prescribes)")
+                    continue
+                self._order += 1
+                self.bindings.append((len(path), self._order, target, value,
+                                      unit, (transform, units, type_, where), label))
+
+    def _parameter_set(self, binding: Any, base: Path) -> tuple[dict | None, str, dict]:
+        source = binding.get("source")
+        if source:
+            path = self._resolve(source, base)
+            if path is None:
+                self._problem(binding, f"parameter file '{source}' not found", "fix the binding's 'source'")
+                return None, "", {}
+            label = self.files.label(path)
+            root, problems = parse_file(path, label, "ssv")
+            if problems or root is None:
+                self.problems.extend(problems)
+                return None, label, {}
+        else:
+            values = binding.find(tag("ssd", "ParameterValues"))
+            root = values.find(tag("ssv", "ParameterSet")) if values is not None else None
+            label = self.label
+            if root is None:
+                self._problem(binding, "the binding has neither 'source' nor an inline ssv:ParameterSet",
+                              "add source=\"resources/x.ssv\" or an ssd:ParameterValues with an ssv:ParameterSet")
+                return None, label, {}
+            problems = schema_problems(root, label, "ssv")
+            if problems:
+                self.problems.extend(problems)
+                return None, label, {}
+        units = self._read_units(root, label)
+        parameters = {}
+        for parameter in root.iter(tag("ssv", "Parameter")):
+            for child in parameter:
+                if not isinstance(child.tag, str):
+                    continue
+                local = child.tag.split("}")[-1]
+                if local not in _TYPE_OF:
+                    continue
+                type_ = _TYPE_OF[local]
+                text = child.get("value")
+                try:
+                    value = _typed(local, text)
+                except ValueError:
+                    self._problem(child, f"'{text}' is not a valid {local} value", f"write a {local} value", label)
+                    continue
+                parameters[parameter.get("name")] = (value, child.get("unit"), type_, child)
+        return parameters, label, units
+
+    def _mapping(self, binding: Any, base: Path) -> dict | None:
+        element = binding.find(tag("ssd", "ParameterMapping"))
+        if element is None:
+            return {}
+        source = element.get("source")
+        if source:
+            path = self._resolve(source, base)
+            if path is None:
+                self._problem(element, f"parameter mapping '{source}' not found", "fix the mapping's 'source'")
+                return None
+            label = self.files.label(path)
+            root, problems = parse_file(path, label, "ssm")
+            if problems or root is None:
+                self.problems.extend(problems)
+                return None
+        else:
+            root, label = element.find(tag("ssm", "ParameterMapping")), self.label
+            if root is None:
+                return {}
+            problems = schema_problems(root, label, "ssm")
+            if problems:
+                self.problems.extend(problems)
+                return None
+        mapping = {}
+        for entry in root.findall(tag("ssm", "MappingEntry")):
+            linear = entry.find(tag("ssc", "LinearTransformation"))
+            transform = (float(linear.get("factor", 1.0)), float(linear.get("offset", 0.0))) \
+                if linear is not None else None
+            suppress = entry.get("suppressUnitConversion", "false") in ("true", "1")
+            mapping[entry.get("source")] = (entry.get("target"), (transform, suppress, entry, label))
+        return mapping
+
+    def _find_target(self, owner: Node, name: str) -> tuple[tuple[str, ...], str] | None:
+        """The (element path, connector) a hierarchical parameter name means inside ``owner``."""
+        if owner.kind == "component":
+            return (owner.path, name) if _variable(owner, name) is not None else None
+        if name in owner.connectors:
+            return owner.path, name
+        best = ""
+        for child in owner.children:
+            if name.startswith(child + ".") and len(child) > len(best):
+                best = child
+        if not best:
+            return None
+        return self._find_target(owner.children[best], name[len(best) + 1:])
+
+    def _apply_bindings(self, units: dict, unit_names: dict) -> None:
+        # a higher level (smaller depth) wins, then the later binding at the same level
+        chosen: dict[tuple, tuple] = {}
+        for depth, order, target, value, unit, extra, label in self.bindings:
+            current = chosen.get(target)
+            if current is None or (depth, -order) < (current[0], -current[1]):
+                chosen[target] = (depth, order, value, unit, extra, label)
+        system_values = {t: v for t, v in chosen.items() if self.nodes[t[0]].kind == "system"}
+        for target, (depth, order, value, unit, extra, label) in chosen.items():
+            node = self.nodes[target[0]]
+            if node.kind == "component" and node.fmu is not None:
+                self._assign(units, unit_names, target, value, unit, extra, label, node)
+        # system connectors with values feed the component variables they are connected to
+        for end in getattr(self, "_into", {}):
+            node = self.nodes[end[0]]
+            if node.kind != "component" or node.fmu is None or end in chosen or _variable(node, end[1]) is None:
+                continue
+            chain = self._chain(end)
+            start = chain[0].start
+            if start not in system_values:
+                continue
+            depth, order, value, unit, extra, label = system_values[start]
+            if isinstance(value, float):  # into the system connector's unit, then along the chain
+                value = self._converted(value, unit, extra, label, self._unit_of(*start))
+                factor, offset = self._compose(chain, self._unit_of(*start))
+                value = factor * value + offset
+            self._assign(units, unit_names, end, value, None, (None, {}, extra[2], extra[3]), label, node)
+
+    def _converted(self, value: float, unit: str | None, extra: tuple, label: str, target_unit: tuple) -> float:
+        """A bound Real value in the target's unit: the .ssv unit converted (unless the mapping suppresses it),
+        then the mapping entry's LinearTransformation."""
+        transform, ssv_units, _, where = extra
+        if not (transform is not None and transform[1]):
+            a, b = self._conversion((unit, {}), target_unit, where, ssv_units, label)
+            value = a * value + b
+        if transform is not None and transform[0] is not None:
+            f, o = transform[0]
+            value = f * value + o
+        return value
+
+    def _assign(self, units: dict, unit_names: dict, target: tuple, value: Any, unit: str | None,
+                extra: tuple, label: str, node: Node) -> None:
+        where = extra[3]
+        variable = _variable(node, target[1])
+        if isinstance(value, float):
+            value = self._converted(value, unit, extra, label, self._unit_of(*target))
+        if variable.causality in ("parameter", "structuralParameter"):
+            field_name = "parameters"
+        elif variable.causality in ("input", "local", "output", "calculatedParameter"):
+            field_name = "start"
+        else:
+            self._problem(where, f"'{target[1]}' of '{'.'.join(target[0])}' is {variable.causality} and cannot "
+                          "be set", "bind parameters, inputs or start values only", label)
+            return
+        units[unit_names[target[0]]].setdefault(field_name, {})[target[1]] = value
+
+
+def _variable(node: Node, name: str) -> Any:
+    """The FMU variable a connector or parameter name means: ``x`` or an element ``x[i]`` of an array."""
+    if name in node.variables:
+        return node.variables[name]
+    base, _, rest = name.partition("[")
+    variable = node.variables.get(base)
+    if variable is not None and variable.is_array and rest.endswith("]") and rest[:-1].isdigit() \
+            and 1 <= int(rest[:-1]) <= variable.size:
+        return variable
+    return None
+
+
+def _typed(kind: str, text: str | None) -> Any:
+    if text is None:
+        raise ValueError(kind)
+    if kind in _REAL:
+        return float(text)
+    if kind in _INTEGER:
+        return int(text)
+    if kind == "Boolean":
+        if text not in ("true", "false", "1", "0"):
+            raise ValueError(text)
+        return text in ("true", "1")
+    if kind == "Enumeration":
+        raise ValueError(text)
+    return text

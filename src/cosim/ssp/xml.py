@@ -1,0 +1,135 @@
+"""SSP XML: a hardened parser, the official schemas, and element paths for messages.
+
+Every SSP file (.ssd, .ssv, .ssm) is parsed without entity expansion, without
+network access, without DTD loading and with lxml's size limits on, then
+checked against the official SSP schemas shipped in ``schema/`` (see its
+README).  Problems name the file, the element path (``/ssd:SystemStructure
+Description/ssd:System[@name='root']/...``) and the fix.
+"""
+
+from __future__ import annotations
+
+import re
+from functools import lru_cache
+from pathlib import Path
+
+from lxml import etree
+
+from cosim.errors import Problem
+
+NS = {
+    "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
+    "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
+    "ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues",
+    "ssm": "http://ssp-standard.org/SSP1/SystemStructureParameterMapping",
+    "ssb": "http://ssp-standard.org/SSP1/SystemStructureSignalDictionary",
+}
+_PREFIX = {uri: prefix for prefix, uri in NS.items()}
+SCHEMA_DIR = Path(__file__).resolve().parent / "schema"
+SCHEMAS = {"ssd": "SystemStructureDescription.xsd", "ssv": "SystemStructureParameterValues.xsd",
+           "ssm": "SystemStructureParameterMapping.xsd"}
+
+
+def hardened_parser() -> etree.XMLParser:
+    """An lxml parser that never expands entities, never loads a DTD and never touches the network."""
+    return etree.XMLParser(resolve_entities=False, no_network=True, huge_tree=False, load_dtd=False,
+                           dtd_validation=False, remove_blank_text=False)
+
+
+@lru_cache(maxsize=None)
+def _schema(kind: str) -> etree.XMLSchema:
+    # the schemas import SystemStructureCommon.xsd by a relative file name, resolved next to them
+    return etree.XMLSchema(etree.parse(str(SCHEMA_DIR / SCHEMAS[kind]), hardened_parser()))
+
+
+def tag(prefix: str, name: str) -> str:
+    """The Clark name ``{namespace}name`` of ``prefix:name``."""
+    return f"{{{NS[prefix]}}}{name}"
+
+
+def short_name(clark: str) -> str:
+    """``ssd:Component`` for ``{...SystemStructureDescription}Component``."""
+    if clark.startswith("{"):
+        uri, _, local = clark[1:].partition("}")
+        return f"{_PREFIX.get(uri, uri)}:{local}"
+    return clark
+
+
+def element_path(element: etree._Element) -> str:
+    """A readable XPath-like path: named elements by ``[@name='...']``, others by position when repeated."""
+    parts = []
+    node = element
+    while node is not None and isinstance(node.tag, str):
+        step = short_name(node.tag)
+        name = node.get("name")
+        parent = node.getparent()
+        if name is not None:
+            step += f"[@name='{name}']"
+        elif parent is not None:
+            same = [c for c in parent if c.tag == node.tag]
+            if len(same) > 1:
+                step += f"[{same.index(node) + 1}]"
+        parts.append(step)
+        node = parent
+    return "/" + "/".join(reversed(parts))
+
+
+def _readable(message: str) -> str:
+    for uri, prefix in _PREFIX.items():
+        message = message.replace(f"{{{uri}}}", f"{prefix}:")
+    return message
+
+
+def parse_file(path: Path, label: str, kind: str) -> tuple[etree._Element | None, list[Problem]]:
+    """Parse and schema-check one SSP file; ``label`` is how problems name it.
+
+    Returns the root element (None when the file cannot be parsed) and the
+    problems found; a file that parses but breaks the schema still returns its
+    root so that later checks can add their own problems.
+    """
+    try:
+        tree = etree.parse(str(path), hardened_parser())
+    except OSError as exc:
+        return None, [Problem(label, "/", f"cannot read the file: {exc}", "check that the file exists")]
+    except etree.XMLSyntaxError as exc:
+        line = exc.lineno if exc.lineno is not None else "?"
+        return None, [Problem(label, f"line {line}", f"malformed XML: {_readable(exc.msg)}",
+                              "fix the XML syntax there (an unclosed tag or quote is the usual cause)")]
+    root = tree.getroot()
+    return root, schema_problems(root, label, kind)
+
+
+def schema_problems(root: etree._Element, label: str, kind: str) -> list[Problem]:
+    """Every way ``root`` (an ssd, ssv or ssm document or inline element) breaks the official schema."""
+    expected = {"ssd": tag("ssd", "SystemStructureDescription"), "ssv": tag("ssv", "ParameterSet"),
+                "ssm": tag("ssm", "ParameterMapping")}[kind]
+    if root.tag != expected:
+        return [Problem(label, element_path(root), f"the root element is {short_name(root.tag)}, expected "
+                        f"{short_name(expected)}", f"use an SSP {kind.upper()} file in the namespace {NS[kind]}")]
+    schema = _schema(kind)
+    document = etree.ElementTree(root) if root.getparent() is None else etree.ElementTree(_detached(root))
+    if schema.validate(document):
+        return []
+    by_line: dict[int, list] = {}
+    for node in root.iter():
+        if isinstance(node.tag, str):
+            by_line.setdefault(node.sourceline, []).append(node)
+    problems = []
+    for entry in schema.error_log:
+        message = _readable(entry.message)
+        named = re.match(r"Element '([^']+)'", message)
+        candidates = by_line.get(entry.line, [])
+        # the element the message names, among those starting on its line
+        node = next((n for n in candidates if named and short_name(n.tag) == named.group(1)),
+                    candidates[0] if candidates else None)
+        where = element_path(node) if node is not None else f"line {entry.line}"
+        problems.append(Problem(label, where, f"breaks the SSP schema (line {entry.line}): {message}",
+                                f"correct the element as the SSP standard's {SCHEMAS[kind]} requires"))
+    return problems
+
+
+def _detached(element: etree._Element) -> etree._Element:
+    """A copy of an inline element as its own document (keeps source lines for messages)."""
+    import copy
+
+    return copy.deepcopy(element)

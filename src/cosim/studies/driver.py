@@ -1,0 +1,116 @@
+"""What every driver (a sweep, an optimisation) does alike with its results folder and its messages.
+
+A driver writes its rows into a results folder (:class:`~cosim.results.store.ResultsStore`).
+Started afresh, the folder must hold no rows; with ``resume`` it must hold rows
+of the same spec and of the same kind of study (a sweep's rows do not continue
+an optimisation): :func:`check_results_folder`.  Either mistake is the user's,
+raised as the driver's own :class:`~cosim.errors.UserError` subclass
+naming the folder and the fix.  ``metadata.json`` records the spec, the FMUs'
+checksums, package versions, host and user and one entry per run
+(:func:`run_metadata`, :func:`finish_metadata`); :func:`say` prints a driver's
+messages.
+"""
+
+from __future__ import annotations
+
+import getpass
+import platform
+import socket
+import sys
+from datetime import datetime, timezone
+from importlib import metadata as importlib_metadata
+from pathlib import Path
+from typing import Any, Mapping, TextIO
+
+from cosim.errors import UserError
+
+PACKAGES = ("cosim", "fmpy", "dask", "distributed", "numpy", "pandas", "pyarrow", "scipy")
+
+
+def check_results_folder(store: Any, resume: bool, spec_digest: str, kind: str, to_resume: str,
+                         error: type[UserError]) -> dict[str, Any] | None:
+    """The folder's stored metadata when resuming (None when it has none yet); raises ``error`` when unusable.
+
+    ``kind`` is the metadata's ``kind`` the driver writes (a sweep writes
+    none: "sweep"); ``to_resume`` completes "add --resume to ..." in the
+    message for a folder that already holds rows.
+    """
+    if not resume:
+        if store.has_rows():
+            raise error(f"{store.folder} already holds results; add --resume to {to_resume}, "
+                        "or choose another --out")
+        return None
+    previous = store.metadata()
+    if previous is None:
+        return None
+    if previous.get("spec_digest") != spec_digest:
+        raise error(f"{store.folder} holds results of a different spec (digest "
+                    f"{str(previous.get('spec_digest'))[:12]}…, this one {spec_digest[:12]}…); "
+                    "use another --out, or run without --resume into an empty folder")
+    if previous.get("kind", "sweep") != kind:
+        raise error(f"{store.folder} holds {previous.get('kind', 'sweep')} results, not {kind} results; use "
+                    "another --out, or resume it with the command that started it")
+    return previous
+
+
+def say(text: str, quiet: bool, stream: TextIO | None) -> None:
+    """Print a driver's message (start, interruption, notes) on ``stream`` (stderr by default) unless ``quiet``."""
+    if not quiet:
+        print(text, file=stream or sys.stderr, flush=True)
+
+
+def run_metadata(store: Any, system: Any, run: Mapping[str, Any], **fields: Any) -> dict[str, Any]:
+    """``metadata.json`` at the start of a run: the spec, FMU checksums, host, user and ``fields``.
+
+    ``run`` (when and how this run started) is appended to the runs already
+    stored; ``started`` and ``counts`` stay those of the first run until
+    :func:`finish_metadata`.  ``fields`` are the driver's own (points, design
+    method, kind, ...); a ``packages`` field adds to the common versions.
+    """
+    from cosim.units.fmu.description import FmuUnitType
+
+    previous = store.metadata() or {}
+    spec = system.spec
+    return {
+        "spec_path": str(Path(spec.path).resolve()), "spec_digest": spec.digest, "spec": spec.raw,
+        "fmu_checksums": {name: su.unit_type.digest for name, su in system.units.items()
+                          if isinstance(su.unit_type, FmuUnitType)},
+        "host": socket.gethostname(), "user": user_name(),
+        **fields,
+        "packages": {**package_versions(), **fields.get("packages", {})},
+        "started": previous.get("started", run["started"]), "runs": previous.get("runs", []) + [dict(run)],
+        "ended": None, "counts": previous.get("counts"),
+    }
+
+
+def finish_metadata(store: Any, counts: Mapping[str, int]) -> None:
+    """Record the end of the run and the final counts by status in ``metadata.json``."""
+    meta = store.metadata() or {}
+    meta.update(ended=now_utc(), counts=dict(counts))
+    if meta.get("runs"):
+        meta["runs"][-1]["ended"] = meta["ended"]
+    store.write_metadata(meta)
+
+
+def package_versions(*extra: str) -> dict[str, str]:
+    """Versions of Python and of the packages a run's numbers depend on (those installed), for the metadata."""
+    versions = {"python": platform.python_version()}
+    for name in (*PACKAGES, *extra):
+        try:
+            versions[name] = importlib_metadata.version(name)
+        except importlib_metadata.PackageNotFoundError:
+            pass
+    return versions
+
+
+def now_utc() -> str:
+    """The current UTC time as ISO 8601 text (seconds), as the metadata records it."""
+    return datetime.now(timezone.utc).isoformat(timespec="seconds")
+
+
+def user_name() -> str:
+    """The login name for the metadata, or '' when the system cannot tell."""
+    try:
+        return getpass.getuser()
+    except Exception:
+        return ""

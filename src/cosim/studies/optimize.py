@@ -1,0 +1,542 @@
+"""``cosim optimize``: multi-objective optimisation of a spec's design space, on the sweep's evaluator.
+
+Optuna's ask-and-tell drives the search; cosim only translates:
+
+- **Dimensions**: each design parameter of the spec (``design.parameters``)
+  becomes an Optuna distribution: ``{min, max}`` a continuous float (an int
+  range with int bounds), ``{min, max, step}`` a stepped one, ``{values}`` and
+  ``{bool}`` categorical.  Array parameters give one dimension per element.
+- **Objectives**: ``optimize.objectives`` (name -> sense), by default the
+  spec's objectives that have a ``sense``.  Each must be one number per run.
+- **Constraints**: the design ``constraint`` (a design violating it is never
+  run: the optimiser is told the trial failed, no row is written, the budget
+  is not charged) and the output constraints of ``optimize.constraints``:
+  comparisons such as ``peak_tau_ratio <= 1``.  A comparison's violation is
+  ``max(lhs - rhs)`` over the elements of an array (``rhs - lhs`` for >=);
+  positive means infeasible.  Each violation is set on the trial
+  (``Trial.set_constraint``), which NSGA-II, TPE and GP take into account
+  (random and qmc ignore it), and each row gets ``feasible``;
+  infeasible rows stay in the table and are never on a Pareto front
+  (``cosim pareto``, ``cosim report``).
+- **Batches**: K designs are asked, evaluated in parallel through
+  :class:`~cosim.parallel.evaluator.Evaluator` (isolation, timeouts, fault rows,
+  as ``cosim sweep``), appended to the table as one part file, then told.
+  A row not ``ok`` (failed, timeout, crashed) is told as a failed trial.
+- **Table**: one row per evaluation in ``DIR/results.parquet``, with
+  ``trial`` (Optuna's trial number), ``batch``, ``sampler`` and ``feasible``
+  besides the sweep's columns; ``metadata.json`` has ``kind: optimization``.
+- **Budget**: evaluations, i.e. rows.  A design asked again (samplers on
+  stepped or categorical dimensions do that) is told the stored result and
+  costs nothing; at most ``20 * budget`` trials are asked in all.
+- **Resume**: the table is the optimiser's memory.  With the same seed,
+  sampler and batch, asking again from a fresh study proposes the same
+  designs in the same order (Optuna's samplers are deterministic given their
+  seed and the history told); designs already in the table are told their
+  stored rows without running.  So an interrupted run resumed gives the same
+  table as an uninterrupted one, and nothing is evaluated twice.  Should a
+  sampler not replay (a proposal not in the table while stored rows are still
+  unreplayed), the stored rows are added to the study as finished trials and
+  the run goes on from there (the rest then differs from an uninterrupted run).
+"""
+
+from __future__ import annotations
+
+import ast
+import math
+import random
+import re
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, TextIO
+
+import numpy as np
+
+from cosim.analysis.hypervolume import hypervolume, normalised_losses
+from cosim.errors import Problem, SpecError, UserError
+from cosim.results.checksums import changed_files, data_file_checksums, unit_checksums
+from cosim.results.columns import TAIL_COLUMNS
+from cosim.studies.driver import check_results_folder, finish_metadata, now_utc, package_versions, run_metadata, say
+
+SAMPLERS = ("tpe", "nsga2", "gp", "random", "qmc")
+DEFAULT_BUDGET = 200
+DEFAULT_BATCH = {"nsga2": 20}  # a generation of NSGA-II is one batch; the others ask 8 at a time
+MAX_TRIALS_PER_EVALUATION = 20
+_ELEMENT = re.compile(r"^(.*)\[(\d+)\]$")
+
+
+class OptimizeError(UserError):
+    """An optimisation cannot start as asked (results folder in use, resume with other settings, no workers)."""
+
+
+# -- settings -----------------------------------------------------------------------
+
+
+@dataclass
+class OptimizeSettings:
+    """What to optimise and how: from the spec's ``optimize`` section, overridden by the command line."""
+
+    objectives: dict[str, str]  # column -> 'minimize' | 'maximize'
+    constraints: list[str] = field(default_factory=list)
+    sampler: str = "tpe"
+    budget: int = DEFAULT_BUDGET
+    batch: int = 8
+    seed: int | None = None
+
+    @classmethod
+    def from_spec(cls, spec: Any, **overrides: Any) -> "OptimizeSettings":
+        """Settings of ``spec`` (a Spec) with non-None ``overrides``; raises SpecError naming the field."""
+        section = dict(spec.raw.get("optimize") or {})
+        section.update({k: v for k, v in overrides.items() if v is not None})
+        problems: list[Problem] = []
+        objectives = section.get("objectives")
+        known = {o.name: o for o in spec.objectives}
+        if objectives is None:
+            objectives = {o.name: o.sense for o in spec.objectives if o.sense}
+            if len(objectives) == 0:
+                problems.append(Problem(spec.path, "$.optimize.objectives", "no objective to optimise",
+                                        "give objectives a 'sense', or list them: \"optimize\": "
+                                        "{\"objectives\": {\"energy\": \"minimize\"}}"))
+        for name in objectives:
+            base = _ELEMENT.sub(r"\1", name)
+            if base not in known:
+                problems.append(Problem(spec.path, f"$.optimize.objectives.{name}", f"'{name}' is not an objective",
+                                        "use names from 'objectives': " + ", ".join(known)))
+        sampler = section.get("sampler", "tpe")
+        if sampler not in SAMPLERS:
+            problems.append(Problem(spec.path, "$.optimize.sampler", f"unknown sampler '{sampler}'",
+                                    "use one of " + ", ".join(SAMPLERS)))
+        for key in ("budget", "batch"):
+            if key in section and (not isinstance(section[key], int) or section[key] < 1):
+                problems.append(Problem(spec.path, f"$.optimize.{key}", f"{key} must be a whole number >= 1",
+                                        f"write e.g. \"{key}\": 8"))
+        if problems:
+            raise SpecError(problems)
+        batch = section.get("batch", DEFAULT_BATCH.get(sampler, 8))
+        if sampler == "nsga2" and batch < 2:
+            raise SpecError([Problem(spec.path, "$.optimize.batch", "NSGA-II needs a batch (its population) of "
+                                     "at least 2", "use a batch of 2 or more, e.g. 20")])
+        return cls(objectives=dict(objectives), constraints=list(section.get("constraints", [])), sampler=sampler,
+                   budget=int(section.get("budget", DEFAULT_BUDGET)), batch=int(batch), seed=section.get("seed"))
+
+
+class OutputConstraint:
+    """One comparison ``lhs OP rhs`` (OP one of < <= > >=) of objectives and parameters.
+
+    :meth:`violation` is ``max(lhs - rhs)`` (``max(rhs - lhs)`` for > and >=)
+    over array elements: <= 0 when met.  Raises SpecError on construction when
+    the text is not one such comparison or names unknown values.
+    """
+
+    def __init__(self, text: str, names: set[str], file: str, path: str):
+        from cosim.spec.expressions import Expression, ExpressionError
+
+        self.text = text
+        fix = "write one comparison such as 'peak_tau_ratio <= 1' (names: objectives and parameters)"
+        try:
+            tree = ast.parse(text.strip(), mode="eval").body
+        except SyntaxError as exc:
+            raise SpecError([Problem(file, path, f"cannot parse '{text}': {exc.msg}", fix)]) from None
+        if not (isinstance(tree, ast.Compare) and len(tree.ops) == 1
+                and isinstance(tree.ops[0], (ast.Lt, ast.LtE, ast.Gt, ast.GtE))):
+            raise SpecError([Problem(file, path, f"'{text}' is not one comparison with <, <=, > or >=", fix)])
+        try:
+            self.lhs = Expression(ast.unparse(tree.left))
+            self.rhs = Expression(ast.unparse(tree.comparators[0]))
+        except ExpressionError as exc:
+            raise SpecError([Problem(file, path, str(exc), fix)]) from None
+        self.sign = 1.0 if isinstance(tree.ops[0], (ast.Lt, ast.LtE)) else -1.0
+        unknown = sorted((self.lhs.free_names | self.rhs.free_names) - names)
+        if unknown:
+            raise SpecError([Problem(file, path, f"unknown name(s) in '{text}': {', '.join(unknown)}",
+                                     "known: " + ", ".join(sorted(names)))])
+
+    def violation(self, values: Mapping[str, Any]) -> float:
+        """How far ``values`` are from meeting the constraint (<= 0: met; NaN when it cannot be evaluated)."""
+        with np.errstate(invalid="ignore"):
+            diff = self.sign * (np.asarray(self.lhs.evaluate(values), dtype=float)
+                                - np.asarray(self.rhs.evaluate(values), dtype=float))
+        return float(np.max(diff)) if diff.size else float("nan")
+
+
+def scope_of(columns: Mapping[str, Any]) -> dict[str, Any]:
+    """Flat table columns as expression values: ``a[1]..a[n]`` also as the array ``a``; parameter names
+    as the design constraint writes them (``traj.q[2]`` -> ``traj_q_2``)."""
+    from cosim.spec.design import expression_name
+
+    scope: dict[str, Any] = {}
+    arrays: dict[str, dict[int, Any]] = {}
+    for name, value in columns.items():
+        m = _ELEMENT.match(name)
+        if m:
+            arrays.setdefault(m.group(1), {})[int(m.group(2))] = value
+        scope[name] = value
+        scope[expression_name(name)] = value
+    for name, elements in arrays.items():
+        array = [elements[i] for i in sorted(elements)]
+        scope.setdefault(name, array)
+        scope.setdefault(expression_name(name), array)
+    return scope
+
+
+# -- Optuna -------------------------------------------------------------------------
+
+
+def distributions(space: Any) -> dict[str, Any]:
+    """One Optuna distribution per dimension of ``space`` (a DesignSpace), keyed by flat name."""
+    from optuna.distributions import CategoricalDistribution, FloatDistribution, IntDistribution
+
+    out = {}
+    for name, dim in space.dimensions:
+        if dim.lo is None:  # a value list or a boolean
+            scalar = all(v is None or isinstance(v, (bool, int, float, str)) for v in dim.values)
+            out[name] = CategoricalDistribution(list(dim.values) if scalar else list(range(len(dim.values))))
+        elif dim.integer:
+            out[name] = IntDistribution(int(dim.lo), int(dim.hi), step=int(dim.step or 1))
+        elif dim.step is not None:
+            steps = math.floor((dim.hi - dim.lo) / dim.step + 1e-9)
+            out[name] = FloatDistribution(float(dim.lo), float(dim.lo + steps * dim.step), step=float(dim.step))
+        else:
+            out[name] = FloatDistribution(float(dim.lo), float(dim.hi))
+    return out
+
+
+def design_values(space: Any, params: Mapping[str, Any]) -> dict[str, Any]:
+    """``{target: value}`` of a trial's ``params`` (categorical indices mapped back to their values)."""
+    flat = []
+    for name, dim in space.dimensions:
+        value = params[name]
+        if dim.lo is None and not all(v is None or isinstance(v, (bool, int, float, str)) for v in dim.values):
+            value = dim.values[value]
+        elif dim.step is not None and not dim.integer:
+            value = round(value, 12)  # Optuna's stepped floats carry representation noise
+        flat.append(value)
+    return space.values_of(flat)
+
+
+def make_sampler(name: str, seed: int, batch: int) -> Any:
+    """The Optuna sampler ``name`` (see SAMPLERS), seeded; raises OptimizeError when it cannot be had."""
+    import optuna
+
+    if name == "tpe":
+        # constant_liar: designs asked in one batch see each other as running, so a batch spreads out
+        return optuna.samplers.TPESampler(seed=seed, multivariate=True, constant_liar=True)
+    if name == "nsga2":
+        return optuna.samplers.NSGAIISampler(seed=seed, population_size=batch)
+    if name == "gp":
+        try:
+            import torch  # noqa: F401  (Optuna's GP sampler is written in PyTorch)
+        except ImportError:
+            raise OptimizeError("the gp sampler needs PyTorch, which is not installed: install cosim's gp extra "
+                                "(pip install 'cosim[gp]', or pip install -e '.[gp]' in a source checkout; it "
+                                "pins the CPU build of torch the project is tested with), or use tpe, nsga2, "
+                                "random or qmc") from None
+        return optuna.samplers.GPSampler(seed=seed)
+    if name == "random":
+        return optuna.samplers.RandomSampler(seed=seed)
+    if name == "qmc":
+        import warnings
+
+        with warnings.catch_warnings():  # "experimental" since Optuna 3.0; we pin the interface by tests
+            warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+            return optuna.samplers.QMCSampler(qmc_type="sobol", scramble=True, seed=seed)
+    raise OptimizeError(f"unknown sampler '{name}': use one of {', '.join(SAMPLERS)}")
+
+
+# -- the driver -------------------------------------------------------------------
+
+
+class Progress:
+    """One line: evaluations done, not ok, front size, hypervolume (rewritten in place on a terminal)."""
+
+    def __init__(self, budget: int, stream: TextIO | None):
+        self.budget, self.stream = budget, stream if stream is not None else sys.stderr
+        self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
+        self.started = time.perf_counter()
+        self._decile = -1
+        self._last = ""
+
+    def close(self) -> None:
+        if self.tty and self._last:
+            self._print("", "\n")
+
+    def show(self, done: int, not_ok: int, front: int, hv: float) -> None:
+        decile = int(10 * done / max(self.budget, 1))
+        if not (self.tty or decile != self._decile or done >= self.budget):
+            return  # in a log, one line per tenth is enough
+        self._decile = decile
+        rate = done / max(time.perf_counter() - self.started, 1e-9)
+        self._last = (f"{done}/{self.budget} evaluations, {not_ok} not ok, front {front}, "
+                      f"hypervolume {hv:.4f}, {rate:.1f}/s")
+        self._print(self._last, "\r" if self.tty else "\n")
+
+    def _print(self, text: str, end: str) -> None:
+        try:
+            print(text, end=end, file=self.stream, flush=True)
+        except (OSError, ValueError):
+            pass  # a closed terminal must not stop the optimisation
+
+
+class Optimization:
+    """A prepared optimisation of the spec at ``spec_path`` (see the module docstring).
+
+    Raises SpecError for a bad spec, design space or ``optimize`` section,
+    OptimizeError when ``out`` cannot be used as asked.
+    """
+
+    def __init__(self, spec_path: str | Path, out: str | Path, objectives: Mapping[str, str] | None = None,
+                 budget: int | None = None, sampler: str | None = None,
+                 batch: int | None = None, seed: int | None = None, resume: bool = False, workers: int | None = None,
+                 scheduler: str | None = None, timeout: float | None = None, progress: TextIO | None = None,
+                 quiet: bool = False, cluster: str | Path | None = None):
+        import os
+
+        from cosim.parallel.cluster import read_cluster_file
+        from cosim.parallel.evaluator import check_timeout
+        from cosim.parallel.isolation import make_payload
+        from cosim.results.store import ResultsStore
+        from cosim.spec.design import DesignSpace, expression_name
+        from cosim.system.validate import check_spec
+
+        check_timeout(timeout, OptimizeError)
+        if cluster is not None and scheduler is not None:
+            raise OptimizeError("give either a cluster file or a scheduler address, not both")
+        self.cluster = None if cluster is None else str(cluster)
+        if cluster is not None:
+            read_cluster_file(cluster)  # a bad cluster file is reported before any work (ClusterFileError)
+        self.system = check_spec(spec_path)
+        self.spec = self.system.spec
+        self.space = DesignSpace.dimensions_of(self.spec)
+        if not self.space.dimensions:
+            raise SpecError([Problem(self.spec.path, "$.design.parameters", "nothing to optimise: no design "
+                                     "parameters", "add parameters with ranges or value lists")])
+        self.out, self.resume = Path(out), resume
+        self.store = ResultsStore(self.out)
+        previous = check_results_folder(self.store, resume, self.spec.digest, "optimization",
+                                        "continue that optimisation", OptimizeError)
+        self.checksums, self.data_checksums = unit_checksums(self.system), data_file_checksums(self.system)
+        changed = changed_files(previous or {}, self.checksums, self.data_checksums, self.spec.folder)
+        if changed:  # the stored trials would steer the sampler with another model's results
+            raise OptimizeError(f"{self.out} holds trials of other unit files than the spec names now ("
+                                + "; ".join(changed) + "); resuming would mix two models in one study; restore "
+                                "the files, or start afresh in another --out")
+        stored = (previous or {}).get("optimize", {})
+        given = {"budget": budget, "sampler": sampler, "batch": batch, "seed": seed, "objectives": objectives}
+        for key in ("sampler", "batch", "seed", "objectives"):  # a resume replays the stored run: these must not change
+            if stored.get(key) is not None and given[key] is not None and given[key] != stored[key]:
+                raise OptimizeError(f"{self.out} was optimised with {key} {stored[key]}; resume with the same "
+                                    f"{key} (or leave it out), or start afresh in another --out")
+            if given[key] is None and key in stored:
+                given[key] = stored[key]
+        self.settings = OptimizeSettings.from_spec(self.spec, **given)
+        if self.settings.seed is None:  # a resume must replay the same proposals: the seed is chosen and kept
+            self.settings.seed = random.SystemRandom().randrange(2**31)
+        names = {o.name for o in self.spec.objectives} | {expression_name(t) for t in self.space.targets} \
+            | set(self.space.targets)
+        self.constraints = [OutputConstraint(text, names | {expression_name(n) for n in names}, self.spec.path,
+                                             f"$.optimize.constraints[{i}]")
+                            for i, text in enumerate(self.settings.constraints)]
+        self.workers, self.scheduler, self.timeout = workers or os.cpu_count() or 1, scheduler, timeout
+        self.quiet, self.progress_stream = quiet, progress
+        self.payload = make_payload(self.system)
+        self._outcomes: dict[tuple, tuple] = {}  # (point id, status) -> _outcome: each row is read once
+
+    def _say(self, text: str) -> None:
+        say(text, self.quiet, self.progress_stream)
+
+    # -- rows and trials ------------------------------------------------------------
+    def _table_row(self, values: dict[str, Any], row: dict[str, Any], trial: int, batch: int) -> dict[str, Any]:
+        out: dict[str, Any] = {"point_id": row["point_id"]}
+        out.update(self.space.columns(values))
+        out.update(row.get("objectives", {}))
+        out.update(trial=trial, batch=batch, sampler=self.settings.sampler)
+        values, violations = self._outcome({**out, "status": row.get("status")})
+        out["feasible"] = values is not None and all(v <= 0 for v in violations)
+        for key in TAIL_COLUMNS:
+            out[key] = row.get(key, "")
+        return out
+
+    def _outcome(self, row: Mapping[str, Any]) -> tuple[list[float] | None, list[float] | None]:
+        """(objective values, constraint violations) of a table row; (None, None) when it cannot be told."""
+        key = (row.get("point_id"), row.get("status"))
+        if key not in self._outcomes:
+            self._outcomes[key] = self._compute_outcome(row)
+        return self._outcomes[key]
+
+    def _compute_outcome(self, row: Mapping[str, Any]) -> tuple[list[float] | None, list[float] | None]:
+        if row.get("status") != "ok":
+            return None, None
+        values = [row.get(name) for name in self.settings.objectives]
+        if any(v is None or not np.isfinite(float(v)) for v in values):
+            return None, None
+        scope = scope_of(row)
+        violations = [c.violation(scope) for c in self.constraints]
+        violations = [v if np.isfinite(v) else 1.0 for v in violations]  # cannot be evaluated: infeasible
+        return [float(v) for v in values], violations
+
+    def _tell(self, study: Any, trial: Any, row: Mapping[str, Any] | None) -> None:
+        from optuna.trial import TrialState
+
+        values, violations = self._outcome(row) if row is not None else (None, None)
+        if values is None:
+            study.tell(trial, state=TrialState.FAIL)
+            return
+        for constraint, violation in zip(self.constraints, violations):
+            trial.set_constraint(constraint.text, violation)
+        study.tell(trial, values)
+
+    # -- the run ------------------------------------------------------------------
+    def run(self, evaluator: Any = None) -> dict[str, int]:
+        """Optimise until ``budget`` evaluations are in the table; returns the counts by status.
+
+        Ctrl-C stops it; the rows so far stay and ``resume`` continues.
+        Raises OptimizeError when no Dask workers are reachable.  ``evaluator``
+        replaces the Dask evaluator (anything with Evaluator's ``evaluate``;
+        benchmarks answer from a stored table with it).
+        """
+        import optuna
+
+        from cosim.parallel.dashboard_points import open_board
+        from cosim.parallel.evaluator import ClusterError, Evaluator, dask_client
+
+        optuna.logging.set_verbosity(optuna.logging.WARNING)
+        started = now_utc()
+        stored = {}
+        if self.resume:
+            stored = {r["point_id"]: r for r in self.store.read().to_dict("records")}
+        s = self.settings
+        study = optuna.create_study(
+            directions=list(s.objectives.values()),
+            sampler=make_sampler(s.sampler, s.seed, s.batch))
+        dists = distributions(self.space)
+        if evaluator is not None:
+            self.store.write_metadata(self._metadata(started, "", 0))
+            self._loop(study, dists, evaluator, stored)
+            return self._finish()
+        try:
+            with dask_client(self.workers, self.scheduler, self.cluster) as (client, n_workers, link):
+                self.store.write_metadata(self._metadata(started, client.scheduler.address, n_workers))
+                board = open_board(client, "optimize", self.spec.name, s.budget, before=len(stored), dashboard=link)
+                self._say(f"cosim optimize {self.spec.name}: {s.sampler}, budget {s.budget}, batch {s.batch}, "
+                          f"seed {s.seed}, {len(stored)} evaluations stored; {n_workers} worker(s); dashboard: "
+                          f"{link} ({board.describe()}); results: {self.out}")
+                evaluator = Evaluator(client, self.payload, n_workers, self.timeout, study=self.spec.name,
+                                      board=board)
+                with board.running():
+                    self._loop(study, dists, evaluator, stored)
+        except ClusterError as exc:
+            raise OptimizeError(str(exc)) from None
+        except KeyboardInterrupt:
+            self._say(f"interrupted: the rows so far are in {self.out}; run again with --resume to go on")
+            raise
+        return self._finish()
+
+    def _loop(self, study: Any, dists: dict[str, Any], evaluator: Any, stored: dict[str, dict]) -> None:
+        s = self.settings
+        rows: dict[str, dict] = {}  # point id -> table row, of every evaluation told in this run
+        unreplayed = set(stored)
+        progress = Progress(s.budget, self.progress_stream) if not self.quiet else None
+        batch_index, trials_asked = 0, 0
+        while len(rows) < s.budget:
+            if trials_asked >= MAX_TRIALS_PER_EVALUATION * s.budget:
+                self._say(f"stopped after {trials_asked} proposals: the sampler keeps proposing designs already "
+                          f"evaluated or outside the design constraint ({len(rows)} evaluations)")
+                break
+            trials = [study.ask(dists) for _ in range(min(s.batch, s.budget - len(rows)))]
+            trials_asked += len(trials)
+            plan: list[tuple[Any, str | None]] = []  # per trial: its point id (None: outside the constraint)
+            to_run: dict[str, dict[str, Any]] = {}
+            for trial in trials:
+                values = design_values(self.space, trial.params)
+                if not self.space.accepts(values):
+                    plan.append((trial, None))
+                    continue
+                pid = self.space.point_id(values)
+                plan.append((trial, pid))
+                if pid in rows or pid in to_run:
+                    continue  # asked again: told the same result
+                if pid in stored:
+                    rows[pid] = stored[pid]
+                    unreplayed.discard(pid)
+                else:
+                    to_run[pid] = values
+            if to_run and unreplayed:
+                self._absorb(study, dists, stored, unreplayed, rows)
+            if to_run:
+                ran = evaluator.evaluate(list(to_run.items()))
+                new = [self._table_row(to_run[r["point_id"]], r, self._trial_of(plan, r["point_id"]), batch_index)
+                       for r in ran]
+                self.store.append(new)
+                rows.update((r["point_id"], r) for r in new)
+            for trial, pid in plan:
+                self._tell(study, trial, rows.get(pid) if pid is not None else None)
+            batch_index += 1
+            if progress is not None:
+                progress.show(len(rows), *self._front_summary(rows))
+        if progress is not None:
+            progress.close()
+
+    @staticmethod
+    def _trial_of(plan: list[tuple[Any, str | None]], pid: str) -> int:
+        return next(trial.number for trial, p in plan if p == pid)
+
+    def _absorb(self, study: Any, dists: dict[str, Any], stored: dict[str, dict], unreplayed: set[str],
+                rows: dict[str, dict]) -> None:
+        """The sampler did not replay the stored run: add the stored rows not yet told as finished trials."""
+        import optuna
+
+        self._say(f"note: the sampler did not replay the stored run; its {len(unreplayed)} other stored "
+                  "evaluations are added as they are (the rest differs from an uninterrupted run)")
+        for pid in sorted(unreplayed, key=lambda p: stored[p].get("trial", 0)):
+            row = stored[pid]
+            values, violations = self._outcome(row)
+            params = {name: row[name] for name in dists if name in row}
+            if len(params) != len(dists):
+                continue  # a row without all dimensions (another design space): nothing to tell
+            state = optuna.trial.TrialState.COMPLETE if values is not None else optuna.trial.TrialState.FAIL
+            trial = optuna.trial.create_trial(params=params, distributions=dists, values=values, state=state)
+            for constraint, violation in zip(self.constraints, violations or []):
+                trial.set_constraint(constraint.text, violation)
+            study.add_trial(trial)
+            rows[pid] = row
+        unreplayed.clear()
+
+    def _front_summary(self, rows: dict[str, dict]) -> tuple[int, int, float]:
+        """(rows not ok, size of the feasible front, its hypervolume scaled to the rows so far)."""
+        from cosim.analysis.pareto import pareto_mask
+
+        not_ok = sum(r.get("status") != "ok" for r in rows.values())
+        good = [self._outcome(r) for r in rows.values()]
+        values = np.array([v for v, c in good if v is not None and all(x <= 0 for x in c)], dtype=float)
+        if len(values) == 0:
+            return not_ok, 0, 0.0
+        senses = list(self.settings.objectives.values())
+        losses = normalised_losses(values, senses)
+        front = losses[pareto_mask(losses)]
+        return not_ok, len(front), hypervolume(front)
+
+    def _metadata(self, started: str, scheduler: str, n_workers: int) -> dict[str, Any]:
+        info = {"started": started, "scheduler": scheduler, "workers": n_workers, "timeout": self.timeout,
+                "budget": self.settings.budget}
+        return run_metadata(self.store, self.system, info, kind="optimization", optimize=asdict(self.settings),
+                            packages=package_versions("optuna"), points=self.settings.budget,
+                            unit_checksums=self.checksums, data_file_checksums=self.data_checksums,
+                            design_method=f"optimize ({self.settings.sampler})")
+
+    def _finish(self) -> dict[str, int]:
+        counts = self.store.compact()  # rows stay in the order they were evaluated
+        finish_metadata(self.store, counts)
+        return counts
+
+
+def optimize(spec_path: str | Path, out: str | Path, **options: Any) -> "Any":
+    """Optimise the spec's design space; returns the results table (one row per evaluation).
+
+    Options as :class:`Optimization` (budget, sampler, batch, seed, resume,
+    workers, scheduler, cluster, timeout, progress, quiet).  Raises SpecError for a bad
+    spec, OptimizeError when ``out`` or the cluster cannot be used.
+    """
+    run = Optimization(spec_path, out, **options)
+    run.run()
+    return run.store.table()

@@ -1,0 +1,531 @@
+"""The Dask layer: every point of a design space, evaluated in parallel, nothing lost.
+
+:class:`Sweep` prepares a sweep (checks the spec, expands the design space,
+packs the system and its unit files into a payload) and :meth:`Sweep.run`
+evaluates the points on Dask:
+
+- Cluster: by default a ``distributed.LocalCluster`` of worker *processes*
+  (one per core, one thread each, bound to 127.0.0.1; FMUs cannot safely
+  share a process), any running scheduler by address (also from
+  ``DASK_SCHEDULER_ADDRESS``), or any Dask cluster class named in a cluster
+  file (Slurm, PBS, Kubernetes ...; :mod:`cosim.parallel.cluster`).
+- The payload is scattered to the workers once; FMU, ``file.py`` unit and
+  played-table bytes travel inside it, and the source of a Python unit named
+  ``module:Class`` from the spec's folder (zipped), so workers need no shared
+  filesystem (installed modules must be installed where the workers run too).
+- Points go in batches.  On a worker, :class:`~cosim.parallel.isolation.IsolatedRunner`
+  runs a batch in a child process that keeps the loaded system and live unit
+  instances between batches, with a per-point watchdog: a point that hangs
+  (``timeout``) or kills its process (``crashed``) gets a row and the other
+  points go on.  A batch lost with its whole worker process (killed, out of
+  memory, a lost node) is run again on another worker by the scheduler; lost
+  a second time (KilledWorker) its points run again in small groups, each
+  alone on the cluster, then those of a group lost again one at a time, so
+  only a point that kills its workers while alone gets ``crashed``
+  (:class:`~cosim.parallel.evaluator.Reruns`).  Rows out = points in.
+- The client streams: a bounded number of batches in flight, each completed
+  batch appended to the :class:`~cosim.results.store.ResultsStore` at once,
+  so its memory does not grow with the number of points, and a kill -9 loses
+  at most the points in flight.  ``resume=True`` skips points already stored.
+"""
+
+from __future__ import annotations
+
+import collections
+import itertools
+import math
+import os
+import shutil
+import statistics
+import sys
+import tempfile
+import time
+from contextlib import contextmanager
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Iterator, Sequence, TextIO
+
+from cosim.errors import UserError
+from cosim.parallel.early_cluster import EarlyCluster
+from cosim.parallel.evaluator import Reruns, ScatteredPayload, check_timeout, lost_rows
+from cosim.parallel.isolation import IsolatedRunner, make_payload, preload_spare_children, stop_spare_children
+from cosim.parallel.tasks import PointBatch, run_batch
+from cosim.results.checksums import changed_files, data_file_checksums, unit_checksums
+from cosim.results.columns import TAIL_COLUMNS
+from cosim.results.lock import FolderLock
+from cosim.spec.design import DesignSpace, Point
+from cosim.studies.driver import check_results_folder, finish_metadata, now_utc, run_metadata, say
+from cosim.util import limits
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+
+
+class SweepError(UserError):
+    """A sweep cannot start as asked (results folder in use, resume of another spec, no workers)."""
+
+
+class OutputError(SweepError):
+    """The results folder cannot be written: read-only, full, no permission."""
+
+
+@contextmanager
+def results_writes(out: Path) -> Iterator[None]:
+    """Turn a failed write into the results folder into an OutputError (exit 2, no traceback).
+
+    Half-written temporary files are removed; the part files already written
+    stay, so after freeing space ``--resume`` finishes the sweep exactly.
+    """
+    try:
+        yield
+    except OSError as exc:
+        for leftover in ("results.parquet.tmp", "results.csv.tmp", "metadata.json.tmp"):
+            try:
+                (out / leftover).unlink(missing_ok=True)
+            except OSError:
+                pass
+        reason = exc.strerror or str(exc) or type(exc).__name__
+        raise OutputError(f"cannot write the results into {out}: {reason}", file=str(out),
+                          fix="free space on that filesystem or make the folder writable (or choose another "
+                              "--out); the rows written so far are kept: run the same command with --resume to "
+                              "finish") from None
+
+
+# -- client side -------------------------------------------------------------------
+
+
+class Progress:
+    """One status line: points done, failed, rate, time left (rewritten in place on a terminal)."""
+
+    def __init__(self, total: int, stream: TextIO | None = None):
+        self.total, self.done, self.failed = total, 0, 0
+        self.stream = stream if stream is not None else sys.stderr
+        self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
+        self.started = time.perf_counter()
+        self._last = 0.0
+        self._last_decile = -1
+
+    def update(self, done: int, failed: int) -> None:
+        self.done += done
+        self.failed += failed
+        now = time.perf_counter()
+        if self.tty and now - self._last < 0.2 and self.done < self.total:
+            return
+        decile = int(10 * self.done / max(self.total, 1))
+        if not self.tty and decile == self._last_decile and self.done < self.total:
+            return  # in a log, one line per tenth is enough
+        self._last, self._last_decile = now, decile
+        self._print(self.line(), end="\r" if self.tty else "\n")
+
+    def line(self) -> str:
+        elapsed = time.perf_counter() - self.started
+        rate = self.done / elapsed if elapsed > 0 else 0.0
+        left = (self.total - self.done) / rate if rate > 0 else math.inf
+        width = 24
+        filled = int(width * self.done / max(self.total, 1))
+        bar = "#" * filled + "." * (width - filled)
+        return (f"[{bar}] {self.done}/{self.total} points, {self.failed} not ok, {rate:.1f}/s, "
+                f"{_duration(left)} left")
+
+    def close(self) -> None:
+        if self.tty:
+            self._print("")
+
+    def _print(self, text: str, end: str = "\n") -> None:
+        try:
+            print(text, end=end, file=self.stream, flush=True)
+        except (OSError, ValueError):
+            pass  # a closed terminal must not stop the sweep
+
+
+def _duration(seconds: float) -> str:
+    if not math.isfinite(seconds):
+        return "?"
+    seconds = int(round(seconds))
+    return f"{seconds // 3600}:{seconds // 60 % 60:02d}:{seconds % 60:02d}" if seconds >= 3600 \
+        else f"{seconds // 60}:{seconds % 60:02d}"
+
+
+class BatchSizer:
+    """How many points go into the next Dask task.
+
+    The first tasks are small, so the first points spread over every worker
+    at once.  Once point times are known, a task gets enough points to last
+    about TASK_SECONDS (at most MAX_BATCH): each task costs the scheduler,
+    the worker and the client a few milliseconds whatever it holds, so tasks
+    of trivial points must hold many.  Near the end tasks shrink again, so
+    the workers finish together.  A fixed ``size`` (``--batch-size``) is kept.
+    """
+
+    TASK_SECONDS = 0.5
+    MAX_BATCH = 2048
+
+    def __init__(self, todo: int, n_workers: int, size: int | None = None):
+        self.fixed = size
+        self.n_workers = n_workers
+        # a quarter of each worker's share at most: the first tasks still spread over every worker, and a task
+        # of cheap points stays big enough for the lock-step groups of its child (cosim.execution.lockstep)
+        self.first = size or max(1, min(64, math.ceil(todo / (n_workers * 4))))
+        self.remaining = todo  # points not yet handed to a task
+        self._seconds, self._count = 0.0, 0  # run time of the ok points so far, and how many
+
+    @property
+    def point_seconds(self) -> float | None:
+        """The mean run time of an ok point so far (None before the first)."""
+        return max(self._seconds / self._count, 1e-5) if self._count else None
+
+    def observe(self, rows: Sequence[dict[str, Any]]) -> None:
+        """Learn the time a point takes from the rows of a completed task."""
+        for row in rows:
+            if row.get("status") == "ok" and row.get("run_time", 0) > 0:
+                self._seconds += row["run_time"]
+                self._count += 1
+
+    def next(self) -> int:
+        """The size of the next task."""
+        if self.fixed is not None or self.point_seconds is None:
+            size = self.first
+        else:
+            size = min(self.MAX_BATCH, max(self.first, round(self.TASK_SECONDS / self.point_seconds)))
+            size = min(size, max(self.first, math.ceil(self.remaining / (4 * self.n_workers))))
+        return max(1, size)
+
+    def take(self, points: Iterator[Point]) -> list[Point]:
+        """The next task's points from ``points`` (an empty list at the end)."""
+        batch = list(itertools.islice(points, self.next()))
+        self.remaining -= len(batch)
+        return batch
+
+
+TIMEOUT_FACTOR = 50  # a point may take this many times the median measured point time (default timeout)
+
+
+def default_timeout(point_times: Sequence[float]) -> float:
+    """The per-point timeout when none is given, from the run times of points measured so far.
+
+    ``TIMEOUT_FACTOR`` times their median, but at least the
+    ``timeout_floor_seconds`` limit and at most ``timeout_first_seconds``,
+    which is also the timeout until three points have been measured.  So a
+    hanging point never hangs a sweep, and a slow model is not cut short.
+    """
+    first = float(limits.limit("timeout_first_seconds"))
+    if len(point_times) < 3:
+        return first
+    floor = float(limits.limit("timeout_floor_seconds"))
+    return min(first, max(floor, TIMEOUT_FACTOR * statistics.median(point_times)))
+
+
+class Sweep:
+    """A prepared sweep of the spec at ``spec_path`` (see the module docstring).
+
+    The constructor reads everything a sweep needs from disk (spec, units, FMU
+    bytes) and checks the results folder.  Raises SpecError for a bad spec or
+    design space, SweepError when ``out`` cannot be used as asked.
+    ``space_of`` builds the points from the checked Spec (default: its design
+    space); a driver such as ``cosim sensitivity`` passes its own sample (an
+    object with DesignSpace's ``__iter__``, ``__len__``, ``head``, ``columns``,
+    ``targets`` and ``method``).
+
+    ``start_early`` (``cosim sweep``'s way): once the spec is checked, the
+    local cluster (when one is used) starts in the background while the rest
+    is prepared (:mod:`cosim.parallel.early_cluster`); :meth:`run`,
+    :meth:`run_to_disk` or :meth:`close` then ends it.
+    """
+
+    def __init__(self, spec_path: str | Path, workers: int | None = None, out: str | Path | None = None,
+                 scheduler: str | None = None, timeout: float | None = None, resume: bool = False,
+                 batch_size: int | None = None, csv: bool = False, progress: TextIO | None = None,
+                 quiet: bool = False, experiment: dict | None = None, space_of: Any = None,
+                 cluster: str | Path | None = None, recompute: bool = False, start_early: bool = False):
+        from cosim.parallel.cluster import read_cluster_file
+        from cosim.system.validate import check_spec
+
+        check_timeout(timeout, SweepError)
+        if workers is not None and workers < 1:
+            raise SweepError(f"workers must be at least 1, got {workers}")
+        if cluster is not None and scheduler is not None:
+            raise SweepError("give either a cluster file or a scheduler address, not both")
+        self.cluster = None if cluster is None else str(cluster)
+        if cluster is not None:
+            read_cluster_file(cluster)  # a bad cluster file is reported before any work (ClusterFileError)
+        if scheduler is not None:
+            check_scheduler_address(scheduler)
+        self.system = check_spec(spec_path, experiment)  # experiment: command-line overrides
+        self.spec = self.system.spec
+        _refuse_design_of_players(self.spec)
+        self.space = (space_of or DesignSpace.from_spec)(self.spec)
+        self.workers = workers or os.cpu_count() or 1
+        self.scheduler, self.timeout, self.resume = scheduler, timeout, resume
+        self.batch_size, self.csv, self.quiet = batch_size, csv, quiet
+        self.progress_stream = progress
+        self._temporary = out is None
+        if resume and out is None:
+            raise SweepError("resume needs the results folder of the interrupted sweep (--out DIR)")
+        if start_early and self._runs_on_a_local_cluster():
+            # the spare point children `cosim sweep` started load the system now, while this process starts
+            # the cluster (importing Dask) and prepares the results folder (importing pandas)
+            self.payload = make_payload(self.system)  # FMU bytes read now: workers never open these paths
+            preload_spare_children(self.payload)
+            self._early = EarlyCluster(self.workers)
+        else:
+            stop_spare_children()  # none of them will be used
+            self._early = None
+        try:
+            from cosim.results.store import ResultsStore  # (pandas and pyarrow are imported when the first rows come)
+
+            self.out = Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="cosim_sweep_"))
+            with results_writes(self.out):
+                self.store = ResultsStore(self.out)
+                self.lock = FolderLock(self.out)
+                self.lock.check_free()  # a sweep running into this folder is the first thing to say
+            self.checksums = unit_checksums(self.system)
+            self.data_checksums = data_file_checksums(self.system)
+            self.recompute = recompute
+            self._check_folder()
+            if self._early is None:
+                self.payload = make_payload(self.system)
+        except BaseException:
+            self.close()
+            raise
+
+    def _runs_on_a_local_cluster(self) -> bool:
+        """Whether no cluster file, scheduler address or configured scheduler is given (a local cluster)."""
+        from cosim.parallel.cluster import configured_scheduler
+
+        return self.scheduler is None and self.cluster is None and configured_scheduler() is None
+
+    def close(self) -> None:
+        """Stop the cluster started early if no run took it (a no-op otherwise)."""
+        early, self._early = self._early, None
+        if early is not None:
+            early.close()
+
+    def _check_folder(self) -> None:
+        previous = check_results_folder(self.store, self.resume, self.spec.digest, "sweep", "finish that sweep",
+                                        SweepError)
+        if self.resume:
+            changed = self._changed_units(previous or {})
+            if changed and not self.recompute:
+                raise SweepError(f"{self.out} holds results of other unit files than the spec names now ("
+                                 + "; ".join(changed) + "); resuming would mix two models in one table; restore "
+                                 "the files, use another --out, or add --recompute to discard the stored rows "
+                                 "and compute every point again")
+            if changed:
+                self.store.discard_rows()
+
+    def _changed_units(self, previous: dict[str, Any]) -> list[str]:
+        """Units and data files whose content differs from the checksums stored with the rows."""
+        return changed_files(previous, self.checksums, self.data_checksums, self.spec.folder)
+
+    def _say(self, text: str) -> None:
+        say(text, self.quiet, self.progress_stream)
+
+    def _metadata(self, client_info: dict[str, Any]) -> dict[str, Any]:
+        return run_metadata(self.store, self.system, client_info, unit_checksums=self.checksums,
+                            data_file_checksums=self.data_checksums,
+                            points=len(self.space), design_method=self.space.method)
+
+    def run(self) -> pd.DataFrame:
+        """Evaluate every missing point; returns the whole table (every point once, in design order).
+
+        Raises SweepError when no Dask workers are reachable, FolderInUse when
+        another sweep writes into the same folder.  Ctrl-C stops the sweep;
+        the rows written so far stay and ``resume`` finishes the rest.
+        """
+        self._run()
+        table = self.store.table()
+        self._remove_temporary()
+        return table
+
+    def run_to_disk(self) -> dict[str, int]:
+        """Like :meth:`run`, but returns only the counts by status: the table stays on disk, never in memory.
+
+        The command line's way, for sweeps of any size.
+        """
+        counts = self._run()
+        self._remove_temporary()
+        return counts
+
+    def _remove_temporary(self) -> None:
+        if self._temporary:
+            shutil.rmtree(self.out, ignore_errors=True)
+
+    def _run(self) -> dict[str, int]:
+        try:
+            with results_writes(self.out):
+                self.lock.acquire()  # released when this process ends, however it ends
+        except BaseException:
+            self.close()  # the early cluster
+            raise
+        try:
+            return self._run_locked()
+        finally:
+            self.lock.release()
+
+    def _run_locked(self) -> dict[str, int]:
+        from cosim.parallel.dashboard_points import open_board
+        from cosim.parallel.evaluator import ClusterError, dask_client
+
+        started = now_utc()
+        done = self.store.done_ids() if self.resume else set()
+        total = len(self.space)
+        todo = total - len(done & {p.id for p in self.space}) if done else total
+        if todo == 0:
+            self.close()
+            self._say(f"cosim sweep {self.spec.name}: all {total} points already in {self.out}")
+            return self._finish()
+        try:
+            with dask_client(self.workers, self.scheduler, self.cluster, early=self._early) as \
+                    (client, n_workers, link):
+                info = {"started": started, "scheduler": client.scheduler.address, "workers": n_workers,
+                        "timeout": self.timeout}
+                with results_writes(self.out):
+                    self.store.write_metadata(self._metadata(info))
+                board = open_board(client, "sweep", self.spec.name, total, before=total - todo, dashboard=link)
+                self._say(f"cosim sweep {self.spec.name}: {total} points ({todo} to run) on {n_workers} "
+                          f"worker(s); dashboard: {link} ({board.describe()}); results: {self.out}")
+                with board.running():
+                    self._evaluate(client, done, todo, n_workers, board)
+        except ClusterError as exc:
+            raise SweepError(str(exc)) from None
+        except KeyboardInterrupt:
+            self._say(f"interrupted: the rows so far are in {self.out}; run again with --resume to finish")
+            raise
+        finally:
+            self.close()  # the early cluster, if dask_client did not take it
+        return self._finish()
+
+    def _finish(self) -> dict[str, int]:
+        with results_writes(self.out):  # a full disk during the final merge loses nothing (see compact)
+            counts = self.store.compact(order=(p.id for p in self.space), csv=self.csv)  # order: older parts
+            finish_metadata(self.store, counts)
+        return counts
+
+    def _evaluate(self, client: Any, done: set[str], todo: int, n_workers: int, board: Any = None) -> None:
+        from distributed import as_completed
+
+        from cosim.parallel.dashboard import task_key
+
+        sizer = BatchSizer(todo, n_workers, self.batch_size)
+        total = len(self.space)
+        unsubmitted = (p for p in self.space if p.id not in done)  # never rebound (a rerun once rebound 'points')
+        payload = ScatteredPayload(client, self.payload)
+        progress = Progress(todo, self.progress_stream) if not self.quiet else None
+        in_flight: dict[str, tuple[list[Point], bool]] = {}  # task key -> points, alone (see evaluator.Reruns)
+        pending = as_completed()
+        reruns = Reruns()
+
+        times: collections.deque[float] = collections.deque(maxlen=1000)  # recent ok point times
+
+        def submit() -> bool:
+            alone = bool(reruns.suspects) or any(a for _, a in in_flight.values())
+            if alone and in_flight:
+                return False  # no new work until the suspects have run, each group alone on the cluster
+            batch = reruns.suspects.popleft() if alone else sizer.take(unsubmitted)
+            if not batch:
+                return False
+            timeout = self.timeout if self.timeout is not None else default_timeout(times)
+            key = task_key("sweep", self.spec.name, [p.index for p in batch], total,  # the dashboard's names
+                           run=board.run if board is not None else "")
+            future = client.submit(run_batch, payload.future(), PointBatch([(p.id, p.values) for p in batch]),
+                                   timeout, pure=False, retries=0, key=key)
+            in_flight[future.key] = batch, alone
+            pending.add(future)
+            return True
+
+        def fill() -> None:  # enough to keep every worker busy, few enough to stay small
+            while len(in_flight) < 2 * n_workers + 1 and submit():
+                pass
+
+        fill()
+        for future in pending:
+            batch, alone = in_flight.pop(future.key)
+            try:
+                rows = future.result()
+            except Exception as exc:  # the worker process itself died (KilledWorker) or the task broke
+                if reruns.after_failure(batch, exc, alone):  # innocent points are never crashed
+                    future.release()
+                    fill()
+                    continue
+                rows = lost_rows([p.id for p in batch], exc, alone)
+                if board is not None:
+                    board.rows_made_here(future.key, rows)
+            future.release()
+            sizer.observe(rows)
+            with results_writes(self.out):
+                self.store.append([self._row(p, r) for p, r in zip(batch, rows)])
+            times.extend(r["run_time"] for r in rows if r["status"] == "ok")
+            if progress is not None:
+                progress.update(len(rows), sum(r["status"] != "ok" for r in rows))
+            fill()
+        if progress is not None:
+            progress.close()
+
+    def _row(self, point: Point, row: dict[str, Any]) -> dict[str, Any]:
+        out = {"point_id": point.id, self.store.INDEX_COLUMN: point.index}  # only in part files: results.py
+        out.update(self.space.columns(point.values))
+        out.update(row.get("objectives", {}))
+        for key in TAIL_COLUMNS:
+            out[key] = row.get(key, "")
+        return out
+
+    def sample_runs(self, n: int = 3) -> list[dict[str, Any]]:
+        """Run ``n`` points spread over the space locally (in a child process, so a crash cannot hit the caller)."""
+        runner = IsolatedRunner(self.payload)
+        try:
+            points = self.space.spread(n)
+            return runner.run([(p.id, p.values) for p in points], self.timeout)
+        finally:
+            runner.close()
+
+
+def _refuse_design_of_players(spec: Any) -> None:
+    """A design parameter of a unit replaced by a player varies nothing: SweepError naming it and the fix."""
+    from cosim.system.builder import split_unit_name
+    from cosim.units.registry import replaying_units
+
+    players = {u.name: u.source for u in spec.units if u.name in replaying_units(spec.units)}
+    for p in spec.design.parameters:
+        unit = split_unit_name(p.target, [u.name for u in spec.units])[0]
+        if unit in players:
+            raise SweepError(f"{spec.path}: $.design.parameters.{p.target}: unit '{unit}' is a player of "
+                             f"{players[unit]} (a recording made with one value of each parameter), so "
+                             f"'{p.target}' would vary nothing; remove it from design.parameters, or sweep the "
+                             "recorded unit itself")
+
+
+def check_scheduler_address(address: str) -> None:
+    """Raise SweepError unless ``address`` has the form of a Dask scheduler address (tcp://host:port)."""
+    from distributed.comm.addressing import parse_address, parse_host_port
+    from distributed.comm.registry import backends
+
+    try:
+        scheme, location = parse_address(address)
+        if scheme not in backends:
+            raise ValueError(f"unknown protocol '{scheme}'")
+        if scheme in ("tcp", "tls"):
+            parse_host_port(location)
+    except (ValueError, TypeError) as exc:
+        raise SweepError(f"--scheduler '{address}' is not a Dask scheduler address ({exc}); write it as "
+                         "tcp://HOST:PORT, as `dask scheduler` prints it, e.g. tcp://127.0.0.1:8786") from None
+
+
+def sweep(spec_path: str | Path, workers: int | None = None, out: str | Path | None = None,
+          scheduler: str | None = None,
+          timeout: float | None = None, resume: bool = False, **options: Any) -> pd.DataFrame:
+    """Evaluate every point of the spec's design space on Dask; returns the results table.
+
+    One row per point: point_id, parameters, objectives, status (ok, failed,
+    timeout, crashed), message, run_time, worker.  ``out`` keeps the results
+    folder (results.parquet, metadata.json); without it the table is only
+    returned.  ``scheduler`` is the address of a running Dask scheduler
+    (default: a local cluster of ``workers`` processes, one per core like
+    ``cosim sweep``).  ``timeout``: seconds
+    a point may run.  ``resume`` runs only the points missing in ``out``.
+    Further options: ``batch_size``, ``csv``, ``progress`` (a stream), ``quiet``.
+
+    Raises SpecError for a bad spec or design space, SweepError when ``out``
+    or the scheduler cannot be used.
+    """
+    return Sweep(spec_path, workers=workers, out=out, scheduler=scheduler, timeout=timeout, resume=resume,
+                 **options).run()

@@ -1,0 +1,216 @@
+"""The system: units, their ports and connections, checked to fit together.
+
+:func:`build_system` turns a :class:`~cosim.spec.loader.Spec` into a
+:class:`System`: it creates every unit type, resolves every port of every
+connection, parameter, recorded signal and objective to scalar elements, and
+checks causality, types, sizes, ranges and algebraic loops.  It reports every
+problem at once (:class:`~cosim.errors.SpecError`).
+
+A System is picklable: it holds unit *types* (blueprints), never live units.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any, Mapping, Sequence
+
+from cosim.errors import Problem, SpecError, UserError, did_you_mean, json_path
+from cosim.spec.loader import Spec
+from cosim.system.connection_checks import check_connections
+from cosim.system.parts import Assignment, Connection, LoadedUnits, Signal, SystemUnit  # noqa: F401  (re-exported)
+from cosim.system.signals import add_recorded, resolve_signal, split_unit_name
+from cosim.system.stepping import check_algebraic_loops, stepping_order
+from cosim.system.study_checks import check_design, check_objective_expressions
+from cosim.system.value_checks import SETTABLE_AS_PARAMETER, SETTABLE_AS_START, assignment  # noqa: F401  (their old place)
+from cosim.units.fmu.description import FmuProblems
+from cosim.units.protocol import NUMERIC_TYPES, UnitDescription, UnitType
+from cosim.units.python.data_files import attach as attach_data_files
+from cosim.units.registry import UnitSpec, replaying_units, unit_kind
+
+
+@dataclass(frozen=True)
+class System:
+    """A validated system, ready to run (see :class:`cosim.execution.run.Execution`)."""
+
+    spec: Spec
+    units: Mapping[str, SystemUnit]
+    connections: tuple[Connection, ...]
+    order: tuple[str, ...]
+    init_order: tuple[Connection, ...]
+    assignments: tuple[Assignment, ...]
+    probes: tuple[Signal, ...]
+    recorded: tuple[str, ...]
+
+    def signal(self, text: str) -> Signal:
+        """Resolve a 'unit.port' text against this system; raises SpecError if it does not fit."""
+        problems: list[Problem] = []
+        signal = resolve_signal(text, self.units, problems, self.spec.path, "$")
+        if signal is None:
+            raise SpecError(problems)
+        return signal
+
+    def assignment_for(self, target: str, value: Any) -> Assignment:
+        """An Assignment setting ``target`` ('unit.port') to ``value``, checked like a spec parameter.
+
+        Raises SpecError when the target does not exist or the value does not fit.
+        """
+        problems: list[Problem] = []
+        unit_name, _, port = split_unit_name(target, self.units)
+        if unit_name not in self.units:
+            raise SpecError([Problem(self.spec.path, "$", f"unknown unit '{unit_name}' in '{target}'."
+                                     f"{did_you_mean(unit_name, self.units)}", "use 'unit.parameter'")])
+        result = assignment(self.units[unit_name], port, value, None, problems, self.spec.path, f"'{target}'")
+        if result is None:
+            raise SpecError(problems)
+        return result
+
+    def recording(self, texts: Sequence[str]) -> "System":
+        """This system, also recording ``texts`` ('unit.port' or 'unit.*' for every output of a unit).
+
+        The units are not loaded or described again.  Raises SpecError when a
+        text does not name a signal of the system.
+        """
+        problems: list[Problem] = []
+        probes = {s.text: s for s in self.probes}
+        recorded = list(self.recorded)
+        add_recorded([(text, "$.record") for text in texts], self.units, problems, self.spec.path, probes, recorded)
+        if problems:
+            raise SpecError(problems)
+        return replace(self, probes=tuple(probes.values()), recorded=tuple(recorded))
+
+    def recording_all_outputs(self) -> "System":
+        """This system recording every output of every unit besides its own record list (for re-runs)."""
+        return self.recording([f"{name}.*" for name in self.units])
+
+
+def make_unit_type(spec: UnitSpec, folder: str) -> UnitType:
+    """The blueprint for one unit of a spec, made by its kind (see :mod:`cosim.units.registry`).
+
+    No file is opened yet except builtin FMU builds.
+    """
+    return unit_kind(spec.kind).create(spec, folder)
+
+
+def build_system(spec: Spec, broken_units: frozenset[str] = frozenset()) -> System:
+    """Check that the spec's units, ports and connections fit, and build the System.
+
+    ``broken_units`` names units already reported as broken elsewhere (by the
+    schema check); references to them are not reported a second time.
+    Raises SpecError listing every problem found.
+    """
+    file = spec.path
+    problems: list[Problem] = []
+    units = LoadedUnits()
+    units.failed.update(broken_units)
+    for u in spec.units:
+        system_unit = _load_unit(u, spec.folder, file, problems)
+        if system_unit is not None:
+            units[u.name] = system_unit
+        else:
+            units.failed.add(u.name)
+
+    assignments = []
+    replaying = replaying_units(spec.units)
+    for u in spec.units:
+        if u.name not in units or u.name in replaying:  # a player replaying a unit plays what that unit's values gave
+            continue
+        for field_name, values in (("parameters", u.parameters), ("start", u.start)):
+            for port, value in values.items():
+                a = assignment(units[u.name], port, value, field_name, problems, file,
+                                json_path(["units", u.name, field_name, port]))
+                if a is not None:
+                    assignments.append(a)
+
+    connections = check_connections(spec, units, problems)
+    order = stepping_order([u.name for u in spec.units], connections)
+    init_order = check_algebraic_loops(units, connections, problems, file)
+
+    probes: dict[str, Signal] = {}
+    recorded: list[str] = []
+    add_recorded([(text, json_path(["record", i])) for i, text in enumerate(spec.record)], units, problems, file,
+                  probes, recorded)
+    for o in spec.objectives:
+        if o.signal:
+            s = resolve_signal(o.signal, units, problems, file, json_path(["objectives", o.name, "signal"]))
+            if s is not None and s.variable.type not in NUMERIC_TYPES:
+                problems.append(Problem(file, json_path(["objectives", o.name, "signal"]),
+                                        f"'{o.signal}' is {s.variable.type}: only numeric signals (Real, Integer, "
+                                        "Boolean) reduce to an objective", "choose a numeric signal; String and "
+                                        "Binary signals can be recorded under 'record'"))
+            elif s is not None:
+                probes.setdefault(s.text, s)
+    if spec.experiment.stop_when:
+        s = resolve_signal(spec.experiment.stop_when, units, problems, file, "$.experiment.stop_when")
+        if s is not None:
+            if s.variable.type != "Boolean" or len(s.refs) != 1:
+                problems.append(Problem(file, "$.experiment.stop_when", f"'{s.text}' is not a Boolean scalar",
+                                        "name a Boolean output such as 'trajectory.finished'"))
+            probes.setdefault(s.text, s)
+    check_objective_expressions(spec, problems)
+    check_design(spec, units, problems)
+    if problems:
+        raise SpecError(problems)
+    system = System(spec=spec, units=dict(units), connections=tuple(connections), order=tuple(order),
+                    init_order=tuple(init_order), assignments=tuple(assignments), probes=tuple(probes.values()),
+                    recorded=tuple(recorded))
+    attach_data_files(system)  # files named by a unit's data-file parameters: read from the spec's folder, shipped
+    return system
+
+
+def _load_unit(u: UnitSpec, folder: str, file: str, problems: list[Problem]) -> SystemUnit | None:
+    path = json_path(["units", u.name, u.kind])
+    try:
+        unit_type = make_unit_type(u, folder)
+        description = unit_type.describe()
+    except FmuProblems as exc:
+        for p in exc.problems:
+            where = f" ({p.path})" if p.path else ""
+            problems.append(Problem(file, path, f"FMU '{u.source}'{where}: {p.message}",
+                                    p.fix or "re-export the FMU from its tool"))
+        return None
+    except UserError as exc:  # e.g. a plug-in kind's own check of its source
+        for p in exc.problems:
+            problems.append(Problem(file, path, f"{u.kind} '{u.source}': {p.message}", p.fix))
+        return None
+    except FileNotFoundError as exc:
+        problems.append(Problem(file, path, str(exc), "check the path; relative paths start at the spec's folder"))
+        return None
+    except (ImportError, TypeError, ValueError) as exc:
+        problems.append(Problem(file, path, f"cannot load '{u.source}': {exc}",
+                                "check the module path and class name, and that the module imports cleanly"))
+        return None
+    except Exception as exc:  # a user's module may raise anything while importing
+        problems.append(Problem(file, path, f"cannot load '{u.source}': {type(exc).__name__}: {exc}",
+                                "fix the error in the unit's source"))
+        return None
+    names = {v.name for v in description.variables}
+    if u.options.get("feedthrough"):
+        description = _declared_feedthrough(u, description, file, problems)
+    for port, actual in u.ports.items():
+        if actual not in names:
+            problems.append(Problem(file, json_path(["units", u.name, "ports", port]),
+                                    f"unit '{u.name}' has no variable '{actual}'.{did_you_mean(actual, names)}",
+                                    "map the spec's port name to one of the unit's variables"))
+    return SystemUnit(u, unit_type, description)
+
+
+def _declared_feedthrough(u: UnitSpec, description: UnitDescription, file: str,
+                          problems: list[Problem]) -> UnitDescription:
+    """The description with the spec's ``feedthrough`` (output -> inputs it depends on directly) applied."""
+    declared: dict[str, tuple[str, ...]] = {}
+    outputs = {v.name for v in description.outputs()}
+    inputs = {v.name for v in description.inputs()}
+    for output, depends in u.options["feedthrough"].items():
+        path = json_path(["units", u.name, "feedthrough", output])
+        name = u.ports.get(output, output)
+        if name not in outputs:
+            problems.append(Problem(file, path, f"'{output}' is not an output of unit '{u.name}'."
+                                                f"{did_you_mean(name, outputs)}", "name an output of the unit"))
+            continue
+        wrong = [d for d in depends if u.ports.get(d, d) not in inputs]
+        if wrong:
+            problems.append(Problem(file, path, f"not inputs of unit '{u.name}': {', '.join(wrong)}",
+                                    "list the inputs this output depends on directly ([] for none)"))
+            continue
+        declared[name] = tuple(u.ports.get(d, d) for d in depends)
+    return replace(description, feedthrough={**description.feedthrough, **declared})

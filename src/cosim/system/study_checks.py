@@ -1,0 +1,72 @@
+"""Checks of a study's objectives and design space against its system."""
+
+from __future__ import annotations
+
+from cosim.errors import Problem, did_you_mean, json_path
+from cosim.spec.design import range_problem, size_problems
+from cosim.spec.expressions import Expression, ExpressionError
+from cosim.spec.loader import Spec
+from cosim.system.parts import LoadedUnits
+from cosim.system.signals import split_unit_name
+from cosim.system.stepping import strongly_connected
+from cosim.system.value_checks import assignment
+from cosim.units.registry import replaying_units
+
+
+def check_objective_expressions(spec: Spec, problems: list[Problem]) -> None:
+    """Problems of the objectives' expressions: syntax, unknown names, cycles."""
+    names = {o.name for o in spec.objectives}
+    depends: dict[str, set[str]] = {}
+    for o in spec.objectives:
+        if not o.expr:
+            continue
+        path = json_path(["objectives", o.name, "expr"])
+        try:
+            expression = Expression(o.expr)
+        except ExpressionError as exc:
+            problems.append(Problem(file=spec.path, path=path, message=str(exc),
+                                    fix="use numbers, other objectives' names, + - * / ** and abs, sqrt, min, max"))
+            continue
+        unknown = sorted(expression.free_names - names)
+        for n in unknown:
+            problems.append(Problem(spec.path, path, f"'{n}' is not an objective.{did_you_mean(n, names)}",
+                                    "refer to objectives defined in this spec"))
+        depends[o.name] = expression.names & names
+    components = strongly_connected(list(depends), {k: v & set(depends) for k, v in depends.items()})
+    for comp in components:
+        if len(comp) > 1 or comp[0] in depends.get(comp[0], set()):
+            problems.append(Problem(spec.path, "$.objectives", "objectives refer to each other in a cycle: "
+                                    + ", ".join(sorted(comp)), "make one of them a signal reduction"))
+
+
+def check_design(spec: Spec, units: LoadedUnits, problems: list[Problem]) -> None:
+    """Problems of the design space: unknown targets, values that do not fit, bad ranges, size, constraint."""
+    players = replaying_units(spec.units)
+    for p in spec.design.parameters:
+        path = json_path(["design", "parameters", p.target])
+        unit_name, _, port = split_unit_name(p.target, [*units, *units.failed])
+        if unit_name in players:
+            continue  # a replayed unit: `cosim run` needs no design; a sweep refuses it (cosim.studies.sweep)
+        if unit_name not in units:
+            if unit_name not in units.failed:
+                problems.append(Problem(spec.path, path, f"unknown unit '{unit_name}'."
+                                        f"{did_you_mean(unit_name, units)}", "use 'unit.parameter'"))
+            continue
+        samples = list(p.values) if p.values is not None else [p.min, p.max] if p.min is not None else [False, True]
+        for value in samples:
+            if assignment(units[unit_name], port, value, None, problems, spec.path, path) is None:
+                break
+        if p.values is None and not p.is_bool:
+            grid = spec.design.method == "grid" and "optimize" not in spec.raw  # an optimiser draws from [min, max]
+            problem = range_problem(p.min, p.max, p.step, grid)
+            if problem is not None:
+                problems.append(Problem(spec.path, path, *problem))
+    if spec.design.method != "grid" and spec.design.parameters and spec.design.samples is None:
+        problems.append(Problem(spec.path, "$.design.samples", f"method '{spec.design.method}' needs 'samples'",
+                                "add e.g. \"samples\": 100"))
+    problems.extend(size_problems(spec))  # counted, never made
+    if spec.design.constraint:
+        try:
+            Expression(spec.design.constraint)
+        except ExpressionError as exc:
+            problems.append(Problem(spec.path, "$.design.constraint", str(exc), "write a comparison of parameters"))

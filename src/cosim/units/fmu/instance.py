@@ -1,0 +1,272 @@
+"""What FMI 2.0 and FMI 3.0 instances share: buffers, logging, error reports.
+
+A :class:`FmiSelection` groups the requested scalar elements by FMI type and
+pre-builds the ctypes arrays of value references and values once, so that a
+``get``/``set`` in the stepping loop is one FMI call per type and no allocation.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import operator
+from collections import deque
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from cosim.units.protocol import ElementRef, Selection, Unit, UnitError
+
+STATUS_LABELS = ["OK", "Warning", "Discard", "Error", "Fatal", "Pending"]
+
+
+class TypeGroup:
+    """All requested elements of one FMI type: one get/set call reads them all."""
+
+    def __init__(self, fmi_type: str, c_type: Any, vr_c_type: Any, vrs: list[int], sizes: list[int]):
+        self.fmi_type = fmi_type
+        self.vrs = (vr_c_type * len(vrs))(*vrs)
+        self.n_vrs = len(vrs)
+        self.n_values = sum(sizes)
+        self.values = (c_type * self.n_values)()
+        # FMI 3.0 Binary: each value is a pointer and a size; the buffers set are kept alive here
+        self.sizes = (ctypes.c_size_t * self.n_values)() if fmi_type == "Binary" else None
+        self.keep: list[Any] = [None] * self.n_values if fmi_type == "Binary" else []
+        # Zero-argument FMI calls bound by the instance (functools.partial over
+        # the library function): the stepping loop's cheapest possible call.
+        self.read: Callable[[], int] = lambda: 0
+        self.write: Callable[[], int] = lambda: 0
+
+
+class FmiSelection(Selection):
+    """Elements resolved to (type group, position in that group's value buffer)."""
+
+    def __init__(self, refs: Sequence[ElementRef], groups: list[TypeGroup], positions: list[tuple[int, int]],
+                 partial_arrays: bool):
+        self.refs = tuple(refs)
+        self.groups = groups
+        self.positions = positions
+        # Setting one element of an FMI 3.0 array means writing the whole
+        # array, so the others are read first (read-modify-write).
+        self.partial_arrays = partial_arrays
+        self.plain = False
+        self.pick: Callable[[Any], tuple] | None = None  # fast reader for one numeric group
+
+
+class FmiInstance(Unit):
+    """Common part of :class:`Fmi2Unit` and :class:`Fmi3Unit`.
+
+    Subclasses provide ``_c_types`` (FMI type -> ctypes type), ``_vr_type``,
+    ``_prefix``, ``_slave`` (fmpy's slave object), ``_bind(group)``
+    ``_set_call(group)`` and the version-specific lifecycle calls.
+    """
+
+    _c_types: dict[str, Any] = {}
+    _vr_type: Any = ctypes.c_uint
+    _prefix = "fmi"  # "fmi2" or "fmi3": names the calls in error messages
+    _slave: Any = None
+
+    def __init__(self, name: str, unit_type: Any):
+        self.name = name
+        self.unit_type = unit_type
+        self.description = unit_type.describe()
+        self.elements = unit_type.elements()
+        self.log: deque[str] = deque(maxlen=20)
+        self.time: float | None = None
+        self._alive = False
+        # Bumped by every call that may change the FMU's values (do_step, set, lifecycle calls through _guard):
+        # a reader whose last read is of the current generation hands out its buffer again without calling
+        # the FMU, since FMI values change only through such calls.  So an output read by a transfer and
+        # again by the probe after the same step costs one get call.
+        self.generation = 0
+        self._readers: dict[tuple, Callable[[], Sequence[Any]]] = {}
+
+    # Logging and errors ---------------------------------------------------
+
+    def _record_log(self, status: int, category: bytes | None, message: bytes | None) -> None:
+        label = STATUS_LABELS[status] if 0 <= status < len(STATUS_LABELS) else str(status)
+        text = (message or b"").decode("utf-8", "replace")
+        self.log.append(f"[{label}] {text}")
+
+    def fail_status(self, call: str, status: int) -> UnitError:
+        """A UnitError for an FMI call that returned ``status``, with the FMU's last log lines."""
+        label = STATUS_LABELS[status] if 0 <= status < len(STATUS_LABELS) else f"illegal status {status}"
+        return self._error(f"{call} returned {label}")
+
+    def fail(self, call: str, exc: BaseException) -> UnitError:
+        """A UnitError for a failed FMI call (an fmpy exception), with its status and the FMU's last log lines."""
+        status = getattr(exc, "status", None)
+        if isinstance(status, int) and 0 <= status < len(STATUS_LABELS):
+            return self.fail_status(call, status)
+        return self._error(f"{call} failed: {exc}")
+
+    def _error(self, text: str) -> UnitError:
+        if self.log:
+            text += "; FMU log: " + " | ".join(self.log)
+        return UnitError(self.name, text, self.time)
+
+    # True while set() and do_step() are the plain FMI calls of this class and its FMI 2.0/3.0 subclasses, so
+    # a writer may fill the set call's buffer itself and reads may be reused; False for Model Exchange units,
+    # whose set() and do_step() do more (restart the solver, integrate, handle events).
+    _plain_calls = True
+
+    def _guard(self, call: str, fn: Callable[[], Any]) -> Any:
+        self.generation += 1
+        try:
+            return fn()
+        except UnitError:
+            raise
+        except Exception as exc:
+            raise self.fail(call, exc) from None
+
+    # FMI type -> the type in the name of its get/set call (an Enumeration is read as an Integer / Int64)
+    _call_types: dict[str, str] = {}
+
+    def call_name(self, verb: str, fmi_type: str) -> str:
+        """The FMI function that gets/sets ``fmi_type``: ``fmi2GetInteger`` for an FMI 2.0 Enumeration."""
+        return f"{self._prefix}{verb}{self._call_types.get(fmi_type, fmi_type)}"
+
+    # Selections -------------------------------------------------------------
+
+    def select(self, refs: Sequence[ElementRef]) -> FmiSelection:
+        by_type: dict[str, dict[int, int]] = {}  # type -> vr -> size, in first-seen order
+        for ref in refs:
+            element = self.elements[ref.variable][ref.offset]
+            by_type.setdefault(element.fmi_type, {})[element.value_reference] = element.size
+        groups: list[TypeGroup] = []
+        offsets: dict[tuple[str, int], tuple[int, int]] = {}
+        for g, (fmi_type, sizes) in enumerate(by_type.items()):
+            start = 0
+            for vr, size in sizes.items():
+                offsets[(fmi_type, vr)] = (g, start)
+                start += size
+            group = TypeGroup(fmi_type, self._c_types[fmi_type], self._vr_type, list(sizes), list(sizes.values()))
+            group.read, group.write = self._bind(group)
+            groups.append(group)
+        positions = []
+        covered: dict[tuple[str, int], set[int]] = {}
+        for ref in refs:
+            element = self.elements[ref.variable][ref.offset]
+            g, start = offsets[(element.fmi_type, element.value_reference)]
+            positions.append((g, start + element.index))
+            covered.setdefault((element.fmi_type, element.value_reference), set()).add(element.index)
+        partial = any(len(covered[(e.fmi_type, e.value_reference)]) < e.size
+                      for ref in refs for e in [self.elements[ref.variable][ref.offset]])
+        selection = FmiSelection(refs, groups, positions, partial)
+        # The common case, one numeric type read in buffer order, skips the
+        # per-element bookkeeping in get/set (it is the stepping loop's hot path).
+        numeric = len(groups) == 1 and groups[0].fmi_type not in ("Boolean", "String", "Binary")
+        selection.plain = numeric and not partial and positions == [(0, i) for i in range(groups[0].n_values)]
+        if numeric and len(positions) > 1:
+            selection.pick = operator.itemgetter(*[i for _, i in positions])
+        return selection
+
+    def get(self, selection: Selection) -> list[Any]:
+        sel: FmiSelection = selection  # type: ignore[assignment]
+        for group in sel.groups:
+            status = group.read()
+            if status > 1:  # above fmiWarning
+                raise self.fail_status(self.call_name("Get", group.fmi_type), status)
+        if sel.plain:
+            return sel.groups[0].values[:]
+        if sel.pick is not None:
+            return list(sel.pick(sel.groups[0].values))
+        return [self._convert(sel.groups[g], sel.groups[g].values[i], i) for g, i in sel.positions]
+
+    def reader(self, selection: Selection) -> Callable[[], Sequence[Any]]:
+        sel: FmiSelection = selection  # type: ignore[assignment]
+        if not sel.plain:
+            return lambda: self.get(sel)
+        shared = self._readers.get(sel.refs)
+        if shared is not None:  # the same elements read elsewhere too (a transfer and the probe): one reader
+            return shared
+        group = sel.groups[0]
+        read, view, fail = group.read, np.frombuffer(group.values, dtype=group.values._type_), self.fail_status
+        read_at = [-1]  # the generation of the last read
+
+        def read_into_view() -> np.ndarray:
+            if read_at[0] == self.generation:
+                return view  # nothing was called since the last read: the FMU's values are the same
+            status = read()
+            if status > 1:
+                raise fail(self.call_name("Get", group.fmi_type), status)
+            read_at[0] = self.generation if self._plain_calls else -1
+            return view  # a numpy view of the buffer the FMU just filled: no copy
+
+        self._readers[sel.refs] = read_into_view
+        return read_into_view
+
+    def writer(self, selection: Selection) -> Callable[[Any], None]:
+        sel: FmiSelection = selection  # type: ignore[assignment]
+        if not sel.plain or getattr(sel, "structural", False) or not self._plain_calls:
+            return super().writer(selection)
+        group = sel.groups[0]
+        write, view, fail = group.write, np.frombuffer(group.values, dtype=group.values._type_), self.fail_status
+
+        def write_from_array(values: Any) -> None:
+            view[:] = values  # into the buffer the set call reads: no list, no per-element conversion
+            self.generation += 1
+            status = write()
+            if status > 1:
+                raise fail(self.call_name("Set", group.fmi_type), status)
+
+        return write_from_array
+
+    def set(self, selection: Selection, values: Sequence[Any]) -> None:
+        sel: FmiSelection = selection  # type: ignore[assignment]
+        self.generation += 1
+        if sel.plain:
+            sel.groups[0].values[:] = values
+        else:
+            if sel.partial_arrays:
+                for group in sel.groups:
+                    status = group.read()
+                    if status > 1:
+                        raise self.fail_status(self.call_name("Get", group.fmi_type), status)
+            for (g, i), value in zip(sel.positions, values):
+                group = sel.groups[g]
+                if group.fmi_type == "String":
+                    group.values[i] = value.encode("utf-8")
+                elif group.fmi_type == "Binary":
+                    data = bytes(value)
+                    group.keep[i] = ctypes.create_string_buffer(data, len(data) or 1)
+                    group.values[i] = ctypes.cast(group.keep[i], group.values._type_)
+                    group.sizes[i] = len(data)
+                else:
+                    group.values[i] = value
+        for group in sel.groups:
+            status = group.write()
+            if status > 1:
+                raise self.fail_status(self.call_name("Set", group.fmi_type), status)
+
+    @staticmethod
+    def _convert(group: TypeGroup, value: Any, index: int) -> Any:
+        if group.fmi_type == "Boolean":
+            return bool(value)
+        if group.fmi_type == "String":
+            return value.decode("utf-8") if value is not None else ""
+        if group.fmi_type == "Binary":  # copied out: the FMU's buffer is only valid until its next call
+            return ctypes.string_at(value, group.sizes[index]) if value else b""
+        return value
+
+    # Lifecycle shared by both versions ------------------------------------
+
+    def reset(self) -> None:
+        self._guard(f"{self._prefix}Reset", self._slave.reset)
+
+    def terminate(self) -> None:
+        if not self._alive:
+            return
+        self._alive = False
+        self.generation += 1
+        try:
+            self._slave.terminate()
+        except Exception:
+            pass  # an FMU in error state may refuse terminate; freeing it still matters
+        finally:
+            self._slave.freeInstance()  # also unloads the library (fmpy), so the slave is never reused
+
+    # Implemented per FMI version -------------------------------------------
+
+    def _bind(self, group: TypeGroup) -> tuple[Callable[[], int], Callable[[], int]]:
+        """Calls that read / write the group's values from / into the FMU, returning the FMI status."""
+        raise NotImplementedError

@@ -1,0 +1,350 @@
+"""Model Exchange FMUs (FMI 2.0 and 3.0) as co-simulation units.
+
+A Model Exchange FMU only evaluates its equations (derivatives, event
+indicators, event updates); the importer integrates them.  Here each
+communication step ``do_step(t, h)`` integrates the FMU from ``t`` to ``t + h``
+with CVode (SUNDIALS, as shipped with fmpy: :class:`fmpy.sundials.CVodeSolver`,
+BDF with a dense Newton solver, absolute tolerance = relative tolerance x the
+states' nominal values), with the inputs held as the master set them:
+
+* **time events**: the step is split at the FMU's next event time, where the
+  event is handled exactly;
+* **state events**: CVode locates the zero crossings of the event indicators
+  (root finding) and returns there; the event is handled, then integration
+  goes on to the end of the step;
+* **step events**: after every return of the solver (the end of the step, a
+  time or a state event) ``completedIntegratorStep`` is called, as fmpy's
+  ``simulate_fmu`` does, and an event is handled when the FMU asks for one;
+* an **input change** between steps restarts the solver (the right-hand side
+  jumps), and is handled as an event when it flips an event indicator's sign.
+
+Handling an event = Event Mode, the event iteration (``newDiscreteStates`` /
+``updateDiscreteStates`` until no discrete state needs an update; at most
+:data:`MAX_EVENT_ITERATIONS` rounds), Continuous-Time Mode, solver restart.
+An FMU that asks to terminate (``terminateSimulation``) ends the run there, cleanly
+(:class:`~cosim.units.protocol.SimulationEnded`, as a co-simulation FMU does).
+
+Solver settings come from the spec (:class:`SolverSettings`: ``tolerance``,
+``max_step``); the tolerance is also handed to the FMU (``setupExperiment`` /
+``enterInitializationMode``).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import math
+from dataclasses import dataclass
+from typing import Any, Callable, Sequence
+
+import numpy as np
+from fmpy.fmi2 import FMU2Model
+from fmpy.fmi3 import FMU3Model
+
+from cosim.units.fmu.fmi2 import Fmi2Unit
+from cosim.units.fmu.fmi3 import Fmi3Unit
+from cosim.units.fmu.fmpy_internals import with_cached_signatures
+from cosim.units.protocol import Selection, SimulationEnded, UnitError
+
+MAX_EVENT_ITERATIONS = 100
+DEFAULT_TOLERANCE = 1e-6
+# CVode's limit of internal steps per communication step (fmpy's default of 500
+# is too small for long communication steps with a small max_step).
+MAX_INTERNAL_STEPS = 100_000
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """How a Model Exchange unit is integrated.
+
+    ``tolerance``: CVode's relative tolerance (the absolute one is
+    ``tolerance`` x each state's nominal value).  ``max_step``: the largest
+    internal step in seconds (``None``: CVode chooses, up to the whole
+    communication step).  Raises ValueError for values that are not positive.
+    """
+
+    tolerance: float = DEFAULT_TOLERANCE
+    max_step: float | None = None
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.tolerance, (int, float)) and 0 < self.tolerance < 1):
+            raise ValueError(f"tolerance must be a number in (0, 1), not {self.tolerance!r}")
+        if self.max_step is not None and not (isinstance(self.max_step, (int, float)) and self.max_step > 0
+                                              and math.isfinite(self.max_step)):
+            raise ValueError(f"max_step must be a positive number of seconds, not {self.max_step!r}")
+
+
+def solver_problem() -> str | None:
+    """Why CVode cannot run here (fmpy ships SUNDIALS for some platforms only), or None when it can."""
+    try:
+        import fmpy.sundials  # noqa: F401  (loads the SUNDIALS libraries)
+    except Exception as exc:  # ImportError, OSError from ctypes, fmpy's version check
+        return f"model exchange needs CVode from fmpy (fmpy.sundials), which does not load here: {exc}"
+    return None
+
+
+class _NoInputs:
+    """fmpy's CVodeSolver applies input signals in its root function; ours are set by the master."""
+
+    @staticmethod
+    def apply(*args: Any, **kwargs: Any) -> None:
+        return None
+
+
+class _ModelExchangeStepping:
+    """The integration and event handling shared by FMI 2.0 and 3.0 (a mixin before Fmi2Unit/Fmi3Unit).
+
+    Subclasses provide ``_update_discrete_states()`` (fmpy's 6-tuple) and
+    ``_get_derivatives`` (fmpy's name differs between versions).
+    """
+
+    _plain_calls = False  # its set() and do_step() do more than the FMI calls (see FmiInstance._plain_calls)
+
+
+    name: str
+    time: float | None
+    _slave: Any
+
+    def __init__(self, name: str, unit_type: Any):
+        super().__init__(name, unit_type)  # type: ignore[call-arg]  # Fmi2Unit/Fmi3Unit: the instance, as a model
+        md = unit_type.model_description()
+        self._settings: SolverSettings = unit_type.solver_settings
+        self._nx = md.numberOfContinuousStates
+        self._nz = md.numberOfEventIndicators
+        self._needs_step_call = bool(getattr(md.modelExchange, "needsCompletedIntegratorStep", True))
+        self._solver: Any = None
+        self._now = 0.0  # the time the FMU and the solver are at
+        self._next_event: float | None = None
+        self._inputs_changed = False
+        self._last_set: dict[int, tuple[Selection, tuple]] = {}
+        self._z = np.zeros(self._nz)
+        self._z_buffer = (ctypes.c_double * max(self._nz, 1))()
+        self._callback_error: BaseException | None = None
+        self.events = {"time": 0, "state": 0, "step": 0, "input": 0}  # handled so far (for tests and reports)
+
+    # -- lifecycle -----------------------------------------------------------
+
+    def setup(self, start_time: float, stop_time: float | None) -> None:
+        super().setup(start_time, stop_time)  # type: ignore[misc]
+        self._now = start_time
+
+    # -- inputs ------------------------------------------------------------------
+
+    def set(self, selection: Selection, values: Sequence[Any]) -> None:
+        # Only a *changed* input restarts the solver: masters set every input every step.
+        # The selection is kept with its values so that a new selection reusing its id() is not mistaken for it.
+        new = tuple(values)
+        if self._last_set.get(id(selection)) != (selection, new):
+            self._last_set[id(selection)] = (selection, new)
+            self._inputs_changed = True
+        super().set(selection, values)  # type: ignore[misc]
+
+    def exit_initialization(self) -> None:
+        super().exit_initialization()  # type: ignore[misc]
+        self._event_iteration()  # FMI: the instance is in Event Mode after initialization
+        self._guard("enterContinuousTimeMode", self._slave.enterContinuousTimeMode)  # type: ignore[attr-defined]
+        self._start_solver()
+        self._inputs_changed = False
+
+    def reset(self) -> None:
+        self._solver = None
+        self._next_event = None
+        self._last_set.clear()
+        super().reset()  # type: ignore[misc]
+
+    def terminate(self) -> None:
+        self._solver = None  # CVodeFree runs when fmpy's solver object is collected
+        super().terminate()  # type: ignore[misc]
+
+    # -- stepping --------------------------------------------------------------
+
+    def do_step(self, t: float, h: float) -> None:
+        self.time = t
+        end = t + h
+        if self._solver is None:
+            raise UnitError(self.name, "do_step before initialization", t)
+        if self._inputs_changed:
+            self._after_input_change()
+        events_in_place = 0  # events handled without time advancing: a bound against endless loops
+        while not _reached(self._now, end):
+            event_time = self._next_event
+            # A time event inside the step, or on its end up to rounding, ends this stretch of integration.
+            time_event_due = event_time is not None and (event_time < end or _close(event_time, end))
+            target = max(min(event_time, end), self._now) if time_event_due else end
+            if _reached(self._now, target):
+                events_in_place += 1
+                if events_in_place > MAX_EVENT_ITERATIONS:
+                    raise UnitError(self.name, f"time stands still: the FMU keeps announcing its next event at "
+                                    f"t={event_time!r}, not after the current time", self._now)
+            state_event = self._integrate(target) if not _reached(self._now, target) else False
+            time_event = time_event_due and not state_event
+            if time_event:
+                self._set_time(event_time)  # exactly the announced time, whatever rounding did to 'target'
+            step_event = self._completed_integrator_step()
+            if time_event or state_event or step_event:
+                self.events["time"] += time_event
+                self.events["state"] += state_event
+                self.events["step"] += step_event
+                self._handle_event()
+        self._now = max(self._now, end)
+
+    def _integrate(self, target: float) -> bool:
+        """Run CVode from ``self._now`` towards ``target``; True when it stopped earlier at a state event."""
+        self._callback_error = None
+        try:
+            state_event, _roots, reached = self._solver.step(self._now, target)
+        except Exception as exc:  # fmpy raises RuntimeError with CVode's message
+            raise UnitError(self.name, f"the solver (CVode) failed between t={self._now:g} and t={target:g}: {exc}; "
+                            "try a smaller 'max_step' or a looser 'tolerance'", self._now) from None
+        if self._callback_error is not None:
+            raise self._fail_callback()
+        self._set_time(reached if state_event else target)  # fmpy's solver has set the states already
+        return bool(state_event)
+
+    def _set_time(self, time: float) -> None:
+        self._now = time
+        self._guard("setTime", lambda: self._slave.setTime(time))
+
+    def _completed_integrator_step(self) -> bool:
+        if not self._needs_step_call:
+            return False
+        step_event, terminate = self._guard("completedIntegratorStep", self._slave.completedIntegratorStep)
+        if terminate:
+            raise self._ended("completedIntegratorStep")
+        return bool(step_event)
+
+    def _after_input_change(self) -> None:
+        """Inputs jumped at a communication point: an event if an indicator changed sign, and a solver restart."""
+        self._inputs_changed = False
+        before = self._z.copy()
+        self._read_indicators()
+        if np.any(np.signbit(before) != np.signbit(self._z)):
+            self.events["input"] += 1
+            self._handle_event()  # restarts the solver too
+        else:
+            self._restart_solver()
+
+    def _handle_event(self) -> None:
+        self._guard("enterEventMode", self._slave.enterEventMode)
+        self._event_iteration()
+        self._guard("enterContinuousTimeMode", self._slave.enterContinuousTimeMode)
+        self._restart_solver()
+
+    def _event_iteration(self) -> None:
+        """Update discrete states until the FMU needs no more; note the next time event."""
+        for _ in range(MAX_EVENT_ITERATIONS):
+            needed, terminate, _nominals, _values, next_defined, next_time = self._guard(
+                self._update_call, self._update_discrete_states)
+            if terminate:
+                raise self._ended(self._update_call)
+            if not needed:
+                self._next_event = float(next_time) if next_defined else None
+                return
+        raise UnitError(self.name, f"the event iteration did not converge in {MAX_EVENT_ITERATIONS} rounds "
+                        "(the FMU keeps asking for new discrete states)", self._now)
+
+    def _start_solver(self) -> None:
+        from fmpy.sundials import CVodeSolver
+        from fmpy.sundials.cvode import CVodeSetMaxNumSteps
+
+        max_step = self._settings.max_step if self._settings.max_step is not None else float("inf")
+        self._solver = CVodeSolver(
+            nx=self._nx, nz=self._nz, get_x=self._caught(self._slave.getContinuousStates),
+            set_x=self._caught(self._slave.setContinuousStates), get_dx=self._caught(self._get_derivatives()),
+            get_z=self._caught(self._slave.getEventIndicators),
+            get_nominals=self._caught(self._slave.getNominalsOfContinuousStates),
+            set_time=self._caught(self._slave.setTime), input=_NoInputs(), startTime=self._now,
+            maxStep=max_step, relativeTolerance=self._settings.tolerance)
+        CVodeSetMaxNumSteps(self._solver.cvode_mem, MAX_INTERNAL_STEPS)
+        if self._callback_error is not None:
+            raise self._fail_callback()
+        self._read_indicators()
+
+    def _restart_solver(self) -> None:
+        """States, discrete states or inputs jumped: CVode starts afresh from the current point."""
+        self._set_time(self._now)
+        self._solver.reset(self._now)
+        if self._callback_error is not None:
+            raise self._fail_callback()
+        self._read_indicators()
+
+    def _read_indicators(self) -> None:
+        if self._nz:
+            self._guard("getEventIndicators", lambda: self._slave.getEventIndicators(self._z_buffer, self._nz))
+            self._z = np.array(self._z_buffer[:self._nz])
+
+    # -- errors ------------------------------------------------------------------
+
+    def _caught(self, call: Callable[..., Any]) -> Callable[..., Any]:
+        """``call`` for CVode's callbacks: an exception cannot cross the C solver, so keep the first one."""
+        def guarded(*args: Any) -> Any:
+            try:
+                return call(*args)
+            except Exception as exc:
+                if self._callback_error is None:
+                    self._callback_error = exc
+                return None
+        return guarded
+
+    def _fail_callback(self) -> UnitError:
+        exc, self._callback_error = self._callback_error, None
+        return self.fail("a call during integration", exc)  # type: ignore[attr-defined]
+
+    def _ended(self, call: str) -> SimulationEnded:
+        """The FMU asked to end the simulation: the run ends here, cleanly (as for a co-simulation FMU)."""
+        return SimulationEnded(self.name, self._now, f"ended the simulation ({call}: terminateSimulation)")
+
+    # provided per FMI version
+    _update_call = "updateDiscreteStates"
+
+    def _update_discrete_states(self) -> tuple:
+        raise NotImplementedError
+
+    def _get_derivatives(self) -> Callable[..., Any]:
+        raise NotImplementedError
+
+
+def _reached(now: float, target: float) -> bool:
+    """``now`` is at or past ``target``, up to the rounding of adding step sizes."""
+    return target - now <= 1e-12 * max(1.0, abs(target))
+
+
+def _close(a: float, b: float) -> bool:
+    """``a`` and ``b`` are the same time up to the rounding of adding step sizes."""
+    return abs(a - b) <= 1e-12 * max(1.0, abs(a), abs(b))
+
+
+class Fmi2ModelExchangeUnit(_ModelExchangeStepping, Fmi2Unit):
+    """A live FMI 2.0 Model Exchange instance, integrated by CVode inside each communication step."""
+
+    _slave_class = with_cached_signatures(FMU2Model)
+    _interface = "modelExchange"
+    _update_call = "fmi2NewDiscreteStates"
+
+    def setup(self, start_time: float, stop_time: float | None) -> None:
+        self.time = self._now = start_time
+        self._guard("fmi2SetupExperiment", lambda: self._slave.setupExperiment(
+            tolerance=self._settings.tolerance, startTime=start_time, stopTime=stop_time))
+
+    def _update_discrete_states(self) -> tuple:
+        return self._slave.newDiscreteStates()
+
+    def _get_derivatives(self) -> Callable[..., Any]:
+        return self._slave.getDerivatives
+
+
+class Fmi3ModelExchangeUnit(_ModelExchangeStepping, Fmi3Unit):
+    """A live FMI 3.0 Model Exchange instance, integrated by CVode inside each communication step."""
+
+    _slave_class = with_cached_signatures(FMU3Model)
+    _interface = "modelExchange"
+    _update_call = "fmi3UpdateDiscreteStates"
+
+    def enter_initialization(self) -> None:
+        self._guard("fmi3EnterInitializationMode", lambda: self._slave.enterInitializationMode(
+            tolerance=self._settings.tolerance, startTime=self._start_time, stopTime=self._stop_time))
+
+    def _update_discrete_states(self) -> tuple:
+        return self._slave.updateDiscreteStates()
+
+    def _get_derivatives(self) -> Callable[..., Any]:
+        return self._slave.getContinuousStateDerivatives

@@ -1,0 +1,122 @@
+"""The layers of the cosim package: each imports only the layers below it, so no import circle can form.
+
+Every import counts: at module level, inside functions, and under ``if TYPE_CHECKING:`` (a circle hidden by
+moving an import into a function is still a circle). The order is the one docs/architecture.md draws.
+"""
+
+from __future__ import annotations
+
+import ast
+import shutil
+from pathlib import Path
+
+import pytest
+
+ENGINE = Path(__file__).resolve().parent.parent / "src" / "cosim"
+
+# Top to bottom; the packages of one row are siblings and may not import each other.
+LAYERS: list[set[str]] = [
+    {"cli"},
+    {"studies"},
+    {"analysis", "parallel"},
+    {"results"},
+    {"export"},
+    {"execution"},
+    {"system"},
+    {"spec"},
+    {"ssp"},
+    {"master"},
+    {"units"},
+    {"fmus", "util"},
+    {"errors"},
+]
+# Plug-ins shipped with cosim: they may use any layer, and no layer may import them (the engine knows no robot).
+PLUGINS = {"models"}
+
+
+def layer_of(package: str) -> int:
+    for rank, row in enumerate(LAYERS):
+        if package in row:
+            return rank
+    raise KeyError(package)
+
+
+def imported_modules(path: Path, module: str) -> list[tuple[int, str]]:
+    """(line, absolute module name) of every cosim import in the file, wherever it stands in the file."""
+    is_package = path.name == "__init__.py"
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            found += [(node.lineno, a.name) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = module.split(".")
+                base = base[:len(base) - node.level + (1 if is_package else 0)]
+                name = ".".join(base + ([node.module] if node.module else []))
+            else:
+                name = node.module or ""
+            # `from cosim import x` may import the module cosim.x
+            found += [(node.lineno, f"{name}.{a.name}") for a in node.names] if name == "cosim" else [(node.lineno, name)]
+    return [(line, name) for line, name in found if name == "cosim" or name.startswith("cosim.")]
+
+
+def upward_imports(engine: Path) -> list[str]:
+    """Every import of ``engine`` (the src/cosim folder) that goes up, sideways between siblings, or into a
+    plug-in package, as 'file:line: a -> b'."""
+    problems = []
+    for path in sorted(engine.rglob("*.py")):
+        parts = path.relative_to(engine).with_suffix("").parts
+        if len(parts) == 1 and parts[0] in ("__init__", "__main__"):
+            continue  # the public face and `python -m cosim` sit above every layer
+        source = parts[0].removesuffix(".py")
+        if source in PLUGINS:
+            continue
+        module = ".".join(("cosim", *parts)).removesuffix(".__init__")
+        for line, name in imported_modules(path, module):
+            target = name.split(".")[1] if "." in name else ""
+            if target == source or name == "cosim.__version__":  # the version is a constant of the root
+                continue
+            where = f"{path.relative_to(engine)}:{line}: {module} -> {name}"
+            if not target or target in PLUGINS:
+                problems.append(where)
+            elif layer_of(target) <= layer_of(source):
+                problems.append(where)
+    return problems
+
+
+def test_every_package_has_a_layer():
+    packages = {p.name.removesuffix(".py") for p in ENGINE.iterdir()
+                if (p.is_dir() and (p / "__init__.py").exists()) or (p.suffix == ".py")}
+    packages -= {"__init__", "__main__"}
+    placed = set().union(*LAYERS) | PLUGINS
+    assert packages - placed == set(), "give these packages a row in LAYERS (and in docs/architecture.md)"
+
+
+def test_each_layer_imports_only_the_layers_below_it():
+    assert upward_imports(ENGINE) == []
+
+
+def test_an_upward_import_hidden_in_a_function_is_found(tmp_path):
+    """The check fails on a deliberately added upward import, even one inside a function."""
+    copy = tmp_path / "cosim"
+    shutil.copytree(ENGINE, copy, ignore=shutil.ignore_patterns("__pycache__", "*.so", "*.fmu"))
+    victim = copy / "units" / "protocol.py"
+    victim.write_text(victim.read_text(encoding="utf-8")
+                      + "\n\ndef _sneaky():\n    from cosim.studies.sweep import Sweep\n    return Sweep\n",
+                      encoding="utf-8")
+    found = upward_imports(copy)
+    assert len(found) == 1 and found[0].endswith("cosim.units.protocol -> cosim.studies.sweep"), found
+
+
+@pytest.mark.parametrize("text", [
+    "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from cosim.system.builder import System\n",
+    "import cosim.cli.main\n",
+    "from cosim import studies\n",
+    "from ..models import trajectory\n",
+])
+def test_type_checking_blocks_module_imports_and_relative_imports_count_too(tmp_path, text):
+    copy = tmp_path / "cosim"
+    shutil.copytree(ENGINE, copy, ignore=shutil.ignore_patterns("__pycache__", "*.so", "*.fmu"))
+    victim = copy / "master" / "algorithms.py"
+    victim.write_text(victim.read_text(encoding="utf-8") + "\n" + text, encoding="utf-8")
+    assert [p for p in upward_imports(copy) if p.startswith("master/algorithms.py")] != []
