@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import cosim
+from cosim import __version__
 from cosim.cli.main import main
 
 from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
@@ -30,7 +30,7 @@ def test_version_prints_the_package_version(capsys):
         main(["--version"])
     except SystemExit as exc:
         assert exc.code == 0
-    assert capsys.readouterr().out.strip() == f"cosim {cosim.__version__}"
+    assert capsys.readouterr().out.strip() == f"cosim {__version__}"
 
 
 def test_output_into_a_pipe_closed_early_is_not_an_error(tmp_path):
