@@ -21,21 +21,15 @@ in another thread.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from cosim.analysis.filters import Range, RangeFilters
 from cosim.analysis.table import AnalysisError, ResultsTable
 from cosim.errors import EXIT_OK
 
 SLIDER_STEPS = 1000  # sliders move over 0..1000; 0 and 1000 are exactly the column's min and max
-
-
-@dataclass
-class Range:
-    lo: float
-    hi: float
 
 
 class ExplorerState:
@@ -49,17 +43,13 @@ class ExplorerState:
 
     def __init__(self, table: ResultsTable):
         self.table = table
-        self.columns = table.numeric_columns()
+        self.filters = RangeFilters(table)  # shared with the decision room (cosim.analysis.decision)
+        self.columns = self.filters.columns
         if len(self.columns) < 2:
             raise AnalysisError(f"{table.path}: the explorer needs at least two numeric columns")
-        self._values = {c: table.values(c) for c in self.columns}
-        self.bounds: dict[str, Range] = {}
-        for c, v in self._values.items():
-            finite = v[np.isfinite(v)]
-            self.bounds[c] = Range(float(finite.min()), float(finite.max())) if finite.size else Range(0.0, 0.0)
-        self.ranges = {c: Range(b.lo, b.hi) for c, b in self.bounds.items()}
-        params = [c for c in table.parameter_columns() if c in self._values]
-        objectives = [c for c in table.objective_columns() if c in self._values]
+        self.bounds: dict[str, Range] = self.filters.bounds
+        params = [c for c in table.parameter_columns() if c in self.bounds]
+        objectives = [c for c in table.objective_columns() if c in self.bounds]
         axes = (params + objectives + self.columns)
         self.x = axes[0]
         self.y = next(c for c in axes if c != self.x)
@@ -80,11 +70,13 @@ class ExplorerState:
             self.table.check_column(column)
         setattr(self, which, column)
 
+    @property
+    def ranges(self) -> dict[str, Range]:
+        return self.filters.ranges
+
     def set_range(self, column: str, lo: float, hi: float) -> None:
         """Narrow (or widen) ``column`` to [lo, hi], clipped to its bounds; lo > hi swaps them."""
-        b = self.bounds[self.table.check_column(column)]
-        lo, hi = sorted((float(lo), float(hi)))
-        self.ranges[column] = Range(max(lo, b.lo), min(hi, b.hi))
+        self.filters.set_range(column, lo, hi)
 
     def set_range_steps(self, column: str, lo_step: int, hi_step: int) -> None:
         """Set a range from slider positions 0..SLIDER_STEPS (the ends are exactly min and max)."""
@@ -98,25 +90,20 @@ class ExplorerState:
         return b.lo + (b.hi - b.lo) * step / SLIDER_STEPS
 
     def reset_ranges(self) -> None:
-        self.ranges = {c: Range(b.lo, b.hi) for c, b in self.bounds.items()}
+        self.filters.reset()
 
     def narrowed(self) -> list[str]:
         """Columns whose range is narrower than their bounds."""
-        return [c for c, r in self.ranges.items() if r.lo > self.bounds[c].lo or r.hi < self.bounds[c].hi]
+        return self.filters.narrowed()
 
     # -- derived sets -------------------------------------------------------------
     def active(self) -> np.ndarray:
         """Rows inside every narrowed range."""
-        mask = np.ones(len(self.table.df), dtype=bool)
-        for c in self.narrowed():
-            v, r = self._values[c], self.ranges[c]
-            with np.errstate(invalid="ignore"):
-                mask &= (v >= r.lo) & (v <= r.hi)
-        return mask
+        return self.filters.active()
 
     def drawable(self) -> np.ndarray:
         cols = [c for c in (self.x, self.y, self.z) if c]
-        return np.all([np.isfinite(self._values[c]) for c in cols], axis=0)
+        return np.all([np.isfinite(self.filters.values(c)) for c in cols], axis=0)
 
     def greyed(self) -> np.ndarray:
         """Positions of drawn rows shown grey."""

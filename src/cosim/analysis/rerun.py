@@ -11,9 +11,11 @@ besides the spec's ``record`` list (:meth:`~cosim.system.builder.System.recordin
 from __future__ import annotations
 
 import json
+import re
 import sys
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -100,6 +102,56 @@ def rerun(table: ResultsTable | None, row: int | None = None, spec_path: str | P
     if full_record:
         system = system.recording_all_outputs()
     return run_point(system, values, record=True), values
+
+
+@dataclass
+class Rerun:
+    """One design run again: its row in the table, ``point_id`` (the row number when the table has none), the
+    values it ran with and the RunResult (``traces``: a DataFrame with ``time`` and the recorded columns)."""
+
+    row: int
+    point_id: str
+    values: dict[str, Any]
+    result: Any
+
+
+def rerun_rows(table: ResultsTable, rows: Sequence[int], spec_path: str | Path | None = None) -> list[Rerun]:
+    """Run the designs of ``rows`` again, one after the other, recording the spec's own ``record`` signals
+    (every output of every unit when the spec records nothing), whatever the system.
+
+    The spec is loaded and its system built once for all rows.  Raises AnalysisError or SpecError when the
+    spec or a row's values do not fit; a failing run is reported in its result's status instead.
+    """
+    from cosim.execution.point import run_point
+    from cosim.system.builder import build_system
+
+    spec = load_rerun_spec(table, spec_path)
+    system = build_system(spec)
+    if not system.recorded:
+        system = system.recording_all_outputs()
+    targets = [p.target for p in spec.design.parameters]
+    ids = table.df["point_id"].astype(str).to_numpy() if "point_id" in table.df.columns else None
+    out = []
+    for row in rows:
+        values = point_values(table, int(row), targets)
+        result = run_point(system, values, record=True)
+        out.append(Rerun(int(row), str(ids[row]) if ids is not None else str(row), values, result))
+    return out
+
+
+_ELEMENT = re.compile(r"^(.*)\[(\d+)\]$")
+
+
+def port_groups(columns: Sequence[str], limit: int = 12) -> list[tuple[str, list[str]]]:
+    """Trace columns grouped by port, in their recorded order: ``[("arm.q", ["arm.q[1]", ...]), ...]``
+    (``time`` left out; at most ``limit`` groups)."""
+    groups: dict[str, list[str]] = {}
+    for c in columns:
+        if str(c) == "time":
+            continue
+        m = _ELEMENT.match(str(c))
+        groups.setdefault(m.group(1) if m else str(c), []).append(str(c))
+    return list(groups.items())[:limit]
 
 
 def find_table_for(spec_path: str | Path, given: str | Path | None, digest: str | None = None) -> Path:
