@@ -313,8 +313,8 @@ FMU = UnitKind("fmu", {
                   "description": "fmu, model exchange only: relative tolerance of the solver (CVode; absolute "
                                  "tolerance = tolerance x nominal). Default 1e-6."},
     "max_step": {"type": "number", "exclusiveMinimum": 0,
-                 "description": "fmu, model exchange only: largest internal solver step in seconds. Default: no "
-                                "limit (up to the communication step)."},
+                 "description": "fmu, model exchange only: largest internal solver step in seconds. Default: the "
+                                "communication step."},
 }, _create_fmu, example='"fmu": "model.fmu"',
     description="an FMI 2.0 or 3.0 FMU: co-simulation, or model exchange integrated by cosim")
 
