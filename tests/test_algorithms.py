@@ -36,10 +36,31 @@ def test_gauss_seidel_steps_sources_first_and_passes_new_values(write_spec):
 
 
 def test_jacobi_uses_values_from_the_start_of_the_step(write_spec):
-    _, result = run(write_spec, chain_spec("jacobi"))
+    # an integrator (dx/dt = u, exact for u held over the step) fed by the clock: under Jacobi it steps from the
+    # clock's value at the start of each step, y(k h) = h * sum_{j<k} j h; Gauss-Seidel gives it the value at the end
+    spec = chain_spec("jacobi")
+    spec["units"]["integ"] = {"python": python_unit("LinearOde"), "parameters": {"a": 0.0, "b": 1.0, "x0": 0.0}}
+    spec["connections"].append({"from": "clock.time", "to": "integ.u"})
+    spec["record"].append("integ.y")
+    _, result = run(write_spec, spec)
+    h, k = 0.1, np.arange(11)
+    np.testing.assert_allclose(result.traces["integ.y"], h * h * k * (k - 1) / 2, atol=1e-12)
+    # the feed-through gain's output is read after its input was set: y(t) = 3 u(t) = 3 t in every row
+    np.testing.assert_allclose(result.traces["gain.y"], 3.0 * result.traces["time"], atol=1e-12)
+    spec["experiment"]["algorithm"] = "gauss-seidel"
+    _, result = run(write_spec, spec)
+    np.testing.assert_allclose(result.traces["integ.y"], h * h * k * (k + 1) / 2, atol=1e-12)
+
+
+def test_jacobi_traces_show_inputs_consistent_with_the_outputs_at_each_time(write_spec):
+    # issue 25 item 8: the row at t shows gain.u = clock.time at t (not at t - h), the stop time included;
+    spec = chain_spec("jacobi", step=0.3, stop=1.0)
+    spec["record"].append("gain.u")
+    _, result = run(write_spec, spec)
     traces = result.traces
-    # one step of delay: y(t) = 3 (t - h), and 0 at the first step
-    np.testing.assert_allclose(traces["gain.y"].iloc[1:], 3.0 * (traces["time"].iloc[1:] - 0.1), atol=1e-12)
+    np.testing.assert_allclose(traces["time"], [0, 0.3, 0.6, 0.9, 1.0], atol=1e-15)
+    np.testing.assert_allclose(traces["gain.u"], traces["time"], atol=1e-15)
+    np.testing.assert_allclose(traces["gain.y"], 3.0 * traces["time"], atol=1e-12)  # y = k u, read after u was set
 
 
 def test_time_does_not_drift_over_many_steps(write_spec):

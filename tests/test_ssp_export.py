@@ -75,8 +75,9 @@ def test_exported_archive_layout_and_parameter_files(tmp_path, built_fmu):
 
     direct, again = run(tmp_path / "spec.json"), run(tmp_path / "out" / "ring.spec.json")
     assert direct.objectives == again.objectives
-    # Jacobi: the last step's input was set from a.y at t = 0.4 (4 steps); g.y = k * u[2] is feed-through
-    expected = 1 / 3 * (3.0 * _linear_ode_final(-1.0, 1.0, 0.1 + 0.2, 0.0, 0.1, 4) - 1.0)
+    # Jacobi sets the inputs after each step (issue 25 item 8), so at the stop time g.u[2] holds a.y at t = 0.5
+    # (5 steps); g.y = k * u[2] is feed-through, read after u[2] was set
+    expected = 1 / 3 * (3.0 * _linear_ode_final(-1.0, 1.0, 0.1 + 0.2, 0.0, 0.1, 5) - 1.0)
     assert direct.objectives["y"] == pytest.approx(expected, rel=1e-12)
 
 

@@ -130,8 +130,15 @@ class GaussSeidel(MasterAlgorithm):
 
 
 class Jacobi(MasterAlgorithm):
-    """All units step from the outputs at ``t``: read every output, set every
-    input, then step every unit (in any order; they are independent)."""
+    """All units step from the outputs at ``t``: step every unit (in any order;
+    they are independent), then read every output and set every input.
+
+    The transfers come at the end of the step, not at its start: the inputs a
+    unit steps from are the same (initialization already set them for the
+    first step), but whoever reads the units after ``step`` (the trace, the
+    objectives) sees inputs consistent with the outputs at ``t + h``, also at
+    the stop time.  A unit that ends the simulation skips the transfers.
+    """
 
     name = "jacobi"
 
@@ -140,10 +147,6 @@ class Jacobi(MasterAlgorithm):
         self._units = [units[n] for n in order]
 
     def step(self, t: float, h: float) -> None:
-        # each transfer reads into its source's buffer, so all reads stay valid until the writes
-        values = [transfer.read() for transfer in self._transfers]
-        for transfer, v in zip(self._transfers, values):
-            transfer.write(v)
         try:  # step_unit's rule, with the try around the loop: one Python call less per unit and step
             for unit in self._units:
                 unit.do_step(t, h)
@@ -151,6 +154,10 @@ class Jacobi(MasterAlgorithm):
             raise
         except Exception as exc:
             raise UnitError(unit.name, f"do_step raised {type(exc).__name__}: {exc}", t) from exc
+        # each transfer reads into its source's buffer, so all reads stay valid until the writes
+        values = [transfer.read() for transfer in self._transfers]
+        for transfer, v in zip(self._transfers, values):
+            transfer.write(v)
 
 
 ALGORITHMS = {GaussSeidel.name: GaussSeidel, Jacobi.name: Jacobi}  # the one list of master algorithm names
