@@ -36,6 +36,9 @@ LIMITS: dict[str, Limit] = {
     "fmu_members": Limit("COSIM_FMU_MEMBERS", 10_000, "files in an FMU archive"),
     "fmu_ratio": Limit("COSIM_FMU_RATIO", 1000, "uncompressed/compressed size of a member above 1 MB",
                        integer=False),
+    # FMI 3.0 arrays (cosim.units.fmu.description): one object per element is made when an FMU is described
+    "array_elements": Limit("COSIM_ARRAY_ELEMENTS", 1_000_000, "elements of the arrays of one FMU, all arrays "
+                            "together (FMI 3.0 <Dimension>s and the structural parameters that size them)"),
     # spec.json and the design space (cosim.spec.loader, cosim.spec.design)
     "json_depth": Limit("COSIM_JSON_DEPTH", 64, "nesting depth of arrays and objects in spec.json"),
     "points": Limit("COSIM_MAX_POINTS", 1_000_000, "design points of a sweep (before a constraint)"),
@@ -79,9 +82,14 @@ def limit(name: str) -> float:
     if not math.isfinite(value) or value <= 0 or (spec.integer and value != int(value)):
         kind = "a positive whole number" if spec.integer else "a positive number"
         raise UserError([Problem("environment", spec.env, f"'{text}' is not {kind}",
-                                 f"set {spec.env} to {kind} ({spec.what}; default {spec.default:g}) "
+                                 f"set {spec.env} to {kind} ({spec.what}; default {shown(spec.default)}) "
                                  "or unset it")])
     return int(value) if spec.integer else value
+
+
+def shown(value: float) -> str:
+    """A limit's value as a person reads it: 1000000, not 1e+06; 0.25 as 0.25."""
+    return str(int(value)) if float(value) == int(value) else f"{value:g}"
 
 
 def settings() -> dict[str, str]:
@@ -92,4 +100,4 @@ def settings() -> dict[str, str]:
 def raise_hint(name: str) -> str:
     """How to raise limit ``name`` on purpose, for messages."""
     spec = LIMITS[name]
-    return f"to raise the limit on purpose, set the environment variable {spec.env} (default {spec.default:g})"
+    return f"to raise the limit on purpose, set the environment variable {spec.env} (default {shown(spec.default)})"

@@ -15,6 +15,7 @@ FMI 3.0 FMU (or a Python unit) with an array port ``x`` are interchangeable.
 
 from __future__ import annotations
 
+import math
 import os
 import platform
 import re
@@ -334,17 +335,83 @@ def _unit_of(v: Any) -> str | None:
     return getattr(declared, "unit", None) if declared is not None else None
 
 
-def _dimension_size(dimension: Any, structural: dict[str, int]) -> int:
+def _whole(text: Any) -> int | None:
+    """A dimension's size as written (``"3"``, ``3``, ``"1e9"``), or None when it is not a whole number."""
+    try:
+        value = float(text) if not isinstance(text, int) else text
+    except (TypeError, ValueError):
+        return None
+    if isinstance(value, float) and (not value == value or value in (float("inf"), float("-inf"))
+                                     or value != int(value)):
+        return None
+    return int(value)
+
+
+def _dimension_size(reference: str, variable_name: str, dimension: Any, structural: dict[str, int]) -> int:
     """One FMI 3.0 <Dimension>: a fixed ``start``, or the value of a structural parameter
-    (the spec's value when it sets one, else the parameter's start value)."""
+    (the spec's value when it sets one, else the parameter's start value).
+
+    Raises FmuProblems naming the FMU, the variable and the fix when the size is not a
+    whole number >= 0 (a negative size would make no array, not "-5 elements").
+    """
     if dimension.start is not None:
-        return int(dimension.start)
-    variable = dimension.variable
-    if variable is None:
+        text, source = dimension.start, f"<Dimension start=\"{dimension.start}\">"
+    elif dimension.variable is None:
         return 0
-    if variable.name in structural:
-        return int(structural[variable.name])
-    return int(variable.start) if variable.start is not None else 0
+    elif dimension.variable.name in structural:
+        text = structural[dimension.variable.name]
+        source = f"the structural parameter '{dimension.variable.name}' (set by the spec to {text})"
+    else:
+        text = dimension.variable.start
+        source = f"the structural parameter '{dimension.variable.name}' (start {text})"
+        if text is None:
+            return 0
+    size = _whole(text)
+    if size is None or size < 0:
+        fix = (f"set '{dimension.variable.name}' to a whole number >= 0" if dimension.start is None
+               else _REEXPORT + " with a whole-number size")
+        raise FmuProblems(reference, [Problem(reference, f"modelDescription.xml: variable '{variable_name}'",
+                                              f"array size {text} from {source} is not a whole number >= 0", fix)])
+    return size
+
+
+def _check_array_sizes(reference: str, shapes: dict[str, tuple[tuple[int, ...], tuple[str | None, ...]]],
+                       set_by_spec: Sequence[str] = ()) -> None:
+    """Refuse an FMU whose arrays hold more elements in all than ``COSIM_ARRAY_ELEMENTS``.
+
+    Checked before any per-element object is made: a ``<Dimension start="1000000000"/>`` (or a
+    structural parameter set to 1e9) would otherwise take the machine's memory. ``shapes`` maps
+    a variable name to its shape and, per dimension, the structural parameter sizing it (None for a
+    fixed ``start``); ``set_by_spec`` are the structural parameters the spec sets. Raises FmuProblems naming the FMU, the largest arrays and how to raise the limit.
+    """
+    from cosim.util import limits
+
+    most = int(limits.limit("array_elements"))
+    sizes = {name: math.prod(shape) for name, (shape, _) in shapes.items()}
+    total = sum(sizes.values())
+    if total <= most:
+        return
+
+    def origin(name: str) -> str:
+        shape, params = shapes[name]
+        fixed = ["<Dimension start>"] if None in params else []
+        named = dict.fromkeys(f"structural parameter '{p}' = {size}" + (" set by the spec" if p in set_by_spec else "")
+                              for size, p in zip(shape, params) if p)
+        return ", ".join(fixed + list(named))
+
+    largest = sorted(sizes, key=lambda n: -sizes[n])[:3]
+    listed = ", ".join(f"'{n}' has {' x '.join(map(str, shapes[n][0])) + ' = ' if len(shapes[n][0]) > 1 else ''}"
+                       f"{sizes[n]:,} (from {origin(n)})" for n in largest)
+    by_parameter = {p: size for n in largest for size, p in zip(*shapes[n]) if p}
+    biggest = max(by_parameter.values(), default=0)
+    culprits = sorted(p for p, size in by_parameter.items() if size == biggest)
+    fix = (f"set the structural parameter{'s' if len(culprits) > 1 else ''} "
+           f"{', '.join(repr(p) for p in culprits)} smaller, or use an FMU with smaller arrays" if culprits
+           else "use an FMU with smaller arrays")
+    raise FmuProblems(reference, [Problem(
+        reference, f"modelDescription.xml: variable '{largest[0]}'",
+        f"its arrays hold {total:,} elements in all, above the limit of {most:,}: {listed}",
+        f"{fix}; {limits.raise_hint('array_elements')}")])
 
 
 def _describe(md: Any, reference: str, structural: dict[str, int] | None = None
@@ -353,14 +420,18 @@ def _describe(md: Any, reference: str, structural: dict[str, int] | None = None
     fmi3 = md.fmiVersion == "3.0"
     variables: list[Variable] = []
     elements: dict[str, list[FmiElement]] = {}
+    shapes: dict[str, tuple[tuple[int, ...], tuple[str | None, ...]]] = {}
+    if fmi3:  # every array's size, checked against the limit before one object per element is made
+        for v in md.modelVariables:
+            if v.dimensions:
+                shape = tuple(_dimension_size(reference, v.name, d, structural or {}) for d in v.dimensions)
+                shapes[v.name] = (shape, tuple(d.variable.name if d.start is None and d.variable is not None
+                                               else None for d in v.dimensions))
+        _check_array_sizes(reference, shapes, tuple(structural or ()))
     for v in md.modelVariables:
         kind = _FMI3_TYPE.get(v.type, "Real")
-        shape: tuple[int, ...] = ()
-        if fmi3 and v.dimensions:
-            shape = tuple(_dimension_size(d, structural or {}) for d in v.dimensions)
-        size = 1
-        for n in shape:
-            size *= n
+        shape: tuple[int, ...] = shapes[v.name][0] if v.name in shapes else ()
+        size = math.prod(shape)
         start = _number(v.start, kind)
         if shape and isinstance(start, tuple) and len(start) != size:
             start = None  # a structural parameter set in the spec resized the array: its listed start no longer fits
