@@ -65,3 +65,28 @@ def nested_expected(algorithm: str, stop: float = 1.0, step: float = 0.01, facto
             integrator += step * 2 * u
             sink += step * sink_b * (10 * integrator + 1)
     return {"source.y": 3.0, "SuT.integrator.y": integrator, "sink.y": sink}
+
+
+def oms3_ssd() -> str:
+    """tests/ssp/oms3.ssd: a system as OMSimulator 3 writes it (startElement="" for system connectors, a
+    parameter connection root.k -> sub.gain -> sub.B.b, inline values on the root and on each component)."""
+    return (SSP_FILES / "oms3.ssd").read_text()
+
+
+def oms3_files(ssd_text: str | None = None, **extra: bytes) -> dict[str, bytes]:
+    """The members of the OMSimulator-3-form test SSP; ``extra`` adds members by name (``resources/x.ssv``)."""
+    members = {
+        "SystemStructure.ssd": (ssd_text if ssd_text is not None else oms3_ssd()).encode(),
+        "resources/linear_ode.fmu": Path(ensure_built("linear_ode", 2)).read_bytes(),
+    }
+    members.update(extra)
+    return members
+
+
+def oms3_expected(t: float, x0_a: float = 2.0, x0_b: float = 0.0, b_b: float = -0.5) -> dict[str, float]:
+    """Values of the OMS3-form SSP at time t, from its equations (not by cosim).
+
+    A: a = b = 0, so y = x0_a for ever; sub.B: a = 0, b = b_b, input = A.y held constant, so B integrates
+    exactly: y = x0_b + b_b * x0_a * t (under either algorithm: initialization already sets B.u = A.y).
+    """
+    return {"A.y": x0_a, "sub.B.y": x0_b + b_b * x0_a * t}

@@ -71,9 +71,10 @@ def open_ssp(path: str | Path) -> SspFiles:
         if not ssd.is_file():
             raise SpecError([Problem(given, "/", f"the folder has no {SSD_NAME}",
                                      "give an .ssp archive, an .ssd file, or the folder an SSP was unpacked into")])
-        return SspFiles(given, path, ssd, None)
+        # absolute from here on: the spec resolves relative FMU paths against its own folder, not the cwd
+        return SspFiles(given, path.resolve(), ssd.resolve(), None)
     if path.suffix.lower() == ".ssd":
-        return SspFiles(str(path.parent), path.parent, path, None)
+        return SspFiles(str(path.parent), path.parent.resolve(), path.resolve(), None)
     if not zipfile.is_zipfile(path):
         raise SpecError([Problem(given, "/", "not a zip archive", "an .ssp file is a zip archive with "
                                  f"{SSD_NAME} at its root; re-export it from its tool")])

@@ -177,6 +177,12 @@ class _Reader:
         if not source or not target or not source[0] or not target[0] or source[0] == target[0]:
             return 1.0, 0.0
         ssd_units = {**self.units, **(units or {})}
+        for name in (source[0], target[0]):
+            bare = re.fullmatch(r"\[\s*([^\]]*?)\s*\]", name)
+            if bare and name not in ssd_units:
+                self._problem(element, f"unit '{name}' is written in brackets; SSP and FMI write units without them",
+                              f"write unit=\"{bare.group(1)}\"", label)
+                return 1.0, 0.0
         try:
             return conversion(source[0], target[0], {**source[1], **ssd_units}, {**target[1], **ssd_units})
         except UnknownUnit as exc:
@@ -257,8 +263,14 @@ class _Reader:
         try:
             description = FmuUnitType(fmu, reference=source).describe()
         except FmuProblems as exc:
-            self._problem(element, f"FMU '{source}' cannot be used: " + "; ".join(exc.problems),
-                          "re-export the FMU for co-simulation (FMI 2.0 or 3.0) with a binary for this platform")
+            for problem in exc.problems:
+                self._problem(element, f"FMU '{source}' cannot be used: {problem.message}",
+                              problem.fix or "re-export the FMU for co-simulation (FMI 2.0 or 3.0) with a binary "
+                              "for this platform")
+            return node
+        except Exception as exc:  # noqa: BLE001 - a broken FMU is the user's file: a problem, never a traceback
+            self._problem(element, f"cannot read FMU '{source}': {type(exc).__name__}: {exc}",
+                          "re-export the FMU from its tool (cosim inspect it alone to see more)")
             return node
         node.variables = {v.name: v for v in description.variables}
         node.unit_definitions = dict(description.unit_definitions)
@@ -296,15 +308,15 @@ class _Reader:
         for side in ("start", "end"):
             owner_name = element.get(f"{side}Element")
             connector = element.get(f"{side}Connector")
-            if owner_name is None:
+            if not owner_name:  # left out, or "" as OMSimulator writes it: the system's own connector
                 owner = system
             elif owner_name in system.children:
                 owner = system.children[owner_name]
             else:
                 self._problem(element, f"{side}Element '{owner_name}' is not an element of system "
                               f"'{element_path(system.element)}'.{did_you_mean(owner_name, system.children)}",
-                              "name a component or sub-system of this system, or leave it out for the "
-                              "system's own connector")
+                              "name a component or sub-system of this system, or leave it out (or write "
+                              f"{side}Element=\"\") for the system's own connector")
                 return
             if connector not in owner.connectors and _variable(owner, connector) is None:
                 what = "system" if owner.kind == "system" else "component"
@@ -448,11 +460,8 @@ class _Reader:
                 for child in annotation:
                     if isinstance(child.tag, str) and child.get("algorithm") in ALGORITHMS:
                         experiment["algorithm"] = child.get("algorithm")
-        if "stop" not in experiment:
-            self._note("no stop time (ssd:DefaultExperiment stopTime): take it from the spec or --stop")
-        if step is None:
-            self._note("no step size (no OMSimulator FixedStepMaster or OSP FixedStepAlgorithm annotation): "
-                       "take it from the spec or --step")
+        # no note for a missing stop time or step size: the spec or the command line may give them, and
+        # ssp_raw_spec reports them when neither does
         return experiment
 
     # --- parameter bindings ---------------------------------------------------
@@ -488,19 +497,18 @@ class _Reader:
                 continue
             for name, (value, unit, type_, where) in parameters.items():
                 name = prefix + name
-                transform = None
-                if name in mapping:
-                    name, transform = mapping[name]
-                target = self._find_target(owner, name)
-                if target is None and self.problems:
-                    continue  # an FMU that did not load has no variables to match: already reported
-                if target is None:
-                    self._note(f"parameter '{name}' of {label} matches no variable of "
-                               f"'{'.'.join(path) or 'the root system'}' and is ignored (as SSP prescribes)")
-                    continue
-                self._order += 1
-                self.bindings.append((len(path), self._order, target, value,
-                                      unit, (transform, units, type_, where), label))
+                # an .ssm may map one source to several targets: each gets the value, with its own transformation
+                for target_name, transform in mapping.get(name, [(name, None)]):
+                    target = self._find_target(owner, target_name)
+                    if target is None and self.problems:
+                        continue  # an FMU that did not load has no variables to match: already reported
+                    if target is None:
+                        self._note(f"parameter '{target_name}' of {label} matches no variable of "
+                                   f"'{'.'.join(path) or 'the root system'}' and is ignored (as SSP prescribes)")
+                        continue
+                    self._order += 1
+                    self.bindings.append((len(path), self._order, target, value,
+                                          unit, (transform, units, type_, where), label))
 
     def _parameter_set(self, binding: Any, base: Path) -> tuple[dict | None, str, dict]:
         source = binding.get("source")
@@ -545,7 +553,8 @@ class _Reader:
                 parameters[parameter.get("name")] = (value, child.get("unit"), type_, child)
         return parameters, label, units
 
-    def _mapping(self, binding: Any, base: Path) -> dict | None:
+    def _mapping(self, binding: Any, base: Path) -> dict[str, list[tuple[str, Any]]] | None:
+        """The binding's .ssm (inline or file): source name -> [(target name, transformation)], one or many."""
         element = binding.find(tag("ssd", "ParameterMapping"))
         if element is None:
             return {}
@@ -574,7 +583,8 @@ class _Reader:
             transform = (float(linear.get("factor", 1.0)), float(linear.get("offset", 0.0))) \
                 if linear is not None else None
             suppress = entry.get("suppressUnitConversion", "false") in ("true", "1")
-            mapping[entry.get("source")] = (entry.get("target"), (transform, suppress, entry, label))
+            mapping.setdefault(entry.get("source"), []).append((entry.get("target"),
+                                                                 (transform, suppress, entry, label)))
         return mapping
 
     def _find_target(self, owner: Node, name: str) -> tuple[tuple[str, ...], str] | None:
@@ -599,25 +609,41 @@ class _Reader:
             if current is None or (depth, -order) < (current[0], -current[1]):
                 chosen[target] = (depth, order, value, unit, extra, label)
         system_values = {t: v for t, v in chosen.items() if self.nodes[t[0]].kind == "system"}
-        for target, (depth, order, value, unit, extra, label) in chosen.items():
-            node = self.nodes[target[0]]
-            if node.kind == "component" and node.fmu is not None:
-                self._assign(units, unit_names, target, value, unit, extra, label, node)
-        # system connectors with values feed the component variables they are connected to
+        # system connectors with values feed the component variables they are connected to (a parameter
+        # connection); such a value counts as bound where the system connector's value was bound, so it beats
+        # the component's own binding (a higher system wins) and loses to a binding of a still higher system
+        fed: dict[tuple, tuple] = {}
         for end in getattr(self, "_into", {}):
             node = self.nodes[end[0]]
-            if node.kind != "component" or node.fmu is None or end in chosen or _variable(node, end[1]) is None:
+            if node.kind != "component" or node.fmu is None or _variable(node, end[1]) is None:
                 continue
             chain = self._chain(end)
             start = chain[0].start
             if start not in system_values:
                 continue
             depth, order, value, unit, extra, label = system_values[start]
+            via = f"system connector '{'.'.join((*start[0], start[1]))}' (parameter connection)"
+            direct = chosen.get(end)
+            if direct is not None and direct[0] <= depth:
+                if direct[0] == depth:
+                    self._note(f"'{'.'.join(end[0])}.{end[1]}' is bound directly ({direct[5]}) and through "
+                               f"{via} by the same system: the direct binding {direct[2]!r} is used")
+                continue
+            if direct is not None:
+                self._note(f"'{'.'.join(end[0])}.{end[1]}': {value!r} from {via} overrides the binding "
+                           f"{direct[2]!r} of {direct[5]} {element_path(direct[4][3])}, as bindings of a higher "
+                           "system win")
             if isinstance(value, float):  # into the system connector's unit, then along the chain
                 value = self._converted(value, unit, extra, label, self._unit_of(*start))
                 factor, offset = self._compose(chain, self._unit_of(*start))
                 value = factor * value + offset
-            self._assign(units, unit_names, end, value, None, (None, {}, extra[2], extra[3]), label, node)
+            fed[end] = (value, (None, {}, extra[2], extra[3]), label)
+        for target, (depth, order, value, unit, extra, label) in chosen.items():
+            node = self.nodes[target[0]]
+            if node.kind == "component" and node.fmu is not None and target not in fed:
+                self._assign(units, unit_names, target, value, unit, extra, label, node)
+        for end, (value, extra, label) in fed.items():
+            self._assign(units, unit_names, end, value, None, extra, label, self.nodes[end[0]])
 
     def _converted(self, value: float, unit: str | None, extra: tuple, label: str, target_unit: tuple) -> float:
         """A bound Real value in the target's unit: the .ssv unit converted (unless the mapping suppresses it),

@@ -1,0 +1,221 @@
+"""SSPs in the forms other tools write them (issue 25): OMSimulator 3's system connectors (startElement=""),
+one-to-many .ssm, parameter connections against a component's own binding, FMUs without a binary for this platform,
+relative paths of every form, and notes only where something is really missing.
+
+Every SSP is written here: hand-written XML in tests/ssp/ (oms3.ssd and its .ssv/.ssm, in the form OMSimulator 3's
+Python writer emits) around linear_ode built from src/cosim/fmus/; values are checked against oms3_expected, which
+solves the system's equations by hand.
+"""
+
+from __future__ import annotations
+
+import io
+import zipfile
+
+import pytest
+
+from cosim.cli.main import main
+from cosim.errors import SpecError
+from cosim.execution.run import Execution
+from cosim.ssp import read_ssp
+from cosim.system.validate import check_spec
+
+from .ssp_fixtures import SSP_FILES, oms3_expected, oms3_files, oms3_ssd, write_archive, write_folder
+
+STEP = {"step": 0.1}
+
+
+def _run(path, algorithm="jacobi", **experiment):
+    system = check_spec(path, {"algorithm": algorithm, **STEP, **experiment})
+    result = Execution(system, record=True).run()
+    assert result.ok, result.message
+    return result
+
+
+def _problems(path, experiment=STEP):
+    with pytest.raises(SpecError) as caught:
+        check_spec(path, experiment)
+    return caught.value.problems
+
+
+def _final(result, column):
+    return float(result.traces[column].iloc[-1])
+
+
+# --- item 1: startElement="" / endElement="" name the system's own connector --------------------------------
+
+
+def test_empty_start_and_end_element_name_the_systems_own_connector(tmp_path):
+    ssd = oms3_ssd()
+    assert 'startElement=""' in ssd and 'endElement=""' in ssd
+    raw = read_ssp(write_archive(tmp_path / "oms3.ssp", oms3_files())).raw
+    omitted = ssd.replace('startElement="" ', "").replace('endElement="" ', "")
+    (tmp_path / "omitted").mkdir()
+    again = read_ssp(write_archive(tmp_path / "omitted" / "oms3.ssp", oms3_files(omitted))).raw
+    for unit in again["units"].values():
+        unit["fmu"] = unit["fmu"].replace("/omitted/", "/")
+    assert raw["units"] == again["units"] and raw["connections"] == again["connections"]
+    assert raw["units"]["sub.B"]["parameters"] == {"a": 0.0, "b": -0.5, "x0": 0.0}
+    assert raw["connections"] == [{"from": "A.y", "to": "sub.B.u", "convert": False}]
+
+
+@pytest.mark.parametrize("algorithm", ["jacobi", "gauss-seidel"])
+def test_oms3_form_runs_as_computed_by_hand(tmp_path, algorithm):
+    result = _run(write_archive(tmp_path / "oms3.ssp", oms3_files()), algorithm)
+    times = result.traces["time"].to_numpy()
+    assert len(times) == 11
+    for column in ("A.y", "sub.B.y"):
+        got = result.traces[column].to_numpy()
+        want = [oms3_expected(t)[column] for t in times]
+        assert got == pytest.approx(want, rel=1e-12, abs=1e-12), column
+
+
+def test_an_unknown_element_still_says_how_to_name_the_systems_connector(tmp_path):
+    ssd = oms3_ssd().replace('startElement="A" startConnector="y"', 'startElement="AA" startConnector="y"')
+    [problem] = _problems(write_archive(tmp_path / "bad.ssp", oms3_files(ssd)))
+    assert "startElement 'AA' is not an element of system" in problem.message and "Did you mean 'A'" in problem.message
+    assert 'startElement=""' in problem.fix
+    assert problem.path.endswith("ssd:System[@name='default']/ssd:Connections/ssd:Connection[1]")
+
+
+# --- item 2: an .ssm mapping one source to several targets ------------------------------------------------
+
+
+def _with_root_binding(binding: str) -> str:
+    """oms3.ssd with the root's inline binding of k replaced by ``binding`` (an ssd:ParameterBinding)."""
+    ssd = oms3_ssd()
+    start = ssd.index("    <ssd:ParameterBindings>")
+    end = ssd.index("</ssd:ParameterBindings>", start) + len("</ssd:ParameterBindings>")
+    return ssd[:start] + f"    <ssd:ParameterBindings>{binding}</ssd:ParameterBindings>" + ssd[end:]
+
+
+def test_one_source_mapped_to_several_targets_sets_each_with_its_own_transformation(tmp_path):
+    # oms3_values.ssv: Input1 = 2; oms3_values.ssm: Input1 -> A.x0, Input1 -> sub.B.x0, Input1 -> k (x -0.25)
+    ssd = _with_root_binding('<ssd:ParameterBinding source="resources/values.ssv">'
+                             '<ssd:ParameterMapping source="resources/values.ssm"/></ssd:ParameterBinding>')
+    members = oms3_files(ssd, **{"resources/values.ssv": (SSP_FILES / "oms3_values.ssv").read_bytes(),
+                                 "resources/values.ssm": (SSP_FILES / "oms3_values.ssm").read_bytes()})
+    system = read_ssp(write_archive(tmp_path / "map.ssp", members))
+    units = system.raw["units"]
+    assert units["A"]["parameters"]["x0"] == 2.0  # the root's binding beats A's own x0 = 2.0 (same value)
+    assert units["sub.B"]["parameters"]["x0"] == 2.0  # beats B's own 0.0
+    assert units["sub.B"]["parameters"]["b"] == -0.5  # k = -0.25 * 2, through the parameter connection
+    result = _run(write_archive(tmp_path / "map2.ssp", members))
+    assert _final(result, "sub.B.y") == pytest.approx(oms3_expected(1.0, x0_b=2.0)["sub.B.y"], rel=1e-12)
+
+
+# --- item 3: a parameter connection carries the higher system's value -------------------------------------
+
+
+def test_a_parameter_connection_beats_the_components_own_binding_with_a_note(tmp_path):
+    system = read_ssp(write_archive(tmp_path / "oms3.ssp", oms3_files()))
+    assert system.raw["units"]["sub.B"]["parameters"] == {"a": 0.0, "b": -0.5, "x0": 0.0}
+    [note] = [n for n in system.notes if "overrides" in n]
+    assert "'sub.B.b'" in note and "-0.5" in note and "system connector 'k'" in note and "0.05" in note
+    assert "ssd:Component[@name='B']" in note
+
+
+def test_a_parameter_connection_beats_the_components_own_ssv_file(tmp_path):
+    own = ('<ssd:ParameterBindings><ssd:ParameterBinding source="resources/B.ssv"/></ssd:ParameterBindings>')
+    ssd = oms3_ssd()
+    start = ssd.index("            <ssd:ParameterBindings>")
+    end = ssd.index("</ssd:ParameterBindings>", start) + len("</ssd:ParameterBindings>")
+    ssd = ssd[:start] + own + ssd[end:]
+    ssv = (SSP_FILES / "oms3_values.ssv").read_text().replace('name="Input1"', 'name="b"').replace('value="2.0"', 'value="0.05"')
+    system = read_ssp(write_archive(tmp_path / "ssv.ssp", oms3_files(ssd, **{"resources/B.ssv": ssv.encode()})))
+    assert system.raw["units"]["sub.B"]["parameters"]["b"] == -0.5
+    assert any("overrides" in n and "resources/B.ssv" in n for n in system.notes)
+
+
+def test_without_a_value_on_the_system_connector_the_components_own_binding_holds(tmp_path):
+    ssd = _with_root_binding("")  # k has no value now
+    ssd = ssd.replace("    <ssd:ParameterBindings></ssd:ParameterBindings>", "")
+    system = read_ssp(write_archive(tmp_path / "nok.ssp", oms3_files(ssd)))
+    assert system.raw["units"]["sub.B"]["parameters"]["b"] == 0.05
+    result = _run(write_archive(tmp_path / "nok2.ssp", oms3_files(ssd)))
+    assert _final(result, "sub.B.y") == pytest.approx(oms3_expected(1.0, b_b=0.05)["sub.B.y"], rel=1e-12)
+
+
+def test_a_direct_binding_of_a_higher_system_beats_the_parameter_connection(tmp_path):
+    # the root binds sub.B.b = 3 directly and k = -0.5 (fed to sub.B.b through sub.gain): the same system
+    # binds it both ways, so the direct binding is kept, with a note
+    ssd = oms3_ssd().replace('<ssv:Parameter name="k">', '<ssv:Parameter name="sub.B.b"><ssv:Real value="3.0"/>'
+                             '</ssv:Parameter><ssv:Parameter name="k">', 1)
+    system = read_ssp(write_archive(tmp_path / "tie.ssp", oms3_files(ssd)))
+    assert system.raw["units"]["sub.B"]["parameters"]["b"] == 3.0
+    assert any("bound directly" in n and "'sub.B.b'" in n for n in system.notes)
+
+
+# --- item 4: an FMU without a binary for this platform -----------------------------------------------------
+
+
+def _without_binaries(fmu: bytes) -> bytes:
+    out = io.BytesIO()
+    with zipfile.ZipFile(io.BytesIO(fmu)) as source, zipfile.ZipFile(out, "w") as target:
+        for info in source.infolist():
+            if not info.filename.startswith("binaries/"):
+                target.writestr(info, source.read(info))
+    return out.getvalue()
+
+
+def test_an_fmu_without_a_binary_for_this_platform_is_a_problem_at_its_component(tmp_path, capsys):
+    members = oms3_files()
+    members["resources/linear_ode.fmu"] = _without_binaries(members["resources/linear_ode.fmu"])
+    path = write_archive(tmp_path / "nobin.ssp", members)
+    problems = _problems(path)
+    assert [p.path.rsplit("/", 1)[-1] for p in problems] == ["ssd:Component[@name='A']", "ssd:Component[@name='B']"]
+    assert all(p.file == f"{path}:SystemStructure.ssd" for p in problems)
+    assert "FMU 'resources/linear_ode.fmu' cannot be used" in problems[0].message
+    assert "binar" in problems[0].message and problems[0].fix
+    assert main(["validate", str(path), "--step", "0.1"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "ssd:Component[@name='A']" in err
+
+
+def test_an_fmu_that_is_no_zip_is_a_problem_not_a_traceback(tmp_path, capsys):
+    members = oms3_files()
+    members["resources/linear_ode.fmu"] = b"not a zip archive"
+    path = write_archive(tmp_path / "nozip.ssp", members)
+    assert main(["validate", str(path), "--step", "0.1"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "ssd:Component[@name='A']" in err
+
+
+# --- item 5: relative paths with a folder part -------------------------------------------------------------
+
+
+def test_every_path_form_reads_the_same_system(tmp_path, monkeypatch):
+    members = oms3_files()
+    write_folder(tmp_path / "sub" / "x", members)
+    write_folder(tmp_path / "sub" / "y", {**members, "other.ssd": members.pop("SystemStructure.ssd")})
+    write_archive(tmp_path / "sub" / "x.ssp", oms3_files())
+    monkeypatch.chdir(tmp_path)
+    expected = oms3_expected(1.0)["sub.B.y"]
+    for given in ("sub/x", "sub/x/SystemStructure.ssd", "sub/y/other.ssd", "sub/x.ssp", "./sub/x/"):
+        assert _final(_run(given), "sub.B.y") == pytest.approx(expected, rel=1e-12), given
+    monkeypatch.chdir(tmp_path / "sub" / "x")
+    assert _final(_run("."), "sub.B.y") == pytest.approx(expected, rel=1e-12)
+    assert main(["validate", ".", "--step", "0.1"]) == 0
+
+
+# --- item 9: notes only for what is really missing; units in brackets ---------------------------------------
+
+
+def test_no_note_about_a_missing_step_when_the_command_line_gives_it(tmp_path, capsys):
+    ssd = oms3_ssd().replace('fixedStepSize="0.1"', 'fixedStep_removed="0.1"')
+    path = write_archive(tmp_path / "nostep.ssp", oms3_files(ssd))
+    assert main(["validate", str(path), "--step", "0.1", "--stop", "1"]) == 0
+    captured = capsys.readouterr()
+    assert "step size" not in captured.err and "stop time" not in captured.err
+    assert main(["validate", str(path)]) == 2
+    assert "the SSP gives no step size" in capsys.readouterr().err
+
+
+def test_a_unit_in_brackets_is_refused_with_the_plain_name_as_fix(tmp_path):
+    ssd = oms3_ssd().replace('<ssv:Real value="-0.5"/>', '<ssv:Real value="-0.5" unit="[1/s]"/>')
+    ssd = ssd.replace('<ssd:Connector name="k" kind="parameter">\n        <ssc:Real/>',
+                      '<ssd:Connector name="k" kind="parameter">\n        <ssc:Real unit="1/s"/>')
+    [problem] = _problems(write_archive(tmp_path / "brackets.ssp", oms3_files(ssd)))
+    assert "unit '[1/s]' is written in brackets" in problem.message
+    assert problem.fix == 'write unit="1/s"'
+    assert problem.path.endswith("ssv:Parameter[@name='k']/ssv:Real")
