@@ -112,7 +112,7 @@ def test_a_parameter_connection_beats_the_components_own_binding_with_a_note(tmp
     assert system.raw["units"]["sub.B"]["parameters"] == {"a": 0.0, "b": -0.5, "x0": 0.0}
     [note] = [n for n in system.notes if "overrides" in n]
     assert "'sub.B.b'" in note and "-0.5" in note and "system connector 'k'" in note and "0.05" in note
-    assert "ssd:Component[@name='B']" in note
+    assert "bound by 'sub.B'" in note
 
 
 def test_a_parameter_connection_beats_the_components_own_ssv_file(tmp_path):
@@ -219,3 +219,54 @@ def test_a_unit_in_brackets_is_refused_with_the_plain_name_as_fix(tmp_path):
     assert "unit '[1/s]' is written in brackets" in problem.message
     assert problem.fix == 'write unit="1/s"'
     assert problem.path.endswith("ssv:Parameter[@name='k']/ssv:Real")
+
+
+# --- item 6: inspect of every SSP form, without stop time or step size, showing the bound values ------------
+
+
+def _port_rows(text: str) -> dict[str, dict[str, list[str]]]:
+    """unit -> port -> the row's cells (split on the table's gaps of two or more spaces)."""
+    import re
+
+    units: dict[str, dict[str, list[str]]] = {}
+    current = None
+    for line in text.splitlines():
+        if line.startswith("unit "):
+            current = units.setdefault(line.split()[1].rstrip(":"), {})
+        elif current is not None and line.startswith("  "):
+            cells = re.split(r"\s{2,}", line.strip())
+            current[cells[0]] = cells
+    return units
+
+
+def test_inspect_reads_every_ssp_form_without_stop_or_step_and_shows_the_bound_values(tmp_path, monkeypatch,
+                                                                                    capsys):
+    ssd = oms3_ssd().replace('fixedStepSize="0.1"', 'fixedStep_removed="0.1"').replace(' stopTime="1.0"', "")
+    members = oms3_files(ssd)
+    write_archive(tmp_path / "x.ssp", members)
+    write_folder(tmp_path / "x", members)
+    monkeypatch.chdir(tmp_path)
+    for given in ("x.ssp", "x", "x/SystemStructure.ssd", "."):
+        if given == ".":
+            monkeypatch.chdir(tmp_path / "x")
+        assert main(["inspect", given]) == 0, given
+        out = capsys.readouterr().out
+        ports = _port_rows(out)
+        # sub.B's own binding says b = 0.05; the root's k = -0.5 reaches it through the parameter connection
+        assert ports["sub.B"]["b"][:2] == ["b", "parameter"] and ports["sub.B"]["b"][4] == "-0.5 *", out
+        assert ports["A"]["x0"][4] == "2 *" and ports["A"]["u"][4] == "0"  # u: the FMU's own start, unmarked
+        assert "experiment: 0 .. (no stop time: give --stop to run), step (none: give --step to run)" in out
+        assert "note: 'sub.B.b': -0.5 from system connector 'k'" in out
+    assert main(["inspect", ".", "--stop", "2", "--step", "0.5"]) == 0
+    assert "experiment: 0 .. 2 s, step 0.5 s" in capsys.readouterr().out
+
+
+def test_inspect_of_a_spec_shows_the_values_it_sets(tmp_path, capsys):
+    import json
+
+    write_archive(tmp_path / "x.ssp", oms3_files())
+    (tmp_path / "spec.json").write_text(json.dumps({"system": "x.ssp", "units": {"A": {"parameters": {"x0": 7.5}}},
+                                                    "experiment": {"step": 0.1}}))
+    assert main(["inspect", str(tmp_path / "spec.json")]) == 0
+    ports = _port_rows(capsys.readouterr().out)
+    assert ports["A"]["x0"][4] == "7.5 *" and ports["sub.B"]["b"][4] == "-0.5 *"

@@ -3,7 +3,9 @@
 A target is an FMU (``model.fmu``, ``builtin:NAME_fmi3``), a Python unit (``file.py:Class``,
 ``package.module:Class``), a recorded table a player would play (``.parquet``/``.csv``) or a spec.json. Every
 port is listed with its causality, type, shape, unit, start value and range, so that the names the error
-messages mention ("no variable 'x'; run cosim inspect") can be looked up.
+messages mention ("no variable 'x'; run cosim inspect") can be looked up.  An SSP (``.ssp``, ``.ssd`` or a
+folder with SystemStructure.ssd) is inspected like a spec, without needing a stop time or step size; the start
+column shows the values the SSP (or spec) binds, marked ``*``, instead of the unit's own.
 """
 
 from __future__ import annotations
@@ -55,14 +57,17 @@ def listed_variables(description: UnitDescription) -> list:
             if v.causality != "local" and not (not v.is_array and v.name.split("[")[0] in arrays)]
 
 
-def port_rows(description: UnitDescription) -> list[tuple[str, ...]]:
-    """One row per port (HEADER's columns)."""
+def port_rows(description: UnitDescription, bound: dict[str, Any] | None = None) -> list[tuple[str, ...]]:
+    """One row per port (HEADER's columns); a port in ``bound`` (the value a spec or SSP sets) shows that
+    value, marked ``*``, in the start column instead of the unit's own start."""
     rows = []
+    bound = bound or {}
     for v in listed_variables(description):
         shape = "x".join(map(str, v.shape)) if v.shape else "scalar"
         rng = "" if v.min is None and v.max is None else f"[{_fmt(v.min) or '-inf'}, {_fmt(v.max) or 'inf'}]"
+        start = f"{_fmt(bound[v.name])} *" if v.name in bound else _fmt(v.start)
         rows.append((v.name, v.causality, v.fmi_type or v.type, shape, v.unit or "",
-                     _fmt(v.start), rng, v.description[:60]))
+                     start, rng, v.description[:60]))
     return rows
 
 
@@ -101,8 +106,24 @@ def inspect_spec(path: str, experiment: dict[str, Any] | None = None) -> int:
     code. ``experiment`` overrides the experiment's fields (what an SSP often lacks)."""
     from cosim.system.validate import check_spec
 
+    from cosim.ssp import is_ssp, read_ssp
+
+    experiment = dict(experiment or {})
+    ssp = read_ssp(path) if is_ssp(path) else None
+    missing: list[str] = []
+    if ssp is not None:  # inspecting needs neither stop time nor step size: stand-ins, said as such below
+        given = {**ssp.raw["experiment"], **experiment}
+        missing = [k for k in ("stop", "step") if k not in given]
+        start = float(given.get("start", 0.0))
+        if "stop" in missing:
+            experiment["stop"] = given["stop"] = start + 1.0
+        if "step" in missing:
+            experiment["step"] = float(given["stop"]) - start
     system = check_spec(path, experiment or None)
     print(f"spec {path}: {system.spec.name}")
+    for note in (ssp.notes if ssp is not None else []):
+        print(f"note: {note}")
+    marked = False
     for name, unit in system.units.items():
         d = unit.description
         kind = f"FMI {d.fmi_version}" if d.kind == "fmu" else d.kind
@@ -112,20 +133,31 @@ def inspect_spec(path: str, experiment: dict[str, Any] | None = None) -> int:
         inputs = sum(v.causality == "input" for v in ports)
         outputs = sum(v.causality == "output" for v in ports)
         print(f"unit {name}: {kind} {unit.spec.source} ({inputs} inputs, {outputs} outputs)")
-        print_table(port_rows(d))
+        own = {v.name: v for v in d.variables}
+        bound = {unit.variable_name(k): v for k, v in {**unit.spec.parameters, **unit.spec.start}.items()}
+        bound = {k: v for k, v in bound.items() if k in own}
+        marked = marked or bool(bound)
+        print_table(port_rows(d, bound))
     print("connections:")
     for c in system.connections:
         scaled = f" (x {c.factor:.17g} + {c.offset:.17g})" if c.transforms else ""
         print(f"  {c.source.text} -> {c.target.text}{scaled}")
+    if marked:
+        print("* the value the spec or SSP sets (the unit's own start value is replaced)")
     exp = system.spec.experiment
-    print(f"experiment: {exp.start:g} .. {exp.stop:g} s, step {exp.step:g} s, {exp.algorithm}")
+    stop = "(no stop time: give --stop to run)" if "stop" in missing else f"{exp.stop:g} s"
+    step = "(none: give --step to run)" if "step" in missing else f"{exp.step:g} s"
+    print(f"experiment: {exp.start:g} .. {stop}, step {step}, {exp.algorithm}")
     print(f"stepping order: {' -> '.join(system.order)}")
     return EXIT_OK
 
 
 def inspect_target(target: str, experiment: dict[str, Any] | None = None) -> int:
-    """``cosim inspect TARGET``: a spec (``.json``) or SSP (``.ssp``), or any one unit."""
-    if Path(target).suffix.lower() in (".json", ".ssp"):
+    """``cosim inspect TARGET``: a spec (``.json``) or SSP (``.ssp``, ``.ssd``, a folder with SystemStructure.ssd),
+    or any one unit."""
+    from cosim.ssp import is_ssp
+
+    if Path(target).suffix.lower() == ".json" or is_ssp(target):
         return inspect_spec(target, experiment)
     return inspect_unit(target)
 

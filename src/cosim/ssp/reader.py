@@ -630,9 +630,9 @@ class _Reader:
                                f"{via} by the same system: the direct binding {direct[2]!r} is used")
                 continue
             if direct is not None:
-                self._note(f"'{'.'.join(end[0])}.{end[1]}': {value!r} from {via} overrides the binding "
-                           f"{direct[2]!r} of {direct[5]} {element_path(direct[4][3])}, as bindings of a higher "
-                           "system win")
+                binder = ".".join(end[0][:direct[0]]) or "the root system"
+                self._note(f"'{'.'.join(end[0])}.{end[1]}': {value!r} from {via} overrides the value "
+                           f"{direct[2]!r} bound by '{binder}' ({direct[5]}), as bindings of a higher system win")
             if isinstance(value, float):  # into the system connector's unit, then along the chain
                 value = self._converted(value, unit, extra, label, self._unit_of(*start))
                 factor, offset = self._compose(chain, self._unit_of(*start))
