@@ -15,6 +15,7 @@ import pandas as pd
 import pytest
 
 from cosim import errors
+from cosim.cli.exit_codes import EXIT_USAGE
 from cosim.cli.main import main
 from cosim.units import registry as unit_kinds
 from cosim.units.registry import UnitKind, register_unit_kind, unregister_unit_kind
@@ -101,7 +102,7 @@ def test_an_explicitly_registered_kind_is_named_in_messages(tmp_path, capsys, si
     spec = tmp_path / "spec.json"
     spec.write_text(json.dumps({"units": {"a": {"parameters": {}}, "b": {"signal": "triangle"}},
                                 "experiment": {"stop": 1, "step": 0.1}}))
-    assert main(["validate", str(spec)]) == errors.EXIT_USAGE
+    assert main(["validate", str(spec)]) == EXIT_USAGE
     err = capsys.readouterr().err
     assert "$.units.a: a unit needs exactly one of 'fmu', 'python', 'player' or 'signal'" in err
     assert '"signal": "sine"' in err
@@ -116,7 +117,7 @@ def test_a_kind_reports_its_own_problems_at_the_unit(tmp_path, capsys):
     try:
         spec = tmp_path / "spec.json"
         spec.write_text(json.dumps({"units": {"d": {"device": "/dev/none"}}, "experiment": {"stop": 1, "step": 0.1}}))
-        assert main(["validate", str(spec)]) == errors.EXIT_USAGE
+        assert main(["validate", str(spec)]) == EXIT_USAGE
         err = capsys.readouterr().err
         assert "$.units.d.device: device '/dev/none': no such device" in err and "fix: plug the device in" in err
     finally:
@@ -149,7 +150,7 @@ def test_a_field_of_another_kind_is_reported_naming_the_kinds_that_take_it(tmp_p
             "p": {"player": "t.csv", "tolerance": 1e-6, "speed": 2},
             "g": {"gadget": "tests.units_for_tests:Gain", "columns": ["y"]}},  # its own field: no problem
             "experiment": {"stop": 1, "step": 0.1}}))
-        assert main(["validate", str(spec)]) == errors.EXIT_USAGE
+        assert main(["validate", str(spec)]) == EXIT_USAGE
         err = capsys.readouterr().err
         assert "$.units.f.columns: 'columns' applies to player or gadget units only" in err
         assert "$.units.p.tolerance: 'tolerance' applies to fmu units only" in err
@@ -162,7 +163,7 @@ def test_a_field_of_another_kind_is_reported_naming_the_kinds_that_take_it(tmp_p
 def test_an_ssp_export_refuses_a_plug_in_kind_by_name(tmp_path, capsys, signal_kind):
     spec = tmp_path / "spec.json"
     spec.write_text(json.dumps({"units": {"source": {"signal": "sine"}}, "experiment": {"stop": 1, "step": 0.1}}))
-    assert main(["export", str(spec), "-o", str(tmp_path / "x.ssp")]) == errors.EXIT_USAGE
+    assert main(["export", str(spec), "-o", str(tmp_path / "x.ssp")]) == EXIT_USAGE
     err = capsys.readouterr().err
     assert "$.units.source: a signal unit cannot be exported to an SSP" in err and "Traceback" not in err
     assert not (tmp_path / "x.ssp").exists()

@@ -150,7 +150,7 @@ def test_fmu_escaping_its_folder_is_refused(tmp_path, capsys, built_fmu):
 def test_fmu_found_unsafe_only_when_instantiated_is_a_user_error(tmp_path, built_fmu):
     """An FMU replaced by an unsafe archive after the check: the run fails as the user's, never as internal."""
     from cosim import Execution, build_system, load_spec
-    from cosim.errors import EXIT_USAGE
+    from cosim.cli.exit_codes import EXIT_USAGE, run_exit_code
 
     fmu = tmp_path / "a.fmu"
     shutil.copy(built_fmu("linear_ode", 2), fmu)
@@ -160,7 +160,7 @@ def test_fmu_found_unsafe_only_when_instantiated_is_a_user_error(tmp_path, built
     system = build_system(load_spec(path))
     rewrite_fmu(built_fmu("linear_ode", 2), fmu, extra={"../../escape.txt": b"x"})
     result = Execution(system).run()
-    assert result.status == "failed" and result.failure == "user" and result.exit_code == EXIT_USAGE
+    assert result.status == "failed" and result.failure == "user" and run_exit_code(result) == EXIT_USAGE
     assert "escapes the extraction folder" in result.message and "internal error" not in result.message
     assert not (tmp_path.parent / "escape.txt").exists()
 

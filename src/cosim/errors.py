@@ -1,4 +1,4 @@
-"""cosim's one error family and the exit codes it maps to.
+"""cosim's one error family: every error cosim raises on purpose, in one module.
 
 Every error cosim raises on purpose derives from :class:`CosimError` and says
 whose it is to fix:
@@ -6,14 +6,14 @@ whose it is to fix:
 - :class:`UserError` -- a spec, a file, a table or a command line the user
   must fix.  It carries structured :class:`Problem` objects (file, JSON or
   element path, what is wrong, the fix), decided where the problem is found,
-  never guessed later from the text.  Exit code 2.
+  never guessed later from the text.  Each part of cosim has its subclass
+  (at the end of this module: archives, expressions, clusters, studies, analysis).
 - :class:`UnitError` -- a unit (an FMU, a Python unit, a player) failed while
-  running.  Exit code 1, like any failed run.
-- :class:`InternalError` -- a bug in cosim.  Exit code 70.
+  running, like any failed run.
+- :class:`InternalError` -- a bug in cosim.
 
-:func:`exit_code` is the only place that turns an outcome into an exit code;
-every ``cosim`` subcommand goes through it (see :mod:`cosim.cli.main`).
-Anything that is not a CosimError escaping a command is treated as internal.
+Exit codes are the command line's business: :mod:`cosim.cli.exit_codes` maps
+these classes to them (UserError 2, UnitError 1, anything else 70).
 
 This module imports nothing from the rest of cosim, so any module (and
 plug-ins outside the package) can raise these errors without import cycles.
@@ -23,13 +23,8 @@ from __future__ import annotations
 
 import difflib
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Iterable, Sequence
-
-EXIT_OK = 0  # everything ran
-EXIT_RUN_FAILED = 1  # a run (or some sweep points) failed
-EXIT_USAGE = 2  # a bad spec, file or command line: the user's to fix
-EXIT_INTERNAL = 70  # a bug in cosim (EX_SOFTWARE)
-EXIT_INTERRUPTED = 130  # Ctrl-C
 
 
 @dataclass(frozen=True)
@@ -53,9 +48,7 @@ class Problem:
 
 
 class CosimError(Exception):
-    """The base of every error cosim raises on purpose; ``exit_code`` says how a command ends."""
-
-    exit_code = EXIT_INTERNAL
+    """The base of every error cosim raises on purpose."""
 
 
 class UserError(CosimError):
@@ -65,7 +58,6 @@ class UserError(CosimError):
     ``path`` and ``fix``) for a mistake that has one obvious place.
     """
 
-    exit_code = EXIT_USAGE
 
     def __init__(self, problems: Sequence[Problem] | Problem | str, *, file: str = "", path: str = "",
                  fix: str = ""):
@@ -112,7 +104,6 @@ def json_path(parts: Iterable[object]) -> str:
 class UnitError(CosimError):
     """A unit failed at run time: names the unit, the simulation time and what went wrong."""
 
-    exit_code = EXIT_RUN_FAILED
 
     def __init__(self, unit: str, message: str, time: float | None = None):
         self.unit = unit
@@ -128,20 +119,108 @@ class UnitError(CosimError):
 class InternalError(CosimError):
     """A bug in cosim (an assumption of the engine that did not hold)."""
 
-    exit_code = EXIT_INTERNAL
+
+# -- the user errors of each part of cosim (one family, one module) --------------------------------------
+
+# Files and archives
 
 
-def exit_code(error: BaseException | None) -> int:
-    """The exit code of a command that ended with ``error`` (None: success).
+class ArchiveError(UserError):
+    """An archive is refused; ``problems`` says why: each a Problem with the archive as its file,
+    the member (when one is to blame) as its path, the rule or limit broken, and the fix."""
 
-    The one mapping of the command line: UserError 2, UnitError 1,
-    InternalError and anything unexpected 70, Ctrl-C 130.
+    def __init__(self, path: str | Path, problems: list[Problem]):
+        self.path = str(path)
+        super().__init__(problems)
+
+
+class ModelJsonError(UserError, ValueError):
+    """``model.json`` is malformed; the message names the file and the problem."""
+
+
+class FmuBuildError(UserError, RuntimeError):
+    """An FMU could not be built; the message says what to do about it (a user error: e.g. no C compiler)."""
+
+
+class FmuProblems(UserError):
+    """An FMU cannot be used; ``problems`` lists every reason as a :class:`Problem` with its fix.
+
+    A plain string in ``problems`` becomes a Problem without a fix.
+    ``path`` is the FMU's file (or its ``builtin:`` name).
     """
-    if error is None:
-        return EXIT_OK
-    if isinstance(error, KeyboardInterrupt):
-        return EXIT_INTERRUPTED
-    if isinstance(error, CosimError):
-        return error.exit_code
-    return EXIT_INTERNAL
 
+    def __init__(self, path: str, problems: Sequence[Problem | str]):
+        self.path = path
+        super().__init__([p if isinstance(p, Problem) else Problem(path, "", p) for p in problems])
+
+    @property
+    def messages(self) -> list[str]:
+        """What is wrong, one text per problem (without file and fix)."""
+        return [p.message for p in self.problems]
+
+
+# Expressions
+
+
+class ExpressionError(UserError, ValueError):
+    """The expression is malformed, uses something not allowed, or names an unknown value."""
+
+
+# Clusters and results folders
+
+
+class ClusterError(UserError):
+    """No Dask workers can be had (scheduler unreachable or without workers)."""
+
+
+class ClusterFileError(UserError):
+    """A cluster file that cannot be read, or whose cluster cannot be made as it says."""
+
+
+class FolderInUse(UserError):
+    """Another cosim process holds the results folder's lock."""
+
+
+# Studies
+
+
+class SweepError(UserError):
+    """A sweep cannot start as asked (results folder in use, resume of another spec, no workers)."""
+
+
+class OutputError(SweepError):
+    """The results folder cannot be written: read-only, full, no permission."""
+
+
+class OptimizeError(UserError):
+    """An optimisation cannot start as asked (results folder in use, resume with other settings, no workers)."""
+
+
+class SensitivityError(UserError):
+    """A sensitivity study cannot be done as asked."""
+
+
+# Analysis
+
+
+class AnalysisError(UserError, ValueError):
+    """A user mistake when analysing a table: a missing file, unknown column, bad filter."""
+
+
+# -- signals inside cosim, turned into Problems by whoever catches them -----------------------------------------
+
+
+class UnitConversionError(ValueError):
+    """Two units cannot be converted into each other (base of the two below)."""
+
+
+class UnknownUnit(UnitConversionError):
+    """A unit string that neither the FMU defines nor the unit syntax explains."""
+
+
+class IncompatibleUnits(UnitConversionError):
+    """Two known units of different quantities (e.g. N.m and A)."""
+
+
+class UnitImportError(ImportError):
+    """A unit's module exited or hung while being imported."""

@@ -27,7 +27,6 @@ import numpy as np
 
 from cosim.analysis.filters import Range, RangeFilters
 from cosim.analysis.table import AnalysisError, ResultsTable
-from cosim.errors import EXIT_OK
 
 SLIDER_STEPS = 1000  # sliders move over 0..1000; 0 and 1000 are exactly the column's min and max
 
@@ -367,8 +366,8 @@ class ExplorerWindow:
         return win
 
 
-def run_explorer(table: ResultsTable) -> int:
-    """Open the window and run the Tk main loop; returns the exit code (2 without a display)."""
+def run_explorer(table: ResultsTable) -> None:
+    """Open the window and run the Tk main loop until it is closed; raises AnalysisError without a display."""
     import tkinter as tk
 
     state = ExplorerState(table)
@@ -378,4 +377,3 @@ def run_explorer(table: ResultsTable) -> int:
         raise AnalysisError(f"cannot open a window ({exc}); set DISPLAY, or use cosim plot/report") from None
     ExplorerWindow(root, state)
     root.mainloop()
-    return EXIT_OK

@@ -28,17 +28,11 @@ from typing import Any, Mapping
 import numpy as np
 import pandas as pd
 
-from cosim.errors import UserError, did_you_mean
+from cosim.errors import AnalysisError, did_you_mean
 from cosim.results.columns import TAIL_COLUMNS
 from cosim.spec.expressions import COMPARISONS, Expression, ExpressionError, identifier
 
 TAIL = TAIL_COLUMNS  # the old name
-
-
-class AnalysisError(UserError, ValueError):
-    """A user mistake when analysing a table: a missing file, unknown column, bad filter."""
-
-
 
 
 def base_name(column: str) -> str:

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from cosim.analysis.pareto import front_of, resolve_objectives
-from cosim.errors import EXIT_OK
+from cosim.cli.exit_codes import EXIT_OK
 
 FIGURE_SUFFIXES = (".png", ".svg", ".pdf")
 
@@ -170,4 +170,5 @@ def cmd_explore(args: argparse.Namespace) -> int:
         from cosim.analysis.explorer import run_explorer
     except ImportError as exc:  # tkinter missing from this Python
         raise AnalysisError(f"the explorer needs tkinter: {exc}") from None
-    return run_explorer(table)
+    run_explorer(table)
+    return EXIT_OK

@@ -25,8 +25,9 @@ def add_export_parsers(sub: Any) -> None:
 
 def cmd_export(args: argparse.Namespace) -> int:
     """``cosim export spec.json -o system.ssp``; also writes system.spec.json beside it."""
+    from cosim.cli.exit_codes import EXIT_OK
     from cosim.cli.options import experiment_overrides
-    from cosim.errors import EXIT_OK, UsageError
+    from cosim.errors import UsageError
     from cosim.export.ssp import companion_spec_path, export_ssp
     from cosim.system.validate import check_spec
 
@@ -47,7 +48,8 @@ def cmd_export_fmu(args: argparse.Namespace) -> int:
     """``cosim export-fmu file.py:Class -o unit.fmu``."""
     import sys
 
-    from cosim.errors import EXIT_OK, UsageError
+    from cosim.cli.exit_codes import EXIT_OK
+    from cosim.errors import UsageError
     from cosim.export.fmu import export_python_unit
 
     out = Path(args.out)

@@ -13,7 +13,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Callable
 
-from cosim.errors import EXIT_OK, UsageError
+from cosim.cli.exit_codes import EXIT_OK
+from cosim.errors import UsageError
 from cosim.units.protocol import UnitDescription, UnitType
 
 HEADER = ("name", "causality", "type", "shape", "unit", "start", "range", "description")

@@ -2,7 +2,7 @@
 
 Exit codes follow the kind of outcome: 0 everything ran, 1 a run failed,
 2 a bad spec, file or usage (the user's to fix), 70 an internal error (ours);
-:func:`cosim.errors.exit_code` decides them for every subcommand.
+:func:`cosim.cli.exit_codes.exit_code` decides them for every subcommand.
 A user's mistake never shows a traceback.
 """
 
@@ -14,9 +14,10 @@ import sys
 import traceback
 from typing import Any, Sequence
 
+from cosim.cli.exit_codes import EXIT_INTERNAL, EXIT_OK, EXIT_RUN_FAILED, EXIT_USAGE, exit_code
 from cosim.cli.options import add_experiment_options, experiment_overrides  # noqa: F401  (their old place)
 from cosim.cli.spec import cmd_inspect, cmd_run, cmd_validate, parse_assignment  # noqa: F401  (their old place)
-from cosim.errors import EXIT_INTERNAL, EXIT_OK, EXIT_RUN_FAILED, EXIT_USAGE, UsageError, UserError, exit_code
+from cosim.errors import UsageError, UserError
 
 __all__ = ["EXIT_INTERNAL", "EXIT_OK", "EXIT_RUN_FAILED", "EXIT_USAGE", "UsageError", "main"]
 
@@ -37,7 +38,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     Every subcommand returns its own code for what it ran (0, or 1 when a run
     failed); whatever it raises is reported here and mapped by
-    :func:`cosim.errors.exit_code`: a UserError lists its problems
+    :func:`cosim.cli.exit_codes.exit_code`: a UserError lists its problems
     (exit 2), anything unexpected prints a traceback (exit 70).
     """
     parser = _parser()

@@ -8,8 +8,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from cosim.cli.exit_codes import EXIT_OK, run_exit_code
 from cosim.cli.options import add_experiment_options, experiment_overrides
-from cosim.errors import EXIT_OK, UsageError
+from cosim.errors import UsageError
 
 
 def add_parsers(sub: Any) -> None:
@@ -103,7 +104,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             result.traces.to_parquet(out, index=False)
         signals = [str(c) for c in result.traces.columns if c != "time"]
         print(f"traces: {out} ({len(result.traces)} rows, {len(signals)} signals: {_abbreviated(signals)})")
-    return result.exit_code
+    return run_exit_code(result)
 
 
 def _abbreviated(names: list[str], most: int = 8) -> str:

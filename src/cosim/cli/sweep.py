@@ -13,7 +13,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from cosim.errors import EXIT_OK, EXIT_RUN_FAILED, UsageError
+from cosim.cli.exit_codes import EXIT_OK, EXIT_RUN_FAILED
+from cosim.errors import UsageError
 
 
 def add_sweep_parser(sub: Any) -> None:

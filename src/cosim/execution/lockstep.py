@@ -44,7 +44,7 @@ from cosim.spec.expressions import evaluate_expressions
 from cosim.system.builder import Assignment, Connection, System
 from cosim.units.fmu.instance import FmiInstance
 from cosim.units.protocol import NUMERIC_TYPES, Selection, Unit
-from cosim.units.python.batch import NotBatchable, PythonBatchUnit, batch_class_of
+from cosim.units.python.batch import NotBatchable, batch_class_of
 from cosim.units.python.unit import PythonUnitType
 from cosim.util.limits import limit
 

@@ -17,7 +17,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from cosim.errors import EXIT_INTERNAL, EXIT_OK, EXIT_RUN_FAILED, EXIT_USAGE, UnitError, UserError
+from cosim.errors import UnitError, UserError
 from cosim.master.algorithms import group_transfers, make_algorithm
 from cosim.master.observers import ExactColumns, ObjectiveReducer, Observer, TraceRecorder, flatten_objectives
 from cosim.spec.expressions import evaluate_expressions
@@ -28,7 +28,6 @@ OK, FAILED = "ok", "failed"
 # Why a run failed, for RunResult.failure: a unit (or a non-finite objective),
 # a user's file found unusable only while running, or a bug in cosim.
 UNIT_FAILURE, USER_FAILURE, INTERNAL_FAILURE = "unit", "user", "internal"
-_EXIT_CODES = {"": EXIT_OK, UNIT_FAILURE: EXIT_RUN_FAILED, USER_FAILURE: EXIT_USAGE, INTERNAL_FAILURE: EXIT_INTERNAL}
 
 
 @dataclass
@@ -54,11 +53,6 @@ class RunResult:
     @property
     def ok(self) -> bool:
         return self.status == OK
-
-    @property
-    def exit_code(self) -> int:
-        """The command line's exit code for this run (see :func:`cosim.errors.exit_code`)."""
-        return EXIT_OK if self.ok else _EXIT_CODES.get(self.failure, EXIT_RUN_FAILED)
 
 
 def step_count(start: float, stop: float, h: float) -> int:

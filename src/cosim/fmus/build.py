@@ -35,7 +35,9 @@ import tempfile
 import zipfile
 from pathlib import Path
 
-from cosim.errors import UserError  # one error family: a failed build is the user's to fix
+from cosim.errors import (
+    FmuBuildError,  # one error family: a failed build is the user's to fix
+)
 
 from .model_description import (
     ModelJsonError,
@@ -51,10 +53,6 @@ COMMON_DIR = FMUS_DIR / "common"
 CFLAGS = ("-shared", "-fPIC", "-O2", "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-fvisibility=hidden", "-Wall", "-Wextra")
 FMI_VERSIONS = (2, 3)
 INTERFACE_CHOICES = {"cs": ("CoSimulation",), "me": ("ModelExchange",), "cs,me": ("CoSimulation", "ModelExchange")}
-
-
-class FmuBuildError(UserError, RuntimeError):
-    """An FMU could not be built; the message says what to do about it (a user error: e.g. no C compiler)."""
 
 
 def available_models() -> list[str]:

@@ -49,7 +49,9 @@ from pathlib import Path
 from typing import Any
 from xml.sax.saxutils import quoteattr
 
-from cosim.errors import UserError  # one error family with the engine (exit code 2 in a command)
+from cosim.errors import (
+    ModelJsonError,  # one error family with the engine (exit code 2 in a command)
+)
 
 CAUSALITIES = ("parameter", "input", "output", "local")
 C_TYPES = {"Real": "double", "Integer": "int32_t", "Boolean": "bool"}
@@ -57,10 +59,6 @@ FMI3_TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean"}
 TYPE_CODES = {"Real": "VT_REAL", "Integer": "VT_INTEGER", "Boolean": "VT_BOOLEAN"}
 INTERFACES = ("CoSimulation", "ModelExchange")
 CAUSALITY_CODES = {"parameter": "CAUS_PARAMETER", "input": "CAUS_INPUT", "output": "CAUS_OUTPUT", "local": "CAUS_LOCAL"}
-
-
-class ModelJsonError(UserError, ValueError):
-    """``model.json`` is malformed; the message names the file and the problem."""
 
 
 @dataclass(frozen=True)

@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterator
 
-from cosim.errors import Problem, UserError
+from cosim.errors import ClusterFileError, Problem
 from cosim.parallel.interrupts import processes_started_here_ignore_ctrl_c
 
 # the package a cluster class comes from -> how to install it (the optional extras of pyproject.toml)
@@ -46,10 +46,6 @@ EXTRAS = {
 }
 
 ALLOWED_FAILURES = 1  # a task whose worker died is run once more elsewhere; a second death is the point's fault
-
-
-class ClusterFileError(UserError):
-    """A cluster file that cannot be read, or whose cluster cannot be made as it says."""
 
 
 @dataclass(frozen=True)

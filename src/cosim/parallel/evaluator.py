@@ -27,11 +27,7 @@ import time
 from contextlib import contextmanager
 from typing import Any, Iterator, Sequence
 
-from cosim.errors import UserError
-
-
-class ClusterError(UserError):
-    """No Dask workers can be had (scheduler unreachable or without workers)."""
+from cosim.errors import ClusterError, UserError
 
 
 def check_timeout(timeout: float | None, error: type[UserError] = UserError) -> None:

@@ -222,10 +222,7 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
     try:
         # what every payload needs (the stepping loop, numpy, the lock-step runner), imported before it comes:
         # a spare child (start_spare_children) is ready for it that much sooner
-        from cosim.execution import (
-            lockstep,
-            point,  # noqa: F401
-        )
+        from cosim.execution import lockstep, point  # noqa: F401
 
         kind, payload = inbox.recv()
         try:

@@ -19,13 +19,9 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from cosim.errors import UserError
+from cosim.errors import FolderInUse
 
 LOCK_NAME = ".cosim.lock"
-
-
-class FolderInUse(UserError):
-    """Another cosim process holds the results folder's lock."""
 
 
 class FolderLock:

@@ -33,7 +33,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from cosim.errors import UserError
+from cosim.errors import ExpressionError
 from cosim.util import limits
 
 
@@ -69,10 +69,6 @@ _BINARY = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul,
 _UNARY = {ast.USub: operator.neg, ast.UAdd: operator.pos, ast.Not: np.logical_not}
 COMPARISONS = {ast.Lt: operator.lt, ast.LtE: operator.le, ast.Gt: operator.gt, ast.GtE: operator.ge,
             ast.Eq: operator.eq, ast.NotEq: operator.ne}
-
-
-class ExpressionError(UserError, ValueError):
-    """The expression is malformed, uses something not allowed, or names an unknown value."""
 
 
 class Expression:

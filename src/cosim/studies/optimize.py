@@ -54,7 +54,7 @@ from typing import Any, Mapping, TextIO
 import numpy as np
 
 from cosim.analysis.hypervolume import hypervolume, normalised_losses
-from cosim.errors import Problem, SpecError, UserError
+from cosim.errors import OptimizeError, Problem, SpecError
 from cosim.results.checksums import changed_files, data_file_checksums, unit_checksums
 from cosim.results.columns import TAIL_COLUMNS
 from cosim.studies.driver import check_results_folder, finish_metadata, now_utc, package_versions, run_metadata, say
@@ -64,10 +64,6 @@ DEFAULT_BUDGET = 200
 DEFAULT_BATCH = {"nsga2": 20}  # a generation of NSGA-II is one batch; the others ask 8 at a time
 MAX_TRIALS_PER_EVALUATION = 20
 _ELEMENT = re.compile(r"^(.*)\[(\d+)\]$")
-
-
-class OptimizeError(UserError):
-    """An optimisation cannot start as asked (results folder in use, resume with other settings, no workers)."""
 
 
 # -- settings -----------------------------------------------------------------------

@@ -32,7 +32,7 @@ from typing import Any, Iterator, Sequence
 
 import numpy as np
 
-from cosim.errors import Problem, SpecError, UserError
+from cosim.errors import Problem, SensitivityError, SpecError
 
 METHODS = ("sobol", "morris")
 DEFAULT_N = {"sobol": 256, "morris": 20}
@@ -40,10 +40,6 @@ DEFAULT_SEED = 1
 MORRIS_LEVELS = 4
 INDICES = {"sobol": ("S1", "ST"), "morris": ("mu_star", "sigma")}
 TABLE_NAME, FIGURE_NAME = "sensitivity.csv", "sensitivity.png"
-
-
-class SensitivityError(UserError):
-    """A sensitivity study cannot be done as asked."""
 
 
 class SampleSpace:

@@ -44,7 +44,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterator, Sequence, TextIO
 
-from cosim.errors import UserError
+from cosim.errors import OutputError, SweepError
 from cosim.parallel.early_cluster import EarlyCluster
 from cosim.parallel.evaluator import Reruns, ScatteredPayload, check_timeout, lost_rows
 from cosim.parallel.isolation import IsolatedRunner, make_payload, preload_spare_children, stop_spare_children
@@ -58,15 +58,6 @@ from cosim.util import limits
 
 if TYPE_CHECKING:
     import pandas as pd
-
-
-
-class SweepError(UserError):
-    """A sweep cannot start as asked (results folder in use, resume of another spec, no workers)."""
-
-
-class OutputError(SweepError):
-    """The results folder cannot be written: read-only, full, no permission."""
 
 
 @contextmanager

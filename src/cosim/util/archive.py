@@ -29,20 +29,11 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from typing import Callable
 
-from cosim.errors import Problem, UserError
+from cosim.errors import ArchiveError, Problem
 from cosim.util import limits
 
 RATIO_MIN_BYTES = 1 << 20  # small members may compress extremely well (a file of spaces); only big ones count
 _CHUNK = 1 << 20
-
-
-class ArchiveError(UserError):
-    """An archive is refused; ``problems`` says why: each a Problem with the archive as its file,
-    the member (when one is to blame) as its path, the rule or limit broken, and the fix."""
-
-    def __init__(self, path: str | Path, problems: list[Problem]):
-        self.path = str(path)
-        super().__init__(problems)
 
 
 @dataclass(frozen=True)

@@ -25,19 +25,9 @@ import re
 from dataclasses import dataclass
 from typing import Any, Mapping
 
+from cosim.errors import IncompatibleUnits, UnitConversionError, UnknownUnit  # noqa: F401 (raised here, caught by callers)
+
 BASE_UNITS = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
-
-
-class UnitConversionError(ValueError):
-    """Two units cannot be converted into each other (base of the two below)."""
-
-
-class UnknownUnit(UnitConversionError):
-    """A unit string that neither the FMU defines nor the unit syntax explains."""
-
-
-class IncompatibleUnits(UnitConversionError):
-    """Two known units of different quantities (e.g. N.m and A)."""
 
 
 @dataclass(frozen=True)

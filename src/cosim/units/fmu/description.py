@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
 
-from cosim.errors import Problem, UserError
+from cosim.errors import FmuProblems, Problem
 from cosim.units.protocol import Unit, UnitDescription, UnitType, Variable, indexed_runs, parse_port
 from cosim.units.registry import BUILTIN_PREFIX  # noqa: F401  (re-exported from its old place)
 from cosim.util.archive import ArchiveError, ExtractionCache, check_archive, extract_to_new_folder
@@ -38,23 +38,6 @@ _FMI3_TYPE = {
     "Enumeration": "Integer", "Boolean": "Boolean", "String": "String", "Binary": "Binary", "Clock": "Clock",
     "Real": "Real", "Integer": "Integer",
 }
-
-
-class FmuProblems(UserError):
-    """An FMU cannot be used; ``problems`` lists every reason as a :class:`Problem` with its fix.
-
-    A plain string in ``problems`` becomes a Problem without a fix.
-    ``path`` is the FMU's file (or its ``builtin:`` name).
-    """
-
-    def __init__(self, path: str, problems: Sequence[Problem | str]):
-        self.path = path
-        super().__init__([p if isinstance(p, Problem) else Problem(path, "", p) for p in problems])
-
-    @property
-    def messages(self) -> list[str]:
-        """What is wrong, one text per problem (without file and fix)."""
-        return [p.message for p in self.problems]
 
 
 _REEXPORT = "re-export the FMU from its tool"

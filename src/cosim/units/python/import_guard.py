@@ -29,14 +29,11 @@ import threading
 from contextlib import contextmanager
 from typing import Iterator
 
+from cosim.errors import UnitImportError
 from cosim.util import limits
 
 CHECK_IN_CHILD = True  # False in the worker children, which are a child process already
 _IN_CHECKING_CHILD = False  # True in the child of import_in_child_first: its parent keeps the time
-
-
-class UnitImportError(ImportError):
-    """A unit's module exited or hung while being imported."""
 
 
 class _ImportTimeout(BaseException):
