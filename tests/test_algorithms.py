@@ -63,6 +63,30 @@ def test_jacobi_traces_show_inputs_consistent_with_the_outputs_at_each_time(writ
     np.testing.assert_allclose(traces["gain.y"], 3.0 * traces["time"], atol=1e-12)  # y = k u, read after u was set
 
 
+def test_jacobi_delayed_adds_a_step_of_delay_at_each_link_between_feedthrough_units(write_spec):
+    # clock -> gain (k = 3) -> gain2 (k = 2): every output is read before any input is set, so gain2 sees
+    # gain's output from before gain's input was set: gain2.y(t) = 6 (t - h) after the first step
+    spec = chain_spec("jacobi-delayed")
+    spec["units"]["gain2"] = {"python": python_unit("Gain"), "parameters": {"k": 2.0}}
+    spec["connections"].append({"from": "gain.y", "to": "gain2.u"})
+    spec["record"].append("gain2.y")
+    _, result = run(write_spec, spec)
+    t = result.traces["time"]
+    np.testing.assert_allclose(result.traces["gain2.y"].iloc[1:], 6.0 * (t.iloc[1:] - 0.1), atol=1e-12)
+    assert result.traces["gain2.y"].iloc[0] == 0.0  # initialization sets every input in dependency order
+
+
+@pytest.mark.parametrize("algorithm", ["jacobi", "gauss-seidel"])
+def test_jacobi_sets_direct_feedthrough_inputs_in_dependency_order(write_spec, algorithm):
+    # the same chain under Jacobi: gain2's input is set after gain's, at every communication point: 6 t, as GS
+    spec = chain_spec(algorithm)
+    spec["units"]["gain2"] = {"python": python_unit("Gain"), "parameters": {"k": 2.0}}
+    spec["connections"].append({"from": "gain.y", "to": "gain2.u"})
+    spec["record"].append("gain2.y")
+    _, result = run(write_spec, spec)
+    np.testing.assert_allclose(result.traces["gain2.y"], 6.0 * result.traces["time"], atol=1e-12)
+
+
 def test_time_does_not_drift_over_many_steps(write_spec):
     _, result = run(write_spec, chain_spec("gauss-seidel", step=1e-3, stop=100.0))
     assert result.steps == 100_000

@@ -251,6 +251,16 @@ def test_undeclared_dependencies_are_named_in_the_loop_message_and_can_be_declar
             "experiment": {"stop": 0.3, "step": 0.1}}
     path = write_spec(spec)
     code, text = cli(capsys, "validate", str(path))
+    assert code == 0, text  # a loop of Real signals is solved (tests/test_algebraic_loops.py), not refused
+    code, text = cli(capsys, "inspect", str(path))
+    assert code == 0
+    assert ("loop through units g1, g2: tearing" in text
+            and "unit(s) g1, g2 declare no dependencies for their outputs, so every output is assumed to depend "
+                "directly on every input" in text)
+    assert '"feedthrough"' in text
+    # where the loop cannot be solved (a master algorithm that does not solve loops) validate names the assumption
+    spec["experiment"]["algorithm"] = "jacobi-delayed"
+    code, text = cli(capsys, "validate", str(write_spec(spec, "delayed.json")))
     assert code == 2
     assert ("algebraic loop through units g1, g2" in text
             and "unit(s) g1, g2 declare no dependencies for their outputs, so every output is assumed to depend "
@@ -259,6 +269,8 @@ def test_undeclared_dependencies_are_named_in_the_loop_message_and_can_be_declar
     spec["units"]["g2"]["feedthrough"] = {"y": []}
     code, text = cli(capsys, "validate", str(write_spec(spec)))
     assert code == 0, text
+    code, text = cli(capsys, "inspect", str(write_spec(spec)))
+    assert code == 0 and "algebraic loops: none" in text
     spec["units"]["g2"]["feedthrough"] = {"yy": ["u", "v"]}
     code, text = cli(capsys, "validate", str(write_spec(spec)))
     assert code == 2 and "$.units.g2.feedthrough.yy: 'yy' is not an output of unit 'g2'" in text

@@ -23,7 +23,7 @@ from cosim.fmus.build import FmuBuildError, build_fmu, ensure_built
 from cosim.fmus.testing import FmuInstance
 
 REPO = Path(__file__).resolve().parents[1]
-MODELS = ["bouncing_ball", "fault", "gain_array", "linear_ode", "motor_gear_energy", "panda_inverse_dynamics",
+MODELS = ["algebraic", "bouncing_ball", "fault", "gain_array", "linear_ode", "motor_gear_energy", "panda_inverse_dynamics",
           "square_lag"]
 MODEL_EXCHANGE_ONLY = {"bouncing_ball", "square_lag"}  # tests/test_fmu_model_exchange.py runs them
 

@@ -57,8 +57,9 @@ def _spec_with(tmp_path: Path, **experiment) -> Path:
 
 
 @pytest.mark.parametrize("experiment", [{"algorithm": "gauss-seidel"}, {"algorithm": "jacobi"},
+                                        {"algorithm": "jacobi-delayed"},
                                         {"stop": 1.2, "stop_when": None}],  # every point cut at the stop time
-                         ids=["gauss-seidel", "jacobi", "no-stop-when"])
+                         ids=["gauss-seidel", "jacobi", "jacobi-delayed", "no-stop-when"])
 def test_lockstep_gives_every_point_the_results_of_its_single_run_bit_for_bit(tmp_path, experiment):
     """Also the energy FMU's outputs, which lock-step reads only at a point's last sample (final reductions)."""
     system = build_system(load_spec(_spec_with(tmp_path, **experiment)))

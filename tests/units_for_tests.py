@@ -194,3 +194,58 @@ class Ishigami(PythonUnit):
     def do_step(self, t, h):
         self.y = math.sin(self.x1) + self.a * math.sin(self.x2) ** 2 + self.b * self.x3 ** 4 * math.sin(self.x1)
         self.lin = 3.0 * self.x1 + self.x2
+
+
+class Algebraic(PythonUnit):
+    """y = c0 + c1*u + c3*u^3 + a*cos(u) + w, direct feed-through from u and w (as the `algebraic` FMU, plus w)."""
+
+    variables = (
+        Variable("c0", "parameter", start=0.0),
+        Variable("c1", "parameter", start=1.0),
+        Variable("c3", "parameter", start=0.0),
+        Variable("a", "parameter", start=0.0),
+        Variable("u", "input", start=0.0),
+        Variable("w", "input", start=0.0),
+        Variable("y", "output", start=0.0),
+    )
+    feedthrough = {"y": ["u", "w"]}
+
+    def compute_outputs(self):
+        self.y = self.c0 + self.c1 * self.u + self.c3 * self.u ** 3 + self.a * math.cos(self.u) + self.w
+
+    def do_step(self, t, h):
+        self.compute_outputs()
+
+
+class Saturation(PythonUnit):
+    """y = min(max(u, lo), hi), direct feed-through (a limiter)."""
+
+    variables = (
+        Variable("lo", "parameter", start=-1.0),
+        Variable("hi", "parameter", start=1.0),
+        Variable("u", "input", start=0.0),
+        Variable("y", "output", start=0.0),
+    )
+    feedthrough = {"y": ["u"]}
+
+    def compute_outputs(self):
+        self.y = min(max(self.u, self.lo), self.hi)
+
+    def do_step(self, t, h):
+        self.compute_outputs()
+
+
+class Counter(PythonUnit):
+    """An Integer output n = n_in + 1 that depends directly on its Integer input (a loop that cannot be solved)."""
+
+    variables = (
+        Variable("n_in", "input", type="Integer", start=0),
+        Variable("n", "output", type="Integer", start=0),
+    )
+    feedthrough = {"n": ["n_in"]}
+
+    def compute_outputs(self):
+        self.n = self.n_in + 1
+
+    def do_step(self, t, h):
+        self.compute_outputs()

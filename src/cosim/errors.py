@@ -116,6 +116,20 @@ class UnitError(CosimError):
         return type(self), (self.unit, self.message, self.time)
 
 
+class LoopError(UnitError):
+    """An algebraic loop that did not converge (cosim.master.loops): names the loop, the time and the residual.
+
+    A UnitError, so the run is a failed row like any unit's failure; ``unit`` holds the loop's name.
+    """
+
+    def __init__(self, loop: str, message: str, time: float | None = None):
+        self.unit = loop
+        self.time = time
+        self.message = message
+        CosimError.__init__(self, f"algebraic {loop}" + (f" at t={time:g}" if time is not None else "")
+                            + f": {message}")
+
+
 class InternalError(CosimError):
     """A bug in cosim (an assumption of the engine that did not hold)."""
 

@@ -150,7 +150,36 @@ def inspect_spec(path: str, experiment: dict[str, Any] | None = None) -> int:
     step = "(none: give --step to run)" if "step" in missing else f"{exp.step:g} s"
     print(f"experiment: {exp.start:g} .. {stop}, step {step}, {exp.algorithm}")
     print(f"stepping order: {' -> '.join(system.order)}")
+    print_coupling(system)
     return EXIT_OK
+
+
+def print_coupling(system: Any) -> None:
+    """The system's direct feed-through inputs in dependency order, and its algebraic loops with their tearing
+    variables (what the master sets and solves at each communication point)."""
+    from cosim.master.loops import Loop
+    from cosim.system.stepping import assumed_feedthrough
+
+    coupling = system.coupling
+    feeds = [system.connections[block[0]].target for block in coupling.blocks if not isinstance(block, Loop)]
+    if feeds:
+        names = dict.fromkeys(f"{s.unit}.{s.variable.name}" for s in feeds)
+        print(f"direct feed-through inputs, in dependency order: {', '.join(names)}")
+    settings = coupling.settings
+    if not coupling.loops:
+        print("algebraic loops: none")
+        return
+    print(f"algebraic loops: {len(coupling.loops)} (solved by {settings.method}, tolerance {settings.tolerance:g}, "
+          f"at most {settings.max_iterations} iterations)")
+    for loop in coupling.loops:
+        values = sum(len(system.connections[i].target.refs) for i in loop.torn)
+        print(f"  loop through units {', '.join(loop.units)}: tearing {', '.join(loop.tearing)} "
+              f"({values} value{'' if values == 1 else 's'}); ports {', '.join(loop.ports)}")
+        assumed = assumed_feedthrough(system.units, loop)
+        if assumed:
+            print(f"    note: unit(s) {', '.join(assumed)} declare no dependencies for their outputs, so every "
+                  "output is assumed to depend directly on every input; if one does not, declare it in the spec "
+                  '("feedthrough": {"<output>": []})')
 
 
 def inspect_target(target: str, experiment: dict[str, Any] | None = None) -> int:

@@ -147,7 +147,7 @@ def has_twin(system: System) -> bool:
 def can_run_in_lockstep(system: System) -> bool:
     """Whether points of ``system`` may run in lock-step (module docstring): a twin, Real connections,
     numeric probes."""
-    if not has_twin(system):
+    if not has_twin(system) or system.coupling.loops:  # algebraic loops are solved point by point
         return False
     # connections carry Real values only (batches hand values on as float arrays; an Integer or Boolean
     # input keeps its exact type on the one-by-one path)
@@ -413,13 +413,20 @@ def _plan(system: System, batches: Mapping[str, Any]):
                 batch.step(t, h)
 
         return gauss_seidel
-    if algorithm == "jacobi":
-        transfers = _transfers(batches, system.connections)
+    if algorithm in ("jacobi", "jacobi-delayed"):
+        # jacobi sets the inputs that feed outputs directly at each communication point, in dependency order
+        # (no loops here: can_run_in_lockstep); jacobi-delayed sets them with the others
+        direct = system.coupling.direct if algorithm == "jacobi" else frozenset()
+        transfers = _transfers(batches, [c for i, c in enumerate(system.connections) if i not in direct])
+        feeds = [transfer for block in system.coupling.blocks if direct
+                 for transfer in _transfers(batches, [system.connections[i] for i in block])]
         stepped = [batches[name] for name in system.order]
 
         def jacobi(t: float, h: float) -> None:  # transfers after the step, as Jacobi.step
             for batch in stepped:
                 batch.step(t, h)
+            for transfer in feeds:
+                transfer.run()
             values = [transfer.read() for transfer in transfers]
             for transfer, v in zip(transfers, values):
                 transfer.write(v)

@@ -166,7 +166,8 @@ class Execution:
             stop_column = probe.columns.index(exp.stop_when) if exp.stop_when else None
 
             algorithm = make_algorithm(exp.algorithm)
-            algorithm.bind(units, self.system.order, self.system.connections)
+            algorithm.bind(units, self.system.order, self.system.connections, self.system.coupling)
+            algorithm.start(t)  # e.g. algebraic loops solved at the start time
             values = probe.read()
             for observer in observers:
                 observer.initialized(t, values)

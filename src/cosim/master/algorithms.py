@@ -1,4 +1,4 @@
-"""Fixed-step master algorithms: Gauss-Seidel and Jacobi.
+"""Fixed-step master algorithms: Gauss-Seidel, Jacobi (zero-delay feed-through) and Jacobi with delay.
 
 An algorithm is bound to live units once (:meth:`MasterAlgorithm.bind`),
 which resolves every connection into a :class:`Transfer` with pre-built
@@ -9,32 +9,11 @@ long runs do not drift.
 
 from __future__ import annotations
 
-from functools import partial
-from typing import Any, Callable, Mapping, Protocol, Sequence
+from typing import Mapping, Sequence
 
-import numpy as np
-
-from cosim.units.protocol import ElementRef, SimulationEnded, Unit, UnitError
-
-
-class Port(Protocol):
-    """One end of a link: a unit's name and the elements of its port."""
-
-    unit: str
-    refs: tuple[ElementRef, ...]
-
-
-class Link(Protocol):
-    """What an algorithm needs of a connection: ``target = factor * source + offset``, element by element.
-
-    The system's checked connections (:class:`cosim.system.parts.Connection`) are links; the algorithms know
-    nothing else of a system, so they can be bound to any units and links.
-    """
-
-    source: Port
-    target: Port
-    factor: float
-    offset: float
+from cosim.master.loops import Coupling, CouplingRuntime
+from cosim.master.transfers import Link, Port, Transfer, group_transfers  # noqa: F401  (re-exported: their old place)
+from cosim.units.protocol import SimulationEnded, Unit, UnitError
 
 
 def step_unit(unit: Unit, t: float, h: float) -> None:
@@ -47,63 +26,23 @@ def step_unit(unit: Unit, t: float, h: float) -> None:
         raise UnitError(unit.name, f"do_step raised {type(exc).__name__}: {exc}", t) from exc
 
 
-class Transfer:
-    """Copies a group of output elements of one unit to input elements of another.
+class MasterAlgorithm:
+    """Base: ``bind`` to live units, ``start(t)`` once at the start time, then ``step(t, h)`` advances all of them.
 
-    Connections with a factor or offset (SSP transformations, unit
-    conversions) deliver ``factor * value + offset``; a group without any
-    keeps the plain copy.
+    ``coupling`` (:class:`cosim.master.loops.Coupling`): the system's direct feed-through and algebraic loops;
+    an algorithm with ``solves_loops`` solves the loops at every communication point, others refuse systems
+    that have any (the system check says so).
     """
 
-    __slots__ = ("source", "source_selection", "target", "target_selection", "read", "write")
-
-    def __init__(self, source: Unit, target: Unit, connections: Sequence[Link]):
-        self.source = source
-        self.target = target
-        self.source_selection = source.select([r for c in connections for r in c.source.refs])
-        self.target_selection = target.select([r for c in connections for r in c.target.refs])
-        read = source.reader(self.source_selection)  # valid until its next call
-        # A unit with its own writer (an FMU: straight into the buffer its set call reads) takes the values
-        # as they are read (numpy views of the source's buffer, or lists); others get them through set().
-        own_writer = type(target).writer is not Unit.writer
-        if any((c.factor, c.offset) != (1.0, 0.0) for c in connections):
-            read = _converting(read, connections, as_list=not own_writer)
-        self.read = read
-        if own_writer:
-            self.write = target.writer(self.target_selection)
-        else:
-            self.write = partial(target.set, self.target_selection)
-
-    def run(self) -> None:
-        self.write(self.read())
-
-
-def _converting(read: Callable[[], Sequence], connections: Sequence[Link],
-                as_list: bool = True) -> Callable[[], Any]:
-    """``read`` followed by each element's unit conversion ``factor * x + offset`` (one multiply-add, no drift);
-    a list, or with ``as_list=False`` a numpy array."""
-    factor = np.array([c.factor for c in connections for _ in c.source.refs])
-    offset = np.array([c.offset for c in connections for _ in c.source.refs])
-    if not as_list:
-        return lambda: np.asarray(read(), dtype=float) * factor + offset
-    return lambda: (np.asarray(read(), dtype=float) * factor + offset).tolist()
-
-
-def group_transfers(units: Mapping[str, Unit], connections: Sequence[Link]) -> list[Transfer]:
-    """One Transfer per (source unit, target unit) pair, in the order first seen."""
-    groups: dict[tuple[str, str], list[Link]] = {}
-    for c in connections:
-        groups.setdefault((c.source.unit, c.target.unit), []).append(c)
-    return [Transfer(units[s], units[t], cs) for (s, t), cs in groups.items()]
-
-
-class MasterAlgorithm:
-    """Base: ``bind`` to live units, then ``step(t, h)`` advances all of them."""
-
     name = "abstract"
+    solves_loops = False
 
-    def bind(self, units: Mapping[str, Unit], order: Sequence[str], connections: Sequence[Link]) -> None:
+    def bind(self, units: Mapping[str, Unit], order: Sequence[str], connections: Sequence[Link],
+             coupling: Coupling | None = None) -> None:
         raise NotImplementedError
+
+    def start(self, t: float) -> None:
+        """Called once after initialization, before the first step: outputs consistent at ``t`` (default: as they are)."""
 
     def step(self, t: float, h: float) -> None:
         raise NotImplementedError
@@ -112,21 +51,42 @@ class MasterAlgorithm:
 class GaussSeidel(MasterAlgorithm):
     """Units step one after another in ``order``; each first takes its inputs
     from the *latest* outputs, so a unit later in the order sees the values its
-    sources computed in this same step."""
+    sources computed in this same step.  An algebraic loop is solved as soon as
+    its last unit has stepped, so the units after it see the solution."""
 
     name = "gauss-seidel"
+    solves_loops = True
 
-    def bind(self, units: Mapping[str, Unit], order: Sequence[str], connections: Sequence[Link]) -> None:
+    def bind(self, units: Mapping[str, Unit], order: Sequence[str], connections: Sequence[Link],
+             coupling: Coupling | None = None) -> None:
         self._plan = []
         for name in order:
             incoming = [c for c in connections if c.target.unit == name]
             self._plan.append((units[name], group_transfers(units, incoming)))
+        self._loops = CouplingRuntime(coupling, units, connections) if coupling and coupling.loops else None
+        if self._loops is not None:  # only then the step that solves loops (a system without any pays nothing)
+            last = {loop: max(order.index(u) for u in loop.units) for loop in coupling.loops}
+            self._solve_after = [[self._loops.solver(loop).solve for loop in coupling.loops if last[loop] == i]
+                                 for i in range(len(order))]
+            self.step = self._step_solving_loops  # type: ignore[method-assign]
+
+    def start(self, t: float) -> None:
+        if self._loops is not None:
+            self._loops.propagate(t)
 
     def step(self, t: float, h: float) -> None:
         for unit, transfers in self._plan:
             for transfer in transfers:
                 transfer.run()
             step_unit(unit, t, h)
+
+    def _step_solving_loops(self, t: float, h: float) -> None:
+        for (unit, transfers), solves in zip(self._plan, self._solve_after):
+            for transfer in transfers:
+                transfer.run()
+            step_unit(unit, t, h)
+            for solve in solves:
+                solve(t + h)
 
 
 class Jacobi(MasterAlgorithm):
@@ -138,13 +98,30 @@ class Jacobi(MasterAlgorithm):
     first step), but whoever reads the units after ``step`` (the trace, the
     objectives) sees inputs consistent with the outputs at ``t + h``, also at
     the stop time.  A unit that ends the simulation skips the transfers.
+
+    The inputs that feed outputs directly are set first, in dependency order,
+    and algebraic loops are solved (zero-delay feed-through); then the others,
+    from outputs now current: a chain of direct feed-through units sees the
+    current values at each communication point, as under Gauss-Seidel.  ``jacobi-delayed``
+    (:class:`JacobiDelayed`) reads every output before setting any input, so
+    each link into a direct feed-through unit adds one step of delay.
     """
 
     name = "jacobi"
+    solves_loops = True
 
-    def bind(self, units: Mapping[str, Unit], order: Sequence[str], connections: Sequence[Link]) -> None:
-        self._transfers = group_transfers(units, connections)
+    def bind(self, units: Mapping[str, Unit], order: Sequence[str], connections: Sequence[Link],
+             coupling: Coupling | None = None) -> None:
+        direct = coupling.direct if coupling is not None else frozenset()
+        # links into direct inputs are set in dependency order (propagate), then the others all at once
+        self._transfers = group_transfers(units, [c for i, c in enumerate(connections) if i not in direct])
         self._units = [units[n] for n in order]
+        self._coupling = CouplingRuntime(coupling, units, connections) if direct else None
+        self._loops = bool(coupling and coupling.loops)
+
+    def start(self, t: float) -> None:
+        if self._loops:  # initialization already set every input in dependency order: only loops remain
+            self._coupling.propagate(t)
 
     def step(self, t: float, h: float) -> None:
         try:  # step_unit's rule, with the try around the loop: one Python call less per unit and step
@@ -154,13 +131,28 @@ class Jacobi(MasterAlgorithm):
             raise
         except Exception as exc:
             raise UnitError(unit.name, f"do_step raised {type(exc).__name__}: {exc}", t) from exc
+        if self._coupling is not None:  # the direct feed-through inputs first, in dependency order; loops solved
+            self._coupling.propagate(t + h)
         # each transfer reads into its source's buffer, so all reads stay valid until the writes
         values = [transfer.read() for transfer in self._transfers]
         for transfer, v in zip(self._transfers, values):
             transfer.write(v)
 
 
-ALGORITHMS = {GaussSeidel.name: GaussSeidel, Jacobi.name: Jacobi}  # the one list of master algorithm names
+class JacobiDelayed(Jacobi):
+    """Jacobi as it was before zero-delay feed-through: every output is read before any input is set, so each
+    link into a direct feed-through unit adds one step of delay; refuses algebraic loops."""
+
+    name = "jacobi-delayed"
+    solves_loops = False
+
+    def bind(self, units: Mapping[str, Unit], order: Sequence[str], connections: Sequence[Link],
+             coupling: Coupling | None = None) -> None:
+        super().bind(units, order, connections, None)
+
+
+# the one list of master algorithm names
+ALGORITHMS = {GaussSeidel.name: GaussSeidel, Jacobi.name: Jacobi, JacobiDelayed.name: JacobiDelayed}
 DEFAULT_ALGORITHM = GaussSeidel.name
 
 

@@ -20,6 +20,8 @@ from typing import TYPE_CHECKING, Any, Mapping
 from cosim.errors import Problem, SpecError, did_you_mean, json_path
 from cosim.master.algorithms import ALGORITHMS as MASTER_ALGORITHMS
 from cosim.master.algorithms import DEFAULT_ALGORITHM
+from cosim.master.loops import METHODS as LOOP_METHODS
+from cosim.master.loops import LoopSettings
 from cosim.master.observers import REDUCERS
 from cosim.units.registry import UnitSpec
 from cosim.util import limits
@@ -54,6 +56,7 @@ class ExperimentSpec:
     algorithm: str = DEFAULT_ALGORITHM
     stop_when: str | None = None
     early_stop: str = "ok"  # a unit ending the simulation before 'stop': "ok" (status ok) or "fail"
+    loop_solver: LoopSettings = LoopSettings()  # how algebraic loops are solved (method, tolerance, max_iterations)
 
 
 @dataclass(frozen=True)
@@ -169,6 +172,8 @@ def spec_schema() -> dict:
     schema["$defs"]["unit"] = unit_schema(schema["$defs"]["unit"])
     algorithm = schema["$defs"]["experiment"]["properties"]["algorithm"]
     algorithm.update(enum=list(ALGORITHMS), default=DEFAULT_ALGORITHM)  # the file repeats them for editors
+    method = schema["$defs"]["experiment"]["properties"]["loop_solver"]["properties"]["method"]
+    method.update(enum=list(LOOP_METHODS), default=LoopSettings().method)
     return schema
 
 
@@ -307,6 +312,14 @@ def _def_name(sub_schema: dict, schema: dict) -> str:
     return ""
 
 
+def _loop_settings(raw: dict) -> LoopSettings:
+    """experiment.loop_solver (its form already checked) as LoopSettings; a missing field keeps its default."""
+    default = LoopSettings()
+    return LoopSettings(method=raw.get("method", default.method),
+                        tolerance=float(raw.get("tolerance", default.tolerance)),
+                        max_iterations=int(raw.get("max_iterations", default.max_iterations)))
+
+
 def build_spec(raw: dict, path: Path) -> Spec:
     """The Spec of a parsed spec whose form is already checked (see :func:`spec_from_dict`).
 
@@ -329,7 +342,7 @@ def build_spec(raw: dict, path: Path) -> Spec:
     e = raw["experiment"]
     experiment = ExperimentSpec(start=float(e.get("start", 0.0)), stop=float(e["stop"]), step=float(e["step"]),
                                 algorithm=e.get("algorithm", DEFAULT_ALGORITHM), stop_when=e.get("stop_when"),
-                                early_stop=e.get("early_stop", "ok"))
+                                early_stop=e.get("early_stop", "ok"), loop_solver=_loop_settings(e.get("loop_solver", {})))
     objectives = tuple(
         ObjectiveSpec(name=n, signal=o.get("signal"), reduce=o.get("reduce"), expr=o.get("expr"),
                       unit=o.get("unit"), sense=o.get("sense"), description=o.get("description", ""))

@@ -19,7 +19,8 @@ from cosim.spec.loader import Spec
 from cosim.system.connection_checks import check_connections
 from cosim.system.parts import Assignment, Connection, LoadedUnits, Signal, SystemUnit  # noqa: F401  (re-exported)
 from cosim.system.signals import add_recorded, resolve_signal, split_unit_name
-from cosim.system.stepping import check_algebraic_loops, stepping_order
+from cosim.master.loops import Coupling
+from cosim.system.stepping import check_algebraic_loops, feedthrough_coupling, stepping_order
 from cosim.system.study_checks import check_design, check_objective_expressions
 from cosim.system.value_checks import SETTABLE_AS_PARAMETER, SETTABLE_AS_START, assignment  # noqa: F401  (their old place)
 from cosim.units.fmu.description import FmuProblems
@@ -40,6 +41,8 @@ class System:
     assignments: tuple[Assignment, ...]
     probes: tuple[Signal, ...]
     recorded: tuple[str, ...]
+    # direct feed-through in dependency order and the algebraic loops, as indices into ``connections``
+    coupling: Coupling = Coupling()
 
     def signal(self, text: str) -> Signal:
         """Resolve a 'unit.port' text against this system; raises SpecError if it does not fit."""
@@ -123,7 +126,8 @@ def build_system(spec: Spec, broken_units: frozenset[str] = frozenset()) -> Syst
 
     connections = check_connections(spec, units, problems)
     order = stepping_order([u.name for u in spec.units], connections)
-    init_order = check_algebraic_loops(units, connections, problems, file)
+    coupling = feedthrough_coupling([u.name for u in spec.units], units, connections, spec.experiment.loop_solver)
+    init_order = check_algebraic_loops(units, connections, problems, file, coupling, spec.experiment.algorithm)
 
     probes: dict[str, Signal] = {}
     recorded: list[str] = []
@@ -152,7 +156,7 @@ def build_system(spec: Spec, broken_units: frozenset[str] = frozenset()) -> Syst
         raise SpecError(problems)
     system = System(spec=spec, units=dict(units), connections=tuple(connections), order=tuple(order),
                     init_order=tuple(init_order), assignments=tuple(assignments), probes=tuple(probes.values()),
-                    recorded=tuple(recorded))
+                    recorded=tuple(recorded), coupling=coupling)
     attach_data_files(system)  # files named by a unit's data-file parameters: read from the spec's folder, shipped
     return system
 

@@ -1,17 +1,28 @@
-"""Stepping order and algebraic loops: the graph side of a system.
+"""Stepping order, direct feed-through and algebraic loops: the graph side of a system.
 
 :func:`stepping_order` orders units for Gauss-Seidel (sources first, feedback
-cycles kept together); :func:`check_algebraic_loops` finds cycles of direct
-feed-through and gives the connections in initialization order; both use
-:func:`strongly_connected` (Tarjan).
+cycles kept together); :func:`feedthrough_coupling` finds the direct feed-through
+in dependency order and the algebraic loops with their tearing variables (solved
+by the master, :mod:`cosim.master.loops`); :func:`check_algebraic_loops` reports
+the loops that cannot be solved and gives the connections in initialization
+order; all use :func:`strongly_connected` (Tarjan).
 """
 
 from __future__ import annotations
 
 import heapq
-from typing import Any, Mapping
+from typing import Mapping
 
 from cosim.errors import Problem
+from cosim.master.algorithms import ALGORITHMS
+from cosim.master.loops import (  # noqa: F401  (strongly_connected re-exported: its old place)
+    Coupling,
+    Loop,
+    LoopSettings,
+    analyse_coupling,
+    port_graph,
+    strongly_connected,
+)
 from cosim.system.parts import Connection, SystemUnit
 from cosim.units.protocol import parse_port
 
@@ -49,94 +60,72 @@ def stepping_order(names: list[str], connections: list[Connection]) -> list[str]
     return ordered
 
 
-def strongly_connected(nodes: list[Any], edges: Mapping[Any, set[Any]]) -> list[list[Any]]:
-    """Tarjan's algorithm, iterative; components come in reverse topological order."""
-    index: dict[Any, int] = {}
-    low: dict[Any, int] = {}
-    on_stack: set[Any] = set()
-    stack: list[Any] = []
-    result: list[list[Any]] = []
-    counter = 0
-    for root in nodes:
-        if root in index:
-            continue
-        work = [(root, iter(sorted(edges.get(root, ()), key=str)))]
-        index[root] = low[root] = counter
-        counter += 1
-        stack.append(root)
-        on_stack.add(root)
-        while work:
-            node, children = work[-1]
-            advanced = False
-            for child in children:
-                if child not in index:
-                    index[child] = low[child] = counter
-                    counter += 1
-                    stack.append(child)
-                    on_stack.add(child)
-                    work.append((child, iter(sorted(edges.get(child, ()), key=str))))
-                    advanced = True
-                    break
-                if child in on_stack:
-                    low[node] = min(low[node], index[child])
-            if advanced:
-                continue
-            work.pop()
-            if work:
-                parent = work[-1][0]
-                low[parent] = min(low[parent], low[node])
-            if low[node] == index[node]:
-                component = []
-                while True:
-                    member = stack.pop()
-                    on_stack.discard(member)
-                    component.append(member)
-                    if member == node:
-                        break
-                result.append(component)
-    return result
-
-
-def check_algebraic_loops(units: Mapping[str, SystemUnit], connections: list[Connection],
-                           problems: list[Problem], file: str) -> list[Connection]:
-    """Find cycles of direct feed-through; return the connections in initialization order.
-
-    Nodes are (unit, variable); a connection is an edge output -> input and a
-    unit's declared feed-through is an edge input -> output.
-    """
-    edges: dict[tuple[str, str], set[tuple[str, str]]] = {}
-    nodes: list[tuple[str, str]] = []
-
-    def add(a: tuple[str, str], b: tuple[str, str]) -> None:
-        for n in (a, b):
-            if n not in edges:
-                edges[n] = set()
-                nodes.append(n)
-        edges[a].add(b)
-
-    for c in connections:
-        add((c.source.unit, c.source.variable.name), (c.target.unit, c.target.variable.name))
+def feedthrough_edges(units: Mapping[str, SystemUnit], connections: list[Connection]) -> list[tuple[str, str, str]]:
+    """``(unit, input, output)`` for every connected input an output depends on directly (the spec's
+    ``feedthrough`` declarations applied; an output that declares nothing depends on every input, FMI's rule)."""
     connected_inputs = {(c.target.unit, c.target.variable.name) for c in connections}
+    found = []
     for name, unit in units.items():
         for out in unit.description.outputs():
             for inp in unit.description.depends_on(out.name):
+                # array elements: an element input depends on the whole array's dependencies
                 if (name, inp) in connected_inputs or _element_input_connected(name, inp, connected_inputs):
-                    add((name, inp), (name, out.name))
-        # array elements: an element input depends on the whole array's dependencies
-    for comp in strongly_connected(nodes, edges):
-        if len(comp) > 1 or comp[0] in edges.get(comp[0], set()):
-            involved = sorted({u for u, _ in comp})
-            ports = ", ".join(sorted(f"{u}.{v}" for u, v in comp))
-            # outputs whose dependencies nobody declared are assumed to depend on every input (FMI's rule)
-            assumed = sorted({u for u, v in comp if u in units and v in {o.name for o in units[u].description.outputs()}
-                              and v not in units[u].description.feedthrough})
-            why = (f"; unit(s) {', '.join(assumed)} declare no dependencies for their outputs, so every output "
-                   "is assumed to depend directly on every input" if assumed else "")
-            fix = ("break the loop: connect through a unit without direct feed-through, or change one connection"
-                   + (f"; if an output does not depend on an input directly, declare it in the spec, e.g. "
-                      f"\"units\": {{\"{assumed[0]}\": {{\"feedthrough\": {{\"<output>\": []}}}}}}" if assumed else ""))
-            problems.append(Problem(file, "$.connections",
-                                    f"algebraic loop through units {', '.join(involved)} (ports {ports}){why}", fix))
+                    found.append((name, inp, out.name))
+    return found
+
+
+def feedthrough_coupling(unit_order: list[str], units: Mapping[str, SystemUnit], connections: list[Connection],
+                         settings: LoopSettings = LoopSettings()) -> Coupling:
+    """The system's direct feed-through in dependency order and its algebraic loops with their tearing
+    variables (:func:`cosim.master.loops.analyse_coupling` on the system's ports)."""
+    return analyse_coupling(unit_order, connections, feedthrough_edges(units, connections), settings)
+
+
+def assumed_feedthrough(units: Mapping[str, SystemUnit], loop: Loop) -> list[str]:
+    """The units of ``loop`` with outputs on it that declare no dependencies (so every input is assumed to feed
+    them directly, FMI's rule: a loop that may not be real)."""
+    on_loop = {tuple(p.split(".", 1)) for p in loop.ports}
+    return [u for u in loop.units if u in units and any(
+        (u, o.name) in on_loop and o.name not in units[u].description.feedthrough
+        for o in units[u].description.outputs())]
+
+
+def check_algebraic_loops(units: Mapping[str, SystemUnit], connections: list[Connection],
+                          problems: list[Problem], file: str, coupling: Coupling | None = None,
+                          algorithm: str | None = None) -> list[Connection]:
+    """Report the algebraic loops that cannot be solved; return the connections in initialization order.
+
+    Loops of Real signals are solved by the master (:mod:`cosim.master.loops`); a loop carrying Integer,
+    Boolean or String values, or a master ``algorithm`` that does not solve loops, is reported.
+    Nodes are (unit, variable); a connection is an edge output -> input and a
+    unit's declared feed-through an edge input -> output.
+    """
+    if coupling is None:
+        coupling = feedthrough_coupling(list(units), units, connections)
+    solves = ALGORITHMS[algorithm].solves_loops if algorithm in ALGORITHMS else True
+    for loop in coupling.loops:
+        ports = ", ".join(loop.ports)
+        assumed = assumed_feedthrough(units, loop)
+        # outputs whose dependencies nobody declared are assumed to depend on every input (FMI's rule)
+        why = (f"; unit(s) {', '.join(assumed)} declare no dependencies for their outputs, so every output "
+               "is assumed to depend directly on every input" if assumed else "")
+        declare = (f"; if an output does not depend on an input directly, declare it in the spec, e.g. "
+                   f"\"units\": {{\"{assumed[0]}\": {{\"feedthrough\": {{\"<output>\": []}}}}}}" if assumed else "")
+        on_loop = [connections[i] for i in (*loop.links, *loop.torn)]
+        discrete = sorted({f"{c.source.text} -> {c.target.text} ({c.source.variable.type})" for c in on_loop
+                           if c.source.variable.type != "Real" or c.target.variable.type != "Real"})
+        where = f"algebraic loop through units {', '.join(loop.units)} (ports {ports})"
+        if discrete:
+            problems.append(Problem(file, "$.connections", f"{where} carries values that are not Real: "
+                                    f"{', '.join(discrete)}; only loops of Real signals are solved{why}",
+                                    "break the loop: connect through a unit without direct feed-through, or "
+                                    "change one connection" + declare))
+        elif not solves:
+            problems.append(Problem(file, "$.experiment.algorithm", f"{where}: the master algorithm "
+                                    f"'{algorithm}' does not solve algebraic loops{why}",
+                                    "use \"gauss-seidel\" or \"jacobi\", which solve them, or break the loop"
+                                    + declare))
+    nodes, edges = port_graph(connections, feedthrough_edges(units, connections))
     rank: dict[tuple[str, str], int] = {}
     for i, comp in enumerate(reversed(strongly_connected(nodes, edges))):
         for n in comp:

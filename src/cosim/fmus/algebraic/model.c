@@ -1,0 +1,31 @@
+/*
+ * algebraic: y = c0 + c1*u + c3*u^3 + a*cos(u), no state -- a test FMU for algebraic loops.
+ * The output follows the input at once (direct feed-through): it is recomputed whenever
+ * it is read after an input was set (model_calculate), also between steps, which is what
+ * a master solving a loop does (set the input, get the output, no step).
+ */
+#include <math.h>
+
+#include "framework.h"
+
+Status model_validate(ModelInstance *comp) {
+    if (check_finite(comp, "c0", SCALAR, comp->d.c0) > Warning) return Error;
+    if (check_finite(comp, "c1", SCALAR, comp->d.c1) > Warning) return Error;
+    if (check_finite(comp, "c3", SCALAR, comp->d.c3) > Warning) return Error;
+    return check_finite(comp, "a", SCALAR, comp->d.a);
+}
+
+void model_initialize(ModelInstance *comp) { (void)comp; }
+
+Status model_calculate(ModelInstance *comp) {
+    ModelData *d = &comp->d;
+    if (check_finite(comp, "u", SCALAR, d->u) > Warning) return Error;
+    d->y = d->c0 + d->c1 * d->u + d->c3 * d->u * d->u * d->u + d->a * cos(d->u);
+    return OK;
+}
+
+Status model_do_step(ModelInstance *comp, double t, double h) {
+    (void)t;
+    (void)h;
+    return model_calculate(comp);  /* no state: the output follows the input */
+}

@@ -1,0 +1,247 @@
+"""Algebraic loops solved at every communication point, and zero-delay feed-through under Jacobi (issue 26).
+
+Every expected value is computed here from the units' equations (closed forms, or a bisection written here),
+never by cosim.  The FMU cases use the `algebraic` and `linear_ode` FMUs built from src/cosim/fmus/.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import cosim
+from cosim import Execution, build_system, load_spec
+from cosim.master.algorithms import GaussSeidel, Jacobi, make_algorithm
+
+from .conftest import python_unit
+from .test_fmi_conformance import cli
+
+DOTTIE = 0.7390851332151607  # the fixed point of cos: u = cos(u)
+
+
+def _bisect(f, lo: float, hi: float) -> float:
+    """A root of f in [lo, hi] (f changes sign there), to the last bit."""
+    flo = f(lo)
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if mid in (lo, hi):
+            break
+        if (f(mid) > 0) == (flo > 0):
+            lo, flo = mid, f(mid)
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def _run(write_spec, spec: dict, name: str = "spec.json"):
+    system = build_system(load_spec(write_spec(spec, name)))
+    return system, Execution(system, record=True).run()
+
+
+def linear_loop(algorithm: str, units: str = "python") -> dict:
+    """x = 2 + y/2 and y = -1 + 3x + t: x = -3 - t, y = -10 - 2t (fixed-point iteration diverges: gain 3/2).
+
+    A clock drives t; a gain downstream reads x (z = 2x = -6 - 2t).
+    """
+    algebraic = ({"python": python_unit("Algebraic")} if units == "python" else {"fmu": "builtin:algebraic_fmi2"})
+    spec = {
+        "units": {
+            "clock": {"python": python_unit("Clock"), "parameters": {"t_end": 10.0}},
+            "ux": {**algebraic, "parameters": {"c0": 2.0, "c1": 0.5}},
+            "uy": {"python": python_unit("Algebraic"), "parameters": {"c0": -1.0, "c1": 3.0}},
+            "gain": {"python": python_unit("Gain"), "parameters": {"k": 2.0}},
+        },
+        "connections": [
+            {"from": "uy.y", "to": "ux.u"},
+            {"from": "ux.y", "to": "uy.u"},
+            {"from": "clock.time", "to": "uy.w"},
+            {"from": "ux.y", "to": "gain.u"},
+        ],
+        "experiment": {"stop": 1.0, "step": 0.1, "algorithm": algorithm},
+        "record": ["ux.y", "uy.y", "gain.y"],
+    }
+    return spec
+
+
+@pytest.mark.parametrize("algorithm", ["gauss-seidel", "jacobi"])
+@pytest.mark.parametrize("units", ["python", "fmu"])
+def test_a_linear_loop_of_two_units_meets_its_closed_form_at_every_communication_point(write_spec, algorithm, units):
+    system, result = _run(write_spec, linear_loop(algorithm, units))
+    assert result.ok, result.message
+    (loop,) = system.coupling.loops
+    assert loop.units == ("ux", "uy") and len(loop.tearing) == 1  # one cut closes the loop
+    t = result.traces["time"].to_numpy()
+    assert len(t) == 11 and t[0] == 0.0  # the start time too: the loop is solved at initialization
+    np.testing.assert_allclose(result.traces["ux.y"], -3.0 - t, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(result.traces["uy.y"], -10.0 - 2.0 * t, rtol=1e-12, atol=1e-12)
+    # the unit downstream of the loop sees the solution, at the same communication point
+    np.testing.assert_allclose(result.traces["gain.y"], -6.0 - 2.0 * t, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_a_nonlinear_loop_through_fmus_is_solved_to_1e_10(write_spec, version):
+    """x = cos(y), y = x^3 through two `algebraic` FMUs: x = cos(x^3) (one root in [0, 1])."""
+    fmu = f"builtin:algebraic_fmi{version}"
+    spec = {
+        "units": {"ux": {"fmu": fmu, "parameters": {"c1": 0.0, "a": 1.0}},
+                  "uy": {"fmu": fmu, "parameters": {"c1": 0.0, "c3": 1.0}}},
+        "connections": [{"from": "uy.y", "to": "ux.u"}, {"from": "ux.y", "to": "uy.u"}],
+        "experiment": {"stop": 0.3, "step": 0.1},
+        "record": ["ux.y", "uy.y", "ux.u", "uy.u"],
+    }
+    _, result = _run(write_spec, spec)
+    assert result.ok, result.message
+    x_exact = _bisect(lambda x: x - math.cos(x ** 3), 0.0, 1.0)
+    traces = result.traces
+    x, y = traces["ux.y"].to_numpy(), traces["uy.y"].to_numpy()
+    assert np.all(np.abs(x - x_exact) < 1e-10) and np.all(np.abs(y - x_exact ** 3) < 1e-10)
+    # the equations themselves hold at every communication point, on what the units output
+    assert np.all(np.abs(x - np.cos(y)) < 1e-10) and np.all(np.abs(y - x ** 3) < 1e-10)
+
+
+@pytest.mark.parametrize("unit", [{"fmu": "builtin:algebraic_fmi3"}, {"python": python_unit("Algebraic")}],
+                         ids=["fmu", "python"])
+def test_a_unit_feeding_its_own_input_is_solved(write_spec, unit):
+    """y = cos(u) with y -> u: u = cos(u), the Dottie number."""
+    spec = {"units": {"c": {**unit, "parameters": {"c1": 0.0, "a": 1.0}}},
+            "connections": [{"from": "c.y", "to": "c.u"}],
+            "experiment": {"stop": 0.2, "step": 0.1}, "record": ["c.y"]}
+    system, result = _run(write_spec, spec)
+    assert result.ok, result.message
+    assert [loop.tearing for loop in system.coupling.loops] == [("c.u",)]
+    np.testing.assert_allclose(result.traces["c.y"], DOTTIE, rtol=0, atol=1e-10)
+
+
+def test_fixed_point_alone_fails_a_loop_it_cannot_contract_naming_the_loop_and_residual(write_spec):
+    spec = linear_loop("gauss-seidel")
+    spec["experiment"]["loop_solver"] = {"method": "fixed-point", "max_iterations": 30}
+    _, result = _run(write_spec, spec)
+    assert result.status == "failed" and result.failure == "unit"
+    assert result.steps == 0  # at initialization already, and no hang
+    message = result.message
+    assert "algebraic loop through units ux, uy (tearing " in message
+    assert "at t=0" in message and "did not converge: largest residual" in message
+    assert "after 30 fixed-point iteration(s)" in message
+    # the same loop with Newton (the default) converges
+    spec["experiment"].pop("loop_solver")
+    _, result = _run(write_spec, spec, "newton.json")
+    assert result.ok, result.message
+
+
+def test_a_loop_without_solution_is_a_failed_row_not_a_hang(write_spec):
+    """x = y + 1 and y = x have no solution: the residual stays 1 whatever Newton or fixed-point try."""
+    spec = {"units": {"ux": {"python": python_unit("Algebraic"), "parameters": {"c0": 1.0}},
+                      "uy": {"python": python_unit("Algebraic")}},
+            "connections": [{"from": "uy.y", "to": "ux.u"}, {"from": "ux.y", "to": "uy.u"}],
+            "experiment": {"stop": 1.0, "step": 0.1, "loop_solver": {"max_iterations": 20}}}
+    _, result = _run(write_spec, spec)
+    assert result.status == "failed"
+    assert "algebraic loop through units ux, uy (tearing ux.u)" in result.message
+    assert "largest residual 1 (tolerance 1e-10)" in result.message
+    assert "Newton iteration(s), then 20 fixed-point iteration(s)" in result.message
+
+
+def test_the_run_command_reports_the_failed_loop(capsys, write_spec):
+    spec = linear_loop("jacobi")
+    spec["experiment"]["loop_solver"] = {"method": "fixed-point"}
+    code, text = cli(capsys, "run", str(write_spec(spec)))
+    assert code == 1 and "algebraic loop through units ux, uy" in text and "Traceback" not in text
+
+
+def chain_spec(algorithm: str) -> dict:
+    """A plant (linear_ode FMU, state) fed back through sensor -> controller -> limiter, all direct feed-through:
+    sensor = 2 x + 0.1 and controller = 1 - 3 sensor (`algebraic` FMUs), limiter = clip(controller, -1, 1)."""
+    return {
+        "units": {
+            "plant": {"fmu": "builtin:linear_ode_fmi2", "parameters": {"a": -0.5, "b": 2.0, "x0": 1.0}},
+            "sensor": {"fmu": "builtin:algebraic_fmi2", "parameters": {"c0": 0.1, "c1": 2.0}},
+            "controller": {"fmu": "builtin:algebraic_fmi3", "parameters": {"c0": 1.0, "c1": -3.0}},
+            "limiter": {"python": python_unit("Saturation"), "parameters": {"lo": -1.0, "hi": 1.0}},
+        },
+        "connections": [
+            {"from": "plant.y", "to": "sensor.u"},
+            {"from": "sensor.y", "to": "controller.u"},
+            {"from": "controller.y", "to": "limiter.u"},
+            {"from": "limiter.y", "to": "plant.u"},
+        ],
+        "experiment": {"stop": 2.0, "step": 0.05, "algorithm": algorithm},
+        "record": ["plant.y", "sensor.y", "controller.y", "limiter.y"],
+    }
+
+
+def test_a_feedthrough_chain_under_jacobi_equals_gauss_seidel_at_every_communication_point(write_spec):
+    _, gauss_seidel = _run(write_spec, chain_spec("gauss-seidel"), "gs.json")
+    _, jacobi = _run(write_spec, chain_spec("jacobi"), "jacobi.json")
+    _, delayed = _run(write_spec, chain_spec("jacobi-delayed"), "delayed.json")
+    assert gauss_seidel.ok and jacobi.ok and delayed.ok
+    columns = ["plant.y", "sensor.y", "controller.y", "limiter.y"]
+    np.testing.assert_allclose(jacobi.traces[columns], gauss_seidel.traces[columns], rtol=1e-14, atol=1e-14)
+    # independently: the plant integrates exactly over each step with the limited control held
+    h, x = 0.05, 1.0
+    for k, row in gauss_seidel.traces.iterrows():
+        u = min(max(1.0 - 3.0 * (2.0 * x + 0.1), -1.0), 1.0)
+        assert row["plant.y"] == pytest.approx(x, rel=1e-12) and row["limiter.y"] == pytest.approx(u, rel=1e-12)
+        e = math.exp(-0.5 * h)
+        x = e * x + (e - 1.0) / -0.5 * 2.0 * u
+    # the old behaviour, by name: each of the three links adds one step of delay, and the result differs
+    assert not np.allclose(delayed.traces["plant.y"], gauss_seidel.traces["plant.y"], rtol=1e-6)
+
+
+def test_systems_without_loops_step_as_before(write_spec):
+    """No loop: Gauss-Seidel keeps its plain step; Jacobi without direct feed-through sets every input before
+    stepping and propagates nothing (the loop machinery is not in the stepping loop at all)."""
+    spec = {"units": {"one": {"fmu": "builtin:linear_ode_fmi2"}, "two": {"fmu": "builtin:linear_ode_fmi2"}},
+            "connections": [{"from": "one.y", "to": "two.u"}, {"from": "two.y", "to": "one.u"}],
+            "experiment": {"stop": 0.1, "step": 0.1}}
+    system = build_system(load_spec(write_spec(spec)))
+    assert system.coupling.blocks == ()
+    units = {name: u.unit_type.instantiate(name) for name, u in system.units.items()}
+    try:
+        for name, cls in (("gauss-seidel", GaussSeidel), ("jacobi", Jacobi)):
+            algorithm = make_algorithm(name)
+            algorithm.bind(units, system.order, system.connections, system.coupling)
+            assert algorithm.step.__func__ is cls.step
+        assert algorithm._coupling is None and len(algorithm._transfers) == 2
+    finally:
+        for unit in units.values():
+            unit.terminate()
+
+
+def test_inspect_shows_the_loops_and_their_tearing_variables(capsys, write_spec):
+    code, text = cli(capsys, "inspect", str(write_spec(linear_loop("gauss-seidel"))))
+    assert code == 0, text
+    assert "algebraic loops: 1 (solved by newton, tolerance 1e-10, at most 50 iterations)" in text
+    assert "  loop through units ux, uy: tearing ux.u (1 value); ports ux.u, ux.y, uy.u, uy.y" in text
+    no_loop = chain_spec("jacobi")
+    code, text = cli(capsys, "inspect", str(write_spec(no_loop, "chain.json")))
+    assert code == 0 and "algebraic loops: none" in text
+
+
+def test_loops_that_cannot_be_solved_are_refused_by_validate(capsys, write_spec):
+    integer = {"units": {"n": {"python": python_unit("Counter")}},
+               "connections": [{"from": "n.n", "to": "n.n_in"}],
+               "experiment": {"stop": 1.0, "step": 0.1}}
+    code, text = cli(capsys, "validate", str(write_spec(integer)))
+    assert code == 2
+    assert ("$.connections: algebraic loop through units n (ports n.n, n.n_in) carries values that are not Real: "
+            "n.n -> n.n_in (Integer); only loops of Real signals are solved") in text
+    delayed = linear_loop("jacobi-delayed")
+    code, text = cli(capsys, "validate", str(write_spec(delayed, "delayed.json")))
+    assert code == 2
+    assert ("$.experiment.algorithm: algebraic loop through units ux, uy (ports ux.u, ux.y, uy.u, uy.y): the master "
+            "algorithm 'jacobi-delayed' does not solve algebraic loops") in text
+    wrong = linear_loop("gauss-seidel")
+    wrong["experiment"]["loop_solver"] = {"method": "broyden", "tolerance": 0}
+    code, text = cli(capsys, "validate", str(write_spec(wrong, "wrong.json")))
+    assert code == 2 and "$.experiment.loop_solver.method" in text and "$.experiment.loop_solver.tolerance" in text
+
+
+def test_loop_settings_reach_the_solver(write_spec):
+    spec = linear_loop("gauss-seidel")
+    spec["experiment"]["loop_solver"] = {"tolerance": 1e-6, "max_iterations": 7}
+    system = build_system(load_spec(write_spec(spec)))
+    settings = system.coupling.settings
+    assert (settings.method, settings.tolerance, settings.max_iterations) == ("newton", 1e-6, 7)
+    assert cosim.run(str(write_spec(spec, "again.json"))).ok
