@@ -270,3 +270,112 @@ def test_inspect_of_a_spec_shows_the_values_it_sets(tmp_path, capsys):
     assert main(["inspect", str(tmp_path / "spec.json")]) == 0
     ports = _port_rows(capsys.readouterr().out)
     assert ports["A"]["x0"][4] == "7.5 *" and ports["sub.B"]["b"][4] == "-0.5 *"
+
+
+# --- item 14: tolerated forms, each read with one note naming the file and the standard's form --------------
+
+
+def _inline_mapping_ssd(version: str = "") -> str:
+    """oms3.ssd whose root binds Input1 = 2 inline, with an inline .ssm (OMSimulator 3 writes it without version)
+    mapping it to A.x0, sub.B.x0 and (x -0.25) to k."""
+    ssm = (SSP_FILES / "oms3_values.ssm").read_text()
+    entries = ssm[ssm.index("<ssm:MappingEntry"):ssm.index("</ssm:ParameterMapping>")]
+    return _with_root_binding(
+        '<ssd:ParameterBinding><ssd:ParameterValues><ssv:ParameterSet version="2.0" name="parameters">'
+        '<ssv:Parameters><ssv:Parameter name="Input1"><ssv:Real value="2.0"/></ssv:Parameter></ssv:Parameters>'
+        f'</ssv:ParameterSet></ssd:ParameterValues><ssd:ParameterMapping><ssm:ParameterMapping{version}>{entries}'
+        '</ssm:ParameterMapping></ssd:ParameterMapping></ssd:ParameterBinding>')
+
+
+def test_an_inline_mapping_without_version_is_read_with_a_note(tmp_path):
+    path = write_archive(tmp_path / "noversion.ssp", oms3_files(_inline_mapping_ssd()))
+    system = read_ssp(path)
+    parameters = system.raw["units"]["sub.B"]["parameters"]
+    assert (parameters["x0"], parameters["b"]) == (2.0, -0.5)  # one-to-many, inline
+    [note] = [n for n in system.notes if "has no 'version'" in n]
+    assert note.startswith(f"{path}:SystemStructure.ssd: /ssd:SystemStructureDescription[@name='default']")
+    assert "ssm:ParameterMapping has no 'version' (SSP requires version=\"1.0\" or \"2.0\"); read as version 2.0" in note
+    result = _run(path)
+    assert _final(result, "sub.B.y") == pytest.approx(oms3_expected(1.0, x0_b=2.0)["sub.B.y"], rel=1e-12)
+    with_version = read_ssp(write_archive(tmp_path / "v.ssp", oms3_files(_inline_mapping_ssd(' version="2.0"'))))
+    assert not [n for n in with_version.notes if "has no 'version'" in n]
+
+
+def test_parameter_files_without_version_are_read_with_a_note(tmp_path):
+    ssd = _with_root_binding('<ssd:ParameterBinding source="resources/values.ssv">'
+                             '<ssd:ParameterMapping source="resources/values.ssm"/></ssd:ParameterBinding>')
+    ssv = (SSP_FILES / "oms3_values.ssv").read_bytes().replace(b' version="2.0"', b"")
+    ssm = (SSP_FILES / "oms3_values.ssm").read_bytes().replace(b' version="2.0"', b"")
+    system = read_ssp(write_archive(tmp_path / "files.ssp", oms3_files(
+        ssd, **{"resources/values.ssv": ssv, "resources/values.ssm": ssm})))
+    assert system.raw["units"]["sub.B"]["parameters"]["b"] == -0.5
+    notes = [n for n in system.notes if "has no 'version'" in n]
+    assert len(notes) == 2 and {n.split(": ")[0].rsplit(":", 1)[1] for n in notes} == {"resources/values.ssv",
+                                                                                       "resources/values.ssm"}
+
+
+def test_a_components_own_ssv_naming_component_dot_param_is_read_with_one_note(tmp_path):
+    # OMSimulator's whole-model .ssv template names 'A.x0'; bound to component A, SSP would name it 'x0'
+    ssv = ('<?xml version="1.0" encoding="utf-8"?>\n<ssv:ParameterSet xmlns:ssv="http://ssp-standard.org/SSP1/'
+           'SystemStructureParameterValues" version="2.0" name="parameters"><ssv:Parameters>'
+           '<ssv:Parameter name="A.x0"><ssv:Real value="4.0"/></ssv:Parameter>'
+           '<ssv:Parameter name="A.b"><ssv:Real value="0.0"/></ssv:Parameter>'
+           '</ssv:Parameters></ssv:ParameterSet>')
+    ssd = oms3_ssd().replace(
+        '        </ssd:ParameterBindings>\n      </ssd:Component>\n      <ssd:System name="sub">',
+        '          <ssd:ParameterBinding source="resources/A.ssv"/>\n        </ssd:ParameterBindings>\n'
+        '      </ssd:Component>\n      <ssd:System name="sub">', 1)
+    path = write_archive(tmp_path / "prefixed.ssp", oms3_files(ssd, **{"resources/A.ssv": ssv.encode()}))
+    system = read_ssp(path)
+    assert system.raw["units"]["A"]["parameters"]["x0"] == 4.0  # the later binding at one level wins
+    [note] = [n for n in system.notes if "component's name" in n]
+    assert note.startswith(f"{path}:resources/A.ssv names the parameters of component 'A'")
+    assert "SSP names them relative to the component ('x0')" in note
+    result = _run(path)
+    assert _final(result, "sub.B.y") == pytest.approx(oms3_expected(1.0, x0_a=4.0)["sub.B.y"], rel=1e-12)
+
+
+def test_two_parameter_bindings_and_annotations_first_are_read_in_the_schemas_order(tmp_path):
+    # OMSimulator 3 writes inline values and .ssv references as two sibling ssd:ParameterBindings; OMSimulator 2
+    # put the system's ssd:Annotations before its ssd:Connectors
+    ssv = (SSP_FILES / "oms3_values.ssv").read_text().replace('name="Input1"', 'name="x0"').replace(
+        'value="2.0"', 'value="6.0"')
+    ssd = oms3_ssd().replace(
+        '        </ssd:ParameterBindings>\n      </ssd:Component>\n      <ssd:System name="sub">',
+        '        </ssd:ParameterBindings>\n        <ssd:ParameterBindings><ssd:ParameterBinding '
+        'source="resources/A.ssv"/></ssd:ParameterBindings>\n      </ssd:Component>\n      <ssd:System name="sub">', 1)
+    annotations = ssd[ssd.index("    <ssd:Annotations>\n      <ssc:Annotation type=\"org.openmodelica\">"):
+                      ssd.index("  </ssd:System>\n  <ssd:DefaultExperiment")]
+    ssd = ssd.replace(annotations, "").replace('  <ssd:System name="default">\n',
+                                               '  <ssd:System name="default">\n' + annotations, 1)
+    path = write_archive(tmp_path / "order.ssp", oms3_files(ssd, **{"resources/A.ssv": ssv.encode()}))
+    system = read_ssp(path)
+    assert system.raw["units"]["A"]["parameters"]["x0"] == 6.0  # the .ssv comes later: it wins over inline 2.0
+    [two] = [n for n in system.notes if "ssd:ParameterBindings;" in n]
+    assert "ssd:Component[@name='A'] has 2 ssd:ParameterBindings; SSP allows one" in two
+    [order] = [n for n in system.notes if "deprecated order" in n]
+    assert "ssd:System[@name='default'] has its children in a deprecated order (ssd:Annotations before " \
+           "ssd:Connectors); SSP 2.0 expects Connectors, ElementGeometry, ParameterBindings" in order
+    assert all(n.startswith(f"{path}:SystemStructure.ssd: ") for n in (two, order))
+    result = _run(path)
+    assert _final(result, "sub.B.y") == pytest.approx(oms3_expected(1.0, x0_a=6.0)["sub.B.y"], rel=1e-12)
+
+
+def test_what_stays_wrong_after_the_tolerated_corrections_is_reported_on_the_users_file(tmp_path):
+    # annotations first (tolerated) and a connector kind the standard does not know (not): the original's problems
+    ssd = oms3_ssd().replace('<ssd:Connector name="out" kind="output">', '<ssd:Connector name="out" kind="sideways">')
+    annotations = ssd[ssd.index("    <ssd:Annotations>\n      <ssc:Annotation type=\"org.openmodelica\">"):
+                      ssd.index("  </ssd:System>\n  <ssd:DefaultExperiment")]
+    ssd = ssd.replace(annotations, "").replace('  <ssd:System name="default">\n',
+                                               '  <ssd:System name="default">\n' + annotations, 1)
+    problems = _problems(write_archive(tmp_path / "still.ssp", oms3_files(ssd)))
+    assert any("'ssd:Connectors': This element is not expected" in p.message for p in problems)
+    assert all("breaks the SSP schema" in p.message for p in problems)
+    ssd = ssd.replace('kind="sideways"', 'kind="output"')
+    assert read_ssp(write_archive(tmp_path / "fine.ssp", oms3_files(ssd))).raw["units"]
+
+
+def test_an_enumeration_value_given_as_its_integer_is_read_with_a_note(tmp_path):
+    ssd = oms3_ssd().replace('<ssv:Real value="-0.5"/>', '<ssv:Enumeration value="3"/>')
+    system = read_ssp(write_archive(tmp_path / "enum.ssp", oms3_files(ssd)))
+    assert any("gives the enumeration value as the integer 3; SSP gives the item's name" in n for n in system.notes)

@@ -33,6 +33,7 @@ from lxml import etree
 from cosim.errors import Problem, SpecError, did_you_mean
 from cosim.master.algorithms import ALGORITHMS
 from cosim.ssp.archive import SspFiles, open_ssp
+from cosim.ssp.tolerant import tolerated
 from cosim.ssp.xml import element_path, parse_file, schema_problems, short_name, tag
 from cosim.util.quantities import BASE_UNITS, IncompatibleUnits, UnitDefinition, UnknownUnit, conversion
 
@@ -107,13 +108,13 @@ class _Reader:
         self.edges: list[Edge] = []
         self.bindings: list[tuple[int, int, tuple[tuple[str, ...], str], Any, str | None, Any, str]] = []
         self._order = 0
+        self._prefixed: set[tuple[str, tuple[str, ...]]] = set()  # (file, component) noted for Component.param
 
     # --- the document ---------------------------------------------------
 
     def read(self) -> SspSystem:
-        root, problems = parse_file(self.files.ssd, self.label, "ssd")
-        self.problems.extend(problems)
-        if root is None or problems:
+        root = self._parse(self.files.ssd, self.label, "ssd")
+        if root is None:
             raise SpecError(self.problems)
         self.units.update(self._read_units(root, self.label))
         system = root.find(tag("ssd", "System"))
@@ -135,6 +136,37 @@ class _Reader:
         if root.get("description"):
             raw["description"] = root.get("description")
         return SspSystem(self.files, raw, self.notes)
+
+    def _parse(self, path: Path, label: str, kind: str) -> Any:
+        """The root of an SSP file checked against the schema, or None (its problems recorded).
+
+        A file in a form popular tools write against the schema (see :mod:`.tolerant`) is read as corrected,
+        with a note per correction; when the correction does not satisfy the schema either, the original's
+        problems are reported, so that they point at the user's own file.
+        """
+        root, problems = parse_file(path, label, kind)
+        if root is not None and problems:
+            fixed, notes = tolerated(root, label)
+            if notes and not schema_problems(fixed, label, kind):
+                for note in notes:
+                    self._note(note)
+                return fixed
+        self.problems.extend(problems)
+        return None if problems else root
+
+    def _checked_inline(self, root: Any, label: str, kind: str) -> Any:
+        """An inline ssv:ParameterSet or ssm:ParameterMapping checked against its schema (tolerated forms
+        corrected, as :meth:`_parse`), or None with its problems recorded."""
+        problems = schema_problems(root, label, kind)
+        if problems:
+            fixed, notes = tolerated(root, label)
+            if notes and not schema_problems(fixed, label, kind):
+                for note in notes:
+                    self._note(note)
+                return fixed
+            self.problems.extend(problems)
+            return None
+        return root
 
     def _note(self, text: str) -> None:
         self.notes.append(text)
@@ -500,6 +532,8 @@ class _Reader:
                 # an .ssm may map one source to several targets: each gets the value, with its own transformation
                 for target_name, transform in mapping.get(name, [(name, None)]):
                     target = self._find_target(owner, target_name)
+                    if target is None and owner.kind == "component":
+                        target = self._component_prefixed(owner, target_name, label)
                     if target is None and self.problems:
                         continue  # an FMU that did not load has no variables to match: already reported
                     if target is None:
@@ -518,9 +552,8 @@ class _Reader:
                 self._problem(binding, f"parameter file '{source}' not found", "fix the binding's 'source'")
                 return None, "", {}
             label = self.files.label(path)
-            root, problems = parse_file(path, label, "ssv")
-            if problems or root is None:
-                self.problems.extend(problems)
+            root = self._parse(path, label, "ssv")
+            if root is None:
                 return None, label, {}
         else:
             values = binding.find(tag("ssd", "ParameterValues"))
@@ -530,9 +563,8 @@ class _Reader:
                 self._problem(binding, "the binding has neither 'source' nor an inline ssv:ParameterSet",
                               "add source=\"resources/x.ssv\" or an ssd:ParameterValues with an ssv:ParameterSet")
                 return None, label, {}
-            problems = schema_problems(root, label, "ssv")
-            if problems:
-                self.problems.extend(problems)
+            root = self._checked_inline(root, label, "ssv")
+            if root is None:
                 return None, label, {}
         units = self._read_units(root, label)
         parameters = {}
@@ -545,6 +577,12 @@ class _Reader:
                     continue
                 type_ = _TYPE_OF[local]
                 text = child.get("value")
+                if local == "Enumeration" and text is not None and re.fullmatch(r"[+-]?\d+", text.strip()):
+                    # OMSimulator 3 writes an enumeration value as its integer; SSP writes the item's name
+                    self._note(f"{label}: {element_path(child)} gives the enumeration value as the integer {text}; "
+                               "SSP gives the item's name: read as the integer")
+                    parameters[parameter.get("name")] = (int(text), child.get("unit"), type_, child)
+                    continue
                 try:
                     value = _typed(local, text)
                 except ValueError:
@@ -565,17 +603,15 @@ class _Reader:
                 self._problem(element, f"parameter mapping '{source}' not found", "fix the mapping's 'source'")
                 return None
             label = self.files.label(path)
-            root, problems = parse_file(path, label, "ssm")
-            if problems or root is None:
-                self.problems.extend(problems)
+            root = self._parse(path, label, "ssm")
+            if root is None:
                 return None
         else:
             root, label = element.find(tag("ssm", "ParameterMapping")), self.label
             if root is None:
                 return {}
-            problems = schema_problems(root, label, "ssm")
-            if problems:
-                self.problems.extend(problems)
+            root = self._checked_inline(root, label, "ssm")
+            if root is None:
                 return None
         mapping = {}
         for entry in root.findall(tag("ssm", "MappingEntry")):
@@ -600,6 +636,20 @@ class _Reader:
         if not best:
             return None
         return self._find_target(owner.children[best], name[len(best) + 1:])
+
+    def _component_prefixed(self, owner: Node, name: str, label: str) -> tuple[tuple[str, ...], str] | None:
+        """A component's own parameter named ``Component.param`` (OMSimulator's whole-model .ssv template, bound
+        to one component): read as ``param``, with one note per file.  Only when the full name is no variable
+        (FMU variable names may hold dots)."""
+        own = owner.path[-1] + "."
+        if not name.startswith(own) or _variable(owner, name[len(own):]) is None:
+            return None
+        if (label, owner.path) in self._prefixed:
+            return owner.path, name[len(own):]
+        self._prefixed.add((label, owner.path))
+        self._note(f"{label} names the parameters of component '{'.'.join(owner.path)}' with the component's name "
+                   f"('{name}'); SSP names them relative to the component ('{name[len(own):]}'): read as such")
+        return owner.path, name[len(own):]
 
     def _apply_bindings(self, units: dict, unit_names: dict) -> None:
         # a higher level (smaller depth) wins, then the later binding at the same level
@@ -629,14 +679,14 @@ class _Reader:
                     self._note(f"'{'.'.join(end[0])}.{end[1]}' is bound directly ({direct[5]}) and through "
                                f"{via} by the same system: the direct binding {direct[2]!r} is used")
                 continue
-            if direct is not None:
-                binder = ".".join(end[0][:direct[0]]) or "the root system"
-                self._note(f"'{'.'.join(end[0])}.{end[1]}': {value!r} from {via} overrides the value "
-                           f"{direct[2]!r} bound by '{binder}' ({direct[5]}), as bindings of a higher system win")
             if isinstance(value, float):  # into the system connector's unit, then along the chain
                 value = self._converted(value, unit, extra, label, self._unit_of(*start))
                 factor, offset = self._compose(chain, self._unit_of(*start))
                 value = factor * value + offset
+            if direct is not None:
+                binder = ".".join(end[0][:direct[0]]) or "the root system"
+                self._note(f"'{'.'.join(end[0])}.{end[1]}': {value!r} from {via} overrides the value "
+                           f"{direct[2]!r} bound by '{binder}' ({direct[5]}), as bindings of a higher system win")
             fed[end] = (value, (None, {}, extra[2], extra[3]), label)
         for target, (depth, order, value, unit, extra, label) in chosen.items():
             node = self.nodes[target[0]]
