@@ -16,6 +16,8 @@ import pytest
 from cosim.fmus.build import ensure_built
 from cosim.fmus.conformance import ensure_built as ensure_conformance_built
 
+from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
+
 REPO = Path(__file__).resolve().parent.parent
 
 
@@ -99,3 +101,145 @@ def test_the_array_limit_is_raised_on_purpose_and_counts_every_array(tmp_path):
     refused = _cosim("validate", str(spec), env={"COSIM_ARRAY_ELEMENTS": "5"})
     assert refused.returncode == 2 and "6 elements in all, above the limit of 5" in refused.stdout + refused.stderr
     assert _cosim("run", str(spec), env={"COSIM_ARRAY_ELEMENTS": "6"}).returncode == 0
+
+
+# 2. --resume fails closed when metadata.json is empty, unreadable or deleted --------------------------------------
+
+TRIPLE = """
+import time
+from cosim import PythonUnit, Variable
+
+class Triple(PythonUnit):
+    variables = (Variable("k", "parameter", start=1.0), Variable("pause", "parameter", start=0.0),
+                 Variable("y", "output", start=0.0))
+
+    def do_step(self, t, h):
+        time.sleep(self.pause)
+        self.y = FACTOR * self.k
+"""
+
+
+def _triple_study(folder: Path, points: int, factor: float = 3.0, pause: float = 0.0, optimize: bool = False) -> Path:
+    """A study of one Python unit y = factor * k over k = 1..points (a sweep grid, or an optimisation)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "triple.py").write_text(TRIPLE.replace("FACTOR", repr(factor)))
+    spec = {"name": "triple", "units": {"s": {"python": "triple.py:Triple", "parameters": {"pause": pause}}},
+            "experiment": {"stop": 0.1, "step": 0.1}, "objectives": {"y": {"signal": "s.y", "reduce": "final"}},
+            "design": {"parameters": {"s.k": {"min": 1, "max": points, "step": 1}}}}
+    if optimize:
+        spec["optimize"] = {"budget": points, "batch": 2, "seed": 1, "objectives": {"y": "minimize"}}
+    path = folder / "spec.json"
+    path.write_text(json.dumps(spec))
+    return path
+
+
+def _set_factor(spec: Path, factor: float) -> None:
+    (spec.parent / "triple.py").write_text(TRIPLE.replace("FACTOR", repr(factor)))
+
+
+def _damage_metadata(out: Path, how: str) -> None:
+    meta = out / "metadata.json"
+    if how == "empty":
+        meta.write_text("")
+    elif how == "damaged":
+        meta.write_bytes(meta.read_bytes()[:40])
+    elif how == "unreadable":
+        meta.unlink()
+        meta.mkdir()  # reading it fails with an OSError (IsADirectoryError), also for root
+    else:
+        meta.unlink()
+
+
+def _strip_identities(out: Path) -> None:
+    """Rewrite every file of rows without the identity it carries: rows as an older cosim wrote them."""
+    import pyarrow.parquet as pq
+
+    from cosim.results.store import IDENTITY_KEY
+
+    for path in [out / "results.parquet", *(out / "parts").glob("part-*.parquet")]:
+        if path.exists():
+            table = pq.read_table(path)
+            metadata = {k: v for k, v in (table.schema.metadata or {}).items() if k != IDENTITY_KEY}
+            pq.write_table(table.replace_schema_metadata(metadata), path)
+
+
+@pytest.mark.parametrize("how", ["empty", "damaged", "unreadable", "deleted"])
+def test_a_sweep_resume_fails_closed_without_usable_metadata(tmp_path, local_cluster, how):
+    """Before: the unit-file check failed open (a changed unit's rows beside the old ones, exit 0)."""
+    import pandas as pd
+
+    spec = _triple_study(tmp_path / "project", 6)
+    out = tmp_path / "out"
+    sweep = ("sweep", str(spec), "--out", str(out), "--scheduler", local_cluster)
+    assert _cosim(*sweep).returncode == 0
+    _set_factor(spec, 5.0)  # same spec text, another model
+    _damage_metadata(out, how)
+    done = _cosim(*sweep, "--resume")  # the rows carry the checksums themselves
+    assert done.returncode == 2, done.stderr
+    assert "holds results of other unit files" in done.stderr and "unit 's'" in done.stderr
+    assert "Traceback" not in done.stderr
+
+    _strip_identities(out)  # rows of an older cosim: nothing left to check them against
+    done = _cosim(*sweep, "--resume")
+    assert done.returncode == 2, done.stderr
+    reason = {"empty": "empty", "damaged": "not valid JSON", "unreadable": "unreadable",
+              "deleted": "missing"}[how]
+    assert f"cannot resume {out}: its metadata.json is {reason}" in done.stderr, done.stderr
+    assert "results.parquet" in done.stderr and "--recompute" in done.stderr and "Traceback" not in done.stderr
+    if how == "unreadable":
+        (out / "metadata.json").rmdir()
+    done = _cosim(*sweep, "--resume", "--recompute")
+    assert done.returncode == 0, done.stderr
+    table = pd.read_parquet(out / "results.parquet")
+    assert list(table["y"]) == [5.0 * k for k in range(1, 7)]
+
+
+def test_a_sweep_resume_without_metadata_goes_on_when_the_rows_prove_the_same_model(tmp_path, local_cluster):
+    import pandas as pd
+
+    spec = _triple_study(tmp_path / "project", 5)
+    out = tmp_path / "out"
+    sweep = ("sweep", str(spec), "--out", str(out), "--scheduler", local_cluster)
+    assert _cosim(*sweep).returncode == 0
+    (out / "metadata.json").unlink()
+    done = _cosim(*sweep, "--resume")
+    assert done.returncode == 0, done.stderr
+    assert list(pd.read_parquet(out / "results.parquet")["y"]) == [3.0 * k for k in range(1, 6)]
+    assert json.loads((out / "metadata.json").read_text())["unit_checksums"]  # written again
+
+
+def test_an_optimize_resume_fails_closed_without_usable_metadata(tmp_path, local_cluster):
+    spec = _triple_study(tmp_path / "project", 4, optimize=True)
+    out = tmp_path / "out"
+    run = ("optimize", str(spec), "--out", str(out), "--scheduler", local_cluster)
+    assert _cosim(*run).returncode == 0
+    _set_factor(spec, 5.0)
+    _damage_metadata(out, "empty")
+    done = _cosim(*run, "--resume", "--budget", "6")
+    assert done.returncode == 2, done.stderr
+    assert "holds trials of other unit files" in done.stderr and "unit 's'" in done.stderr
+    _strip_identities(out)
+    done = _cosim(*run, "--resume", "--budget", "6")
+    assert done.returncode == 2 and "cannot resume" in done.stderr and "metadata.json is empty" in done.stderr
+
+
+def test_metadata_is_replaced_whole_or_not_at_all(tmp_path):
+    """A write that fails part-way (here: a file-size limit, as a full disk) leaves the old metadata.json."""
+    import signal
+
+    from cosim.results.store import ResultsStore
+
+    store = ResultsStore(tmp_path / "out")
+    store.write_metadata({"spec_digest": "a" * 64, "unit_checksums": {"s": "b" * 64}})
+    before = (tmp_path / "out" / "metadata.json").read_bytes()
+    old_limit = resource.getrlimit(resource.RLIMIT_FSIZE)
+    old_handler = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (4096, old_limit[1]))
+    try:
+        with pytest.raises(OSError):
+            store.write_metadata({"spec_digest": "c" * 64, "spec": {"big": "x" * 10_000}})
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, old_limit)
+        signal.signal(signal.SIGXFSZ, old_handler)
+    assert (tmp_path / "out" / "metadata.json").read_bytes() == before
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["metadata.json", "parts"]

@@ -14,7 +14,12 @@ Layout of a results folder ``DIR``:
   in order by it, streaming, without holding every point id.
 - ``DIR/results.csv``: the same table as CSV, on request.
 - ``DIR/metadata.json``: the spec and its digest, FMU checksums, package
-  versions, host, start and end, counts by status.
+  versions, host, start and end, counts by status; replaced atomically
+  (temporary file, fsync, rename).
+- Every part file and ``results.parquet`` also carry the study's *identity*
+  (spec digest, kind of study, checksums of the unit and data files) in their
+  Parquet metadata (:data:`IDENTITY_KEY`), so a resume can tell which model made
+  the rows even when ``metadata.json`` is lost or damaged.
 
 Columns: ``point_id``, one per parameter (arrays as ``target[i]``), one per
 objective (flat, e.g. ``e_el[3]``), ``status`` (ok, failed, timeout, crashed),
@@ -68,6 +73,7 @@ _SOURCE = "__source"  # which source file a row came from, while merging (a late
 # buffer of rows per file, so the number of files must stay small.
 MERGE_PARTS = 64
 ROW_GROUP = 1024  # rows per row group of a merged part: what a streaming merge holds of each file
+IDENTITY_KEY = b"cosim.identity"  # Parquet metadata key of the study's identity in every file of rows
 
 
 class ResultsStore:
@@ -84,6 +90,16 @@ class ResultsStore:
         self.parts.mkdir(exist_ok=True)
         self._next = max((int(m.group(1)) for m in map(_PART.match, os.listdir(self.parts)) if m), default=-1) + 1
         self._parts_written = 0
+        # what made the rows (spec digest, kind, unit and data-file checksums): written into every file of rows
+        # by the driver that sets it, read back by row_identities()
+        self.identity: Mapping[str, Any] | None = None
+
+    def _stamped(self, schema: pa.Schema) -> pa.Schema:
+        """``schema`` with the study's identity added to its metadata (unchanged when no identity is set)."""
+        if not self.identity:
+            return schema
+        return schema.with_metadata({**(schema.metadata or {}),
+                                     IDENTITY_KEY: json.dumps(self.identity, sort_keys=True).encode()})
 
     # -- writing --------------------------------------------------------------
     def append(self, rows: Sequence[Mapping[str, Any]]) -> None:
@@ -105,9 +121,9 @@ class ResultsStore:
         try:
             with os.fdopen(fd, "wb") as f:
                 if isinstance(table, pa.Table):
-                    pq.write_table(table, f)
+                    pq.write_table(table.replace_schema_metadata(self._stamped(table.schema).metadata), f)
                 else:
-                    with pq.ParquetWriter(f, schema) as writer:
+                    with pq.ParquetWriter(f, self._stamped(schema)) as writer:
                         for piece in table:
                             writer.write_table(piece, row_group_size=ROW_GROUP)
                 f.flush()
@@ -147,18 +163,55 @@ class ResultsStore:
         pa.default_memory_pool().release_unused()
 
     def write_metadata(self, metadata: Mapping[str, Any]) -> None:
-        """Replace ``metadata.json`` atomically."""
+        """Replace ``metadata.json`` atomically and durably: temporary file, fsync, rename, fsync of the folder.
+
+        A crash or a full disk leaves the old file or the new one, never an empty one.
+        """
         tmp = self.metadata_path.with_suffix(".json.tmp")
-        tmp.write_text(json.dumps(metadata, indent=2, default=str))
-        os.replace(tmp, self.metadata_path)
+        try:
+            with open(tmp, "w", encoding="utf-8") as f:
+                f.write(json.dumps(metadata, indent=2, default=str))
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(tmp, self.metadata_path)
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
+        _fsync_folder(self.folder)
 
     # -- reading --------------------------------------------------------------
     def metadata(self) -> dict[str, Any] | None:
-        """The stored metadata, or None when there is none yet."""
+        """The stored metadata, or None when there is none (or it cannot be read: see :meth:`metadata_state`)."""
+        return self.metadata_state()[0]
+
+    def metadata_state(self) -> tuple[dict[str, Any] | None, str | None]:
+        """(the stored metadata, None) or (None, why it cannot be used: "missing", "empty", ...)."""
         try:
-            return json.loads(self.metadata_path.read_text())
-        except (FileNotFoundError, json.JSONDecodeError):
-            return None
+            text = self.metadata_path.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            return None, "missing"
+        except (OSError, UnicodeDecodeError) as exc:
+            return None, f"unreadable ({getattr(exc, 'strerror', None) or exc})"
+        if not text.strip():
+            return None, "empty"
+        try:
+            data = json.loads(text)
+        except ValueError:
+            return None, "not valid JSON (damaged)"
+        if not isinstance(data, dict):
+            return None, "not a JSON object (damaged)"
+        return data, None
+
+    def row_identities(self) -> dict[str, list[Path]]:
+        """The identities the files of rows carry (see :data:`IDENTITY_KEY`), as JSON text -> files.
+
+        Files written without one (by an older cosim, or by a driver that sets none) are listed under "".
+        """
+        found: dict[str, list[Path]] = {}
+        for path in ([self.table_path] if self.table_path.exists() else []) + self._part_files():
+            metadata = pq.ParquetFile(path).schema_arrow.metadata or {}
+            found.setdefault(metadata.get(IDENTITY_KEY, b"").decode(), []).append(path)
+        return found
 
     def _part_files(self) -> list[Path]:
         return sorted(p for p in self.parts.iterdir() if _PART.match(p.name))
@@ -218,7 +271,7 @@ class ResultsStore:
         tmp = self.table_path.with_suffix(".parquet.tmp")
         csv_tmp = self.folder / "results.csv.tmp"
         csv_writer = None
-        with pq.ParquetWriter(tmp, schema) as writer:
+        with pq.ParquetWriter(tmp, self._stamped(schema)) as writer:
             for window in windows:
                 writer.write_table(window)
                 for status, n in zip(*np.unique(window.column("status").to_numpy(zero_copy_only=False),
@@ -242,6 +295,20 @@ class ResultsStore:
     def table(self, columns: Sequence[str] | None = None) -> pd.DataFrame:
         """The compacted table (``results.parquet``) as a DataFrame, optionally only some columns."""
         return pd.read_parquet(self.table_path, columns=list(columns) if columns else None)
+
+
+def _fsync_folder(folder: Path) -> None:
+    """Make a rename in ``folder`` durable (where the system allows opening a folder)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 def _read(path: Path, columns: Sequence[str] | None = None) -> pa.Table:

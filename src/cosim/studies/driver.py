@@ -14,6 +14,7 @@ messages.
 from __future__ import annotations
 
 import getpass
+import json
 import platform
 import socket
 import sys
@@ -27,13 +28,25 @@ from cosim.errors import UserError
 PACKAGES = ("cosim", "fmpy", "dask", "distributed", "numpy", "pandas", "pyarrow", "scipy")
 
 
+def study_identity(spec_digest: str, kind: str, units: Mapping[str, str],
+                   data_files: Mapping[str, Mapping[str, str]]) -> dict[str, Any]:
+    """What makes a study's rows comparable: the spec digest, the kind of study and the checksums of its unit
+    and data files (:mod:`cosim.results.checksums`).  The store writes it into every file of rows."""
+    return {"spec_digest": spec_digest, "kind": kind, "unit_checksums": dict(units),
+            "data_file_checksums": {k: dict(v) for k, v in data_files.items()}}
+
+
 def check_results_folder(store: Any, resume: bool, spec_digest: str, kind: str, to_resume: str,
                          error: type[UserError]) -> dict[str, Any] | None:
-    """The folder's stored metadata when resuming (None when it has none yet); raises ``error`` when unusable.
+    """The folder's stored metadata when resuming (None when it has none, or none that can be read);
+    raises ``error`` when the folder is unusable.
 
     ``kind`` is the metadata's ``kind`` the driver writes (a sweep writes
     none: "sweep"); ``to_resume`` completes "add --resume to ..." in the
-    message for a folder that already holds rows.
+    message for a folder that already holds rows.  The spec digest and kind
+    are checked against ``metadata.json`` and against the identity every file
+    of rows carries, so a lost or damaged ``metadata.json`` does not let rows
+    of another spec through.
     """
     if not resume:
         if store.has_rows():
@@ -41,16 +54,46 @@ def check_results_folder(store: Any, resume: bool, spec_digest: str, kind: str, 
                         "or choose another --out")
         return None
     previous = store.metadata()
-    if previous is None:
-        return None
-    if previous.get("spec_digest") != spec_digest:
-        raise error(f"{store.folder} holds results of a different spec (digest "
-                    f"{str(previous.get('spec_digest'))[:12]}…, this one {spec_digest[:12]}…); "
-                    "use another --out, or run without --resume into an empty folder")
-    if previous.get("kind", "sweep") != kind:
-        raise error(f"{store.folder} holds {previous.get('kind', 'sweep')} results, not {kind} results; use "
-                    "another --out, or resume it with the command that started it")
+    records = [previous] if previous is not None else []
+    records += [json.loads(text) for text in store.row_identities() if text]
+    for record in records:
+        if record.get("spec_digest") != spec_digest:
+            raise error(f"{store.folder} holds results of a different spec (digest "
+                        f"{str(record.get('spec_digest'))[:12]}…, this one {spec_digest[:12]}…); "
+                        "use another --out, or run without --resume into an empty folder")
+        if record.get("kind", "sweep") != kind:
+            raise error(f"{store.folder} holds {record.get('kind', 'sweep')} results, not {kind} results; use "
+                        "another --out, or resume it with the command that started it")
     return previous
+
+
+def resume_differences(store: Any, units: Mapping[str, str], data_files: Mapping[str, Mapping[str, str]],
+                       folder: str | Path) -> tuple[list[str], str | None]:
+    """What keeps the stored rows from being resumed with the unit and data files as they are now.
+
+    Returns (changed, unverifiable): ``changed`` lines name each unit or data
+    file whose checksum differs from ``metadata.json`` or from the identity a
+    file of rows carries; ``unverifiable`` says why the rows cannot be checked
+    at all (``metadata.json`` missing, empty or damaged and rows without an
+    identity of their own), else None.  A resume must fail closed on either.
+    """
+    from cosim.results.checksums import changed_files
+
+    previous, why = store.metadata_state()
+    changed = changed_files(previous, units, data_files, folder) if previous is not None else []
+    identities = store.row_identities()
+    for text, paths in identities.items():
+        if text:
+            changed += [line for line in changed_files(json.loads(text), units, data_files, folder)
+                        if line not in changed]
+    unmarked = identities.get("", [])
+    unverifiable = None
+    if previous is None and unmarked:
+        names = ", ".join(p.relative_to(store.folder).as_posix() for p in unmarked[:3])
+        more = f" and {len(unmarked) - 3} more" if len(unmarked) > 3 else ""
+        unverifiable = (f"its metadata.json is {why}, and {len(unmarked)} file(s) of rows ({names}{more}) carry no "
+                        "checksums of the unit files that made them, so nothing shows they come from the same model")
+    return changed, unverifiable
 
 
 def say(text: str, quiet: bool, stream: TextIO | None) -> None:

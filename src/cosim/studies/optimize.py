@@ -55,9 +55,10 @@ import numpy as np
 
 from cosim.analysis.hypervolume import hypervolume, normalised_losses
 from cosim.errors import OptimizeError, Problem, SpecError
-from cosim.results.checksums import changed_files, data_file_checksums, unit_checksums
+from cosim.results.checksums import data_file_checksums, unit_checksums
 from cosim.results.columns import TAIL_COLUMNS
-from cosim.studies.driver import check_results_folder, finish_metadata, now_utc, package_versions, run_metadata, say
+from cosim.studies.driver import (check_results_folder, finish_metadata, now_utc, package_versions, resume_differences,
+                                  run_metadata, say, study_identity)
 
 SAMPLERS = ("tpe", "nsga2", "gp", "random", "qmc")
 DEFAULT_BUDGET = 200
@@ -312,11 +313,16 @@ class Optimization:
         previous = check_results_folder(self.store, resume, self.spec.digest, "optimization",
                                         "continue that optimisation", OptimizeError)
         self.checksums, self.data_checksums = unit_checksums(self.system), data_file_checksums(self.system)
-        changed = changed_files(previous or {}, self.checksums, self.data_checksums, self.spec.folder)
+        changed, unverifiable = resume_differences(self.store, self.checksums, self.data_checksums,
+                                                   self.spec.folder) if resume else ([], None)
+        if unverifiable:
+            raise OptimizeError(f"cannot resume {self.out}: {unverifiable}; resuming could mix two models in one "
+                                "study; restore metadata.json, or start afresh in another --out")
         if changed:  # the stored trials would steer the sampler with another model's results
             raise OptimizeError(f"{self.out} holds trials of other unit files than the spec names now ("
                                 + "; ".join(changed) + "); resuming would mix two models in one study; restore "
                                 "the files, or start afresh in another --out")
+        self.store.identity = study_identity(self.spec.digest, "optimization", self.checksums, self.data_checksums)
         stored = (previous or {}).get("optimize", {})
         given = {"budget": budget, "sampler": sampler, "batch": batch, "seed": seed, "objectives": objectives}
         for key in ("sampler", "batch", "seed", "objectives"):  # a resume replays the stored run: these must not change

@@ -53,7 +53,8 @@ from cosim.results.checksums import changed_files, data_file_checksums, unit_che
 from cosim.results.columns import TAIL_COLUMNS
 from cosim.results.lock import FolderLock
 from cosim.spec.design import DesignSpace, Point
-from cosim.studies.driver import check_results_folder, finish_metadata, now_utc, run_metadata, say
+from cosim.studies.driver import (check_results_folder, finish_metadata, now_utc, resume_differences, run_metadata,
+                                  say, study_identity)
 from cosim.util import limits
 
 if TYPE_CHECKING:
@@ -292,17 +293,22 @@ class Sweep:
             early.close()
 
     def _check_folder(self) -> None:
-        previous = check_results_folder(self.store, self.resume, self.spec.digest, "sweep", "finish that sweep",
-                                        SweepError)
+        check_results_folder(self.store, self.resume, self.spec.digest, "sweep", "finish that sweep", SweepError)
         if self.resume:
-            changed = self._changed_units(previous or {})
+            changed, unverifiable = resume_differences(self.store, self.checksums, self.data_checksums,
+                                                       self.spec.folder)
+            if unverifiable and not self.recompute:
+                raise SweepError(f"cannot resume {self.out}: {unverifiable}; resuming could mix two models in one "
+                                 "table; restore metadata.json, use another --out, or add --recompute to discard "
+                                 "the stored rows and compute every point again")
             if changed and not self.recompute:
                 raise SweepError(f"{self.out} holds results of other unit files than the spec names now ("
                                  + "; ".join(changed) + "); resuming would mix two models in one table; restore "
                                  "the files, use another --out, or add --recompute to discard the stored rows "
                                  "and compute every point again")
-            if changed:
+            if changed or unverifiable:
                 self.store.discard_rows()
+        self.store.identity = study_identity(self.spec.digest, "sweep", self.checksums, self.data_checksums)
 
     def _changed_units(self, previous: dict[str, Any]) -> list[str]:
         """Units and data files whose content differs from the checksums stored with the rows."""
@@ -364,6 +370,10 @@ class Sweep:
         if todo == 0:
             self.close()
             self._say(f"cosim sweep {self.spec.name}: all {total} points already in {self.out}")
+            if self.store.metadata() is None:  # lost or damaged, and the rows showed the same model: written anew
+                with results_writes(self.out):
+                    self.store.write_metadata(self._metadata({"started": started, "scheduler": "", "workers": 0,
+                                                              "timeout": self.timeout}))
             return self._finish()
         try:
             with dask_client(self.workers, self.scheduler, self.cluster, early=self._early) as \
