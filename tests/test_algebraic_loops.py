@@ -245,3 +245,40 @@ def test_loop_settings_reach_the_solver(write_spec):
     settings = system.coupling.settings
     assert (settings.method, settings.tolerance, settings.max_iterations) == ("newton", 1e-6, 7)
     assert cosim.run(str(write_spec(spec, "again.json"))).ok
+
+
+def test_a_sweep_point_whose_loop_has_no_solution_is_a_failed_row(write_spec):
+    """x = 2 + c y, y = x: x = 2/(1 - c); at c = 1 there is none (the residual stays 2). Real Dask, child process."""
+    spec = {"units": {"ux": {"python": python_unit("Algebraic"), "parameters": {"c0": 2.0}},
+                      "uy": {"python": python_unit("Algebraic")}},
+            "connections": [{"from": "uy.y", "to": "ux.u"}, {"from": "ux.y", "to": "uy.u"}],
+            "experiment": {"stop": 0.2, "step": 0.1},
+            "objectives": {"x": {"signal": "ux.y", "reduce": "final"}},
+            "design": {"parameters": {"ux.c1": {"values": [0.5, 1.0, -1.0]}}}}
+    table = cosim.sweep(str(write_spec(spec)), workers=1, quiet=True)
+    rows = {row["ux.c1"]: row for _, row in table.iterrows()}
+    assert rows[0.5]["status"] == "ok" and rows[0.5]["x"] == pytest.approx(4.0, rel=1e-12)
+    assert rows[-1.0]["status"] == "ok" and rows[-1.0]["x"] == pytest.approx(1.0, rel=1e-12)
+    failed = rows[1.0]
+    assert failed["status"] == "failed" and math.isnan(failed["x"])
+    assert ("algebraic loop through units ux, uy (tearing ux.u) at t=0: did not converge: largest residual 2 "
+            "(tolerance 1e-10)") in failed["message"]
+
+
+def test_one_tearing_variable_where_one_input_lies_on_every_cycle(write_spec):
+    """Two cycles b -> a -> b and b -> a -> c -> b share the input a.u: cutting the link into it alone breaks
+    both (b, listed first, has two inputs on them, each on one cycle only).  a = b/2 + 1, c = a/2, b = a/4 + c:
+    a = 1.6, b = 1.2, c = 0.8."""
+    algebraic = python_unit("Algebraic")
+    spec = {"units": {"b": {"python": algebraic, "parameters": {"c1": 0.25}},
+                      "a": {"python": algebraic, "parameters": {"c0": 1.0, "c1": 0.5}},
+                      "c": {"python": algebraic, "parameters": {"c1": 0.5}}},
+            "connections": [{"from": "b.y", "to": "a.u"}, {"from": "a.y", "to": "b.u"},
+                            {"from": "a.y", "to": "c.u"}, {"from": "c.y", "to": "b.w"}],
+            "experiment": {"stop": 0.1, "step": 0.1}, "record": ["a.y", "b.y", "c.y"]}
+    system, result = _run(write_spec, spec)
+    (loop,) = system.coupling.loops
+    assert loop.tearing == ("a.u",) and loop.units == ("b", "a", "c")
+    assert result.ok, result.message
+    final = result.traces.iloc[-1]
+    assert (final["a.y"], final["b.y"], final["c.y"]) == pytest.approx((1.6, 1.2, 0.8), rel=1e-12)

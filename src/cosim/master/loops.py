@@ -214,33 +214,37 @@ def _loop(members: set[Node], links: Sequence[Link], feedthrough: Sequence[tuple
             ft[(unit, inp)].add((unit, out))
     link_nodes = {i: (_source(links[i]), _target(links[i])) for i in inner}
     key = lambda n: (rank.get(n[0], len(rank)), n[0], n[1])  # noqa: E731  (spec order, then names)
+    order = sorted(members, key=key)
     cut: set[int] = set()
 
-    def remaining() -> dict[Node, set[Node]]:
+    def remaining(cuts: set[int]) -> dict[Node, set[Node]]:
         graph = {n: set(ft[n]) for n in members}
         for i, (a, b) in link_nodes.items():
-            if i not in cut:
+            if i not in cuts:
                 graph[a].add(b)
         return graph
 
-    while True:
-        graph = remaining()
-        cycles = [c for c in strongly_connected(sorted(members, key=key), graph) if is_cycle(c, graph)]
+    def still_cyclic(cuts: set[int]) -> int:
+        """How many ports are still on a cycle once ``cuts`` are cut."""
+        graph = remaining(cuts)
+        return sum(len(c) for c in strongly_connected(order, graph) if is_cycle(c, graph))
+
+    while True:  # greedy: cut the links into the one input that leaves the fewest ports on a cycle, and again
+        graph = remaining(cut)
+        cycles = [c for c in strongly_connected(order, graph) if is_cycle(c, graph)]
         if not cycles:
             break
-        for component in cycles:  # cut every link into the input that closes the most paths of this cycle
-            inside = set(component)
-            inputs = [n for n in component if any(i not in cut and b == n and a in inside
-                                                  for i, (a, b) in link_nodes.items())]
-
-            def score(n: Node) -> tuple:
-                fed = sum(1 for i, (a, b) in link_nodes.items() if i not in cut and b == n and a in inside)
-                return (-fed * len(ft[n] & inside), key(n))
-
-            chosen = min(inputs, key=score)
-            cut.update(i for i, (a, b) in link_nodes.items() if b == chosen and a in inside)
-    graph = remaining()
-    position = {c[0]: p for p, c in enumerate(reversed(strongly_connected(sorted(members, key=key), graph)))}
+        inside = set(cycles[0])
+        candidates: dict[Node, set[int]] = {}  # an input on this cycle -> its links from the cycle
+        for i, (a, b) in link_nodes.items():
+            if i not in cut and a in inside and b in inside:
+                candidates.setdefault(b, set()).add(i)
+        # fewest ports left on a cycle, then fewest tearing values, then most paths closed, then spec order
+        scores = {n: (still_cyclic(cut | into_n), sum(len(links[i].target.refs) for i in into_n),
+                      -len(into_n) * len(ft[n] & inside), key(n)) for n, into_n in candidates.items()}
+        cut |= candidates[min(scores, key=scores.__getitem__)]
+    graph = remaining(cut)
+    position = {c[0]: p for p, c in enumerate(reversed(strongly_connected(order, graph)))}
     ordered = tuple(sorted((i for i in inner if i not in cut), key=lambda i: (position[link_nodes[i][1]], i)))
     torn = tuple(sorted(cut))
     units = tuple(sorted({n[0] for n in members}, key=lambda u: (rank.get(u, len(rank)), u)))
