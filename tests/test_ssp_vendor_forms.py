@@ -10,6 +10,7 @@ solves the system's equations by hand.
 from __future__ import annotations
 
 import io
+from pathlib import Path
 import zipfile
 
 import pytest
@@ -379,3 +380,96 @@ def test_an_enumeration_value_given_as_its_integer_is_read_with_a_note(tmp_path)
     ssd = oms3_ssd().replace('<ssv:Real value="-0.5"/>', '<ssv:Enumeration value="3"/>')
     system = read_ssp(write_archive(tmp_path / "enum.ssp", oms3_files(ssd)))
     assert any("gives the enumeration value as the integer 3; SSP gives the item's name" in n for n in system.notes)
+
+
+# --- item 13: implementation and OMSimulator's solver annotations --------------------------------------------
+
+_CVODE_ASSIGNED = ('        <ssd:Annotations>\n          <ssc:Annotation type="org.openmodelica">\n'
+                   '            <oms:Annotations>\n              <oms:SimulationInformation name="solver2"/>\n'
+                   '            </oms:Annotations>\n          </ssc:Annotation>\n        </ssd:Annotations>\n')
+_A_END = '      </ssd:Component>\n      <ssd:System name="sub">'
+
+
+def _solver_ssd() -> str:
+    """oms3.ssd with OMSimulator 3 solvers: A (implementation ModelExchange) assigned cvode 'solver2', B
+    CoSimulation, two oms_ma masters of 0.1 s and 0.05 s."""
+    ssd = oms3_ssd().replace(_A_END, _CVODE_ASSIGNED + _A_END, 1)
+    ssd = ssd.replace('source="resources/linear_ode.fmu" implementation="any">',
+                      'source="resources/linear_ode.fmu" implementation="ModelExchange">', 1)
+    ssd = ssd.replace('source="resources/linear_ode.fmu" implementation="any">',
+                      'source="resources/linear_ode.fmu" implementation="CoSimulation">', 1)
+    return ssd.replace(
+        '<oms:SimulationInformation name="solver1" method="oms_ma" fixedStepSize="0.1"/>',
+        '<oms:SimulationInformation name="solver1" method="oms_ma" fixedStepSize="0.1"/>\n'
+        '          <oms:SimulationInformation name="solver2" method="cvode" relativeTolerance="0.0001" '
+        'initialStepSize="1e-06" minimumStepSize="1e-12" maximumStepSize="0.001"/>\n'
+        '          <oms:SimulationInformation name="solver3" method="oms_ma" fixedStepSize="0.05"/>')
+
+
+def test_implementation_and_solver_annotations_become_interface_tolerance_max_step_and_step(tmp_path):
+    path = write_archive(tmp_path / "solvers.ssp", oms3_files(_solver_ssd()))
+    system = read_ssp(path)
+    units = system.raw["units"]
+    assert (units["A"]["interface"], units["A"]["tolerance"], units["A"]["max_step"]) == ("model-exchange", 1e-4,
+                                                                                          1e-3)
+    assert units["sub.B"]["interface"] == "co-simulation" and "tolerance" not in units["sub.B"]
+    assert system.raw["experiment"]["step"] == 0.05
+    assert any("several steps (0.1, 0.05): cosim steps every unit with the smallest, 0.05 s" in n
+               for n in system.notes)
+    [unread] = [n for n in system.notes if "not read (cosim's CVode" in n]
+    assert unread.startswith("solver 'solver2': initialStepSize, minimumStepSize not read")
+    result = Execution(check_spec(path), record=True).run()  # the SSP's own step: no --step
+    assert result.ok and len(result.traces) == 21
+    expected = [oms3_expected(t)["sub.B.y"] for t in result.traces["time"]]
+    assert result.traces["sub.B.y"].to_numpy() == pytest.approx(expected, rel=1e-12, abs=1e-12)
+    assert result.traces["A.y"].to_numpy() == pytest.approx(2.0, rel=1e-9)  # A integrated by CVode: dx/dt = 0
+
+
+def test_oms2_solver_forms_and_osp_step_hints(tmp_path):
+    # OMSimulator 2: a VariableStepSolver on the system of a ModelExchange component, a variable-step master
+    ssd = oms3_ssd().replace('source="resources/linear_ode.fmu" implementation="any">',
+                             'source="resources/linear_ode.fmu" implementation="ModelExchange">', 1)
+    ssd = ssd.replace(
+        '<oms:SimulationInformation name="solver1" method="oms_ma" fixedStepSize="0.1"/>',
+        '<oms:SimulationInformation><oms:VariableStepSolver description="cvode" absoluteTolerance="0.0001" '
+        'relativeTolerance="0.001" minimumStepSize="1e-08" maximumStepSize="0.01" initialStepSize="0.001"/>'
+        '<oms:FixedStepMaster description="oms-ma" stepSize="0.1"/></oms:SimulationInformation>')
+    ssd = ssd.replace(_A_END, '        <ssd:Annotations><ssc:Annotation type="com.opensimulationplatform">'
+                      '<osp:StepSizeHint xmlns:osp="http://opensimulationplatform.com/SSP/OSPAnnotations" '
+                      'value="0.05"/></ssc:Annotation><ssc:Annotation type="com.example.layout"><x/></ssc:Annotation>'
+                      '</ssd:Annotations>\n' + _A_END, 1)
+    system = read_ssp(write_archive(tmp_path / "oms2.ssp", oms3_files(ssd)))
+    a = system.raw["units"]["A"]
+    assert (a["interface"], a["tolerance"], a["max_step"]) == ("model-exchange", 1e-3, 1e-2)
+    assert system.raw["experiment"]["step"] == 0.1
+    assert "OSP step size hints ignored (A 0.05 s): cosim steps every unit with one communication step" in system.notes
+    assert "annotations of type 'com.example.layout' are not read" in system.notes
+    assert ("solver 'root cvode': initialStepSize, minimumStepSize, absoluteTolerance not read (cosim's CVode takes "
+            "a relative tolerance and a maximum step)") in system.notes
+
+
+def test_solver_assignments_cosim_cannot_follow_are_notes_or_problems(tmp_path):
+    ssd = _solver_ssd().replace('<oms:SimulationInformation name="solver2"/>',
+                                '<oms:SimulationInformation name="nosuch"/>')
+    system = read_ssp(write_archive(tmp_path / "unknown.ssp", oms3_files(ssd)))
+    assert "component 'A' is assigned solver 'nosuch', which no system defines: ignored" in system.notes
+    assert system.raw["units"]["A"]["interface"] == "model-exchange"  # implementation="ModelExchange" still holds
+
+    ssd = _solver_ssd().replace('implementation="ModelExchange"', 'implementation="ScheduledExecution"')
+    [problem] = _problems(write_archive(tmp_path / "scheduled.ssp", oms3_files(ssd)))
+    assert 'implementation="ScheduledExecution" is not supported' in problem.message
+    assert problem.path.endswith("ssd:Component[@name='A']")
+
+    # an FMU offering only co-simulation asked to run as model exchange: a problem at its component
+    from cosim.fmus.build import ensure_built
+
+    ssd = oms3_ssd().replace('<ssd:Component name="A" type="application/x-fmu-sharedlibrary" '
+                             'source="resources/linear_ode.fmu" implementation="any">',
+                             '<ssd:Component name="C" type="application/x-fmu-sharedlibrary" '
+                             'source="resources/gain_array.fmu" implementation="ModelExchange"/>'
+                             '<ssd:Component name="A" type="application/x-fmu-sharedlibrary" '
+                             'source="resources/linear_ode.fmu" implementation="any">')
+    members = oms3_files(ssd, **{"resources/gain_array.fmu": Path(ensure_built("gain_array", 2)).read_bytes()})
+    [problem] = _problems(write_archive(tmp_path / "csonly.ssp", members))
+    assert problem.path.endswith("ssd:Component[@name='C']")
+    assert "FMU 'resources/gain_array.fmu' cannot be used" in problem.message and "co-simulation" in problem.message

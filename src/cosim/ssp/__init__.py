@@ -33,7 +33,8 @@ def ssp_raw_spec(path: str | Path, experiment: Mapping[str, Any] | None = None) 
     missing = [k for k in ("stop", "step") if k not in raw["experiment"]]
     if missing:
         what = {"stop": "stop time (ssd:DefaultExperiment stopTime)",
-                "step": "step size (OMSimulator FixedStepMaster or OSP FixedStepAlgorithm annotation)"}
+                "step": "step size (OMSimulator FixedStepMaster or oms_ma fixedStepSize, or OSP FixedStepAlgorithm "
+                         "annotation)"}
         raise SpecError([Problem(system.files.label(system.files.ssd), "/ssd:SystemStructureDescription",
                                  f"the SSP gives no {what[k]}",
                                  f"pass --{k} on the command line, or name the SSP in a spec.json "

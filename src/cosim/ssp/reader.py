@@ -32,6 +32,8 @@ from lxml import etree
 
 from cosim.errors import Problem, SpecError, did_you_mean
 from cosim.master.algorithms import ALGORITHMS
+from cosim.ssp.annotations import (Solvers, component_solver, cvode_settings, read_system_solvers, step_size_hint,
+                                   unread_annotation_types)
 from cosim.ssp.archive import SspFiles, open_ssp
 from cosim.ssp.tolerant import tolerated
 from cosim.ssp.xml import element_path, parse_file, schema_problems, short_name, tag
@@ -69,6 +71,8 @@ class Node:
     fmu: Path | None = None
     variables: dict[str, Any] = field(default_factory=dict)  # component: the FMU's variables by name
     unit_definitions: dict[str, Any] = field(default_factory=dict)  # component: the FMU's <UnitDefinitions>
+    interface: str | None = None  # component: "model-exchange" | "co-simulation" (implementation, solver)
+    settings: dict[str, float] = field(default_factory=dict)  # component: tolerance, max_step (from a solver)
 
 
 @dataclass
@@ -109,6 +113,8 @@ class _Reader:
         self.bindings: list[tuple[int, int, tuple[tuple[str, ...], str], Any, str | None, Any, str]] = []
         self._order = 0
         self._prefixed: set[tuple[str, tuple[str, ...]]] = set()  # (file, component) noted for Component.param
+        self.solvers = Solvers()
+        self._hints: list[str] = []  # OSP step size hints, for one note
 
     # --- the document ---------------------------------------------------
 
@@ -126,7 +132,10 @@ class _Reader:
         unit_names = self._unit_names()
         if self.problems:
             raise SpecError(self.problems)
-        units = {unit_names[n.path]: {"fmu": self.files.reference(n.fmu)} for n in self._components()}
+        units = {unit_names[n.path]: {"fmu": self.files.reference(n.fmu),
+                                      **({"interface": n.interface} if n.interface else {}), **n.settings}
+                 for n in self._components()}
+        self._note_unread(root)
         connections = self._connections(unit_names)
         self._apply_bindings(units, unit_names)
         if self.problems:
@@ -232,6 +241,7 @@ class _Reader:
     def _read_system(self, element: Any, path: tuple[str, ...]) -> Node:
         node = Node(path, "system", element, self._connectors(element))
         self.nodes[path] = node
+        read_system_solvers(element, path, self.solvers)  # before the elements: they are assigned by name
         elements = element.find(tag("ssd", "Elements"))
         for child in (elements if elements is not None else []):
             if not isinstance(child.tag, str):
@@ -290,10 +300,12 @@ class _Reader:
                           "put the FMU under resources/ of the SSP, or fix the component's 'source'")
             return node
         node.fmu = fmu
+        if not self._choose_interface(node):
+            return node
         from cosim.units.fmu.description import FmuProblems, FmuUnitType
 
         try:
-            description = FmuUnitType(fmu, reference=source).describe()
+            description = FmuUnitType(fmu, reference=source, interface=node.interface).describe()
         except FmuProblems as exc:
             for problem in exc.problems:
                 self._problem(element, f"FMU '{source}' cannot be used: {problem.message}",
@@ -313,6 +325,51 @@ class _Reader:
                               f"use a variable the FMU has (cosim inspect {Path(source).name} lists them), "
                               "or remove the connector")
         return node
+
+    def _choose_interface(self, node: Node) -> bool:
+        """The component's interface and solver settings from ``implementation`` and an OMSimulator solver
+        assigned to it (cvode or euler: model exchange); False when ``implementation`` is refused."""
+        element = node.element
+        implementation = element.get("implementation")
+        if implementation == "ScheduledExecution":
+            self._problem(element, "implementation=\"ScheduledExecution\" is not supported",
+                          "use implementation=\"CoSimulation\" or \"ModelExchange\" (or \"any\")")
+            return False
+        node.interface = {"ModelExchange": "model-exchange", "CoSimulation": "co-simulation"}.get(implementation or "")
+        name = ".".join(node.path)
+        solver = component_solver(element)
+        if solver is not None:
+            definition = self.solvers.definitions.get(solver)
+            if definition is None:
+                self.solvers.unused.add(f"component '{name}' is assigned solver '{solver}', which no system "
+                                        "defines: ignored")
+            elif definition.get("method") in ("cvode", "euler"):
+                if node.interface == "co-simulation":
+                    self.solvers.unused.add(f"component '{name}' has implementation=\"CoSimulation\" and the "
+                                            f"model-exchange solver '{solver}': it runs as co-simulation")
+                else:
+                    node.interface = "model-exchange"
+                    if definition.get("method") == "cvode":
+                        node.settings = cvode_settings(definition)
+        if node.interface == "model-exchange" and not node.settings:
+            for depth in range(len(node.path) - 1, -1, -1):  # OMSimulator 2: the nearest system's cvode
+                if node.path[:depth] in self.solvers.system_cvode:
+                    node.settings = cvode_settings(self.solvers.system_cvode[node.path[:depth]])
+                    break
+        hint = step_size_hint(element)
+        if hint is not None:
+            self._hints.append(f"{name} {hint:g} s")
+        return True
+
+    def _note_unread(self, root: Any) -> None:
+        """One note per kind of annotation content cosim does not use."""
+        for text in sorted(self.solvers.unused):
+            self._note(text)
+        if self._hints:
+            self._note(f"OSP step size hints ignored ({', '.join(self._hints)}): cosim steps every unit with one "
+                       "communication step")
+        for kind in unread_annotation_types(root):
+            self._note(f"annotations of type '{kind}' are not read")
 
     def _resolve(self, uri: str, base: Path) -> Path | None:
         """A file a component or binding refers to: inside the SSP first, then next to the archive."""
@@ -485,6 +542,11 @@ class _Reader:
                 step = float(element.get("baseStepSize") or element.get("stepSize"))  # OSP / libcosim
             if step is not None:
                 break
+        if step is None and self.solvers.steps:  # OMSimulator 3: oms_ma solvers' fixedStepSize
+            step = min(self.solvers.steps)
+            if len(set(self.solvers.steps)) > 1:
+                self._note(f"OMSimulator solvers give several steps ({', '.join(f'{s:g}' for s in self.solvers.steps)}"
+                           f"): cosim steps every unit with the smallest, {step:g} s")
         if step is not None:
             experiment["step"] = step
         for annotation in root.iter(tag("ssc", "Annotation")):
