@@ -45,8 +45,6 @@ import ast
 import math
 import random
 import re
-import sys
-import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, TextIO
@@ -59,6 +57,7 @@ from cosim.results.checksums import data_file_checksums, unit_checksums
 from cosim.results.columns import TAIL_COLUMNS
 from cosim.studies.driver import (check_results_folder, finish_metadata, now_utc, package_versions, resume_differences,
                                   run_metadata, say, study_identity)
+from cosim.studies.progress import StatusLine
 
 SAMPLERS = ("tpe", "nsga2", "gp", "random", "qmc")
 DEFAULT_BUDGET = 200
@@ -245,34 +244,20 @@ def make_sampler(name: str, seed: int, batch: int) -> Any:
 
 
 class Progress:
-    """One line: evaluations done, not ok, front size, hypervolume (rewritten in place on a terminal)."""
+    """The optimisation's status line: evaluations done, not ok, front size, hypervolume, rate
+    (see :class:`cosim.studies.progress.StatusLine`)."""
 
     def __init__(self, budget: int, stream: TextIO | None):
-        self.budget, self.stream = budget, stream if stream is not None else sys.stderr
-        self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
-        self.started = time.perf_counter()
-        self._decile = -1
-        self._last = ""
-
-    def close(self) -> None:
-        if self.tty and self._last:
-            self._print("", "\n")
+        self.budget = budget
+        self._line = StatusLine(budget, stream)
 
     def show(self, done: int, not_ok: int, front: int, hv: float) -> None:
-        decile = int(10 * done / max(self.budget, 1))
-        if not (self.tty or decile != self._decile or done >= self.budget):
-            return  # in a log, one line per tenth is enough
-        self._decile = decile
-        rate = done / max(time.perf_counter() - self.started, 1e-9)
-        self._last = (f"{done}/{self.budget} evaluations, {not_ok} not ok, front {front}, "
-                      f"hypervolume {hv:.4f}, {rate:.1f}/s")
-        self._print(self._last, "\r" if self.tty else "\n")
+        rate = done / max(self._line.elapsed(), 1e-9)
+        self._line.show(done, f"{done}/{self.budget} evaluations, {not_ok} not ok, front {front}, "
+                              f"hypervolume {hv:.4f}, {rate:.1f}/s")
 
-    def _print(self, text: str, end: str) -> None:
-        try:
-            print(text, end=end, file=self.stream, flush=True)
-        except (OSError, ValueError):
-            pass  # a closed terminal must not stop the optimisation
+    def close(self) -> None:
+        self._line.close()
 
 
 class Optimization:

@@ -37,9 +37,7 @@ import math
 import os
 import shutil
 import statistics
-import sys
 import tempfile
-import time
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterator, Sequence, TextIO
@@ -55,6 +53,7 @@ from cosim.results.lock import FolderLock
 from cosim.spec.design import DesignSpace, Point
 from cosim.studies.driver import (check_results_folder, finish_metadata, now_utc, resume_differences, run_metadata,
                                   say, study_identity)
+from cosim.studies.progress import StatusLine, duration
 from cosim.util import limits
 
 if TYPE_CHECKING:
@@ -87,55 +86,29 @@ def results_writes(out: Path) -> Iterator[None]:
 
 
 class Progress:
-    """One status line: points done, failed, rate, time left (rewritten in place on a terminal)."""
+    """The sweep's status line: points done, not ok, rate, time left (see :class:`cosim.studies.progress.StatusLine`)."""
 
     def __init__(self, total: int, stream: TextIO | None = None):
         self.total, self.done, self.failed = total, 0, 0
-        self.stream = stream if stream is not None else sys.stderr
-        self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
-        self.started = time.perf_counter()
-        self._last = 0.0
-        self._last_decile = -1
+        self._line = StatusLine(total, stream)
 
     def update(self, done: int, failed: int) -> None:
         self.done += done
         self.failed += failed
-        now = time.perf_counter()
-        if self.tty and now - self._last < 0.2 and self.done < self.total:
-            return
-        decile = int(10 * self.done / max(self.total, 1))
-        if not self.tty and decile == self._last_decile and self.done < self.total:
-            return  # in a log, one line per tenth is enough
-        self._last, self._last_decile = now, decile
-        self._print(self.line(), end="\r" if self.tty else "\n")
+        self._line.show(self.done, self.line())
 
     def line(self) -> str:
-        elapsed = time.perf_counter() - self.started
+        elapsed = self._line.elapsed()
         rate = self.done / elapsed if elapsed > 0 else 0.0
         left = (self.total - self.done) / rate if rate > 0 else math.inf
         width = 24
         filled = int(width * self.done / max(self.total, 1))
         bar = "#" * filled + "." * (width - filled)
         return (f"[{bar}] {self.done}/{self.total} points, {self.failed} not ok, {rate:.1f}/s, "
-                f"{_duration(left)} left")
+                f"{duration(left)} left")
 
     def close(self) -> None:
-        if self.tty:
-            self._print("")
-
-    def _print(self, text: str, end: str = "\n") -> None:
-        try:
-            print(text, end=end, file=self.stream, flush=True)
-        except (OSError, ValueError):
-            pass  # a closed terminal must not stop the sweep
-
-
-def _duration(seconds: float) -> str:
-    if not math.isfinite(seconds):
-        return "?"
-    seconds = int(round(seconds))
-    return f"{seconds // 3600}:{seconds // 60 % 60:02d}:{seconds % 60:02d}" if seconds >= 3600 \
-        else f"{seconds // 60}:{seconds % 60:02d}"
+        self._line.close()
 
 
 class BatchSizer:
