@@ -40,7 +40,7 @@ def add_optimize_parser(sub: Any) -> None:
                    help="designs asked and evaluated in parallel per round (default 8; nsga2: 20, its population)")
     p.add_argument("--seed", type=int, metavar="S", help="sampler seed (default: optimize.seed, or a random one)")
     p.add_argument("--resume", action="store_true", help="continue the optimisation stored in --out to the budget")
-    p.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: one per core)")
+    p.add_argument("--workers", type=int, metavar="N", help="local workers, each running points in a child process (default: one per core)")
     add_cluster_options(p)
     p.add_argument("--timeout", type=float, metavar="S", help="seconds an evaluation may run before it is stopped")
     p.set_defaults(handler=cmd_optimize)

@@ -29,7 +29,7 @@ def add_sensitivity_parser(sub: Any) -> None:
     p.add_argument("--objective", action="append", metavar="NAME",
                    help="objective to analyse (repeatable; default: those with a sense, else all)")
     p.add_argument("--out", metavar="DIR", help="results folder (default: results/<spec name>_<method>)")
-    p.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: one per core)")
+    p.add_argument("--workers", type=int, metavar="N", help="local workers, each running points in a child process (default: one per core)")
     from cosim.cli.sweep import add_cluster_options
     add_cluster_options(p)
     p.add_argument("--timeout", type=float, metavar="S", help="seconds a run may take before it is stopped")

@@ -22,7 +22,7 @@ def add_sweep_parser(sub: Any) -> None:
     p = sub.add_parser("sweep", help="evaluate every design point of a spec on Dask; write a results table")
     p.add_argument("spec", help="path to spec.json, or an SSP (.ssp, .ssd, or a folder with SystemStructure.ssd)")
     p.add_argument("--out", metavar="DIR", help="results folder (default: results/<spec name> in the current folder)")
-    p.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: one per core)")
+    p.add_argument("--workers", type=int, metavar="N", help="local workers, each running points in a child process (default: one per core)")
     add_cluster_options(p)
     p.add_argument("--timeout", type=float, metavar="S", help="seconds a point may run before it is stopped")
     p.add_argument("--resume", action="store_true", help="run only the points missing in --out")

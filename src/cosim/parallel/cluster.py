@@ -18,8 +18,8 @@ In order of precedence:
 3. Dask's own configuration: ``scheduler-address`` (also set by the
    environment variable ``DASK_SCHEDULER_ADDRESS``), see
    :func:`configured_scheduler`.
-4. Otherwise a local cluster of worker processes
-   (:func:`cosim.parallel.evaluator.dask_client`).
+4. Otherwise a local cluster whose workers run in cosim's process, each running
+   its points in a child process (:func:`cosim.parallel.evaluator.local_cluster`).
 
 Every mistake in a cluster file is a :class:`~cosim.errors.UserError`
 naming the file, the field and the fix (exit code 2).

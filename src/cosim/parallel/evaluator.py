@@ -1,15 +1,21 @@
-"""One evaluator for every driver: design points in, one row per point out, on Dask.
+"""Design points in, one row per point out, on Dask: what every study shares.
 
 ``cosim sweep``, ``cosim optimize`` and ``cosim sensitivity`` differ only in
-*which* points they ask for and when; all of them evaluate points here, so
-they share the cluster set-up, the payload (system + unit files, scattered
-once), the per-worker child processes of :mod:`cosim.parallel.isolation` with
-their timeouts, and the rule that a fault is a row, never an exception:
+*which* points they ask for and when; they share the cluster set-up, the
+payload (system + unit files, scattered once), the task function
+(:func:`cosim.parallel.tasks.run_batch`) and the per-worker child processes of
+:mod:`cosim.parallel.isolation` with their timeouts, the re-runs of lost tasks
+and the rule that a fault is a row, never an exception.  An optimisation asks
+:class:`Evaluator` for batches; a sweep (and a sensitivity study, which is a
+sweep of its sample) streams its points through the same pieces itself
+(:meth:`cosim.studies.sweep.Sweep.run`), sizing its tasks as point times become
+known:
 
 - :func:`dask_client` starts the cluster of a cluster file, connects to a
   running scheduler (given, or from Dask's configuration) or starts a local
-  cluster of worker processes (one thread each, 127.0.0.1), and closes what
-  it started (see :mod:`cosim.parallel.cluster`).
+  cluster whose workers run in this process (one thread each, 127.0.0.1; each
+  runs its points in a child process), and closes what it started (see
+  :mod:`cosim.parallel.cluster`).
 - :class:`Evaluator` runs a list of points on that client in parallel and
   returns one row per point in the order given (``evaluate``).
 - A task lost with its worker process is run again by the scheduler on

@@ -4,9 +4,10 @@
 packs the system and its unit files into a payload) and :meth:`Sweep.run`
 evaluates the points on Dask:
 
-- Cluster: by default a ``distributed.LocalCluster`` of worker *processes*
-  (one per core, one thread each, bound to 127.0.0.1; FMUs cannot safely
-  share a process), any running scheduler by address (also from
+- Cluster: by default a ``distributed.LocalCluster`` whose workers (one per
+  core, one thread each, bound to 127.0.0.1) run in cosim's process and run
+  their points in child processes (FMUs cannot safely share a process; see
+  :func:`cosim.parallel.evaluator.local_cluster`), any running scheduler by address (also from
   ``DASK_SCHEDULER_ADDRESS``), or any Dask cluster class named in a cluster
   file (Slurm, PBS, Kubernetes ...; :mod:`cosim.parallel.cluster`).
 - The payload is scattered to the workers once; FMU, ``file.py`` unit and
