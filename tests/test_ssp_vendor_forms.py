@@ -473,3 +473,62 @@ def test_solver_assignments_cosim_cannot_follow_are_notes_or_problems(tmp_path):
     [problem] = _problems(write_archive(tmp_path / "csonly.ssp", members))
     assert problem.path.endswith("ssd:Component[@name='C']")
     assert "FMU 'resources/gain_array.fmu' cannot be used" in problem.message and "co-simulation" in problem.message
+
+
+# --- item 11: a CSV table as a component, played ------------------------------------------------------------
+
+_TABLE = ('      <ssd:Component name="setpoint" type="text/csv" source="resources/setpoint.csv">\n'
+          '        <ssd:Connectors>\n          <ssd:Connector name="speed" kind="output">\n'
+          '            <ssc:Real/>\n          </ssd:Connector>\n        </ssd:Connectors>\n'
+          '      </ssd:Component>\n')
+SETPOINT = b'"time","speed"\n0,0\n0.5,0\n1.5,1\n2,1\n'  # OMSimulator's result CSVs quote the names
+
+
+def _setpoint(t: float) -> float:
+    """The table, interpolated linearly by hand."""
+    return 0.0 if t <= 0.5 else (t - 0.5 if t <= 1.5 else 1.0)
+
+
+def _table_ssd() -> str:
+    """oms3.ssd with a table component 'setpoint' (as OMSimulator 3 writes it) feeding sub.speed instead of A."""
+    ssd = oms3_ssd().replace('      <ssd:System name="sub">', _TABLE + '      <ssd:System name="sub">', 1)
+    return ssd.replace('startElement="A" startConnector="y" endElement="sub"',
+                       'startElement="setpoint" startConnector="speed" endElement="sub"')
+
+
+@pytest.mark.parametrize("algorithm", ["jacobi", "gauss-seidel"])
+def test_a_csv_component_is_played_into_the_system(tmp_path, algorithm):
+    members = oms3_files(_table_ssd(), **{"resources/setpoint.csv": SETPOINT})
+    path = write_archive(tmp_path / "table.ssp", members)
+    raw = read_ssp(path).raw
+    assert raw["units"]["setpoint"] == {"player": f"{path.resolve()}!/resources/setpoint.csv",
+                                        "interpolation": "linear", "all_real": True, "columns": ["speed"]}
+    assert {"from": "setpoint.speed", "to": "sub.B.u", "convert": False} in raw["connections"]
+    h, b = 0.1, -0.5  # sub.B integrates b * u exactly for u held over each step, from x0 = 0
+    times = [k * h for k in range(11)]
+    expected, y = [0.0], 0.0
+    for k in range(10):  # Jacobi: B steps from the table's value at the start of the step; Gauss-Seidel: the end
+        y += h * b * _setpoint(times[k] if algorithm == "jacobi" else times[k + 1])
+        expected.append(y)
+    for given in (path, write_folder(tmp_path / algorithm, members) / "SystemStructure.ssd"):
+        result = _run(given, algorithm)
+        assert result.traces["sub.B.y"].to_numpy() == pytest.approx(expected, rel=1e-12, abs=1e-15)
+        assert result.traces["setpoint.speed"].to_numpy() == pytest.approx([_setpoint(t) for t in times], abs=1e-12)
+
+
+def test_table_components_cosim_cannot_play_are_problems_at_their_element(tmp_path):
+    members = oms3_files(_table_ssd().replace("resources/setpoint.csv", "resources/Gain_res.mat"),
+                         **{"resources/Gain_res.mat": b"MATLAB 5.0"})
+    [problem] = _problems(write_archive(tmp_path / "mat.ssp", members))
+    assert "table 'resources/Gain_res.mat' is no CSV file" in problem.message and "CSV" in problem.fix
+    assert problem.path.endswith("ssd:Component[@name='setpoint']")
+
+    ssd = _table_ssd().replace('<ssd:Connector name="speed" kind="output">', '<ssd:Connector name="sped" kind="output">')
+    ssd = ssd.replace('startConnector="speed" endElement="sub"', 'startConnector="sped" endElement="sub"')
+    [problem] = _problems(write_archive(tmp_path / "col.ssp", oms3_files(ssd, **{"resources/setpoint.csv": SETPOINT})))
+    assert "connector 'sped' is not a column of resources/setpoint.csv" in problem.message
+    assert "Did you mean 'speed'" in problem.message
+
+    members = oms3_files(_table_ssd(), **{"resources/setpoint.csv": b"t,speed\n0,1\n"})
+    [problem] = _problems(write_archive(tmp_path / "notime.ssp", members))
+    assert "cannot read table 'resources/setpoint.csv'" in problem.message and "'time'" in problem.message

@@ -46,6 +46,7 @@ _INTEGER = {"Integer", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "I
 _TYPE_OF = {**{t: "Real" for t in _REAL}, **{t: "Integer" for t in _INTEGER}, "Boolean": "Boolean",
             "String": "String", "Enumeration": "Integer"}
 FMU_TYPES = ("application/x-fmu-sharedlibrary",)
+TABLE_TYPES = ("text/csv", "application/table")  # OMSimulator 3 and 2: a table whose columns are outputs
 _NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _LOGGED: set[tuple[str, str]] = set()
 
@@ -69,6 +70,7 @@ class Node:
     connectors: dict[str, Connector] = field(default_factory=dict)
     children: dict[str, "Node"] = field(default_factory=dict)
     fmu: Path | None = None
+    table: Path | None = None  # a table component (CSV): played by a player unit
     variables: dict[str, Any] = field(default_factory=dict)  # component: the FMU's variables by name
     unit_definitions: dict[str, Any] = field(default_factory=dict)  # component: the FMU's <UnitDefinitions>
     interface: str | None = None  # component: "model-exchange" | "co-simulation" (implementation, solver)
@@ -132,9 +134,7 @@ class _Reader:
         unit_names = self._unit_names()
         if self.problems:
             raise SpecError(self.problems)
-        units = {unit_names[n.path]: {"fmu": self.files.reference(n.fmu),
-                                      **({"interface": n.interface} if n.interface else {}), **n.settings}
-                 for n in self._components()}
+        units = {unit_names[n.path]: self._raw_unit(n) for n in self._components()}
         self._note_unread(root)
         connections = self._connections(unit_names)
         self._apply_bindings(units, unit_names)
@@ -176,6 +176,18 @@ class _Reader:
             self.problems.extend(problems)
             return None
         return root
+
+    def _raw_unit(self, node: Node) -> dict:
+        """The spec entry of one component: an FMU unit, or a player of a table component."""
+        if node.table is not None:
+            # every column Real and interpolated linearly, as OMSimulator plays a table
+            unit: dict[str, Any] = {"player": self.files.reference(node.table), "interpolation": "linear",
+                                    "all_real": True}
+            if node.connectors:
+                unit["columns"] = list(node.connectors)
+            return unit
+        return {"fmu": self.files.reference(node.fmu), **({"interface": node.interface} if node.interface else {}),
+                **node.settings}
 
     def _note(self, text: str) -> None:
         self.notes.append(text)
@@ -284,8 +296,11 @@ class _Reader:
         node = Node(path, "component", element, self._connectors(element))
         self.nodes[path] = node
         kind = element.get("type", FMU_TYPES[0])
+        if kind in TABLE_TYPES:
+            return self._read_table(node)
         if kind not in FMU_TYPES:
-            self._problem(element, f"component type '{kind}' is not supported (only FMUs: {FMU_TYPES[0]})",
+            self._problem(element, f"component type '{kind}' is not supported (FMUs: {FMU_TYPES[0]}; "
+                          f"CSV tables: {' or '.join(TABLE_TYPES)})",
                           "export the component as an FMU, or inline its SSD as an ssd:System")
             return node
         source = element.get("source")
@@ -324,6 +339,44 @@ class _Reader:
                               + did_you_mean(name, node.variables),
                               f"use a variable the FMU has (cosim inspect {Path(source).name} lists them), "
                               "or remove the connector")
+        return node
+
+    def _read_table(self, node: Node) -> Node:
+        """A table component (``type="text/csv"``, OMSimulator's form): its columns but ``time`` are outputs,
+        played with linear interpolation (as OMSimulator does)."""
+        element = node.element
+        source = element.get("source")
+        if not source:
+            self._problem(element, "the table component has no 'source'", "set source=\"resources/table.csv\"")
+            return node
+        if not source.lower().endswith(".csv"):
+            self._problem(element, f"table '{source}' is no CSV file: cosim reads table components from CSV only "
+                          "(not MAT result files)", "export the table as CSV (a 'time' column, then one column per "
+                          "output) and point the component's source at it")
+            return node
+        path = self._resolve(source, self.files.ssd.parent)
+        if path is None:
+            self._problem(element, f"table '{source}' not found", "put the CSV under resources/ of the SSP, or fix "
+                          "the component's 'source'")
+            return node
+        from cosim.units.player import PlayerUnitType
+
+        try:
+            description = PlayerUnitType(path, all_real=True).describe()
+        except Exception as exc:  # noqa: BLE001 - the user's file: a problem, never a traceback
+            self._problem(element, f"cannot read table '{source}': {exc}", "write a CSV with a 'time' column "
+                          "(non-decreasing) and numeric columns")
+            return node
+        node.table = path
+        node.variables = {v.name: v for v in description.variables}
+        for name, connector in node.connectors.items():
+            if name not in node.variables:
+                self._problem(connector.element, f"connector '{name}' is not a column of {source}."
+                              + did_you_mean(name, node.variables),
+                              f"name a column: {', '.join(list(node.variables)[:12])}")
+            elif connector.kind not in ("output", None):
+                self._problem(connector.element, f"connector '{name}' of a table is kind=\"{connector.kind}\"",
+                              "a table's columns are outputs: write kind=\"output\"")
         return node
 
     def _choose_interface(self, node: Node) -> bool:
@@ -435,7 +488,7 @@ class _Reader:
         return (getattr(variable, "unit", None) if variable is not None else None), node.unit_definitions
 
     def _components(self) -> list[Node]:
-        return [n for n in self.nodes.values() if n.kind == "component" and n.fmu is not None]
+        return [n for n in self.nodes.values() if n.kind == "component" and (n.fmu or n.table) is not None]
 
     def _unit_names(self) -> dict[tuple[str, ...], str]:
         names: dict[tuple[str, ...], str] = {}
@@ -468,7 +521,7 @@ class _Reader:
         connections = []
         for end, edge in into.items():
             node = self.nodes[end[0]]
-            if node.kind != "component" or node.fmu is None:
+            if node.kind != "component" or (node.fmu or node.table) is None:
                 continue
             variable = _variable(node, end[1])
             if variable is None or variable.causality != "input":
@@ -576,6 +629,10 @@ class _Reader:
         if container is None or path not in self.nodes:
             return
         owner = self.nodes[path]
+        if owner.table is not None or owner.element.get("type") in TABLE_TYPES:
+            self._problem(container, "a table component has no parameters to bind",
+                          "remove the ssd:ParameterBindings of the table component")
+            return
         for binding in container.findall(tag("ssd", "ParameterBinding")):
             prefix = binding.get("prefix", "")
             base = self.files.ssd.parent

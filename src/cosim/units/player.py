@@ -105,7 +105,8 @@ class PlayerUnitType(UnitType):
     """Blueprint of a signal player over the table at ``path``."""
 
     def __init__(self, path: str | Path, columns: Sequence[str] | None = None, interpolation: str = "linear",
-                 extrapolation: str = "hold", units: dict[str, str] | None = None, unit_name: str | None = None):
+                 extrapolation: str = "hold", units: dict[str, str] | None = None, unit_name: str | None = None,
+                 all_real: bool = False):
         if interpolation not in INTERPOLATIONS:
             raise ValueError(f"interpolation '{interpolation}' is not one of {', '.join(INTERPOLATIONS)}")
         self.path = str(path)
@@ -115,6 +116,7 @@ class PlayerUnitType(UnitType):
         self.units = dict(units or {})
         self._recorded_units: dict[str, str] = {}
         self.unit_name = unit_name  # the spec's name of this player: its own columns 'name.port' are offered as 'port'
+        self.all_real = all_real  # every column Real (interpolated), whatever its recorded type: SSP table components
         self._table: tuple[np.ndarray, np.ndarray, list[str]] | None = None
         self._kinds: list[str] = []
         self._aliases: dict[str, str] | None = None
@@ -145,7 +147,7 @@ class PlayerUnitType(UnitType):
             if not_numbers:
                 raise ValueError(f"{self.path}: column(s) {', '.join(not_numbers)} are not numbers (a player plays "
                                  "numeric and Boolean columns only); leave them out of 'columns'")
-            self._kinds = ["Boolean" if _is_bool(frame[c]) else
+            self._kinds = ["Real" if self.all_real else "Boolean" if _is_bool(frame[c]) else
                            "Integer" if np.issubdtype(frame[c].dtype, np.integer) else "Real" for c in names]
             self._table = (frame["time"].to_numpy(dtype=float), frame[names].to_numpy(dtype=float), names)
             # units written by 'cosim run --out' into a Parquet table's metadata (CSV has none)

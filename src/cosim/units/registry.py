@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Mapping
 
 from cosim.errors import InternalError, Problem, UserError
+from cosim.util.archive import MEMBER_SEPARATOR
 
 if TYPE_CHECKING:
     from cosim.units.protocol import UnitType
@@ -232,6 +233,10 @@ def one_kind_hint() -> tuple[str, str]:
 
 
 def _relative(source: str, folder: str) -> Path:
+    if MEMBER_SEPARATOR in source:  # a table inside an SSP archive (an SSP's CSV component), as resolve_fmu_path
+        from cosim.util.archive import member_file
+
+        return member_file(source)
     path = Path(source)
     return path if path.is_absolute() else Path(folder) / path
 
@@ -300,7 +305,8 @@ def _create_player(spec: UnitSpec, folder: str) -> "UnitType":
 
     o = spec.options
     return PlayerUnitType(_relative(spec.source, folder), o.get("columns"), o.get("interpolation", "linear"),
-                          o.get("extrapolation", "hold"), o.get("units"), unit_name=spec.name)
+                          o.get("extrapolation", "hold"), o.get("units"), unit_name=spec.name,
+                          all_real=o.get("all_real", False))
 
 
 FMU = UnitKind("fmu", {
@@ -334,6 +340,10 @@ PLAYER = UnitKind("player", {
                       "description": "player only: beyond the recorded time range, hold the end values or fail."},
     "units": {"type": "object", "additionalProperties": {"type": "string"},
               "description": "player only: unit of measure of played columns or arrays, e.g. {\"speed\": \"rpm\"}."},
+    "all_real": {"type": "boolean",
+                 "description": "player only: play every column as Real (interpolated), whatever its recorded type "
+                                "(a CSV column of whole numbers reads as Integer, held). An SSP's table component "
+                                "is played so."},
 }, _create_player, example='"player": "traces.parquet"', description="recorded signals played back", replays=True)
 
 BUILTIN_KINDS = {kind.name: kind for kind in (FMU, PYTHON, PLAYER)}
