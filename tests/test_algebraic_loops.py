@@ -45,12 +45,12 @@ def linear_loop(algorithm: str, units: str = "python") -> dict:
 
     A clock drives t; a gain downstream reads x (z = 2x = -6 - 2t).
     """
-    algebraic = ({"python": python_unit("Algebraic")} if units == "python" else {"fmu": "builtin:algebraic_fmi2"})
+    algebraic = {"python": python_unit("Algebraic")} if units == "python" else {"fmu": "builtin:algebraic_fmi2"}
     spec = {
         "units": {
             "clock": {"python": python_unit("Clock"), "parameters": {"t_end": 10.0}},
             "ux": {**algebraic, "parameters": {"c0": 2.0, "c1": 0.5}},
-            "uy": {"python": python_unit("Algebraic"), "parameters": {"c0": -1.0, "c1": 3.0}},
+            "uy": {**algebraic, "parameters": {"c0": -1.0, "c1": 3.0}},
             "gain": {"python": python_unit("Gain"), "parameters": {"k": 2.0}},
         },
         "connections": [

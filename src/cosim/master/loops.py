@@ -12,7 +12,8 @@ output -> input, a unit's declared feed-through an edge input -> output.  :func:
 
 :class:`LoopSolver` solves it with Newton's method on the residual (finite-difference Jacobian, kept from one
 communication point to the next while it still contracts, backtracking steps), falling back to fixed-point
-iteration x <- G(x); ``"fixed-point"`` uses only the latter.  A loop that does not converge within the
+iteration x <- G(x); ``"fixed-point"`` uses only the latter.  Each solve starts from the last two solutions
+extrapolated to the time (Newton is local: it follows the solution branch it starts on).  A loop that does not converge within the
 iteration limit raises :class:`LoopError` (a UnitError: the run becomes a failed row naming the loop and its
 residual), never a hang.  Units are only set and read (FMI 2/3 allow set/get between steps; a Python unit
 recomputes its outputs in ``compute_outputs``), never stepped, so solving costs no simulated time.
@@ -26,6 +27,7 @@ which outputs (after the spec's own ``feedthrough`` declarations) and calls :fun
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping, Sequence
 
@@ -286,6 +288,7 @@ class LoopSolver:
         self._slices = [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:])]
         self._inner = _in_order(units, [links[i] for i in loop.links])
         self._jacobian: np.ndarray | None = None  # of the residual, kept while Newton steps still contract
+        self._solutions: deque[tuple[float, np.ndarray]] = deque(maxlen=2)  # (t, x) of the last two solves
         self.evaluations = 0
         self.iterations = 0
 
@@ -303,31 +306,48 @@ class LoopSolver:
         return self._read()
 
     def _converged(self, r: np.ndarray, x: np.ndarray) -> bool:
-        return bool(np.all(np.abs(r) <= self.settings.tolerance * (1.0 + np.abs(x))))
+        """Every |r_i| <= tolerance * (1 + |x_i|) (false for NaN); on lists: loops are small, numpy's per-call
+        cost would be most of the solve."""
+        tolerance = self.settings.tolerance
+        return all(abs(ri) <= tolerance * (1.0 + abs(xi)) for ri, xi in zip(r.tolist(), x.tolist()))
 
     def solve(self, t: float) -> None:
         """Solve the loop at time ``t``; raises LoopError when it does not converge (UnitError of a unit as is)."""
         for transfer in self._entries:
             transfer.run()
-        x = self._read()  # the guess: what the cut links carry now
+        x = self._guess(t)
         g = self._evaluate(x)
         r = g - x
         self.iterations = 0
         if self._converged(r, x):
+            self._solutions.append((t, x))
             return
         newton_iterations = 0
         best = (_size(r), x)
         if self.settings.method == "newton":
             done, x, r, newton_iterations, best = self._newton(x, g, r, best)
             if done:
+                self._solutions.append((t, x))
                 return
-        done, fixed_iterations, best = self._fixed_point(best[1], best)
+        done, x, fixed_iterations, best = self._fixed_point(best[1], best)
         if done:
+            self._solutions.append((t, x))
             return
         tried = (f"{newton_iterations} Newton iteration(s), then " if self.settings.method == "newton" else "")
         raise LoopError(self.loop.name, f"did not converge: largest residual {best[0]:.3g} (tolerance "
                                         f"{self.settings.tolerance:g}) after {tried}{fixed_iterations} fixed-point "
                                         "iteration(s)", t)
+
+    def _guess(self, t: float) -> np.ndarray:
+        """Where to start at ``t``: the last two solutions extrapolated linearly (the last one alone after the
+        first solve; what the cut links carry now before it), so a smooth solution is followed closely."""
+        if not self._solutions:
+            return self._read()
+        t1, x1 = self._solutions[-1]
+        if len(self._solutions) == 1 or t == t1:
+            return x1.copy()
+        t0, x0 = self._solutions[0]
+        return x1 + (x1 - x0) * ((t - t1) / (t1 - t0)) if t1 != t0 else x1.copy()
 
     def _newton(self, x: np.ndarray, g: np.ndarray, r: np.ndarray, best: tuple[float, np.ndarray]):
         """Newton on r(x) = G(x) - x from ``x``; (converged, x, r, iterations, best (residual, x) seen)."""
@@ -336,11 +356,8 @@ class LoopSolver:
         while iterations < self.settings.max_iterations:
             if jacobian is None:
                 jacobian, fresh = self._finite_differences(x, g), True
-            try:
-                dx = np.linalg.solve(jacobian, -r)
-            except np.linalg.LinAlgError:
-                dx = None
-            if dx is None or not np.all(np.isfinite(dx)):
+            dx = _newton_step(jacobian, r)
+            if dx is None or not all(map(math.isfinite, dx.tolist())):
                 if fresh:
                     break  # singular at this x: leave it to the fixed-point iteration
                 jacobian = None
@@ -351,12 +368,13 @@ class LoopSolver:
                 x_new = x + scale * dx
                 g_new = self._evaluate(x_new)
                 r_new = g_new - x_new
-                if _size(r_new) < size or scale <= 1.0 / 16:
+                size_new = _size(r_new)
+                if size_new < size or scale <= 1.0 / 16:
                     break
                 scale /= 2
-            if _size(r_new) < best[0]:
-                best = (_size(r_new), x_new)
-            if not _size(r_new) < size:
+            if size_new < best[0]:
+                best = (size_new, x_new)
+            if not size_new < size:
                 if fresh:
                     break
                 jacobian = None  # an old Jacobian that no longer leads down: make a new one here
@@ -365,7 +383,7 @@ class LoopSolver:
             if self._converged(r, x):
                 self._jacobian, self.iterations = jacobian, iterations
                 return True, x, r, iterations, best
-            if _size(r) > 0.25 * size:  # contracting slowly: the Jacobian is out of date
+            if size_new > 0.25 * size:  # contracting slowly: the Jacobian is out of date
                 jacobian = None
             fresh = False
         self._jacobian = None
@@ -384,7 +402,7 @@ class LoopSolver:
         return jacobian
 
     def _fixed_point(self, x: np.ndarray, best: tuple[float, np.ndarray]):
-        """x <- G(x) from ``x``; (converged, iterations, best (residual, x) seen)."""
+        """x <- G(x) from ``x``; (converged, the last x, iterations, best (residual, x) seen)."""
         g = self._evaluate(x)
         for iterations in range(1, self.settings.max_iterations + 1):
             x = g
@@ -394,13 +412,25 @@ class LoopSolver:
                 best = (_size(r), x)
             if self._converged(r, x):
                 self.iterations = iterations
-                return True, iterations, best
-        return False, self.settings.max_iterations, best
+                return True, x, iterations, best
+        return False, x, self.settings.max_iterations, best
+
+
+def _newton_step(jacobian: np.ndarray, r: np.ndarray) -> np.ndarray | None:
+    """dx solving ``jacobian @ dx = -r``; None when the Jacobian is singular (a scalar loop without numpy's solver)."""
+    if len(r) == 1:
+        return -r / jacobian[0, 0] if jacobian[0, 0] != 0.0 else None
+    try:
+        return np.linalg.solve(jacobian, -r)
+    except np.linalg.LinAlgError:
+        return None
 
 
 def _size(r: np.ndarray) -> float:
     """The largest residual element; infinite when any is not finite (never 'smaller' than a finite one)."""
-    return float(np.max(np.abs(r))) if np.all(np.isfinite(r)) else math.inf
+    values = [abs(v) for v in r.tolist()]
+    largest = max(values, default=0.0)
+    return largest if math.isfinite(largest) and all(v == v for v in values) else math.inf
 
 
 class CouplingRuntime:

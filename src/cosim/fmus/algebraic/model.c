@@ -1,5 +1,5 @@
 /*
- * algebraic: y = c0 + c1*u + c3*u^3 + a*cos(u), no state -- a test FMU for algebraic loops.
+ * algebraic: y = c0 + c1*u + c3*u^3 + a*cos(u) + w, no state -- a test FMU for algebraic loops.
  * The output follows the input at once (direct feed-through): it is recomputed whenever
  * it is read after an input was set (model_calculate), also between steps, which is what
  * a master solving a loop does (set the input, get the output, no step).
@@ -20,7 +20,8 @@ void model_initialize(ModelInstance *comp) { (void)comp; }
 Status model_calculate(ModelInstance *comp) {
     ModelData *d = &comp->d;
     if (check_finite(comp, "u", SCALAR, d->u) > Warning) return Error;
-    d->y = d->c0 + d->c1 * d->u + d->c3 * d->u * d->u * d->u + d->a * cos(d->u);
+    if (check_finite(comp, "w", SCALAR, d->w) > Warning) return Error;
+    d->y = d->c0 + d->c1 * d->u + d->c3 * d->u * d->u * d->u + d->a * cos(d->u) + d->w;
     return OK;
 }
 
