@@ -140,7 +140,7 @@ def test_a_loop_without_solution_is_a_failed_row_not_a_hang(write_spec):
     assert result.status == "failed"
     assert "algebraic loop through units ux, uy (tearing ux.u)" in result.message
     assert "largest residual 1 (tolerance 1e-10)" in result.message
-    assert "Newton iteration(s), then 20 fixed-point iteration(s)" in result.message
+    assert "0 Newton iteration(s) (singular Jacobian), then 20 fixed-point iteration(s)" in result.message
 
 
 def test_the_run_command_reports_the_failed_loop(capsys, write_spec):

@@ -291,6 +291,7 @@ class LoopSolver:
         self._solutions: deque[tuple[float, np.ndarray]] = deque(maxlen=2)  # (t, x) of the last two solves
         self.evaluations = 0
         self.iterations = 0
+        self.newton_stop = ""  # why the last Newton iteration stopped short, for the message
 
     def _read(self) -> np.ndarray:
         """The cut links' values now (their sources' outputs, converted)."""
@@ -333,7 +334,8 @@ class LoopSolver:
         if done:
             self._solutions.append((t, x))
             return
-        tried = (f"{newton_iterations} Newton iteration(s), then " if self.settings.method == "newton" else "")
+        tried = (f"{newton_iterations} Newton iteration(s) ({self.newton_stop}), then "
+                 if self.settings.method == "newton" else "")
         raise LoopError(self.loop.name, f"did not converge: largest residual {best[0]:.3g} (tolerance "
                                         f"{self.settings.tolerance:g}) after {tried}{fixed_iterations} fixed-point "
                                         "iteration(s)", t)
@@ -352,14 +354,15 @@ class LoopSolver:
     def _newton(self, x: np.ndarray, g: np.ndarray, r: np.ndarray, best: tuple[float, np.ndarray]):
         """Newton on r(x) = G(x) - x from ``x``; (converged, x, r, iterations, best (residual, x) seen)."""
         jacobian, fresh = self._jacobian, False
-        iterations = 0
+        iterations, self.newton_stop = 0, "iteration limit"
         while iterations < self.settings.max_iterations:
             if jacobian is None:
                 jacobian, fresh = self._finite_differences(x, g), True
             dx = _newton_step(jacobian, r)
             if dx is None or not all(map(math.isfinite, dx.tolist())):
-                if fresh:
-                    break  # singular at this x: leave it to the fixed-point iteration
+                if fresh:  # singular at this x: leave it to the fixed-point iteration
+                    self.newton_stop = "singular Jacobian"
+                    break
                 jacobian = None
                 continue
             iterations += 1
@@ -376,6 +379,7 @@ class LoopSolver:
                 best = (size_new, x_new)
             if not size_new < size:
                 if fresh:
+                    self.newton_stop = "no step reduced the residual"
                     break
                 jacobian = None  # an old Jacobian that no longer leads down: make a new one here
                 continue
