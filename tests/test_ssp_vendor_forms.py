@@ -532,3 +532,68 @@ def test_table_components_cosim_cannot_play_are_problems_at_their_element(tmp_pa
     members = oms3_files(_table_ssd(), **{"resources/setpoint.csv": b"t,speed\n0,1\n"})
     [problem] = _problems(write_archive(tmp_path / "notime.ssp", members))
     assert "cannot read table 'resources/setpoint.csv'" in problem.message and "'time'" in problem.message
+
+
+# --- item 12: several SSDs in one SSP (variants) ------------------------------------------------------------
+
+
+def _variants(tmp_path):
+    """An archive as OMSimulator 3 exports two variants: SystemStructure.ssd (name="default") and one more .ssd at
+    the root (name="Variant-B", its root system still called "default") where A starts at x0 = 3 instead of 2;
+    here the file is variant_b.ssd, so that the variant's name and its file's stem differ."""
+    variant_b = oms3_ssd().replace('name="default" version="2.0"', 'name="Variant-B" version="2.0"', 1).replace(
+        '<ssv:Parameter name="x0">\n                    <ssv:Real value="2.0"/>',
+        '<ssv:Parameter name="x0">\n                    <ssv:Real value="3.0"/>', 1)
+    assert variant_b.count('value="3.0"') == 1
+    return write_archive(tmp_path / "variants.ssp", oms3_files(**{"variant_b.ssd": variant_b.encode()}))
+
+
+def test_a_variant_is_chosen_by_name_on_the_command_line_and_in_a_spec(tmp_path, capsys):
+    import json
+
+    path = _variants(tmp_path)
+    default = _run(path)
+    assert _final(default, "sub.B.y") == pytest.approx(oms3_expected(1.0)["sub.B.y"], rel=1e-12)
+    system = check_spec(path, {**STEP, "algorithm": "jacobi"}, "Variant-B")
+    assert system.spec.name == "Variant-B"
+    result = Execution(system, record=True).run()
+    assert _final(result, "sub.B.y") == pytest.approx(oms3_expected(1.0, x0_a=3.0)["sub.B.y"], rel=1e-12)
+    assert check_spec(path, STEP, "variant_b").units["A"].spec.parameters["x0"] == 3.0  # by the file stem too
+    assert main(["run", str(path), "--variant", "Variant-B", "--step", "0.1"]) == 0
+
+    (tmp_path / "spec.json").write_text(json.dumps({"system": {"ssp": "variants.ssp", "variant": "Variant-B"},
+                                                    "experiment": {"step": 0.1, "algorithm": "jacobi"},
+                                                    "objectives": {"y": {"signal": "sub.B.y", "reduce": "final"}}}))
+    import cosim
+
+    assert cosim.run(tmp_path / "spec.json").objectives["y"] == pytest.approx(
+        oms3_expected(1.0, x0_a=3.0)["sub.B.y"], rel=1e-12)
+
+    capsys.readouterr()
+    assert main(["inspect", str(path), "--variant", "Variant-B"]) == 0
+    out = capsys.readouterr().out
+    assert "variants: default (SystemStructure.ssd), Variant-B (variant_b.ssd, shown)" in out
+    assert _port_rows(out)["A"]["x0"][4] == "3 *"
+
+
+def test_an_unknown_variant_is_a_problem_listing_the_variants(tmp_path, capsys):
+    path = _variants(tmp_path)
+    assert main(["validate", str(path), "--variant", "Variant-C", "--step", "0.1"]) == 2
+    err = capsys.readouterr().err
+    assert "the SSP has no variant 'Variant-C'; its variants: default (" in err and "Variant-B (" in err
+    assert "Did you mean 'Variant-B'" in err and "Traceback" not in err
+    spec = tmp_path / "spec.json"
+    spec.write_text('{"units": {"g": {"fmu": "builtin:linear_ode_fmi2"}}, "experiment": {"stop": 1, "step": 1}}')
+    assert main(["validate", str(spec), "--variant", "B"]) == 2
+    assert '"system": {"ssp": "x.ssp", "variant": "B"}' in capsys.readouterr().err
+
+
+def test_two_ssds_of_one_name_keep_systemstructure_with_a_note(tmp_path):
+    # OMSimulator 3 exporting after switching the active variant leaves a stale copy under the old file name
+    stale = oms3_ssd().replace('name="default" version="2.0"', 'name="Variant-B" version="2.0"', 1)
+    members = oms3_files(stale, **{"Variant-B.ssd": stale.encode()})
+    path = write_archive(tmp_path / "stale.ssp", members)
+    system = read_ssp(path)
+    assert list(system.files.variants) == ["Variant-B"]
+    assert f"{path}:Variant-B.ssd names its variant 'Variant-B' as {path}:SystemStructure.ssd does: 'Variant-B' " \
+           f"is {path}:SystemStructure.ssd" in system.notes

@@ -102,7 +102,7 @@ def inspect_unit(target: str) -> int:
     return EXIT_OK
 
 
-def inspect_spec(path: str, experiment: dict[str, Any] | None = None) -> int:
+def inspect_spec(path: str, experiment: dict[str, Any] | None = None, variant: str | None = None) -> int:
     """Print a spec's (or an SSP's) units with their ports, its connections and stepping order; returns the exit
     code. ``experiment`` overrides the experiment's fields (what an SSP often lacks)."""
     from cosim.system.validate import check_spec
@@ -110,7 +110,7 @@ def inspect_spec(path: str, experiment: dict[str, Any] | None = None) -> int:
     from cosim.ssp import is_ssp, read_ssp
 
     experiment = dict(experiment or {})
-    ssp = read_ssp(path) if is_ssp(path) else None
+    ssp = read_ssp(path, variant) if is_ssp(path) else None
     missing: list[str] = []
     if ssp is not None:  # inspecting needs neither stop time nor step size: stand-ins, said as such below
         given = {**ssp.raw["experiment"], **experiment}
@@ -120,8 +120,11 @@ def inspect_spec(path: str, experiment: dict[str, Any] | None = None) -> int:
             experiment["stop"] = given["stop"] = start + 1.0
         if "step" in missing:
             experiment["step"] = float(given["stop"]) - start
-    system = check_spec(path, experiment or None)
+    system = check_spec(path, experiment or None, variant)
     print(f"spec {path}: {system.spec.name}")
+    if ssp is not None and len(ssp.files.variants) > 1:
+        print("variants: " + ", ".join(f"{name} ({Path(p).name}{', shown' if name == ssp.files.variant else ''})"
+                                       for name, p in ssp.files.variants.items()))
     for note in (ssp.notes if ssp is not None else []):
         print(f"note: {note}")
     marked = False
@@ -182,13 +185,15 @@ def print_coupling(system: Any) -> None:
                   '("feedthrough": {"<output>": []})')
 
 
-def inspect_target(target: str, experiment: dict[str, Any] | None = None) -> int:
+def inspect_target(target: str, experiment: dict[str, Any] | None = None, variant: str | None = None) -> int:
     """``cosim inspect TARGET``: a spec (``.json``) or SSP (``.ssp``, ``.ssd``, a folder with SystemStructure.ssd),
     or any one unit."""
     from cosim.ssp import is_ssp
 
     if Path(target).suffix.lower() == ".json" or is_ssp(target):
-        return inspect_spec(target, experiment)
+        return inspect_spec(target, experiment, variant)
+    if variant is not None:
+        raise UsageError(f"--variant {variant}: only an SSP has variants, and '{target}' is none")
     return inspect_unit(target)
 
 

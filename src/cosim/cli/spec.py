@@ -13,16 +13,25 @@ from cosim.cli.options import add_experiment_options, experiment_overrides
 from cosim.errors import UsageError
 
 
+def add_variant_option(p: argparse.ArgumentParser) -> None:
+    """``--variant NAME``: which of an SSP's SSDs (variants) to read."""
+    p.add_argument("--variant", metavar="NAME",
+                   help="an SSP's variant: one of its SSDs, by its name (cosim inspect lists them); default "
+                        "SystemStructure.ssd")
+
+
 def add_parsers(sub: Any) -> None:
     """Register validate, run and inspect on the ``cosim`` subparsers ``sub``."""
     p = sub.add_parser("validate", help="check a spec and report every problem at once")
     p.add_argument("spec", help="path to spec.json, or an SSP (.ssp, .ssd, or a folder with SystemStructure.ssd)")
     add_experiment_options(p)
+    add_variant_option(p)
     p.set_defaults(handler=cmd_validate)
 
     p = sub.add_parser("run", help="run one point of a spec and print its objectives")
     p.add_argument("spec", help="path to spec.json, or an SSP (.ssp, .ssd, or a folder with SystemStructure.ssd)")
     add_experiment_options(p)
+    add_variant_option(p)
     p.add_argument("--set", dest="sets", action="append", default=[], metavar="UNIT.PARAM=VALUE",
                    help="set a parameter (VALUE as JSON: 2.5, true, [1,2,3]); repeatable")
     p.add_argument("--out", help="write the recorded signals to this .parquet or .csv file")
@@ -32,9 +41,11 @@ def add_parsers(sub: Any) -> None:
 
     p = sub.add_parser("inspect", help="list the ports of an FMU, a Python unit, a recorded table, or a spec's "
                                        "(or an SSP's) units")
-    p.add_argument("target", help="spec.json, system.ssp, model.fmu, builtin:NAME_fmi3, file.py:Class, "
-                                  "package.module:Class, or a recorded .parquet/.csv table")
+    p.add_argument("target", help="spec.json, an SSP (.ssp, .ssd, or a folder with SystemStructure.ssd), model.fmu, "
+                                  "builtin:NAME_fmi3, file.py:Class, package.module:Class, or a recorded "
+                                  ".parquet/.csv table")
     add_experiment_options(p)
+    add_variant_option(p)
     p.set_defaults(handler=cmd_inspect)
 
 
@@ -42,7 +53,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
     """``cosim validate spec.json``: 0 when the spec is usable, 2 with every problem otherwise."""
     from cosim.system.validate import check_design, check_spec
 
-    system = check_spec(args.spec, experiment_overrides(args))
+    system = check_spec(args.spec, experiment_overrides(args), args.variant)
     check_design(system)  # what `cosim sweep` would refuse, validate refuses too
     spec = system.spec
     print(f"{args.spec}: ok: {len(spec.units)} unit(s), {len(spec.connections)} connection(s), "
@@ -77,7 +88,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if out is not None and out.suffix.lower() not in (".parquet", ".csv"):
         raise UsageError(f"--out {out}: use a .parquet or .csv file name")
     sets = dict(parse_assignment(text) for text in args.sets)
-    system = check_spec(args.spec, experiment_overrides(args))
+    system = check_spec(args.spec, experiment_overrides(args), args.variant)
     values: dict[str, Any] = {}
     if args.point:  # values from the sweep's table; traces by default to <results>/points/<ID>.parquet
         from cosim.analysis.rerun import prepare_point_run
@@ -115,4 +126,4 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     """``cosim inspect TARGET``: the ports of an FMU, Python unit or recorded table, or of a spec's units."""
     from cosim.cli.inspection import inspect_target
 
-    return inspect_target(args.target, experiment_overrides(args))
+    return inspect_target(args.target, experiment_overrides(args), args.variant)

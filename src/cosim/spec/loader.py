@@ -118,7 +118,7 @@ class Spec:
         raise KeyError(name)
 
 
-def load_spec(path: str | Path, experiment: Mapping[str, Any] | None = None) -> Spec:
+def load_spec(path: str | Path, experiment: Mapping[str, Any] | None = None, variant: str | None = None) -> Spec:
     """Read and check a spec: a spec.json, or an SSP (see :mod:`cosim.ssp`).
 
     ``experiment`` fields (e.g. ``{"step": 0.01}`` from the command line)
@@ -126,12 +126,13 @@ def load_spec(path: str | Path, experiment: Mapping[str, Any] | None = None) -> 
     found: unreadable file, malformed JSON (with line and column), values JSON
     does not allow (NaN, Infinity), keys given twice, too deep nesting, missing
     or unknown fields, wrong types, bad reduction or algorithm names, and every
-    problem of an SSP the spec names.
+    problem of an SSP the spec names.  ``variant`` chooses an SSP's variant (one of its SSDs) when ``path`` is
+    an SSP.
     """
-    return spec_from_dict(read_raw(path, experiment), path)
+    return spec_from_dict(read_raw(path, experiment, variant), path)
 
 
-def read_raw(path: str | Path, experiment: Mapping[str, Any] | None = None) -> Any:
+def read_raw(path: str | Path, experiment: Mapping[str, Any] | None = None, variant: str | None = None) -> Any:
     """The content of a spec as parsed JSON, not yet checked.
 
     An SSP (``.ssp``, ``.ssd`` or a folder with SystemStructure.ssd) becomes
@@ -142,9 +143,13 @@ def read_raw(path: str | Path, experiment: Mapping[str, Any] | None = None) -> A
 
     path = Path(path)
     if is_ssp(path):
-        return ssp_raw_spec(path, experiment)
+        return ssp_raw_spec(path, experiment, variant)
+    if variant is not None:
+        raise SpecError([Problem(str(path), "$.system", f"--variant {variant} chooses a variant of an SSP, and "
+                                 f"{path.name} is a spec.json", "name the variant in the spec: \"system\": "
+                                 f"{{\"ssp\": \"x.ssp\", \"variant\": \"{variant}\"}}")])
     raw = read_spec_json(path)
-    if isinstance(raw, dict) and isinstance(raw.get("system"), str):
+    if isinstance(raw, dict) and isinstance(raw.get("system"), (str, dict)):
         raw = merge_system(raw, path)
     if experiment and isinstance(raw, dict):
         raw["experiment"] = {**(raw.get("experiment") or {}), **experiment}

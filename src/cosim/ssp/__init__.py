@@ -21,13 +21,14 @@ from cosim.units.registry import unit_kinds
 __all__ = ["is_ssp", "merge_system", "read_ssp", "ssp_raw_spec", "SspSystem"]
 
 
-def ssp_raw_spec(path: str | Path, experiment: Mapping[str, Any] | None = None) -> dict:
-    """The spec content of the SSP at ``path``, with ``experiment`` fields (command line) on top.
+def ssp_raw_spec(path: str | Path, experiment: Mapping[str, Any] | None = None, variant: str | None = None) -> dict:
+    """The spec content of the SSP at ``path`` (its ``variant``, if given), with ``experiment`` fields (command
+    line) on top.
 
     Raises SpecError for every problem of the SSP, and when it gives no stop
     time or step size and ``experiment`` does not either.
     """
-    system = read_ssp(path)
+    system = read_ssp(path, variant)
     raw = system.raw
     raw["experiment"].update(experiment or {})
     missing = [k for k in ("stop", "step") if k not in raw["experiment"]]
@@ -44,7 +45,8 @@ def ssp_raw_spec(path: str | Path, experiment: Mapping[str, Any] | None = None) 
 
 
 def merge_system(spec: dict, spec_path: Path) -> dict:
-    """A spec.json whose ``"system"`` names an SSP, with the SSP's units and connections merged in.
+    """A spec.json whose ``"system"`` names an SSP (a path, or ``{"ssp": path, "variant": name}``), with the
+    SSP's units and connections merged in.
 
     The spec's own entries win: a unit of the same name has its fields
     replaced (``parameters`` and ``start`` merged value by value), a spec
@@ -53,17 +55,24 @@ def merge_system(spec: dict, spec_path: Path) -> dict:
     come first, so JSON paths of problems in them match the spec file.
     Raises SpecError for problems of the SSP.
     """
-    source = Path(spec["system"])
+    given, variant, where = spec["system"], None, "$.system"
+    if isinstance(given, dict):  # {"ssp": "x.ssp", "variant": "Variant-B"}
+        given, variant, where = given.get("ssp"), given.get("variant"), "$.system.ssp"
+    if not isinstance(given, str) or (variant is not None and not isinstance(variant, str)):
+        raise SpecError([Problem(str(spec_path), "$.system", "\"system\" is neither an SSP's path nor "
+                                 "{\"ssp\": path, \"variant\": name}",
+                                 "write \"system\": \"x.ssp\" or \"system\": {\"ssp\": \"x.ssp\", \"variant\": \"B\"}")])
+    source = Path(given)
     if not source.is_absolute():
         source = spec_path.resolve().parent / source
     if not source.exists():
-        raise SpecError([Problem(str(spec_path), "$.system", f"'{spec['system']}' not found",
+        raise SpecError([Problem(str(spec_path), where, f"'{given}' not found",
                                  "name an .ssp archive, an .ssd file or a folder with SystemStructure.ssd, "
                                  "relative to the spec's folder")])
     if not is_ssp(source):
-        raise SpecError([Problem(str(spec_path), "$.system", f"'{spec['system']}' is not an SSP",
+        raise SpecError([Problem(str(spec_path), where, f"'{given}' is not an SSP",
                                  "name an .ssp archive, an .ssd file or a folder with SystemStructure.ssd")])
-    ssp = read_ssp(source).raw
+    ssp = read_ssp(source, variant).raw
     merged = copy.deepcopy(spec)
     units = copy.deepcopy(ssp["units"])
     for name, own in (spec.get("units") or {}).items():

@@ -10,10 +10,10 @@ are refused.
 from __future__ import annotations
 
 import zipfile
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
-from cosim.errors import Problem, SpecError
+from cosim.errors import Problem, SpecError, did_you_mean
 from cosim.util.archive import MEMBER_SEPARATOR, ArchiveError, extracted_ssp
 
 SSD_NAME = "SystemStructure.ssd"
@@ -35,6 +35,9 @@ class SspFiles:
     ssd: Path
     beside: Path | None
     archive: Path | None = None
+    variants: dict[str, Path] = field(default_factory=dict)  # variant name -> its SSD (see :func:`variants_of`)
+    variant: str | None = None  # the name of the variant read (the SSD's name)
+    notes: tuple[str, ...] = ()  # what choosing the variant noted (two SSDs of one name)
 
     def label(self, path: Path) -> str:
         """How a message names a file of this SSP: ``system.ssp:resources/a.ssv``."""
@@ -60,8 +63,61 @@ class SspFiles:
         return resolved == root or root in resolved.parents
 
 
-def open_ssp(path: str | Path) -> SspFiles:
-    """The files of the SSP at ``path``; raises SpecError when there is none."""
+def open_ssp(path: str | Path, variant: str | None = None) -> SspFiles:
+    """The files of the SSP at ``path``, with the SSD of ``variant`` (default: SystemStructure.ssd, or the
+    given .ssd file); raises SpecError when there is none, or no variant of that name."""
+    files = _locate(path)
+    variants, notes = variants_of(files)
+    chosen = files.ssd.resolve()
+    if variant is not None:
+        chosen = variants.get(variant) or next((p for p in variants.values() if p.stem == variant), None)
+        if chosen is None:
+            listed = ", ".join(f"{name} ({files.label(p)})" for name, p in variants.items())
+            raise SpecError([Problem(files.given, "/", f"the SSP has no variant '{variant}'; its variants: {listed}."
+                                     + did_you_mean(variant, list(variants)),
+                                     "give --variant (or \"variant\" in the spec's \"system\") one of these names")])
+    name = next((n for n, p in variants.items() if p == chosen), None)
+    return SspFiles(files.given, files.root.resolve(), chosen, files.beside, files.archive, variants, name,
+                    tuple(notes))
+
+
+def variants_of(files: SspFiles) -> tuple[dict[str, Path], list[str]]:
+    """The SSDs of an SSP by variant name (their root's ``name``, else the file stem), SystemStructure.ssd first,
+    then every other .ssd at the root in name order (how OMSimulator 3 stores variants); and notes.
+
+    When two SSDs give one name, SystemStructure.ssd (else the first) keeps it, with a note: OMSimulator 3 leaves
+    a stale copy of a variant it made active.
+    """
+    default = files.ssd.resolve()
+    candidates = [default] + sorted(p.resolve() for p in default.parent.glob("*.ssd")
+                                    if p.is_file() and p.resolve() != default)
+    variants: dict[str, Path] = {}
+    notes = []
+    for ssd in candidates:
+        name = _ssd_name(ssd) or ssd.stem
+        if name in variants:
+            notes.append(f"{files.label(ssd)} names its variant '{name}' as {files.label(variants[name])} does: "
+                         f"'{name}' is {files.label(variants[name])}")
+            continue
+        variants[name] = ssd
+    return variants, notes
+
+
+def _ssd_name(path: Path) -> str | None:
+    """The ``name`` of an SSD's root element, read from its start only (None when it cannot be read)."""
+    from lxml import etree
+
+    try:
+        for _, element in etree.iterparse(str(path), events=("start",), resolve_entities=False, no_network=True,
+                                          load_dtd=False, huge_tree=False):
+            return element.get("name")
+    except (etree.XMLSyntaxError, OSError):
+        return None
+    return None
+
+
+def _locate(path: str | Path) -> SspFiles:
+    """The files of the SSP at ``path`` with its default SSD; raises SpecError when there is none."""
     path = Path(path)
     given = str(path)
     if not path.exists():

@@ -98,9 +98,10 @@ class SspSystem:
     notes: list[str]
 
 
-def read_ssp(path: str | Path) -> SspSystem:
-    """Read, check and flatten the SSP at ``path`` (.ssp, folder or .ssd); raises SpecError."""
-    return _Reader(open_ssp(path)).read()
+def read_ssp(path: str | Path, variant: str | None = None) -> SspSystem:
+    """Read, check and flatten the SSP at ``path`` (.ssp, folder or .ssd), its SSD of ``variant`` if given (see
+    :func:`~cosim.ssp.archive.open_ssp`); raises SpecError."""
+    return _Reader(open_ssp(path, variant)).read()
 
 
 class _Reader:
@@ -109,6 +110,8 @@ class _Reader:
         self.label = files.label(files.ssd)
         self.problems: list[Problem] = []
         self.notes: list[str] = []
+        for note in files.notes:
+            self._note(note)
         self.units: dict[str, UnitDefinition] = {}  # ssd:Units
         self.nodes: dict[tuple[str, ...], Node] = {}
         self.edges: list[Edge] = []

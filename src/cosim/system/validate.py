@@ -21,19 +21,19 @@ from cosim.system.builder import System, build_system
 _ENTRY_DEPTH = {"units": 2, "connections": 2, "record": 2, "objectives": 2}
 
 
-def check_spec(path: str | Path, experiment: dict | None = None) -> System:
+def check_spec(path: str | Path, experiment: dict | None = None, variant: str | None = None) -> System:
     """Load and check the spec (or SSP) at ``path``; returns the System when it is usable.
 
-    ``experiment`` fields override the file's (see :func:`load_spec`).
+    ``experiment`` fields override the file's (see :func:`load_spec`); ``variant`` chooses an SSP's variant.
     Raises SpecError with every problem of form and fit found.
     """
     try:
-        return build_system(load_spec(path, experiment))
+        return build_system(load_spec(path, experiment, variant))
     except SpecError as first:
         problems = list(first.problems)
         if any("malformed JSON" in p.message or p.path == "$" for p in problems):
             raise
-        raw = read_raw(path, experiment)
+        raw = read_raw(path, experiment, variant)
         if not schema_problems(raw, str(path)):
             raise  # the spec's form is fine: these already are all the problems
         sanitized, broken_units = _set_aside_broken_entries(raw, str(path))
