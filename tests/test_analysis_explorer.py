@@ -267,6 +267,6 @@ def test_explorer_animates_the_arm_of_a_rerun_robot_design(xvfb, tmp_path, panda
 def test_explore_without_a_display_is_a_usage_error(tmp_path):
     path = make_sweep_table(tmp_path / "s")
     env = {k: v for k, v in os.environ.items() if k != "DISPLAY"}
-    done = subprocess.run([sys.executable, "-m", "cosim.cli.main", "explore", str(path)], env=env,
+    done = subprocess.run([sys.executable, "-m", "cosim.cli.main", "explore", str(path), "--tk"], env=env,
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 2 and "cannot open a window" in done.stderr and "Traceback" not in done.stderr

@@ -62,9 +62,15 @@ def add_analysis_parsers(sub: Any) -> None:
     _spec_option(p)
     p.set_defaults(handler=cmd_report)
 
-    p = sub.add_parser("explore", help="interactive point-cloud window (Tk)")
-    p.add_argument("table", help="results.parquet, a .csv, or a sweep folder")
+    p = sub.add_parser("explore", help="the decision room: the study in the browser (filters, Pareto front, "
+                                       "ranking, re-runs); --tk for the desktop window")
+    p.add_argument("table", help="results.parquet, a .csv, or a results folder (sweep, optimize, sensitivity)")
     _spec_option(p)
+    p.add_argument("--host", default="127.0.0.1",
+                   help="address to serve on (default 127.0.0.1: this machine only; another address puts a token "
+                        "in the link)")
+    p.add_argument("--port", type=int, default=0, help="port to serve on (default 0: a free one)")
+    p.add_argument("--tk", action="store_true", help="open the Tk point-cloud window instead (needs a display)")
     p.set_defaults(handler=cmd_explore)
 
 
@@ -162,10 +168,18 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_explore(args: argparse.Namespace) -> int:
-    """``cosim explore``: open the window; needs a display."""
+    """``cosim explore``: serve the decision room until Ctrl-C (``--tk``: open the window; needs a display)."""
     from cosim.analysis.table import AnalysisError, load_results
 
     table = load_results(args.table, args.spec)
+    if not args.tk:
+        from cosim.analysis.room.data import Study
+        from cosim.analysis.room.server import serve
+
+        if not 0 <= args.port <= 65535:
+            raise AnalysisError(f"--port {args.port}: use a port between 1 and 65535, or 0 for a free one")
+        serve(Study(table, spec_path=args.spec), host=args.host, port=args.port)
+        return EXIT_OK
     try:
         from cosim.analysis.explorer import run_explorer
     except ImportError as exc:  # tkinter missing from this Python

@@ -1,0 +1,179 @@
+"""The decision room's web server: a Bokeh server app serving one study at ``http://HOST:PORT/``.
+
+- Bound to loopback (127.0.0.1) by default: only users of this machine reach it.
+- On another address (``--host 0.0.0.0`` to serve a cluster's login node over the network) the server wants
+  a token: the printed link carries ``?token=...`` (random, 32 bytes); the first page opened with it sets a
+  cookie (HttpOnly, SameSite=Strict) that the page's websocket then carries.  A request without either is
+  refused with 403.  The websocket accepts pages of this server's own address only (bokeh's origin check).
+- Port 0 (the default) takes a free port; the link says which.
+
+:func:`serve` runs until Ctrl-C; :class:`RoomServer` runs the same server in a thread (tests, notebooks).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import errno
+import hmac
+import ipaddress
+import secrets
+import socket
+import threading
+from functools import partial
+from typing import Any, Callable
+
+from cosim.analysis.room.data import Study
+from cosim.analysis.table import AnalysisError
+
+TOKEN_COOKIE = "cosim_room_token"
+LOOPBACK = "127.0.0.1"
+
+
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` (an address or a name) is this machine's loopback only."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def link_host(host: str) -> str:
+    """The host to print in the link: the machine's name for a wildcard address, else ``host``."""
+    return socket.gethostname() if host in ("0.0.0.0", "::", "") else host
+
+
+def token_auth(token: str) -> Any:
+    """A bokeh AuthProvider admitting requests with ``?token=TOKEN`` or the cookie that first request set."""
+    from bokeh.server.auth_provider import AuthProvider
+    from tornado.web import RequestHandler
+
+    class Denied(RequestHandler):
+        def get(self) -> None:
+            self.set_status(403)
+            self.write("cosim explore: this page needs the link with its token, as cosim printed it.\n")
+
+    def get_user(handler: Any) -> str | None:
+        given = handler.get_argument("token", default=None)
+        if given is not None and hmac.compare_digest(given, token):
+            handler.set_cookie(TOKEN_COOKIE, token, httponly=True, samesite="Strict")
+            return "cosim"
+        cookie = handler.get_cookie(TOKEN_COOKIE)
+        if cookie is not None and hmac.compare_digest(cookie, token):
+            return "cosim"
+        return None
+
+    class TokenAuth(AuthProvider):
+        @property
+        def get_user(self) -> Callable[[Any], str | None]:
+            return get_user
+
+        @property
+        def login_url(self) -> str:
+            return "/denied"
+
+        @property
+        def login_handler(self) -> type:
+            return Denied
+
+    return TokenAuth()
+
+
+def free_port(host: str) -> int:
+    """A port free on ``host`` now (the server binds it just after; a lost race is retried)."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family) as s:
+        s.bind((host, 0))
+        return int(s.getsockname()[1])
+
+
+def make_server(study: Study, host: str = LOOPBACK, port: int = 0, token: str | None = None,
+                webgl: bool = True, io_loop: Any = None) -> tuple[Any, str]:
+    """(a started-to-be bokeh Server of the room on ``host:port``, its link).  A token is made when ``host`` is
+    not loopback and none is given.  Raises AnalysisError when the address cannot be bound."""
+    from bokeh.application import Application
+    from bokeh.application.handlers.function import FunctionHandler
+    from bokeh.server.server import Server
+
+    from cosim.analysis.room.app import make_document
+
+    if token is None and not is_loopback(host):
+        token = secrets.token_urlsafe(32)
+    application = Application(FunctionHandler(partial(make_document, study=study, webgl=webgl)))
+    options: dict[str, Any] = {"address": host, "websocket_max_message_size": 512 * 1024 * 1024}
+    if io_loop is not None:
+        options["io_loop"] = io_loop
+    if token:
+        # any origin: the page's websocket must carry the token's cookie, which is SameSite=Strict
+        options.update(auth_provider=token_auth(token), allow_websocket_origin=["*"])
+    for attempt in range(5):
+        chosen = port
+        try:
+            chosen = port or free_port(host)
+            if not token:  # bokeh's default origin list names localhost only
+                options["allow_websocket_origin"] = [f"{h}:{chosen}" for h in dict.fromkeys(
+                    ("127.0.0.1", "localhost", host))]
+            server = Server({"/": application}, port=chosen, **options)
+            break
+        except OSError as exc:
+            if port == 0 and exc.errno == errno.EADDRINUSE and attempt < 4:
+                continue  # another program took the free port meanwhile
+            raise AnalysisError(f"cosim explore: cannot serve at {host}:{chosen}: {exc.strerror or exc}; choose "
+                                "another --port (0 takes a free one)") from None
+    link = f"http://{link_host(host)}:{server.port}/" + (f"?token={token}" if token else "")
+    return server, link
+
+
+def serve(study: Study, host: str = LOOPBACK, port: int = 0, token: str | None = None,
+          announce: Callable[[str], None] = print) -> None:
+    """Serve the room until Ctrl-C, announcing its link first."""
+    server, link = make_server(study, host, port, token)
+    server.start()
+    announce(f"cosim explore: the decision room of {study.name} is at {link}  (Ctrl-C stops it)")
+    try:
+        server.io_loop.start()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.stop()
+
+
+class RoomServer:
+    """The room served from a daemon thread with its own event loop: ``link``, ``stop()``."""
+
+    def __init__(self, study: Study, host: str = LOOPBACK, port: int = 0, token: str | None = None,
+                 webgl: bool = True):
+        self._ready = threading.Event()
+        self._error: BaseException | None = None
+        self.link = ""
+        self.thread = threading.Thread(target=self._run, args=(study, host, port, token, webgl), daemon=True,
+                                       name="cosim-room-server")
+        self.thread.start()
+        self._ready.wait(60)
+        if self._error is not None:
+            raise self._error
+
+    def _run(self, study: Study, host: str, port: int, token: str | None, webgl: bool) -> None:
+        from tornado.ioloop import IOLoop
+
+        asyncio.set_event_loop(asyncio.new_event_loop())
+        try:
+            self.server, self.link = make_server(study, host, port, token, webgl, io_loop=IOLoop.current())
+            self.server.start()
+        except BaseException as exc:
+            self._error = exc
+            self._ready.set()
+            return
+        self._ready.set()
+        self.server.io_loop.start()
+
+    def stop(self) -> None:
+        loop = self.server.io_loop
+
+        def stop_here() -> None:
+            self.server.stop()
+            loop.stop()
+
+        loop.add_callback(stop_here)
+        self.thread.join(10)

@@ -1,0 +1,228 @@
+"""The decision room's bokeh views: figures, tables and widgets, each built from plain columns (:mod:`.data`).
+
+Every model a test or a user script may look for carries a ``name`` (``Bokeh.documents[0].get_model_by_name``
+in the page): ``cloud``, ``count``, ``filter:<column>``, ``histogram``, ``ranking``, ``weight:<objective>``,
+``radar``, ``rerun``, ``trace:<port>``, ``export``, ``hypervolume``, ``sensitivity:<objective>``.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import numpy as np
+from bokeh.models import (BooleanFilter, Button, CDSView, ColorBar, Column, ColumnDataSource, DataTable, Div,
+                          HoverTool, LinearColorMapper, NumberFormatter, RangeSlider, Select, Slider, TableColumn,
+                          Whisker)
+from bokeh.palettes import Category10_10, Viridis256
+from bokeh.plotting import figure
+
+from cosim.analysis.room.data import PLAIN_SIZE
+
+GREY = "#c8c8c8"
+PLAIN = "#1f77b4"  # ok points when no column gives the colour
+FRONT = "#000000"
+SELECTED = "#e31a1c"
+NONE = "(none)"
+WIDTH = 760
+
+
+def cloud(data: dict[str, Any], x_label: str, y_label: str, colour_label: str | None, webgl: bool) -> dict[str, Any]:
+    """The point cloud: greyed (filtered out), ok rows by the colour map, other statuses in their colour, the
+    Pareto front ringed, the selection ringed in red.  Returns the figure and the models the app updates."""
+    source = ColumnDataSource(data, name="cloud-source")
+    n = len(data["x"])
+    filters = {layer: BooleanFilter(booleans=np.zeros(n, dtype=bool), name=f"show-{layer}")
+               for layer in ("greyed", "ok", "not_ok", "front", "selected")}
+    fig = figure(name="cloud", width=WIDTH, height=520, x_axis_label=x_label, y_axis_label=y_label,
+                 tools="pan,wheel_zoom,box_zoom,tap,box_select,lasso_select,reset,save",
+                 output_backend="webgl" if webgl else "canvas", active_scroll="wheel_zoom")
+    mapper = LinearColorMapper(palette=Viridis256, nan_color=PLAIN)
+    same = {"selection_alpha": 1.0, "nonselection_alpha": 1.0}  # the selection has its own red ring
+    fig.scatter("x", "y", source=source, view=CDSView(filter=filters["greyed"]), size="s", color=GREY,
+                line_color=None, legend_label="filtered out", name="cloud-greyed", **same)
+    ok = fig.scatter("x", "y", source=source, view=CDSView(filter=filters["ok"]), size="s", line_color=None,
+                     fill_color={"field": "c", "transform": mapper}, name="cloud-ok", **same)
+    fig.scatter("x", "y", source=source, view=CDSView(filter=filters["not_ok"]), size="s", marker="x",
+                line_color="status_colour", line_width=2, legend_field="status", name="cloud-not-ok", **same)
+    fig.scatter("x", "y", source=source, view=CDSView(filter=filters["front"]), size=PLAIN_SIZE + 6,
+                fill_color=None, line_color=FRONT, line_width=1.5, legend_label="Pareto front", name="cloud-front",
+                **same)
+    fig.scatter("x", "y", source=source, view=CDSView(filter=filters["selected"]), size=PLAIN_SIZE + 12,
+                fill_color=None, line_color=SELECTED, line_width=3, legend_label="selected", name="cloud-selected",
+                **same)
+    fig.legend.location = "top_right"
+    fig.legend.click_policy = "hide"
+    fig.add_tools(HoverTool(renderers=[ok], tooltips=[("design", "@point_id"), ("x", "@x"), ("y", "@y"),
+                                                        ("colour", "@c")]))
+    fig.add_tools(HoverTool(renderers=[r for r in fig.renderers if r.name == "cloud-not-ok"],
+                            tooltips=[("design", "@point_id"), ("status", "@status"), ("message", "@message")]))
+    bar = ColorBar(color_mapper=mapper, title=colour_label or "", width=10)
+    fig.add_layout(bar, "right")
+    return {"figure": fig, "source": source, "filters": filters, "mapper": mapper, "colour_bar": bar}
+
+
+def colour_by(mapper: LinearColorMapper, bar: ColorBar, values: np.ndarray, label: str | None) -> None:
+    """Map ``values`` (the source's ``c``) over their finite range; without a column one plain colour."""
+    finite = values[np.isfinite(values)]
+    if label is None or not finite.size:
+        mapper.update(palette=[PLAIN], low=0.0, high=1.0)
+        bar.visible = False
+        return
+    lo, hi = float(finite.min()), float(finite.max())
+    mapper.update(palette=Viridis256, low=lo, high=hi if hi > lo else lo + 1.0)
+    bar.update(title=label, visible=True)
+
+
+def axis_choosers(columns: Sequence[str], x: str, y: str, colour: str | None) -> dict[str, Select]:
+    """Selects of x, y, colour and size (the last two may be '(none)')."""
+    options = list(columns)
+    return {"x": Select(title="x", value=x, options=options, name="choose-x", width=180),
+            "y": Select(title="y", value=y, options=options, name="choose-y", width=180),
+            "colour": Select(title="colour", value=colour or NONE, options=[NONE, *options], name="choose-colour",
+                             width=180),
+            "size": Select(title="size", value=NONE, options=[NONE, *options], name="choose-size", width=180)}
+
+
+def range_sliders(bounds: dict[str, Any], labels: dict[str, str]) -> dict[str, RangeSlider]:
+    """One RangeSlider per numeric column over its bounds (a constant column gets a slider it cannot narrow)."""
+    out = {}
+    for column, b in bounds.items():
+        lo, hi = float(b.lo), float(b.hi)
+        end = hi if hi > lo else lo + 1.0
+        out[column] = RangeSlider(title=labels[column], start=lo, end=end, value=(lo, end), step=(end - lo) / 1000,
+                                  name=f"filter:{column}", width=300, format="0[.]0000")
+    return out
+
+
+def scrolling(children: list, height: int, name: str) -> Column:
+    """A column of widgets that scrolls when taller than ``height``."""
+    return Column(*children, height=height, name=name, styles={"overflow-y": "auto"}, width=330)
+
+
+def histogram(data: dict[str, np.ndarray], label: str) -> dict[str, Any]:
+    """Bars of every row (grey) and of the rows the filters keep (blue), over one column."""
+    source = ColumnDataSource(data, name="histogram-source")
+    fig = figure(name="histogram", width=WIDTH, height=220, x_axis_label=label, y_axis_label="designs",
+                 tools="xpan,xwheel_zoom,reset,save")
+    fig.quad(left="left", right="right", bottom=0, top="all", source=source, color=GREY, legend_label="all")
+    fig.quad(left="left", right="right", bottom=0, top="active", source=source, color=PLAIN, alpha=0.8,
+             legend_label="kept by the filters")
+    fig.legend.location = "top_right"
+    return {"figure": fig, "source": source}
+
+
+def ranking_table(objectives: Sequence[tuple[str, str]], data: dict[str, list]) -> DataTable:
+    """The best designs: rank, design, score, and each objective."""
+    number = NumberFormatter(format="0.[0000]")
+    columns = [TableColumn(field="rank", title="#", width=40), TableColumn(field="point_id", title="design"),
+               TableColumn(field="score", title="score", formatter=NumberFormatter(format="0.0000"))]
+    columns += [TableColumn(field=f"o{k}", title=f"{name} ({sense})", formatter=number)
+                for k, (name, sense) in enumerate(objectives)]
+    return DataTable(source=ColumnDataSource(data), columns=columns, name="ranking", width=WIDTH, height=330,
+                     index_position=None, selectable=True)
+
+
+def weight_sliders(weights: dict[str, float]) -> list[Slider]:
+    return [Slider(title=f"weight of {name}", start=0.0, end=1.0, step=0.05, value=min(float(w), 1.0),
+                   name=f"weight:{name}", width=300) for name, w in weights.items()]
+
+
+def radar(data: dict[str, Any], ids: Sequence[str]) -> dict[str, Any]:
+    """Spokes (one per objective, 1 = best at the rim), a ring per 0.25, one polygon per selected design."""
+    fig = figure(name="radar", width=460, height=460, x_range=(-1.45, 1.45), y_range=(-1.3, 1.3),
+                 tools="save", match_aspect=True, title="score profile of the selected designs (rim: best)")
+    fig.axis.visible = False
+    fig.grid.visible = False
+    angles = np.linspace(0, 2 * np.pi, 73)
+    for r in (0.1, 0.325, 0.55, 0.775, 1.0):
+        fig.line(r * np.cos(angles), r * np.sin(angles), color="#dddddd")
+    spokes = ColumnDataSource({"x": data["spoke_x"], "y": data["spoke_y"], "label": data["labels"]},
+                              name="radar-spokes")
+    fig.segment(0, 0, "x", "y", source=spokes, color="#999999")
+    fig.text("x", "y", text="label", source=spokes, text_font_size="9pt", text_align="center",
+             text_baseline="middle", y_offset=0)
+    designs = ColumnDataSource(radar_columns(data, ids), name="radar-designs")
+    fig.patches("xs", "ys", source=designs, fill_color="colour", fill_alpha=0.12, line_color="colour",
+                line_width=2, legend_field="design")
+    return {"figure": fig, "spokes": spokes, "designs": designs}
+
+
+def radar_columns(data: dict[str, Any], ids: Sequence[str]) -> dict[str, list]:
+    return {"xs": data["xs"], "ys": data["ys"], "design": list(ids),
+            "colour": [Category10_10[k % 10] for k in range(len(ids))]}
+
+
+def trace_figures(groups: list[tuple[str, list[str]]], runs: Sequence[Any]) -> list:
+    """One figure per port (``trace:<port>``), a line per design and element, designs in their own colour,
+    x ranges linked."""
+    figures: list = []
+    for port, columns in groups:
+        linked = {"x_range": figures[0].x_range} if figures else {}
+        fig = figure(name=f"trace:{port}", width=WIDTH, height=200, x_axis_label="time [s]", y_axis_label=port,
+                     tools="pan,wheel_zoom,box_zoom,reset,save", **linked)
+        for k, run in enumerate(runs):
+            traces = run.result.traces
+            if traces is None or not len(traces):
+                continue
+            t = traces["time"].to_numpy(dtype=float)
+            for column in columns:
+                if column not in traces.columns:
+                    continue
+                label = run.point_id if len(columns) == 1 else f"{run.point_id} {column[len(port):]}"
+                fig.line(t, traces[column].to_numpy(dtype=float), color=Category10_10[k % 10], line_width=1.5,
+                         legend_label=label, name=f"trace:{column}:{run.point_id}")
+        if fig.renderers:
+            fig.legend.location = "top_right"
+            fig.legend.label_text_font_size = "8pt"
+            figures.append(fig)
+    return figures
+
+
+def hypervolume(evaluations: np.ndarray, values: np.ndarray) -> Any:
+    fig = figure(name="hypervolume", width=WIDTH, height=300, x_axis_label="evaluations",
+                 y_axis_label="hypervolume", title="hypervolume of the feasible front after each evaluation",
+                 tools="pan,wheel_zoom,reset,save")
+    fig.step(evaluations, values, mode="after", line_width=2)
+    return fig
+
+
+def sensitivity(indices: Any) -> list:
+    """One figure per objective (at most 6): each parameter's indices as bars with their 95 % intervals."""
+    figures = []
+    for objective, part in list(indices.groupby("objective", sort=False))[:6]:
+        names = list(dict.fromkeys(part["index"]))
+        factors = [(str(p), str(i)) for p in dict.fromkeys(part["parameter"]) for i in names]
+        by = {(str(r.parameter), str(r["index"])): r for _, r in part.iterrows()}
+        value = [float(by[f]["value"]) if f in by else np.nan for f in factors]
+        conf = [float(by[f]["conf"]) if f in by else 0.0 for f in factors]
+        source = ColumnDataSource({"factor": factors, "value": value, "lower": np.subtract(value, conf),
+                                   "upper": np.add(value, conf),
+                                   "colour": [Category10_10[names.index(i) % 10] for _, i in factors]})
+        fig = figure(name=f"sensitivity:{objective}", y_range=_factor_range(factors), width=WIDTH,
+                     height=60 + 22 * len(factors), title=f"sensitivity of {objective} (± 95 % confidence)",
+                     x_axis_label="index", tools="save")
+        fig.hbar(y="factor", right="value", height=0.7, source=source, color="colour")
+        fig.add_layout(Whisker(source=source, base="factor", lower="lower", upper="upper", dimension="width"))
+        figures.append(fig)
+    return figures
+
+
+def _factor_range(factors):
+    from bokeh.models import FactorRange
+
+    return FactorRange(*factors)
+
+
+def failures_table(rows: dict[str, list]) -> DataTable:
+    return DataTable(source=ColumnDataSource(rows), name="failures", width=WIDTH, height=160, index_position=None,
+                     columns=[TableColumn(field="point_id", title="design", width=140),
+                              TableColumn(field="status", title="status", width=70),
+                              TableColumn(field="message", title="message", width=550)])
+
+
+def button(label: str, name: str, kind: str = "default") -> Button:
+    return Button(label=label, name=name, button_type=kind, width=180)
+
+
+def text(html: str, name: str, width: int = WIDTH) -> Div:
+    return Div(text=html, name=name, width=width)

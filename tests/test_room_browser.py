@@ -1,0 +1,380 @@
+"""The decision room (`cosim explore`) in a real browser: Debian's chromium driven by selenium (chromium-driver).
+
+Three small folders are made here by real studies of the test units (a sweep with failing points, an
+optimisation, a Sobol sensitivity analysis), each served by the room; in each the test checks that the page
+loads, that a range filter narrows the points, that a click on the cloud selects the design under the
+pointer, that a re-run draws the design's traces, and that the ranking reorders when a weight changes: each
+against values computed here from the table (and, for traces, from the closed-form solution).  Under CI=true
+a missing chromium, chromium-driver or selenium fails the tests instead of skipping them.
+
+Screenshots of each view go to ``$COSIM_SCREENSHOTS`` when it is set.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from cosim.analysis.table import load_results
+
+from .conftest import python_unit, require_tool
+from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
+
+# -- in-page scripts ------------------------------------------------------------------------------------------
+
+WAIT_LOADED = """
+const done = arguments[arguments.length - 1];
+(function check() {
+  const B = window.Bokeh, doc = B && B.documents && B.documents[0];
+  const count = doc && doc.get_model_by_name('count');
+  if (doc && doc.is_idle && count && count.text) requestAnimationFrame(() => done(count.text));
+  else setTimeout(check, 20);
+})();
+"""
+
+# set a model's property; resolve when the JS expression `watch` (of doc) changes value: [its new value]
+SET_AND_WAIT = """
+const [name, attr, value, watch, done] = arguments;
+const doc = Bokeh.documents[0];
+const look = () => new Function('doc', watch)(doc);
+const before = look();
+doc.get_model_by_name(name)[attr] = value;
+(function check() {
+  const now = look();
+  if (now !== before && doc.is_idle) requestAnimationFrame(() => done(now));
+  else setTimeout(check, 20);
+})();
+"""
+
+WAIT_FOR = """
+const [js, done] = arguments;
+const f = new Function('doc', js);
+(function check() {
+  const value = f(Bokeh.documents[0]);
+  if (value !== null && value !== undefined && value !== false) requestAnimationFrame(() => done(value));
+  else setTimeout(check, 50);
+})();
+"""
+
+COUNT_TEXT = "return doc.get_model_by_name('count').text;"
+RANKING_SOURCE = "return doc.get_model_by_name('ranking').source.id;"
+
+# the viewport position of data point (x, y) of the cloud
+POINT_ON_SCREEN = """
+const [x, y] = arguments;
+const view = Bokeh.index.find_one(Bokeh.documents[0].get_model_by_name('cloud'));
+const rect = view.canvas_view.el.getBoundingClientRect();
+return [rect.left + view.frame.x_scale.compute(x), rect.top + view.frame.y_scale.compute(y)];
+"""
+
+# the viewport position of a widget's centre
+WIDGET_ON_SCREEN = """
+const view = Bokeh.index.find_one(Bokeh.documents[0].get_model_by_name(arguments[0]));
+const rect = view.el.getBoundingClientRect();
+return [rect.left + rect.width / 2, rect.top + rect.height / 2];
+"""
+
+def count_true(driver, name: str) -> int:
+    return driver.execute_script(f"return Array.from(Bokeh.documents[0].get_model_by_name('{name}').booleans)"
+                                 ".filter(Boolean).length;")
+
+
+def ranking_ids(driver) -> list[str]:
+    return driver.execute_script("return Array.from(Bokeh.documents[0].get_model_by_name('ranking')"
+                                 ".source.data.point_id);")
+
+
+# -- the browser ------------------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def browser():
+    require_tool("chromium", "chromium")
+    driver_path = require_tool("chromedriver", "chromium-driver")
+    try:
+        from selenium import webdriver
+        from selenium.webdriver.chrome.service import Service
+    except ImportError:
+        if os.environ.get("CI", "").lower() in ("1", "true", "yes"):
+            pytest.fail("selenium is not installed (the test extra of pyproject.toml); CI=true, so this test "
+                        "must run")
+        pytest.skip("selenium is not installed (pip install -e .[test])")
+    options = webdriver.ChromeOptions()
+    options.binary_location = require_tool("chromium", "chromium")
+    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--window-size=1400,1000",
+                "--disable-dev-shm-usage"):
+        options.add_argument(arg)
+    driver = webdriver.Chrome(service=Service(driver_path), options=options)
+    driver.set_script_timeout(180)
+    driver.set_page_load_timeout(180)
+    yield driver
+    driver.quit()
+
+
+def click_at(driver, x: float, y: float) -> None:
+    """A real mouse click at viewport position (x, y)."""
+    from selenium.webdriver.common.actions.action_builder import ActionBuilder
+
+    actions = ActionBuilder(driver)
+    actions.pointer_action.move_to_location(int(round(x)), int(round(y)))
+    actions.pointer_action.click()
+    actions.perform()
+
+
+def screenshot(driver, name: str) -> None:
+    folder = os.environ.get("COSIM_SCREENSHOTS")
+    if folder:
+        Path(folder).mkdir(parents=True, exist_ok=True)
+        driver.save_screenshot(str(Path(folder) / f"room-{name}.png"))
+
+
+def show_tab(driver, index: int) -> None:
+    driver.execute_script(f"Bokeh.documents[0].get_model_by_name('tabs').active = {index};")
+    driver.execute_async_script(WAIT_FOR, "return doc.is_idle;")
+
+
+# -- the studies --------------------------------------------------------------------------------------------------
+
+
+def write(folder: Path, spec: dict) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "spec.json"
+    path.write_text(json.dumps(spec, indent=2))
+    return path
+
+
+def decay_spec() -> dict:
+    """dy/dt = a y, y(0) = x0 over 1 s, with a unit that fails at 0.5 s when f.fail_at is 0.5: half the grid fails.
+    y_end = x0 e^a (minimised) against y_int = x0 (e^a - 1) / a (maximised): a front along a and x0."""
+    return {"name": "decay", "units": {"ode": {"python": python_unit("LinearOde")},
+                                       "f": {"python": python_unit("Failing")}},
+            "experiment": {"start": 0.0, "stop": 1.0, "step": 0.01}, "record": ["ode.y"],
+            "objectives": {"y_end": {"signal": "ode.y", "reduce": "final", "sense": "minimize"},
+                           "y_int": {"signal": "ode.y", "reduce": "integral", "sense": "maximize"}},
+            "design": {"parameters": {"ode.a": {"values": [-2.0, -1.5, -1.0, -0.5]},
+                                      "ode.x0": {"values": [1.0, 2.0, 3.0]},
+                                      "f.fail_at": {"values": [5.0, 0.5]}}}}
+
+
+def bowls_spec() -> dict:
+    return {"name": "bowls", "units": {"b": {"python": python_unit("TwoBowls")}},
+            "experiment": {"stop": 1.0, "step": 1.0},
+            "objectives": {"f1": {"signal": "b.f1", "reduce": "final", "sense": "minimize"},
+                           "f2": {"signal": "b.f2", "reduce": "final", "sense": "minimize"}},
+            "design": {"parameters": {"b.x": {"min": -1.0, "max": 3.0}, "b.y": {"min": -2.0, "max": 2.0}}},
+            "optimize": {"budget": 40, "batch": 8, "seed": 3}}
+
+
+def ishigami_spec() -> dict:
+    box = {"min": -np.pi, "max": np.pi}
+    return {"name": "ishigami", "units": {"b": {"python": python_unit("Ishigami"), "parameters": {"a": 7.0, "b": 0.1}}},
+            "experiment": {"stop": 1.0, "step": 1.0},
+            "objectives": {"y": {"signal": "b.y", "reduce": "final", "sense": "maximize"},
+                           "lin": {"signal": "b.lin", "reduce": "final", "sense": "minimize"}},
+            "design": {"method": "lhs", "samples": 10, "parameters": {"b.x1": box, "b.x2": box, "b.x3": box}}}
+
+
+@pytest.fixture(scope="module")
+def studies(tmp_path_factory, local_cluster):
+    """Three real results folders: a sweep, an optimisation and a Sobol sensitivity analysis."""
+    import cosim
+    from cosim.studies.sensitivity import SensitivityStudy
+
+    root = tmp_path_factory.mktemp("room")
+    cosim.sweep(write(root / "sweep", decay_spec()), out=root / "sweep" / "out", scheduler=local_cluster,
+                quiet=True)
+    cosim.optimize(write(root / "optimize", bowls_spec()), root / "optimize" / "out", scheduler=local_cluster,
+                   quiet=True)
+    SensitivityStudy(write(root / "sensitivity", ishigami_spec()), root / "sensitivity" / "out", method="sobol",
+                     n=16, seed=2, objectives=["y"], scheduler=local_cluster, quiet=True).run()
+    return {kind: root / kind / "out" for kind in ("sweep", "optimize", "sensitivity")}
+
+
+@pytest.fixture
+def room(request):
+    """A function (folder) -> the link of the room serving it; the servers stop after the test."""
+    from cosim.analysis.room.data import Study
+    from cosim.analysis.room.server import RoomServer
+
+    servers = []
+
+    def serve(folder: Path, **options) -> tuple[str, object]:
+        server = RoomServer(Study(load_results(folder)), **options)
+        servers.append(server)
+        return server.link, server
+
+    yield serve
+    for server in servers:
+        server.stop()
+
+
+# -- the tests ----------------------------------------------------------------------------------------------------
+
+
+def load(driver, link: str) -> str:
+    driver.get(link)
+    return driver.execute_async_script(WAIT_LOADED)
+
+
+def exercise(driver, link: str, folder: Path, filter_column: str, name: str) -> dict:
+    """The five checks of the module docstring on one folder; returns what the sweep test checks further."""
+    table = load_results(folder)
+    df = table.df
+    n = len(df)
+    text = load(driver, link)
+    assert f"of {n} designs" in text
+    ok = (df["status"] == "ok").to_numpy()
+    assert count_true(driver, "show-ok") == int(ok.sum())
+    screenshot(driver, f"{name}-points")
+
+    # a range filter narrows the points: the upper half of one parameter's range
+    values = table.values(filter_column)
+    lo, hi = float(np.nanmin(values)), float(np.nanmax(values))
+    middle = (lo + hi) / 2
+    driver.execute_async_script(SET_AND_WAIT, f"filter:{filter_column}", "value", [middle, hi], COUNT_TEXT)
+    kept = values >= middle
+    assert 0 < kept.sum() < n
+    assert count_true(driver, "show-ok") == int((kept & ok).sum())
+    assert count_true(driver, "show-greyed") == int((~kept).sum())
+    assert driver.execute_script("return Bokeh.documents[0].get_model_by_name('count').text;").startswith(
+        f"<b>{int(kept.sum())}</b> of {n}")
+
+    # a click on the cloud selects the design under the pointer: the best-ranked design, drawn on the axes
+    first = ranking_ids(driver)[0]
+    row = int(np.flatnonzero(df["point_id"].astype(str).to_numpy() == first)[0])
+    x_name, y_name = driver.execute_script(
+        "const d = Bokeh.documents[0]; return [d.get_model_by_name('choose-x').value, "
+        "d.get_model_by_name('choose-y').value];")
+    x, y = driver.execute_script(POINT_ON_SCREEN, float(table.values(x_name)[row]), float(table.values(y_name)[row]))
+    click_at(driver, x, y)
+    selected = driver.execute_async_script(
+        WAIT_FOR, "const s = doc.get_model_by_name('cloud-source').selected.indices; "
+                  "return s.length && doc.get_model_by_name('selected').text.includes('selected') ? Array.from(s) : null;")
+    assert row in selected
+
+    # the ranking reorders when a weight changes: the first objective's weight to 0 ranks by the others only
+    objectives = driver.execute_script(
+        "return Bokeh.documents[0].get_model_by_name('weights').children.map((s) => s.name.slice(7));")
+    before = ranking_ids(driver)
+    driver.execute_async_script(SET_AND_WAIT, f"weight:{objectives[0]}", "value", 0.0, RANKING_SOURCE)
+    after = ranking_ids(driver)
+    assert after != before
+    senses = table.objective_senses()
+    candidates = kept & ok & table.feasible_mask() & np.all(
+        np.isfinite(np.column_stack([table.values(o) for o in objectives])), axis=1)
+    rest = objectives[1:]
+    utility = np.zeros(n)
+    for o in rest:  # the weighted sum by hand: each objective scaled to [0, 1] over the candidates, 1 best
+        v = table.values(o)
+        lo_o, hi_o = v[candidates].min(), v[candidates].max()
+        u = (v - lo_o) / (hi_o - lo_o) if hi_o > lo_o else np.ones(n)
+        utility += (u if senses[o] == "max" else 1 - u) / len(rest)
+    order = np.flatnonzero(candidates)[np.argsort(-utility[candidates], kind="stable")]
+    assert after[:5] == list(df["point_id"].astype(str).to_numpy()[order[:5]])
+    show_tab(driver, 1)
+    screenshot(driver, f"{name}-decide")
+
+    # a re-run draws the selected design's traces
+    show_tab(driver, 2)
+    bx, by = driver.execute_script(WIDGET_ON_SCREEN, "rerun")
+    click_at(driver, bx, by)
+    traces = driver.execute_async_script(
+        WAIT_FOR, "const c = doc.get_model_by_name('traces'); "
+                  "if (doc.get_model_by_name('rerun-status').text.includes('failed')) return 'failed'; "
+                  "return c && c.children.length ? "
+                  "c.children.map((f) => [f.name, f.renderers.map((r) => [r.name, Array.from(r.data_source.data.x),"
+                  " Array.from(r.data_source.data.y)])]) : null;")
+    assert traces != "failed", driver.execute_script(
+        "return Bokeh.documents[0].get_model_by_name('rerun-status').text;")
+    screenshot(driver, f"{name}-selection")
+    if (folder / "sensitivity.csv").exists() or table.metadata.get("kind") == "optimization":
+        show_tab(driver, 3)
+        screenshot(driver, f"{name}-study")
+    return {"table": table, "row": row, "selected": selected, "traces": traces}
+
+
+def test_sweep_folder_filter_click_rerun_and_ranking(browser, studies, room):
+    folder = studies["sweep"]
+    link, _ = room(folder)
+    seen = exercise(browser, link, folder, "ode.a", "sweep")
+    table, row = seen["table"], seen["row"]
+    df = table.df
+    # failed designs: drawn in their status colour, listed with their message
+    failed = (df["status"] == "failed").to_numpy()
+    assert failed.sum() == 12
+    show_tab(browser, 0)
+    messages = browser.execute_script("return Array.from(Bokeh.documents[0].get_model_by_name('failures')"
+                                      ".source.data.message);")
+    assert len(messages) == 12 and all("boom" in m for m in messages)
+    # the traces are the spec's recorded signal, y = x0 e^(a t), one line per selected design
+    assert [name for name, _ in seen["traces"]] == ["trace:ode.y"]
+    lines = {name.split(":")[-1]: (np.array(t), np.array(y)) for name, t, y in seen["traces"][0][1]}
+    a, x0 = float(df["ode.a"].iloc[row]), float(df["ode.x0"].iloc[row])
+    t, y = lines[str(df["point_id"].iloc[row])]
+    assert t[-1] == pytest.approx(1.0) and y == pytest.approx(x0 * np.exp(a * t), rel=1e-9)
+    # the selection's export: CSV rows and cosim run commands naming the design
+    export = browser.execute_script("return Bokeh.documents[0].get_model_by_name('export').text;")
+    assert f"--point {df['point_id'].iloc[row]}" in export and "data:text/csv;base64," in export
+
+
+def test_optimisation_folder_with_its_hypervolume(browser, studies, room):
+    from cosim.analysis.hypervolume import hypervolume, normalised_losses
+    from cosim.analysis.pareto import pareto_mask
+
+    folder = studies["optimize"]
+    link, _ = room(folder)
+    seen = exercise(browser, link, folder, "b.x", "optimize")
+    df = seen["table"].df
+    # every output of the bowls (the spec records nothing), f1 = x^2 + y^2 over the run
+    names = dict(seen["traces"])
+    f1 = {n.split(":")[-1]: y for n, _, y in names["trace:b.f1"]}
+    x, y = df["b.x"].iloc[seen["row"]], df["b.y"].iloc[seen["row"]]
+    assert f1[str(df["point_id"].iloc[seen["row"]])][-1] == pytest.approx(x ** 2 + y ** 2, rel=1e-12)
+    # the hypervolume against evaluations ends at the hypervolume of the final front
+    history = browser.execute_script("const f = Bokeh.documents[0].get_model_by_name('hypervolume');"
+                                     "return Array.from(f.renderers[0].data_source.data.y);")
+    usable = ((df["status"] == "ok") & df["feasible"]).to_numpy()
+    values = df.loc[usable, ["f1", "f2"]].to_numpy(float)
+    front = values[pareto_mask(values)]
+    final = hypervolume(normalised_losses(front, ["min", "min"]))
+    assert len(history) == len(df) and history[-1] == pytest.approx(final, rel=1e-9)
+    assert all(b >= a - 1e-12 for a, b in zip(history, history[1:]))
+
+
+def test_sensitivity_folder_with_its_indices(browser, studies, room):
+    folder = studies["sensitivity"]
+    link, _ = room(folder)
+    exercise(browser, link, folder, "b.x1", "sensitivity")
+    bars = browser.execute_script(
+        "const f = Bokeh.documents[0].get_model_by_name('sensitivity:y'); const d = f.renderers[0].data_source.data;"
+        "return [Array.from(d.factor), Array.from(d.value), Array.from(d.upper)];")
+    written = pd.read_csv(folder / "sensitivity.csv")
+    shown = {tuple(f): (v, u) for f, v, u in zip(*bars)}
+    assert len(shown) == len(written) == 6
+    for r in written.itertuples():
+        v, u = shown[(r.parameter, r.index)]
+        assert v == pytest.approx(r.value) and u == pytest.approx(r.value + r.conf)
+
+
+def test_a_room_off_loopback_wants_its_token(room, studies):
+    link, server = room(studies["sweep"], host="0.0.0.0")
+    assert "?token=" in link
+    port = server.server.port
+    token = link.split("?token=")[1]
+    with pytest.raises(urllib.error.HTTPError) as refused:
+        urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=60)
+    assert refused.value.code == 403
+    with pytest.raises(urllib.error.HTTPError):
+        urllib.request.urlopen(f"http://127.0.0.1:{port}/?token=wrong", timeout=60)
+    page = urllib.request.urlopen(f"http://127.0.0.1:{port}/?token={token}", timeout=60)
+    assert page.status == 200 and b"cosim: decay" in page.read()
+    assert "cosim_room_token" in page.headers.get("Set-Cookie", "")
+    loopback, _ = room(studies["sweep"])
+    assert loopback.startswith("http://127.0.0.1:") and "token" not in loopback

@@ -1,0 +1,53 @@
+"""`cosim explore DIR`: the decision room served on loopback, its printed link, and its usage errors."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import urllib.request
+
+from cosim.analysis.room.server import is_loopback
+
+from .test_analysis_explorer import linear_ode_sweep
+
+
+def test_explore_serves_the_room_on_loopback_and_prints_its_link(tmp_path, write_spec):
+    folder = linear_ode_sweep(tmp_path / "decay", write_spec).parent
+    proc = subprocess.Popen([sys.executable, "-m", "cosim.cli.main", "explore", str(folder)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        line = proc.stdout.readline()
+        assert "the decision room of decay is at http://127.0.0.1:" in line, (line, proc.stderr.read()
+                                                                               if proc.poll() is not None else "")
+        link = line.split(" is at ")[1].split()[0]
+        assert "token" not in link
+        page = urllib.request.urlopen(link, timeout=60).read().decode()
+        assert "<title>cosim: decay</title>" in page
+    finally:
+        os.killpg(proc.pid, signal.SIGINT)
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 0, proc.stderr.read()
+
+
+def test_explore_mistakes_are_one_line_and_exit_2(tmp_path, write_spec):
+    folder = linear_ode_sweep(tmp_path / "decay", write_spec).parent
+    for extra, message in ((["--port", "70000"], "between 1 and 65535"),
+                           (["--host", "192.0.2.1"], "cannot serve at 192.0.2.1")):
+        done = subprocess.run([sys.executable, "-m", "cosim.cli.main", "explore", str(folder), *extra],
+                              capture_output=True, text=True, timeout=120)
+        assert done.returncode == 2 and message in done.stderr and "Traceback" not in done.stderr, done.stderr
+    done = subprocess.run([sys.executable, "-m", "cosim.cli.main", "explore", str(tmp_path / "nothing")],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and "no such results table" in done.stderr
+
+
+def test_loopback_addresses():
+    assert is_loopback("127.0.0.1") and is_loopback("::1") and is_loopback("localhost")
+    assert not is_loopback("0.0.0.0") and not is_loopback("10.1.2.3") and not is_loopback("login1")
+
