@@ -282,3 +282,21 @@ def test_one_tearing_variable_where_one_input_lies_on_every_cycle(write_spec):
     assert result.ok, result.message
     final = result.traces.iloc[-1]
     assert (final["a.y"], final["b.y"], final["c.y"]) == pytest.approx((1.6, 1.2, 0.8), rel=1e-12)
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_an_array_loop_with_an_offset_on_a_connection(write_spec, version):
+    """gain_array FMUs (y = k u, 3 elements) in a loop whose connection adds 1: y1 = 2 y2, y2 = 3 (y1 + 1), so
+    y1 = 6/(1 - 6) = -1.2 and y2 = -0.6 in every element; three tearing values, one Newton system."""
+    fmu = f"builtin:gain_array_fmi{version}"
+    spec = {"units": {"g1": {"fmu": fmu, "parameters": {"k": 2.0}}, "g2": {"fmu": fmu, "parameters": {"k": 3.0}}},
+            "connections": [{"from": "g1.y", "to": "g2.u", "offset": 1.0}, {"from": "g2.y", "to": "g1.u"}],
+            "experiment": {"stop": 0.2, "step": 0.1}, "record": ["g1.y", "g2.y"]}
+    system, result = _run(write_spec, spec)
+    assert result.ok, result.message
+    (loop,) = system.coupling.loops
+    assert sum(len(system.connections[i].target.refs) for i in loop.torn) == 3
+    traces = result.traces
+    for i in (1, 2, 3):
+        np.testing.assert_allclose(traces[f"g1.y[{i}]"], -1.2, rtol=1e-12)
+        np.testing.assert_allclose(traces[f"g2.y[{i}]"], -0.6, rtol=1e-12)
