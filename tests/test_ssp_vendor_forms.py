@@ -597,3 +597,20 @@ def test_two_ssds_of_one_name_keep_systemstructure_with_a_note(tmp_path):
     assert list(system.files.variants) == ["Variant-B"]
     assert f"{path}:Variant-B.ssd names its variant 'Variant-B' as {path}:SystemStructure.ssd does: 'Variant-B' " \
            f"is {path}:SystemStructure.ssd" in system.notes
+
+
+# --- item 7 (in part): an SSP with values on system connectors only -----------------------------------------
+
+
+def test_an_ssp_without_components_is_one_clear_problem(tmp_path, capsys):
+    ssd = oms3_ssd()
+    ssd = ssd[:ssd.index("    <ssd:Elements>")] + ssd[ssd.index("    <ssd:Annotations>\n      <ssc:Annotation"):]
+    path = write_folder(tmp_path / "values_only", oms3_files(ssd))
+    [problem] = _problems(path)
+    assert problem.file == f"{path}:SystemStructure.ssd"
+    assert problem.message == ("the SSP has no component (FMU or CSV table) to run; its values live on system "
+                               "connectors only (default.k, default.out)")
+    assert "ssd:Component" in problem.fix
+    assert main(["inspect", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "no component" in err and "must not be empty" not in err and "Traceback" not in err

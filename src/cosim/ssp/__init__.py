@@ -30,6 +30,15 @@ def ssp_raw_spec(path: str | Path, experiment: Mapping[str, Any] | None = None, 
     """
     system = read_ssp(path, variant)
     raw = system.raw
+    if not raw["units"]:  # values on system connectors or parameter sets only: nothing cosim can step
+        connectors = system.system_connectors
+        raise SpecError([Problem(system.files.label(system.files.ssd), "/ssd:SystemStructureDescription/ssd:System",
+                                 "the SSP has no component (FMU or CSV table) to run"
+                                 + (f"; its values live on system connectors only ({', '.join(connectors[:6])})"
+                                    if connectors else ""),
+                                 "add the components (ssd:Component with an FMU or a CSV table) the values are "
+                                 "for; cosim runs components, and a value on a system connector reaches only "
+                                 "the component variables it is connected to")])
     raw["experiment"].update(experiment or {})
     missing = [k for k in ("stop", "step") if k not in raw["experiment"]]
     if missing:

@@ -96,6 +96,7 @@ class SspSystem:
     files: SspFiles
     raw: dict
     notes: list[str]
+    system_connectors: list[str] = field(default_factory=list)  # 'Root.sub.connector', for messages
 
 
 def read_ssp(path: str | Path, variant: str | None = None) -> SspSystem:
@@ -147,7 +148,10 @@ class _Reader:
                "experiment": experiment, "record": [f"{name}.*" for name in units]}
         if root.get("description"):
             raw["description"] = root.get("description")
-        return SspSystem(self.files, raw, self.notes)
+        root_name = system.get("name", "")
+        connectors = [".".join((root_name, *n.path, c)) for n in self.nodes.values() if n.kind == "system"
+                      for c in n.connectors]
+        return SspSystem(self.files, raw, self.notes, connectors)
 
     def _parse(self, path: Path, label: str, kind: str) -> Any:
         """The root of an SSP file checked against the schema, or None (its problems recorded).
