@@ -119,7 +119,8 @@ class Triple(PythonUnit):
 """
 
 
-def _triple_study(folder: Path, points: int, factor: float = 3.0, pause: float = 0.0, optimize: bool = False) -> Path:
+def _triple_study(folder: Path, points: int, factor: float = 3.0, pause: float = 0.0, optimize: bool = False,
+                  budget: int | None = None) -> Path:
     """A study of one Python unit y = factor * k over k = 1..points (a sweep grid, or an optimisation)."""
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "triple.py").write_text(TRIPLE.replace("FACTOR", repr(factor)))
@@ -127,7 +128,7 @@ def _triple_study(folder: Path, points: int, factor: float = 3.0, pause: float =
             "experiment": {"stop": 0.1, "step": 0.1}, "objectives": {"y": {"signal": "s.y", "reduce": "final"}},
             "design": {"parameters": {"s.k": {"min": 1, "max": points, "step": 1}}}}
     if optimize:
-        spec["optimize"] = {"budget": points, "batch": 2, "seed": 1, "objectives": {"y": "minimize"}}
+        spec["optimize"] = {"budget": budget or points, "batch": 2, "seed": 1, "objectives": {"y": "minimize"}}
     path = folder / "spec.json"
     path.write_text(json.dumps(spec))
     return path
@@ -243,3 +244,82 @@ def test_metadata_is_replaced_whole_or_not_at_all(tmp_path):
         signal.signal(signal.SIGXFSZ, old_handler)
     assert (tmp_path / "out" / "metadata.json").read_bytes() == before
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["metadata.json", "parts"]
+
+
+# 4. cosim optimize takes the results folder's lock, and says what to do about a folder it cannot write -----------
+
+def _popen_cosim(*args: str, **popen) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "cosim.cli.main", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=dict(os.environ, PYTHONPATH=str(REPO / "src")),
+                            start_new_session=True, **popen)
+
+
+def _wait_for(condition, seconds: float = 120) -> None:
+    import time
+
+    deadline = time.monotonic() + seconds
+    while not condition():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.1)
+
+
+def test_two_optimisations_into_one_folder_the_second_is_refused(tmp_path, local_cluster):
+    """Before: both ran (30 rows for a budget of 24, two seeds, duplicate trial numbers)."""
+    import pandas as pd
+
+    spec = _triple_study(tmp_path / "project", 16, pause=3.0, optimize=True)
+    out = tmp_path / "out"
+    run = ("optimize", str(spec), "--out", str(out), "--scheduler", local_cluster)
+    first = _popen_cosim(*run)
+    _wait_for(lambda: (out / "metadata.json").exists())  # written once it holds the lock and runs
+    for extra in ((), ("--resume",)):  # also one that would resume the rows so far
+        second = _cosim(*run, *extra)
+        assert first.poll() is None, "the first run ended too soon for this test"
+        assert second.returncode == 2, second.stderr
+        assert f"{out} is in use by another cosim optimize (pid {first.pid}" in second.stderr, second.stderr
+    _, err = first.communicate(timeout=300)
+    assert first.returncode == 0, err
+    table = pd.read_parquet(out / "results.parquet")
+    assert len(table) == 16 and table["trial"].is_unique and table["point_id"].is_unique
+    assert list(table["y"]) == [3.0 * k for k in table["s.k"]]
+
+
+def test_an_optimisation_into_a_read_only_folder_is_a_clear_message(tmp_path):
+    from .test_hostile_files import _read_only_folder
+
+    spec = _triple_study(tmp_path / "project", 4, optimize=True)
+    with _read_only_folder(tmp_path / "ro") as folder:
+        done = _cosim("optimize", str(spec), "--out", str(folder / "results"), "--workers", "1")
+    assert done.returncode == 2, done.stderr
+    assert f"cannot write the results into {folder / 'results'}" in done.stderr
+    assert "Read-only file system" in done.stderr or "Permission denied" in done.stderr
+    assert "make the folder writable" in done.stderr and "Traceback" not in done.stderr
+    assert "rows written so far are kept" not in done.stderr  # there are none
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="mounting a small tmpfs needs root")
+def test_an_optimisation_on_a_full_disk_stops_with_exit_2_and_resumes_exactly(tmp_path, local_cluster):
+    """Before: exit 70 and a traceback. A 64 kB tmpfs takes the metadata and a few parts of rows, then is full."""
+    import pandas as pd
+
+    spec = _triple_study(tmp_path / "project", 200, optimize=True, budget=40)
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(disk)], check=True)
+    try:
+        run = ("optimize", str(spec), "--out", str(disk / "out"), "--scheduler", local_cluster)
+        done = _cosim(*run)
+        assert done.returncode == 2, done.stderr
+        assert f"cannot write the results into {disk / 'out'}: No space left on device" in done.stderr
+        assert "rows written so far are kept" in done.stderr and "--resume" in done.stderr
+        assert "Traceback" not in done.stderr
+        kept = len(pd.concat([pd.read_parquet(p) for p in (disk / "out" / "parts").glob("part-*.parquet")]))
+        assert kept >= 2
+        subprocess.run(["mount", "-o", "remount,size=8m", str(disk)], check=True)  # space freed
+        done = _cosim(*run, "--resume")
+        assert done.returncode == 0, done.stderr
+        table = pd.read_parquet(disk / "out" / "results.parquet")
+        assert len(table) == 40 and table["point_id"].is_unique and table["trial"].is_unique
+        assert list(table["y"]) == [3.0 * k for k in table["s.k"]]
+    finally:
+        subprocess.run(["umount", str(disk)], check=True)

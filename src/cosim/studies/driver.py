@@ -18,12 +18,13 @@ import json
 import platform
 import socket
 import sys
+from contextlib import contextmanager
 from datetime import datetime, timezone
 from importlib import metadata as importlib_metadata
 from pathlib import Path
-from typing import Any, Mapping, TextIO
+from typing import Any, Iterator, Mapping, TextIO
 
-from cosim.errors import UserError
+from cosim.errors import OutputError, UserError
 
 PACKAGES = ("cosim", "fmpy", "dask", "distributed", "numpy", "pandas", "pyarrow", "scipy")
 
@@ -94,6 +95,48 @@ def resume_differences(store: Any, units: Mapping[str, str], data_files: Mapping
         unverifiable = (f"its metadata.json is {why}, and {len(unmarked)} file(s) of rows ({names}{more}) carry no "
                         "checksums of the unit files that made them, so nothing shows they come from the same model")
     return changed, unverifiable
+
+
+@contextmanager
+def results_writes(out: Path) -> Iterator[None]:
+    """Turn a failed write into the results folder into an OutputError (exit 2, no traceback).
+
+    Half-written temporary files are removed; the part files already written
+    stay, so after freeing space ``--resume`` finishes the study exactly.  The
+    message says so only when it is true: a folder removed while the study
+    ran has lost its rows, and one without rows yet has nothing to resume.
+    """
+    existed = out.is_dir()
+    try:
+        yield
+    except OSError as exc:
+        for leftover in ("results.parquet.tmp", "results.csv.tmp", "metadata.json.tmp"):
+            try:
+                (out / leftover).unlink(missing_ok=True)
+            except OSError:
+                pass
+        reason = exc.strerror or str(exc) or type(exc).__name__
+        if existed and not out.is_dir():
+            raise OutputError(f"cannot write the results into {out}: the folder was removed while cosim wrote "
+                              f"into it ({reason}); the rows it held are gone", file=str(out),
+                              fix="run the same command again without --resume (into a folder nothing else "
+                                  "removes)") from None
+        if _holds_rows(out):
+            fix = ("free space on that filesystem or make the folder writable (or choose another --out); the rows "
+                   "written so far are kept: run the same command with --resume to finish")
+        else:
+            fix = ("free space on that filesystem or make the folder writable, or choose another --out; then run "
+                   "the same command again")
+        raise OutputError(f"cannot write the results into {out}: {reason}", file=str(out), fix=fix) from None
+
+
+def _holds_rows(out: Path) -> bool:
+    """Whether the folder holds any file of rows (without importing pandas)."""
+    try:
+        return (out / "results.parquet").is_file() or any(p.name.startswith("part-") and p.suffix == ".parquet"
+                                                            for p in (out / "parts").iterdir())
+    except OSError:
+        return False
 
 
 def say(text: str, quiet: bool, stream: TextIO | None) -> None:

@@ -55,8 +55,9 @@ from cosim.analysis.hypervolume import hypervolume, normalised_losses
 from cosim.errors import OptimizeError, Problem, SpecError
 from cosim.results.checksums import data_file_checksums, unit_checksums
 from cosim.results.columns import TAIL_COLUMNS
+from cosim.results.lock import FolderLock
 from cosim.studies.driver import (check_results_folder, finish_metadata, now_utc, package_versions, resume_differences,
-                                  run_metadata, say, study_identity)
+                                  results_writes, run_metadata, say, study_identity)
 from cosim.studies.progress import StatusLine
 
 SAMPLERS = ("tpe", "nsga2", "gp", "random", "qmc")
@@ -294,7 +295,10 @@ class Optimization:
             raise SpecError([Problem(self.spec.path, "$.design.parameters", "nothing to optimise: no design "
                                      "parameters", "add parameters with ranges or value lists")])
         self.out, self.resume = Path(out), resume
-        self.store = ResultsStore(self.out)
+        with results_writes(self.out):  # a read-only or full disk: said with what to do (exit 2)
+            self.store = ResultsStore(self.out)
+            self.lock = FolderLock(self.out)
+            self.lock.check_free()  # another optimisation running into this folder is the first thing to say
         previous = check_results_folder(self.store, resume, self.spec.digest, "optimization",
                                         "continue that optimisation", OptimizeError)
         self.checksums, self.data_checksums = unit_checksums(self.system), data_file_checksums(self.system)
@@ -378,10 +382,20 @@ class Optimization:
         """Optimise until ``budget`` evaluations are in the table; returns the counts by status.
 
         Ctrl-C stops it; the rows so far stay and ``resume`` continues.
-        Raises OptimizeError when no Dask workers are reachable.  ``evaluator``
+        Raises OptimizeError when no Dask workers are reachable, FolderInUse when another
+        cosim process writes into the same folder, OutputError (exit 2) when the folder cannot be
+        written (read-only, full).  ``evaluator``
         replaces the Dask evaluator (anything with Evaluator's ``evaluate``;
         benchmarks answer from a stored table with it).
         """
+        with results_writes(self.out):
+            self.lock.acquire("cosim optimize")  # released when this process ends, however it ends
+        try:
+            return self._run_locked(evaluator)
+        finally:
+            self.lock.release()
+
+    def _run_locked(self, evaluator: Any = None) -> dict[str, int]:
         import optuna
 
         from cosim.parallel.dashboard_points import open_board
@@ -398,12 +412,14 @@ class Optimization:
             sampler=make_sampler(s.sampler, s.seed, s.batch))
         dists = distributions(self.space)
         if evaluator is not None:
-            self.store.write_metadata(self._metadata(started, "", 0))
+            with results_writes(self.out):
+                self.store.write_metadata(self._metadata(started, "", 0))
             self._loop(study, dists, evaluator, stored)
             return self._finish()
         try:
             with dask_client(self.workers, self.scheduler, self.cluster) as (client, n_workers, link):
-                self.store.write_metadata(self._metadata(started, client.scheduler.address, n_workers))
+                with results_writes(self.out):
+                    self.store.write_metadata(self._metadata(started, client.scheduler.address, n_workers))
                 board = open_board(client, "optimize", self.spec.name, s.budget, before=len(stored), dashboard=link)
                 self._say(f"cosim optimize {self.spec.name}: {s.sampler}, budget {s.budget}, batch {s.batch}, "
                           f"seed {s.seed}, {len(stored)} evaluations stored; {n_workers} worker(s); dashboard: "
@@ -454,7 +470,8 @@ class Optimization:
                 ran = evaluator.evaluate(list(to_run.items()))
                 new = [self._table_row(to_run[r["point_id"]], r, self._trial_of(plan, r["point_id"]), batch_index)
                        for r in ran]
-                self.store.append(new)
+                with results_writes(self.out):
+                    self.store.append(new)
                 rows.update((r["point_id"], r) for r in new)
             for trial, pid in plan:
                 self._tell(study, trial, rows.get(pid) if pid is not None else None)
@@ -512,8 +529,9 @@ class Optimization:
                             design_method=f"optimize ({self.settings.sampler})")
 
     def _finish(self) -> dict[str, int]:
-        counts = self.store.compact()  # rows stay in the order they were evaluated
-        finish_metadata(self.store, counts)
+        with results_writes(self.out):  # a full disk during the final merge loses nothing (see compact)
+            counts = self.store.compact()  # rows stay in the order they were evaluated
+            finish_metadata(self.store, counts)
         return counts
 
 

@@ -52,35 +52,13 @@ from cosim.results.checksums import changed_files, data_file_checksums, unit_che
 from cosim.results.columns import TAIL_COLUMNS
 from cosim.results.lock import FolderLock
 from cosim.spec.design import DesignSpace, Point
-from cosim.studies.driver import (check_results_folder, finish_metadata, now_utc, resume_differences, run_metadata,
-                                  say, study_identity)
+from cosim.studies.driver import (check_results_folder, finish_metadata, now_utc, results_writes,  # noqa: F401
+                                  resume_differences, run_metadata, say, study_identity)
 from cosim.studies.progress import StatusLine, duration
 from cosim.util import limits
 
 if TYPE_CHECKING:
     import pandas as pd
-
-
-@contextmanager
-def results_writes(out: Path) -> Iterator[None]:
-    """Turn a failed write into the results folder into an OutputError (exit 2, no traceback).
-
-    Half-written temporary files are removed; the part files already written
-    stay, so after freeing space ``--resume`` finishes the sweep exactly.
-    """
-    try:
-        yield
-    except OSError as exc:
-        for leftover in ("results.parquet.tmp", "results.csv.tmp", "metadata.json.tmp"):
-            try:
-                (out / leftover).unlink(missing_ok=True)
-            except OSError:
-                pass
-        reason = exc.strerror or str(exc) or type(exc).__name__
-        raise OutputError(f"cannot write the results into {out}: {reason}", file=str(out),
-                          fix="free space on that filesystem or make the folder writable (or choose another "
-                              "--out); the rows written so far are kept: run the same command with --resume to "
-                              "finish") from None
 
 
 # -- client side -------------------------------------------------------------------
