@@ -300,3 +300,34 @@ def test_an_array_loop_with_an_offset_on_a_connection(write_spec, version):
     for i in (1, 2, 3):
         np.testing.assert_allclose(traces[f"g1.y[{i}]"], -1.2, rtol=1e-12)
         np.testing.assert_allclose(traces[f"g2.y[{i}]"], -0.6, rtol=1e-12)
+
+
+def test_an_algorithm_that_does_not_solve_loops_keeps_its_three_argument_bind(write_spec, monkeypatch):
+    """A master algorithm written before loops were solved (bind(units, order, links), no solves_loops) still
+    runs systems without loops, and the system check refuses a loop for it, naming it."""
+    from cosim.execution import run as run_module
+    from cosim.master.algorithms import ALGORITHMS, MasterAlgorithm, step_unit
+    from cosim.system.stepping import check_algebraic_loops
+
+    class InOrder(MasterAlgorithm):
+        name = "in-order"
+
+        def bind(self, units, order, connections):
+            self._units = [units[n] for n in order]
+
+        def step(self, t, h):
+            for unit in self._units:
+                step_unit(unit, t, h)
+
+    monkeypatch.setattr(run_module, "make_algorithm", lambda name: InOrder())
+    spec = {"units": {"clock": {"python": python_unit("Clock")}}, "experiment": {"stop": 0.3, "step": 0.1},
+            "record": ["clock.time"]}
+    _, result = _run(write_spec, spec)
+    assert result.ok, result.message
+    np.testing.assert_allclose(result.traces["clock.time"], [0.0, 0.1, 0.2, 0.3], atol=1e-15)
+    monkeypatch.setitem(ALGORITHMS, "in-order", InOrder)
+    system = build_system(load_spec(write_spec(linear_loop("gauss-seidel"), "loop.json")))
+    problems: list = []
+    check_algebraic_loops(system.units, list(system.connections), problems, "spec.json", system.coupling, "in-order")
+    assert [p.path for p in problems] == ["$.experiment.algorithm"]
+    assert "the master algorithm 'in-order' does not solve algebraic loops" in problems[0].message

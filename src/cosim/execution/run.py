@@ -166,7 +166,10 @@ class Execution:
             stop_column = probe.columns.index(exp.stop_when) if exp.stop_when else None
 
             algorithm = make_algorithm(exp.algorithm)
-            algorithm.bind(units, self.system.order, self.system.connections, self.system.coupling)
+            if algorithm.solves_loops:  # given the feed-through and loops to solve (others never see a loop)
+                algorithm.bind(units, self.system.order, self.system.connections, self.system.coupling)
+            else:
+                algorithm.bind(units, self.system.order, self.system.connections)
             algorithm.start(t)  # e.g. algebraic loops solved at the start time
             values = probe.read()
             for observer in observers:

@@ -29,9 +29,10 @@ def step_unit(unit: Unit, t: float, h: float) -> None:
 class MasterAlgorithm:
     """Base: ``bind`` to live units, ``start(t)`` once at the start time, then ``step(t, h)`` advances all of them.
 
-    ``coupling`` (:class:`cosim.master.loops.Coupling`): the system's direct feed-through and algebraic loops;
-    an algorithm with ``solves_loops`` solves the loops at every communication point, others refuse systems
-    that have any (the system check says so).
+    ``coupling`` (:class:`cosim.master.loops.Coupling`): the system's direct feed-through and algebraic loops,
+    given to ``bind`` only when the algorithm says ``solves_loops`` (it then solves the loops at every
+    communication point); the system check refuses a system with loops for any other algorithm, whose ``bind``
+    may keep the three arguments.
     """
 
     name = "abstract"
