@@ -614,3 +614,19 @@ def test_an_ssp_without_components_is_one_clear_problem(tmp_path, capsys):
     assert main(["inspect", str(path)]) == 2
     err = capsys.readouterr().err
     assert "no component" in err and "must not be empty" not in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("old, new, attribute", [
+    ('fixedStepSize="0.1"', 'fixedStepSize="fast"', "fixedStepSize"),
+    ('fixedStepSize="0.1"', 'fixedStepSize="-0.1"', "fixedStepSize"),
+    ('<oms:SimulationInformation name="solver1" method="oms_ma" fixedStepSize="0.1"/>',
+     '<oms:SimulationInformation><oms:FixedStepMaster stepSize="1e-3s"/></oms:SimulationInformation>', "stepSize"),
+])
+def test_a_tool_annotation_number_that_is_none_is_a_problem_not_a_traceback(tmp_path, capsys, old, new, attribute):
+    # the SSP schema does not check the tools' own annotations: cosim does, where it reads them
+    path = write_archive(tmp_path / "bad.ssp", oms3_files(oms3_ssd().replace(old, new)))
+    [problem] = _problems(path)
+    assert problem.message.endswith(f' is not a number') and f'{attribute}="' in problem.message
+    assert problem.path.split("/")[-1].startswith("oms:")
+    assert main(["validate", str(path)]) == 2
+    assert "Traceback" not in capsys.readouterr().err

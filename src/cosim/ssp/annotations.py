@@ -31,6 +31,35 @@ READ_TYPES = ("org.openmodelica", "com.opensimulationplatform", "org.cosim")
 _ME_METHODS = ("cvode", "euler")
 _VARIABLE_MASTERS = ("oms_mav", "oms_mav2")
 _UNREAD_KEYS = ("initialStepSize", "minimumStepSize", "absoluteTolerance")
+_NUMBERS = ("fixedStepSize", "relativeTolerance", "tolerance", "maximumStepSize", "stepSize", "baseStepSize", "value")
+
+
+class BadNumber(ValueError):
+    """A tool annotation's attribute that should hold a number does not (the schema does not check them)."""
+
+    def __init__(self, element: Any, attribute: str):
+        super().__init__(f"{attribute}=\"{element.get(attribute)}\" is not a number")
+        self.element = element
+        self.attribute = attribute
+
+
+def number(element: Any, attribute: str) -> float | None:
+    """The attribute as a positive finite number, None when absent; raises BadNumber otherwise."""
+    text = element.get(attribute)
+    if text is None:
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        raise BadNumber(element, attribute) from None
+    if not (0 < value < float("inf")):
+        raise BadNumber(element, attribute)
+    return value
+
+
+def _check_numbers(element: Any) -> None:
+    for attribute in _NUMBERS:
+        number(element, attribute)
 
 
 def _local(element: Any) -> str:
@@ -67,8 +96,15 @@ class Solvers:
 
 
 def read_system_solvers(system: Any, path: tuple[str, ...], solvers: Solvers) -> None:
-    """Collect the solver definitions on one ``ssd:System`` (OMSimulator 3 and 2 forms) into ``solvers``."""
+    """Collect the solver definitions on one ``ssd:System`` (OMSimulator 3 and 2 forms) into ``solvers``.
+
+    Raises BadNumber for a setting cosim reads that is no positive number.
+    """
     for info in _simulation_information(system):
+        _check_numbers(info)
+        for child in info:
+            if isinstance(child.tag, str):
+                _check_numbers(child)
         name, method = info.get("name"), info.get("method")
         if name and method:  # OMSimulator 3: a definition
             solvers.definitions[name] = dict(info.attrib)
@@ -117,11 +153,11 @@ def component_solver(component: Any) -> str | None:
 
 
 def step_size_hint(component: Any) -> float | None:
-    """OSP's ``osp:StepSizeHint value`` on a component, if any."""
+    """OSP's ``osp:StepSizeHint value`` on a component, if any; raises BadNumber."""
     for annotation in own_annotations(component, "com.opensimulationplatform"):
         for child in annotation.iter():
             if _local(child) == "StepSizeHint" and child.get("value"):
-                return float(child.get("value"))
+                return number(child, "value")
     return None
 
 

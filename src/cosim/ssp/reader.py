@@ -32,11 +32,11 @@ from lxml import etree
 
 from cosim.errors import Problem, SpecError, did_you_mean
 from cosim.master.algorithms import ALGORITHMS
-from cosim.ssp.annotations import (Solvers, component_solver, cvode_settings, read_system_solvers, step_size_hint,
-                                   unread_annotation_types)
+from cosim.ssp.annotations import (BadNumber, Solvers, component_solver, cvode_settings, number,
+                                   read_system_solvers, step_size_hint, unread_annotation_types)
 from cosim.ssp.archive import SspFiles, open_ssp
 from cosim.ssp.tolerant import tolerated
-from cosim.ssp.xml import element_path, parse_file, schema_problems, short_name, tag
+from cosim.ssp.xml import display_name, element_path, parse_file, schema_problems, short_name, tag
 from cosim.util.quantities import BASE_UNITS, IncompatibleUnits, UnitDefinition, UnknownUnit, conversion
 
 log = logging.getLogger("cosim.ssp")
@@ -260,7 +260,10 @@ class _Reader:
     def _read_system(self, element: Any, path: tuple[str, ...]) -> Node:
         node = Node(path, "system", element, self._connectors(element))
         self.nodes[path] = node
-        read_system_solvers(element, path, self.solvers)  # before the elements: they are assigned by name
+        try:
+            read_system_solvers(element, path, self.solvers)  # before the elements: they are assigned by name
+        except BadNumber as exc:
+            self._bad_number(exc)
         elements = element.find(tag("ssd", "Elements"))
         for child in (elements if elements is not None else []):
             if not isinstance(child.tag, str):
@@ -416,10 +419,21 @@ class _Reader:
                 if node.path[:depth] in self.solvers.system_cvode:
                     node.settings = cvode_settings(self.solvers.system_cvode[node.path[:depth]])
                     break
-        hint = step_size_hint(element)
+        try:
+            hint = step_size_hint(element)
+        except BadNumber as exc:
+            self._bad_number(exc)
+            hint = None
         if hint is not None:
             self._hints.append(f"{name} {hint:g} s")
         return True
+
+    def _bad_number(self, exc: BadNumber) -> None:
+        message = f"{display_name(exc.element)} {exc}"
+        if any(p.message == message and p.path == element_path(exc.element) for p in self.problems):
+            return  # read twice (a system's solvers and the experiment's step)
+        self._problem(exc.element, message,
+                      f"write {exc.attribute} as a positive number, e.g. {exc.attribute}=\"0.01\"")
 
     def _note_unread(self, root: Any) -> None:
         """One note per kind of annotation content cosim does not use."""
@@ -596,10 +610,14 @@ class _Reader:
             if not isinstance(element.tag, str):
                 continue
             local = element.tag.split("}")[-1]
-            if local == "FixedStepMaster" and element.get("stepSize"):
-                step = float(element.get("stepSize"))  # OMSimulator
-            elif local == "FixedStepAlgorithm" and (element.get("baseStepSize") or element.get("stepSize")):
-                step = float(element.get("baseStepSize") or element.get("stepSize"))  # OSP / libcosim
+            try:
+                if local == "FixedStepMaster" and element.get("stepSize"):
+                    step = number(element, "stepSize")  # OMSimulator
+                elif local == "FixedStepAlgorithm" and (element.get("baseStepSize") or element.get("stepSize")):
+                    step = number(element, "baseStepSize" if element.get("baseStepSize") else "stepSize")  # OSP
+            except BadNumber as exc:
+                self._bad_number(exc)
+                break
             if step is not None:
                 break
         if step is None and self.solvers.steps:  # OMSimulator 3: oms_ma solvers' fixedStepSize

@@ -55,12 +55,20 @@ def short_name(clark: str) -> str:
     return clark
 
 
+def display_name(element: etree._Element) -> str:
+    """``ssd:Component``; an element of a tool's own namespace by the prefix its file gives it (``oms:...``)."""
+    clark = element.tag
+    if clark.startswith("{") and clark[1:].partition("}")[0] not in _PREFIX and element.prefix:
+        return f"{element.prefix}:{clark.partition('}')[2]}"
+    return short_name(clark)
+
+
 def element_path(element: etree._Element) -> str:
     """A readable XPath-like path: named elements by ``[@name='...']``, others by position when repeated."""
     parts = []
     node = element
     while node is not None and isinstance(node.tag, str):
-        step = short_name(node.tag)
+        step = display_name(node)
         name = node.get("name")
         parent = node.getparent()
         if name is not None:
