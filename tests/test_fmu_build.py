@@ -39,7 +39,7 @@ def fresh_cache(tmp_path, monkeypatch):
 def fmus_copy(tmp_path, monkeypatch):
     """A copy of the fmus/ sources the builder is pointed at, free to edit."""
     copy = tmp_path / "fmus"
-    shutil.copytree(REPO / "fmus", copy, ignore=shutil.ignore_patterns("__pycache__", "*.fmu"))
+    shutil.copytree(REPO / "src" / "cosim" / "fmus", copy, ignore=shutil.ignore_patterns("__pycache__", "*.fmu"))
     monkeypatch.setattr(build, "FMUS_DIR", copy)
     monkeypatch.setattr(build, "COMMON_DIR", copy / "common")
     return copy
