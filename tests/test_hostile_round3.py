@@ -323,3 +323,109 @@ def test_an_optimisation_on_a_full_disk_stops_with_exit_2_and_resumes_exactly(tm
         assert list(table["y"]) == [3.0 * k for k in table["s.k"]]
     finally:
         subprocess.run(["umount", str(disk)], check=True)
+
+
+# 5. A damaged part file or results.parquet is named, set aside, and only its points computed again ---------------
+
+LOGGED = """
+from cosim import PythonUnit, Variable
+
+class Logged(PythonUnit):
+    '''y = 3 k, and every point it computes noted in computed.log (one line a point, appended).'''
+    variables = (Variable("k", "parameter", start=1.0), Variable("pause", "parameter", start=0.0),
+                 Variable("y", "output", start=0.0))
+
+    def do_step(self, t, h):
+        import time
+        time.sleep(self.pause)
+        self.y = 3.0 * self.k
+        with open(LOG, "a") as log:  # an absolute path: a sweep's workers run a copy of this file elsewhere
+            log.write(f"{self.k:g}\\n")
+"""
+
+
+def _logged_study(folder: Path, points: int, pause: float = 0.0) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "logged.py").write_text(LOGGED.replace("LOG", repr(str(folder / "computed.log"))))
+    spec = {"name": "logged", "units": {"s": {"python": "logged.py:Logged", "parameters": {"pause": pause}}},
+            "experiment": {"stop": 0.1, "step": 0.1}, "objectives": {"y": {"signal": "s.y", "reduce": "final"}},
+            "design": {"parameters": {"s.k": {"min": 1, "max": points, "step": 1}}}}
+    (folder / "spec.json").write_text(json.dumps(spec))
+    return folder / "spec.json"
+
+
+def _computed(spec: Path) -> list[float]:
+    """The points computed since the log was last cleared, and clear it."""
+    log = spec.parent / "computed.log"
+    values = sorted(float(v) for v in log.read_text().split()) if log.exists() else []
+    log.unlink(missing_ok=True)
+    return values
+
+
+def _truncate(path: Path) -> None:
+    path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+
+
+def test_a_truncated_part_is_named_set_aside_and_only_its_points_computed_again(tmp_path, local_cluster):
+    """Before: the final merge and every --resume (also --recompute) ended in exit 70 without naming the file."""
+    import signal
+
+    import pandas as pd
+
+    spec = _logged_study(tmp_path / "project", 30, pause=0.2)
+    out = tmp_path / "out"
+    sweep = ("sweep", str(spec), "--out", str(out), "--scheduler", local_cluster, "--batch-size", "2")
+    proc = _popen_cosim(*sweep)
+    _wait_for(lambda: len(list((out / "parts").glob("part-*.parquet"))) >= 4)
+    os.killpg(proc.pid, signal.SIGKILL)  # a crash: the parts written so far stay
+    proc.wait(timeout=30)
+    parts = sorted((out / "parts").glob("part-*.parquet"))
+    damaged = parts[1]
+    intact = pd.concat([pd.read_parquet(p) for p in parts if p != damaged])
+    lost = sorted(pd.read_parquet(damaged)["s.k"])
+    _truncate(damaged)  # as a crash or a full disk elsewhere leaves it
+    import time
+
+    time.sleep(2)  # the killed client's batches still running on the cluster have finished
+    _computed(spec)
+
+    done = _cosim(*sweep, "--resume")
+    assert done.returncode == 0, done.stderr
+    assert f"parts/{damaged.name} cannot be read" in done.stderr and f"damaged/{damaged.name}" in done.stderr
+    assert "its points are computed again" in done.stderr and "Traceback" not in done.stderr
+    assert (out / "damaged" / damaged.name).exists()
+    recomputed = _computed(spec)
+    assert set(lost) <= set(recomputed) and not set(recomputed) & set(intact["s.k"])  # only what was missing
+    table = pd.read_parquet(out / "results.parquet")
+    assert list(table["s.k"]) == list(range(1, 31)) and list(table["y"]) == [3.0 * k for k in range(1, 31)]
+
+
+@pytest.mark.parametrize("recompute", [False, True])
+def test_a_truncated_results_table_is_set_aside_and_its_points_computed_again(tmp_path, local_cluster, recompute):
+    import pandas as pd
+
+    spec = _logged_study(tmp_path / "project", 6)
+    out = tmp_path / "out"
+    sweep = ("sweep", str(spec), "--out", str(out), "--scheduler", local_cluster)
+    assert _cosim(*sweep).returncode == 0
+    _truncate(out / "results.parquet")
+    _computed(spec)
+    done = _cosim(*sweep, "--resume", *(["--recompute"] if recompute else []))
+    assert done.returncode == 0, done.stderr
+    assert "results.parquet cannot be read" in done.stderr and "damaged/results.parquet" in done.stderr
+    assert _computed(spec) == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
+    assert list(pd.read_parquet(out / "results.parquet")["y"]) == [3.0 * k for k in range(1, 7)]
+
+
+def test_a_folder_removed_mid_run_is_not_said_to_keep_its_rows(tmp_path, local_cluster):
+    import shutil
+
+    spec = _logged_study(tmp_path / "project", 40, pause=0.3)
+    out = tmp_path / "out"
+    proc = _popen_cosim("sweep", str(spec), "--out", str(out), "--scheduler", local_cluster, "--batch-size", "2")
+    _wait_for(lambda: len(list((out / "parts").glob("part-*.parquet"))) >= 2)
+    shutil.rmtree(out)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 2, err
+    assert "was removed while cosim wrote into it" in err and "the rows it held are gone" in err, err
+    assert "kept" not in err and "--resume to" not in err and "Traceback" not in err

@@ -13,6 +13,9 @@ Layout of a results folder ``DIR``:
   ``__design_index`` that only the part files have: the final merge puts them
   in order by it, streaming, without holding every point id.
 - ``DIR/results.csv``: the same table as CSV, on request.
+- ``DIR/damaged/``: files of rows that could not be read (truncated by a
+  crash or a full disk), set aside by :meth:`ResultsStore.set_aside_damaged`
+  so that a resume computes their points again instead of failing for good.
 - ``DIR/metadata.json``: the spec and its digest, FMU checksums, package
   versions, host, start and end, counts by status; replaced atomically
   (temporary file, fsync, rename).
@@ -212,6 +215,40 @@ class ResultsStore:
             metadata = pq.ParquetFile(path).schema_arrow.metadata or {}
             found.setdefault(metadata.get(IDENTITY_KEY, b"").decode(), []).append(path)
         return found
+
+    def damaged_files(self) -> list[tuple[Path, str]]:
+        """Files of rows (``results.parquet``, parts) that cannot be read, each with the reader's reason.
+
+        A file counts as readable when its footer and its ``point_id`` column
+        read without error (a truncated file has no footer).
+        """
+        damaged = []
+        for path in ([self.table_path] if self.table_path.exists() else []) + self._part_files():
+            try:
+                _read(path, ["point_id"])
+            except (pa.ArrowException, OSError, ValueError, KeyError) as exc:
+                damaged.append((path, str(exc).splitlines()[0][:200] if str(exc) else type(exc).__name__))
+        return damaged
+
+    def set_aside_damaged(self) -> list[str]:
+        """Move every file of rows that cannot be read into ``DIR/damaged/``; returns one line per file moved.
+
+        Their points then have no row, so a resume computes them again; the
+        files are kept (not deleted) for whoever wants to look at them.
+        """
+        lines = []
+        for path, reason in self.damaged_files():
+            aside = self.folder / "damaged"
+            aside.mkdir(exist_ok=True)
+            target = aside / path.name
+            number = 1
+            while target.exists():
+                target = aside / f"{path.stem}.{number}{path.suffix}"
+                number += 1
+            os.replace(path, target)
+            lines.append(f"{path.relative_to(self.folder).as_posix()} cannot be read ({reason}); set aside as "
+                         f"{target.relative_to(self.folder).as_posix()}")
+        return lines
 
     def _part_files(self) -> list[Path]:
         return sorted(p for p in self.parts.iterdir() if _PART.match(p.name))

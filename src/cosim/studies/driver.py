@@ -13,6 +13,7 @@ messages.
 
 from __future__ import annotations
 
+import errno
 import getpass
 import json
 import platform
@@ -22,7 +23,7 @@ from contextlib import contextmanager
 from datetime import datetime, timezone
 from importlib import metadata as importlib_metadata
 from pathlib import Path
-from typing import Any, Iterator, Mapping, TextIO
+from typing import Any, Callable, Iterator, Mapping, TextIO
 
 from cosim.errors import OutputError, UserError
 
@@ -38,7 +39,8 @@ def study_identity(spec_digest: str, kind: str, units: Mapping[str, str],
 
 
 def check_results_folder(store: Any, resume: bool, spec_digest: str, kind: str, to_resume: str,
-                         error: type[UserError]) -> dict[str, Any] | None:
+                         error: type[UserError], note: Callable[[str], None] | None = None
+                         ) -> dict[str, Any] | None:
     """The folder's stored metadata when resuming (None when it has none, or none that can be read);
     raises ``error`` when the folder is unusable.
 
@@ -47,13 +49,19 @@ def check_results_folder(store: Any, resume: bool, spec_digest: str, kind: str, 
     message for a folder that already holds rows.  The spec digest and kind
     are checked against ``metadata.json`` and against the identity every file
     of rows carries, so a lost or damaged ``metadata.json`` does not let rows
-    of another spec through.
+    of another spec through.  When resuming, files of rows that cannot be read
+    (truncated) are set aside first, each told to ``note``: their points are
+    computed again.
     """
     if not resume:
         if store.has_rows():
             raise error(f"{store.folder} already holds results; add --resume to {to_resume}, "
                         "or choose another --out")
         return None
+    with results_writes(store.folder):
+        for line in store.set_aside_damaged():
+            if note is not None:
+                note(f"{store.folder}: {line}; its points are computed again")
     previous = store.metadata()
     records = [previous] if previous is not None else []
     records += [json.loads(text) for text in store.row_identities() if text]
@@ -83,7 +91,7 @@ def resume_differences(store: Any, units: Mapping[str, str], data_files: Mapping
     previous, why = store.metadata_state()
     changed = changed_files(previous, units, data_files, folder) if previous is not None else []
     identities = store.row_identities()
-    for text, paths in identities.items():
+    for text in identities:
         if text:
             changed += [line for line in changed_files(json.loads(text), units, data_files, folder)
                         if line not in changed]
@@ -106,7 +114,6 @@ def results_writes(out: Path) -> Iterator[None]:
     message says so only when it is true: a folder removed while the study
     ran has lost its rows, and one without rows yet has nothing to resume.
     """
-    existed = out.is_dir()
     try:
         yield
     except OSError as exc:
@@ -116,7 +123,7 @@ def results_writes(out: Path) -> Iterator[None]:
             except OSError:
                 pass
         reason = exc.strerror or str(exc) or type(exc).__name__
-        if existed and not out.is_dir():
+        if exc.errno == errno.ENOENT and not out.is_dir():  # removed (rm -rf) while the study wrote into it
             raise OutputError(f"cannot write the results into {out}: the folder was removed while cosim wrote "
                               f"into it ({reason}); the rows it held are gone", file=str(out),
                               fix="run the same command again without --resume (into a folder nothing else "

@@ -45,6 +45,7 @@ import ast
 import math
 import random
 import re
+import sys
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, TextIO
@@ -300,7 +301,9 @@ class Optimization:
             self.lock = FolderLock(self.out)
             self.lock.check_free()  # another optimisation running into this folder is the first thing to say
         previous = check_results_folder(self.store, resume, self.spec.digest, "optimization",
-                                        "continue that optimisation", OptimizeError)
+                                        "continue that optimisation", OptimizeError,
+                                        note=lambda text: print(f"cosim: {text}", file=progress or sys.stderr,
+                                                                flush=True))
         self.checksums, self.data_checksums = unit_checksums(self.system), data_file_checksums(self.system)
         changed, unverifiable = resume_differences(self.store, self.checksums, self.data_checksums,
                                                    self.spec.folder) if resume else ([], None)
@@ -530,8 +533,12 @@ class Optimization:
 
     def _finish(self) -> dict[str, int]:
         with results_writes(self.out):  # a full disk during the final merge loses nothing (see compact)
+            aside = self.store.set_aside_damaged()  # a part damaged while the study ran: its trials are missing
             counts = self.store.compact()  # rows stay in the order they were evaluated
             finish_metadata(self.store, counts)
+        if aside:
+            raise OptimizeError(f"{self.out}: " + "; ".join(aside) + "; run the same command with --resume to "
+                                "evaluate their designs again")
         return counts
 
 

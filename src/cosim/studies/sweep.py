@@ -38,12 +38,12 @@ import math
 import os
 import shutil
 import statistics
+import sys
 import tempfile
-from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterator, Sequence, TextIO
 
-from cosim.errors import OutputError, SweepError
+from cosim.errors import OutputError, SweepError  # noqa: F401  (OutputError: imported from here too)
 from cosim.parallel.early_cluster import EarlyCluster
 from cosim.parallel.evaluator import Reruns, ScatteredPayload, check_timeout, lost_rows
 from cosim.parallel.isolation import IsolatedRunner, make_payload, preload_spare_children, stop_spare_children
@@ -245,7 +245,8 @@ class Sweep:
             early.close()
 
     def _check_folder(self) -> None:
-        check_results_folder(self.store, self.resume, self.spec.digest, "sweep", "finish that sweep", SweepError)
+        check_results_folder(self.store, self.resume, self.spec.digest, "sweep", "finish that sweep", SweepError,
+                             note=self._note)
         if self.resume:
             changed, unverifiable = resume_differences(self.store, self.checksums, self.data_checksums,
                                                        self.spec.folder)
@@ -348,10 +349,18 @@ class Sweep:
             self.close()  # the early cluster, if dask_client did not take it
         return self._finish()
 
+    def _note(self, text: str) -> None:
+        """A note that matters even with ``quiet`` (a file of rows set aside): always on stderr."""
+        print(f"cosim: {text}", file=self.progress_stream or sys.stderr, flush=True)
+
     def _finish(self) -> dict[str, int]:
         with results_writes(self.out):  # a full disk during the final merge loses nothing (see compact)
+            aside = self.store.set_aside_damaged()  # a part damaged while the sweep ran: its points are missing
             counts = self.store.compact(order=(p.id for p in self.space), csv=self.csv)  # order: older parts
             finish_metadata(self.store, counts)
+        if aside:
+            raise SweepError(f"{self.out}: " + "; ".join(aside) + f"; the table holds {sum(counts.values())} of "
+                             f"{len(self.space)} points: run the same command with --resume to compute the others")
         return counts
 
     def _evaluate(self, client: Any, done: set[str], todo: int, n_workers: int, board: Any = None) -> None:
