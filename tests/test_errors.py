@@ -80,7 +80,7 @@ def test_every_subcommand_maps_errors_through_main(tmp_path, capsys, monkeypatch
 
     from cosim.system import validate
 
-    def broken(path, experiment=None):  # check_spec's signature (experiment: command-line overrides)
+    def broken(path, experiment=None, variant=None):  # check_spec's signature (command-line overrides, variant)
         raise KeyError("an assumption of ours")
 
     monkeypatch.setattr(validate, "check_spec", broken)

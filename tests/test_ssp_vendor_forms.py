@@ -630,3 +630,41 @@ def test_a_tool_annotation_number_that_is_none_is_a_problem_not_a_traceback(tmp_
     assert problem.path.split("/")[-1].startswith("oms:")
     assert main(["validate", str(path)]) == 2
     assert "Traceback" not in capsys.readouterr().err
+
+
+# --- item 7 (in part): a spec names the SSP's system connectors and root-prefixed unit ports ---------------
+
+
+def test_a_spec_names_system_connectors_and_root_prefixed_ports_as_tool_users_write_them(tmp_path):
+    import json
+
+    import cosim
+
+    write_archive(tmp_path / "oms3.ssp", oms3_files())
+    spec = {"system": "oms3.ssp", "experiment": {"step": 0.1, "algorithm": "jacobi"},
+            "record": ["default.out", "sub.res", "default.A.y"],
+            "objectives": {"out": {"signal": "default.out", "reduce": "final"},
+                           "res_min": {"signal": "default.sub.res", "reduce": "min"}}}
+    (tmp_path / "spec.json").write_text(json.dumps(spec))
+    system = check_spec(tmp_path / "spec.json")
+    assert system.spec.record == ("sub.B.y", "sub.B.y", "A.y")  # default.out <- sub.res <- sub.B.y, factor 1
+    result = cosim.run(tmp_path / "spec.json")
+    assert result.objectives["out"] == pytest.approx(oms3_expected(1.0)["sub.B.y"], rel=1e-12)
+    assert result.objectives["res_min"] == pytest.approx(oms3_expected(1.0)["sub.B.y"], rel=1e-12)  # y = -t
+
+
+def test_a_system_connector_that_is_no_unit_port_as_it_is_is_a_problem_in_the_spec(tmp_path):
+    import json
+
+    ssd = oms3_ssd().replace('<ssd:Connection startElement="sub" startConnector="res" endElement="" '
+                             'endConnector="out"/>',
+                             '<ssd:Connection startElement="sub" startConnector="res" endElement="" endConnector="out">'
+                             '<ssc:LinearTransformation factor="2.0" offset="1.0"/></ssd:Connection>')
+    write_archive(tmp_path / "scaled.ssp", oms3_files(ssd))
+    spec = {"system": "scaled.ssp", "experiment": {"step": 0.1}, "record": ["default.out", "default.k"]}
+    (tmp_path / "spec.json").write_text(json.dumps(spec))
+    problems = _problems(tmp_path / "spec.json", None)
+    assert [(p.path, p.message) for p in problems] == [
+        ("$.record[0]", "'default.out' is the SSP's system connector carrying 2 x sub.B.y + 1, no unit port"),
+        ("$.record[1]", "'default.k' is the SSP's system connector holding the constant -0.5, no signal of a unit")]
+    assert problems[0].fix.startswith("name 'sub.B.y'")

@@ -10,6 +10,7 @@ gets that content merged under its own (:func:`merge_system`).
 from __future__ import annotations
 
 import copy
+import logging
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -19,6 +20,7 @@ from cosim.ssp.reader import SspSystem, read_ssp
 from cosim.units.registry import unit_kinds
 
 __all__ = ["is_ssp", "merge_system", "read_ssp", "ssp_raw_spec", "SspSystem"]
+log = logging.getLogger("cosim.ssp")
 
 
 def ssp_raw_spec(path: str | Path, experiment: Mapping[str, Any] | None = None, variant: str | None = None) -> dict:
@@ -81,7 +83,8 @@ def merge_system(spec: dict, spec_path: Path) -> dict:
     if not is_ssp(source):
         raise SpecError([Problem(str(spec_path), where, f"'{given}' is not an SSP",
                                  "name an .ssp archive, an .ssd file or a folder with SystemStructure.ssd")])
-    ssp = read_ssp(source, variant).raw
+    system = read_ssp(source, variant)
+    ssp = system.raw
     merged = copy.deepcopy(spec)
     units = copy.deepcopy(ssp["units"])
     for name, own in (spec.get("units") or {}).items():
@@ -106,4 +109,52 @@ def merge_system(spec: dict, spec_path: Path) -> dict:
     if "record" not in spec:
         merged["record"] = ssp["record"]
     merged.setdefault("name", ssp["name"])
+    problems = _name_connectors(merged, system, str(spec_path))
+    if problems:
+        raise SpecError(problems)
     return merged
+
+
+def _name_connectors(spec: dict, system: SspSystem, file: str) -> list[Problem]:
+    """Signals in ``record``, objectives and ``stop_when`` that name the SSP's system connectors
+    (``Root.SuT.speed``, as a tool's users write them) or a unit with the root system's name in front
+    (``Root.SuT.motor.y``), rewritten to the unit ports they mean; a problem for a connector whose value is no
+    unit port as it is (scaled on its way, or a constant)."""
+    units = [u for u in spec.get("units") or {} if isinstance(u, str)]
+    signals, root = system.connector_signals, system.root_system
+    problems: list[Problem] = []
+
+    def names_unit(text: str) -> bool:
+        return any(text.startswith(u + ".") for u in units)
+
+    def resolve(text: Any, where: str) -> Any:
+        if not isinstance(text, str) or names_unit(text):
+            return text
+        if text in signals:
+            carried = signals[text]
+            if carried[0] == "port" and carried[2] == 1.0 and carried[3] == 0.0:
+                log.warning("%s: %s '%s' is the SSP's system connector carrying '%s': recorded as '%s'",
+                            file, where, text, carried[1], carried[1])
+                return carried[1]
+            if carried[0] == "port":
+                problems.append(Problem(file, where, f"'{text}' is the SSP's system connector carrying "
+                                        f"{carried[2]:.17g} x {carried[1]} + {carried[3]:.17g}, no unit port",
+                                        f"name '{carried[1]}' (for an objective, an expression of it scales it)"))
+            else:
+                problems.append(Problem(file, where, f"'{text}' is the SSP's system connector holding the constant "
+                                        f"{carried[1]!r}, no signal of a unit", "name a unit port"))
+            return text
+        if root and text.startswith(root + ".") and names_unit(text[len(root) + 1:]):
+            return text[len(root) + 1:]  # OMSimulator's result names carry the root system's name
+        return text
+
+    if isinstance(spec.get("record"), list):
+        spec["record"] = [resolve(r, f"$.record[{i}]") for i, r in enumerate(spec["record"])]
+    for name, objective in (spec.get("objectives") or {}).items() if isinstance(spec.get("objectives"), dict) \
+            else ():
+        if isinstance(objective, dict) and "signal" in objective:
+            objective["signal"] = resolve(objective["signal"], f"$.objectives.{name}.signal")
+    experiment = spec.get("experiment")
+    if isinstance(experiment, dict) and "stop_when" in experiment:
+        experiment["stop_when"] = resolve(experiment["stop_when"], "$.experiment.stop_when")
+    return problems

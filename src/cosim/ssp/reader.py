@@ -97,6 +97,10 @@ class SspSystem:
     raw: dict
     notes: list[str]
     system_connectors: list[str] = field(default_factory=list)  # 'Root.sub.connector', for messages
+    # 'Root.sub.connector' (and 'sub.connector') -> what it carries: ("port", 'unit.port', factor, offset) for a
+    # connector fed by a component output, ("value", v) for one holding a bound value (see connector_signals)
+    connector_signals: dict[str, tuple] = field(default_factory=dict)
+    root_system: str = ""
 
 
 def read_ssp(path: str | Path, variant: str | None = None) -> SspSystem:
@@ -118,6 +122,8 @@ class _Reader:
         self.edges: list[Edge] = []
         self.bindings: list[tuple[int, int, tuple[tuple[str, ...], str], Any, str | None, Any, str]] = []
         self._order = 0
+        self._into: dict[tuple, Edge] = {}  # connection end -> the connection feeding it (see _connections)
+        self._system_values: dict[tuple, tuple] = {}  # system connector -> its chosen binding
         self._prefixed: set[tuple[str, tuple[str, ...]]] = set()  # (file, component) noted for Component.param
         self.solvers = Solvers()
         self._hints: list[str] = []  # OSP step size hints, for one note
@@ -151,7 +157,40 @@ class _Reader:
         root_name = system.get("name", "")
         connectors = [".".join((root_name, *n.path, c)) for n in self.nodes.values() if n.kind == "system"
                       for c in n.connectors]
-        return SspSystem(self.files, raw, self.notes, connectors)
+        return SspSystem(self.files, raw, self.notes, connectors, self._connector_signals(unit_names, root_name),
+                         root_name)
+
+    def _connector_signals(self, unit_names: dict, root_name: str) -> dict[str, tuple]:
+        """What every system connector carries, by its name with and without the root system's name.
+
+        A connector fed (through a chain) by a component output carries factor x that output + offset (the
+        chain's conversions and transformations); one holding a bound value carries that value.  A connector
+        whose chain cannot be followed (a loop, units that do not convert) carries nothing known and is left
+        out: this is for naming connectors in a spec, the SSP was checked already.
+        """
+        signals: dict[str, tuple] = {}
+        problems = list(self.problems)
+        for node in self.nodes.values():
+            if node.kind != "system":
+                continue
+            for name in node.connectors:
+                end = (node.path, name)
+                carried: tuple | None = None
+                if end in self._into:
+                    chain = self._chain(end)
+                    start = chain[0].start
+                    if self.nodes[start[0]].kind == "component" and start[0] in unit_names:
+                        factor, offset = self._compose(chain, self._unit_of(*start))
+                        carried = ("port", f"{unit_names[start[0]]}.{start[1]}", factor, offset)
+                    elif start in self._system_values:
+                        carried = ("value", self._system_values[start][2])
+                elif end in self._system_values:
+                    carried = ("value", self._system_values[end][2])
+                if carried is not None:
+                    signals[".".join((root_name, *node.path, name))] = carried
+                    signals.setdefault(".".join((*node.path, name)), carried)
+        self.problems[:] = problems  # a chain only named here (no FMU input at its end) reports nothing new
+        return signals
 
     def _parse(self, path: Path, label: str, kind: str) -> Any:
         """The root of an SSP file checked against the schema, or None (its problems recorded).
@@ -803,6 +842,7 @@ class _Reader:
             if current is None or (depth, -order) < (current[0], -current[1]):
                 chosen[target] = (depth, order, value, unit, extra, label)
         system_values = {t: v for t, v in chosen.items() if self.nodes[t[0]].kind == "system"}
+        self._system_values = system_values
         # system connectors with values feed the component variables they are connected to (a parameter
         # connection); such a value counts as bound where the system connector's value was bound, so it beats
         # the component's own binding (a higher system wins) and loses to a binding of a still higher system
