@@ -668,3 +668,43 @@ def test_a_system_connector_that_is_no_unit_port_as_it_is_is_a_problem_in_the_sp
         ("$.record[0]", "'default.out' is the SSP's system connector carrying 2 x sub.B.y + 1, no unit port"),
         ("$.record[1]", "'default.k' is the SSP's system connector holding the constant -0.5, no signal of a unit")]
     assert problems[0].fix.startswith("name 'sub.B.y'")
+
+
+# --- no traceback for any input file --------------------------------------------------------------------------
+
+
+def test_an_ssd_with_any_element_or_attribute_removed_or_spoilt_reads_or_gives_problems_never_a_traceback(tmp_path):
+    """Each element and each attribute of the OMSimulator-3-form SSD (with a table and solvers) removed in turn,
+    and each attribute emptied or given a stray text: the SSP reads, or its problems are reported (each with a fix);
+    nothing else is raised."""
+    from lxml import etree
+
+    ssd = _solver_ssd().replace('      <ssd:System name="sub">', _TABLE + '      <ssd:System name="sub">', 1)
+    folder = write_folder(tmp_path / "mutated", oms3_files(ssd, **{"resources/setpoint.csv": SETPOINT}))
+    original = etree.fromstring(ssd.encode())
+    mutations = []
+    for index, element in enumerate(original.iter()):
+        if not isinstance(element.tag, str):
+            continue
+        if index:
+            mutations.append(("element", index, None))
+        mutations.extend((what, index, name) for name in element.attrib for what in ("attribute", "", "x/../[1]"))
+    assert len(mutations) > 300
+    outcomes = {"read": 0, "problems": 0}
+    for what, index, name in mutations:
+        root = etree.fromstring(ssd.encode())
+        element = list(root.iter())[index]
+        if what == "element":
+            element.getparent().remove(element)
+        elif what == "attribute":
+            del element.attrib[name]
+        else:
+            element.set(name, what)
+        (folder / "SystemStructure.ssd").write_bytes(etree.tostring(root))
+        try:
+            read_ssp(folder)
+            outcomes["read"] += 1
+        except SpecError as exc:
+            assert exc.problems and all(p.message and p.fix for p in exc.problems), (what, index, name)
+            outcomes["problems"] += 1
+    assert outcomes["read"] and outcomes["problems"]
