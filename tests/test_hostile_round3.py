@@ -429,3 +429,85 @@ def test_a_folder_removed_mid_run_is_not_said_to_keep_its_rows(tmp_path, local_c
     assert proc.returncode == 2, err
     assert "was removed while cosim wrote into it" in err and "the rows it held are gone" in err, err
     assert "kept" not in err and "--resume to" not in err and "Traceback" not in err
+
+
+# 8. Exit codes that lied --------------------------------------------------------------------------------------------
+
+FAILING = """
+from cosim import PythonUnit, Variable
+
+class FailsAboveThree(PythonUnit):
+    variables = (Variable("k", "parameter", start=1.0), Variable("y", "output", start=0.0))
+
+    def do_step(self, t, h):
+        if self.k > 3:
+            raise ValueError("k above 3")
+        self.y = 3.0 * self.k
+"""
+
+
+def test_a_closed_stdout_does_not_turn_failed_points_into_success(tmp_path, local_cluster):
+    """`cosim sweep ... | head`: before, the reader leaving made every outcome exit 0."""
+    import pandas as pd
+
+    (tmp_path / "failing.py").write_text(FAILING)
+    spec = tmp_path / "spec.json"
+    spec.write_text(json.dumps({"units": {"s": {"python": "failing.py:FailsAboveThree"}},
+                                "experiment": {"stop": 0.1, "step": 0.1},
+                                "objectives": {"y": {"signal": "s.y", "reduce": "final"}},
+                                "design": {"parameters": {"s.k": {"min": 1, "max": 6, "step": 1}}}}))
+    out = tmp_path / "out"
+    proc = _popen_cosim("sweep", str(spec), "--out", str(out), "--scheduler", local_cluster)
+    proc.stdout.close()  # what `| head -0` does: the reader is gone before the summary is printed
+    err = proc.stderr.read()
+    assert proc.wait(timeout=180) == 1, err  # points failed: exit 1, as with a reader
+    assert "Traceback" not in err and "BrokenPipe" not in err
+    table = pd.read_parquet(out / "results.parquet")
+    assert list(table["status"]) == ["ok"] * 3 + ["failed"] * 3
+
+
+def test_an_fmu_library_lacking_a_function_is_the_fmus_fault_not_an_internal_error(tmp_path):
+    """Before: `cosim run` said "internal error" (exit 70) for an FMU whose library lacks fmi2CancelStep."""
+    source = ensure_built("gain_array", 2)
+    (tmp_path / "stub.c").write_text("int not_an_fmi_function = 0;\n")
+    subprocess.run(["gcc", "-shared", "-fPIC", "-o", str(tmp_path / "stub.so"), str(tmp_path / "stub.c")], check=True)
+    with zipfile.ZipFile(source) as zin, zipfile.ZipFile(tmp_path / "hollow.fmu", "w") as zout:
+        for info in zin.infolist():
+            zout.writestr(info, (tmp_path / "stub.so").read_bytes() if info.filename.endswith(".so")
+                          else zin.read(info))
+    spec = _spec_of(tmp_path, {"g": {"fmu": "hollow.fmu"}})
+    done = _cosim("run", str(spec))
+    text = done.stdout + done.stderr
+    assert done.returncode == 2, text
+    assert "hollow.fmu" in text and "binaries/linux64/gain_array.so" in text, text
+    assert "its library lacks the FMI function fmi2" in text and "re-export the FMU" in text, text
+    assert "internal error" not in text and "Traceback" not in text
+
+
+def test_a_scheduler_address_of_a_server_that_speaks_first_is_a_clear_exit_2(tmp_path):
+    """Before: exit 70, "Unable to allocate 3.01 EiB" (an ssh banner read as the length of a Dask frame)."""
+    import socket
+    import threading
+
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(4)
+    server.settimeout(60)
+
+    def banner():
+        try:
+            while True:
+                connection, _ = server.accept()
+                connection.sendall(b"SSH-2.0-OpenSSH_8.9p1 Ubuntu-3ubuntu0.1\r\n")
+        except OSError:
+            pass
+
+    threading.Thread(target=banner, daemon=True).start()
+    try:
+        spec = _triple_study(tmp_path / "project", 3)
+        address = f"tcp://127.0.0.1:{server.getsockname()[1]}"
+        done = _cosim("sweep", str(spec), "--out", str(tmp_path / "out"), "--scheduler", address)
+    finally:
+        server.close()
+    assert done.returncode == 2, done.stderr
+    assert f"the server at {address} is not a Dask scheduler" in done.stderr and "Traceback" not in done.stderr

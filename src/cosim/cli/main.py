@@ -48,17 +48,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_USAGE
     from cosim.parallel.interrupts import restore_signals, stop_cleanly_on_signals
     previous = stop_cleanly_on_signals()
+    stdout = sys.stdout
+    sys.stdout = _ReaderMayLeave(stdout)  # `cosim sweep ... | head`: the command goes on and says how it ended
     try:
         return args.handler(args)
-    except BrokenPipeError:  # the reader stopped early (`cosim pareto ... | head`): not an error of ours
+    except BrokenPipeError:  # written past the wrapper: the command did not finish, so it did not succeed
         _discard_stdout()
-        return EXIT_OK
+        print("cosim: standard output was closed before the command finished", file=sys.stderr)
+        return EXIT_RUN_FAILED
     except BaseException as exc:  # noqa: BLE001 - every outcome gets its exit code here, and only here
         if isinstance(exc, SystemExit):
             raise
         report_error(exc)
         return exit_code(exc)
     finally:
+        sys.stdout = stdout
         restore_signals(previous)  # main() may be called from a program with handlers of its own
         if argv is None:
             _skip_final_collections()
@@ -76,6 +80,41 @@ def _skip_final_collections() -> None:
     import gc
 
     gc.freeze()
+
+
+class _ReaderMayLeave:
+    """Standard output that a reader may close early (``| head``): from then on, what is written is dropped.
+
+    Without it the first print after the reader left raised BrokenPipeError in the middle
+    of a command, and its outcome (points failed: exit 1) was lost: every command ended 0.
+    The command now runs to its end and returns its own exit code; only its output is cut.
+    """
+
+    def __init__(self, stream: Any):
+        self._stream = stream
+        self._closed = False
+
+    def write(self, text: str) -> int:
+        if not self._closed:
+            try:
+                return self._stream.write(text)
+            except BrokenPipeError:
+                self._reader_left()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self._closed:
+            try:
+                self._stream.flush()
+            except BrokenPipeError:
+                self._reader_left()
+
+    def _reader_left(self) -> None:
+        self._closed = True
+        _discard_stdout()
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._stream, name)
 
 
 def _discard_stdout() -> None:

@@ -177,6 +177,12 @@ def _client(workers: int, scheduler: str | None, cluster_file: str | None,
             client = Client(scheduler, timeout=10)
         except OSError as exc:
             raise ClusterError(f"cannot reach the Dask scheduler at {scheduler}{origin}: {exc}") from None
+        except (MemoryError, ValueError, TypeError, KeyError, IndexError) as exc:
+            # a server that is no Dask scheduler (ssh, smtp, http speak first): its first bytes, read as the
+            # length of a Dask frame, asked for exabytes ("Unable to allocate 3.01 EiB"), or would not decode
+            raise ClusterError(f"the server at {scheduler}{origin} is not a Dask scheduler: it did not answer in "
+                               f"Dask's protocol ({type(exc).__name__}: {str(exc)[:100]}); check the address and "
+                               "port (a scheduler listens on 8786 unless told otherwise)") from None
         link = client.dashboard_link
     try:
         if cluster_file is not None or scheduler is not None:  # a scheduler of another environment

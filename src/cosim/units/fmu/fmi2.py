@@ -18,7 +18,7 @@ from fmpy.fmi2 import (
 )
 
 from cosim.units.fmu.fmpy_internals import fmi2_allocator, instance_handle, library, with_cached_signatures
-from cosim.units.fmu.instance import FmiInstance, TypeGroup
+from cosim.units.fmu.instance import FmiInstance, TypeGroup, load_library
 from cosim.units.protocol import SimulationEnded
 
 
@@ -41,9 +41,9 @@ class Fmi2Unit(FmiInstance):
         super().__init__(name, unit_type)
         md = unit_type.model_description()
         # The Model Exchange subclass (units/model_exchange.py) swaps the fmpy class and the interface.
-        self._slave = self._slave_class(guid=md.guid, unzipDirectory=unit_type.extracted_folder(),
-                                        modelIdentifier=getattr(md, self._interface).modelIdentifier,
-                                        instanceName=name)
+        self._slave = load_library(unit_type, lambda: self._slave_class(
+            guid=md.guid, unzipDirectory=unit_type.extracted_folder(),
+            modelIdentifier=getattr(md, self._interface).modelIdentifier, instanceName=name))
         self._callbacks = fmi2CallbackFunctions()
         self._callbacks.logger = fmi2CallbackLoggerTYPE(
             lambda env, instance, status, category, message: self._record_log(status, category, message))

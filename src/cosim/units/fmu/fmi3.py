@@ -9,7 +9,7 @@ from typing import Any, Callable, Sequence
 from fmpy.fmi3 import FMU3Slave
 
 from cosim.units.fmu.fmpy_internals import instance_handle, library, with_cached_signatures
-from cosim.units.fmu.instance import FmiInstance, FmiSelection, TypeGroup
+from cosim.units.fmu.instance import FmiInstance, FmiSelection, TypeGroup, load_library
 from cosim.units.protocol import Selection, SimulationEnded
 
 
@@ -37,9 +37,9 @@ class Fmi3Unit(FmiInstance):
         super().__init__(name, unit_type)
         md = unit_type.model_description()
         # The Model Exchange subclass (units/model_exchange.py) swaps the fmpy class and the interface.
-        self._slave = self._slave_class(guid=md.guid, unzipDirectory=unit_type.extracted_folder(),
-                                        modelIdentifier=getattr(md, self._interface).modelIdentifier,
-                                        instanceName=name)
+        self._slave = load_library(unit_type, lambda: self._slave_class(
+            guid=md.guid, unzipDirectory=unit_type.extracted_folder(),
+            modelIdentifier=getattr(md, self._interface).modelIdentifier, instanceName=name))
         self._guard(f"fmi3Instantiate{self._interface[0].upper()}{self._interface[1:]}",
                     lambda: self._slave.instantiate(logMessage=self._log_callback_py))
         self._component = instance_handle(self._slave)

@@ -14,9 +14,34 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from cosim.errors import Problem
 from cosim.units.protocol import ElementRef, Selection, Unit, UnitError
 
 STATUS_LABELS = ["OK", "Warning", "Discard", "Error", "Fatal", "Pending"]
+
+
+def load_library(unit_type: Any, make_slave: Callable[[], Any]) -> Any:
+    """fmpy's slave object from ``make_slave()``, which loads the FMU's library and looks up its functions.
+
+    A library that cannot be loaded, or that lacks an FMI function, is the FMU's fault, not cosim's:
+    raises FmuProblems (a user error) naming the FMU, the library and the missing function.
+    """
+    from cosim.units.fmu.description import FmuProblems
+
+    try:
+        return make_slave()
+    except AttributeError as exc:  # ctypes: "<library>: undefined symbol: fmi2DoStep"
+        library, _, missing = str(exc).rpartition(": undefined symbol: ")
+        inside = library.rpartition("/binaries/")[2]  # the library's place inside the FMU
+        problem = Problem(unit_type.path, f"binaries/{inside}" if inside else "binaries",
+                          f"its library lacks the FMI function {missing}" if library
+                          else f"its library is unusable: {exc}",
+                          "re-export the FMU from its tool: its library must export every function of its FMI "
+                          "version")
+    except OSError as exc:  # dlopen: not a library for this machine, a missing dependency
+        problem = Problem(unit_type.path, "binaries", f"its library cannot be loaded: {exc}",
+                          "re-export the FMU with a binary for this platform, and install what the library needs")
+    raise FmuProblems(unit_type.path, [problem]) from None
 
 
 class TypeGroup:
