@@ -708,3 +708,13 @@ def test_an_ssd_with_any_element_or_attribute_removed_or_spoilt_reads_or_gives_p
             assert exc.problems and all(p.message and p.fix for p in exc.problems), (what, index, name)
             outcomes["problems"] += 1
     assert outcomes["read"] and outcomes["problems"]
+
+
+def test_a_table_starting_with_a_separator_line_is_read_with_a_note(tmp_path):
+    members = oms3_files(_table_ssd(), **{"resources/setpoint.csv": b'"sep=,"\n' + SETPOINT})
+    path = write_archive(tmp_path / "sep.ssp", members)
+    system = read_ssp(path)
+    assert f"{path}:resources/setpoint.csv starts with a 'sep=' line" in " ".join(system.notes)
+    result = _run(path, "gauss-seidel")
+    times = result.traces["time"]
+    assert result.traces["setpoint.speed"].to_numpy() == pytest.approx([_setpoint(t) for t in times], abs=1e-12)

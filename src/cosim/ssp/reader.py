@@ -418,6 +418,11 @@ class _Reader:
             return node
         node.table = path
         node.variables = {v.name: v for v in description.variables}
+        from cosim.units.player import csv_separator_line
+
+        if csv_separator_line(path):
+            self._note(f"{self.files.label(path)} starts with a 'sep=' line (a spreadsheet's separator hint, as "
+                       "OMSimulator's result files have); CSV has none: skipped")
         for name, connector in node.connectors.items():
             if name not in node.variables:
                 self._problem(connector.element, f"connector '{name}' is not a column of {source}."

@@ -64,13 +64,24 @@ def read_table(path: str | Path) -> Any:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no such file: {path}")
-    frame = pd.read_csv(path) if path.suffix.lower() == ".csv" else pd.read_parquet(path)
+    if path.suffix.lower() == ".csv":
+        separator = csv_separator_line(path)  # "sep=," first (Excel's hint; OMSimulator's result CSVs): skipped
+        frame = pd.read_csv(path, skiprows=1, sep=separator) if separator else pd.read_csv(path)
+    else:
+        frame = pd.read_parquet(path)
     if "time" not in frame.columns:
         raise ValueError(f"{path} has no 'time' column; columns: {', '.join(map(str, frame.columns[:8]))}")
     time = frame["time"].to_numpy(dtype=float)
     if len(time) == 0 or np.any(np.diff(time) < 0):
         raise ValueError(f"{path}: 'time' must be non-empty and non-decreasing")
     return frame
+
+
+def csv_separator_line(path: str | Path) -> str | None:
+    """The separator a CSV's first line ``sep=X`` (or ``"sep=X"``) declares, None when it has no such line."""
+    with open(path, encoding="utf-8", errors="replace") as stream:
+        first = stream.readline().strip().strip('"')
+    return first[4] if len(first) == 5 and first.lower().startswith("sep=") else None
 
 
 def _is_numeric(column: Any) -> bool:
