@@ -249,3 +249,22 @@ class Counter(PythonUnit):
 
     def do_step(self, t, h):
         self.compute_outputs()
+
+
+class RestorableLinearOde(LinearOde):
+    """LinearOde whose state can be saved and restored (get_state/set_state), counting the steps it keeps:
+    a state kept outside its variables, so a test sees that a restore brings it back too."""
+
+    def initialize(self):
+        super().initialize()
+        self.steps_kept = 0
+
+    def do_step(self, t, h):
+        super().do_step(t, h)
+        self.steps_kept += 1
+
+    def get_state(self):
+        return self.steps_kept
+
+    def set_state(self, state):
+        self.steps_kept = state

@@ -105,6 +105,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         for name, value in result.objectives.items():
             print(f"{name:<{width}}  {value:>14.6g}  {units.get(name.split('[')[0], '')}")
     print(f"status: {result.status}; {result.steps} steps to t={result.end_time:g} s in {result.elapsed:.3f} s")
+    if result.step_stats:
+        from cosim.master.adaptive import describe_statistics
+        print(describe_statistics(result.step_stats))
     if result.message:
         print(f"message: {result.message}", file=sys.stderr)
     if out is not None and result.traces is not None:

@@ -39,6 +39,8 @@ class RunResult:
     says why a failed run failed: ``"unit"`` (a unit, or a non-finite
     objective), ``"user"`` (a user's file found unusable only while running,
     e.g. an FMU archive that escapes its folder) or ``"internal"`` (a bug).
+    ``steps`` counts the communication steps taken (the accepted ones under
+    the adaptive algorithm, whose ``step_stats`` say what else it did).
     """
 
     status: str
@@ -49,6 +51,8 @@ class RunResult:
     steps: int = 0
     end_time: float = math.nan
     failure: str = ""
+    # the adaptive algorithm's statistics (accepted, rejected, exceeded, smallest, largest, ...); None for a fixed step
+    step_stats: dict[str, Any] | None = None
 
     @property
     def ok(self) -> bool:
@@ -150,6 +154,7 @@ class Execution:
         owned = self._given_units is None
         t = exp.start
         steps = 0
+        algorithm = None
         try:
             if owned:
                 for name, system_unit in self.system.units.items():
@@ -165,7 +170,8 @@ class Execution:
             observers = [o for o in (recorder, reducer) if o is not None] + self.extra_observers
             stop_column = probe.columns.index(exp.stop_when) if exp.stop_when else None
 
-            algorithm = make_algorithm(exp.algorithm)
+            algorithm = make_algorithm(exp.algorithm, exp)
+            variable = algorithm.variable_step  # the adaptive algorithm: steps of its choosing, after the loop
             if algorithm.solves_loops:  # given the feed-through and loops to solve (others never see a loop)
                 algorithm.bind(units, self.system.order, self.system.connections, self.system.coupling)
             else:
@@ -178,7 +184,7 @@ class Execution:
             step, read = algorithm.step, probe.read
             hooks = [observer.step for observer in observers]
             ended: SimulationEnded | None = None
-            for k in range(n_steps):
+            for k in range(0 if variable else n_steps):
                 t = start + k * h  # whole steps counted, never summed: no drift
                 t_next = exp.stop if k == last else start + (k + 1) * h
                 try:
@@ -192,6 +198,18 @@ class Execution:
                     hook(t, values)
                 if ended is not None or stop_column is not None and values[stop_column]:
                     break
+            while variable and ended is None and t < exp.stop:
+                try:
+                    t = algorithm.advance(t)  # type: ignore[attr-defined]
+                except SimulationEnded as stop:
+                    ended, t = stop, stop.time
+                steps += 1
+                values = read()
+                for hook in hooks:
+                    hook(t, values)
+                if stop_column is not None and values[stop_column]:
+                    break
+            stats = algorithm.stats.as_dict() if variable else None  # type: ignore[attr-defined]
             for observer in observers:
                 observer.finished(t)
             objectives = evaluate_expressions(self.system.spec.objectives, reducer.results())
@@ -200,17 +218,17 @@ class Execution:
             if nan:
                 return RunResult(FAILED, f"objective(s) not finite: {', '.join(nan)}", flat,
                                  recorder.frame() if recorder else None, time.perf_counter() - started, steps, t,
-                                 failure=UNIT_FAILURE)
+                                 failure=UNIT_FAILURE, step_stats=stats)
             if ended is not None:
                 message = f"stopped early: {ended} (stop time {exp.stop:g})"
                 if exp.early_stop == "fail":  # the spec says a run must reach its stop time
                     return RunResult(FAILED, message + "; experiment.early_stop is 'fail'", flat,
                                      recorder.frame() if recorder else None, time.perf_counter() - started,
-                                     steps, t, failure=UNIT_FAILURE)
+                                     steps, t, failure=UNIT_FAILURE, step_stats=stats)
                 return RunResult(OK, message, flat, recorder.frame() if recorder else None,
-                                 time.perf_counter() - started, steps, t)
+                                 time.perf_counter() - started, steps, t, step_stats=stats)
             return RunResult(OK, "", flat, recorder.frame() if recorder else None,
-                             time.perf_counter() - started, steps, t)
+                             time.perf_counter() - started, steps, t, step_stats=stats)
         except UnitError as exc:
             return RunResult(FAILED, str(exc), elapsed=time.perf_counter() - started, steps=steps, end_time=t,
                              failure=UNIT_FAILURE)
@@ -222,6 +240,11 @@ class Execution:
                              elapsed=time.perf_counter() - started, steps=steps, end_time=t,
                              failure=INTERNAL_FAILURE)
         finally:
+            if algorithm is not None and algorithm.variable_step:
+                try:
+                    algorithm.free()  # type: ignore[attr-defined]  # its saved states, before the units go
+                except Exception:
+                    pass  # freeing the units matters more
             if owned:
                 for unit in units.values():
                     try:

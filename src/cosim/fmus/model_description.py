@@ -286,7 +286,7 @@ def fmi3_model_description(model: Model, interfaces: tuple[str, ...] | None = No
                    f' needsCompletedIntegratorStep="{_needs_step(model)}"/>')
     if "CoSimulation" in offered:
         out.append(f'  <CoSimulation{_attrs(modelIdentifier=model.name)} canHandleVariableCommunicationStepSize="true"'
-                   ' canGetAndSetFMUState="false" canSerializeFMUState="false" canBeInstantiatedOnlyOncePerProcess="false"'
+                   ' canGetAndSetFMUState="true" canSerializeFMUState="true" canBeInstantiatedOnlyOncePerProcess="false"'
                    ' needsExecutionTool="false" providesIntermediateUpdate="false" hasEventMode="false"/>')
     out += _unit_definitions(model)
     out += LOG_CATEGORIES
@@ -346,7 +346,7 @@ def fmi2_model_description(model: Model, interfaces: tuple[str, ...] | None = No
                    ' needsExecutionTool="false" canNotUseMemoryManagementFunctions="true"/>')
     if "CoSimulation" in offered:
         out.append(f'  <CoSimulation{_attrs(modelIdentifier=model.name)} canHandleVariableCommunicationStepSize="true"'
-                   ' canGetAndSetFMUstate="false" canSerializeFMUstate="false" canBeInstantiatedOnlyOncePerProcess="false"'
+                   ' canGetAndSetFMUstate="true" canSerializeFMUstate="true" canBeInstantiatedOnlyOncePerProcess="false"'
                    ' needsExecutionTool="false" canNotUseMemoryManagementFunctions="true"/>')
     out += _unit_definitions(model)
     out += LOG_CATEGORIES

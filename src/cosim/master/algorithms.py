@@ -1,4 +1,5 @@
-"""Fixed-step master algorithms: Gauss-Seidel, Jacobi (zero-delay feed-through) and Jacobi with delay.
+"""Master algorithms: Gauss-Seidel, Jacobi (zero-delay feed-through) and Jacobi with delay, with fixed
+steps; ``adaptive`` (steps chosen by an error estimate) is in :mod:`cosim.master.adaptive`.
 
 An algorithm is bound to live units once (:meth:`MasterAlgorithm.bind`),
 which resolves every connection into a :class:`Transfer` with pre-built
@@ -9,7 +10,7 @@ long runs do not drift.
 
 from __future__ import annotations
 
-from typing import Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 from cosim.master.loops import Coupling, CouplingRuntime
 from cosim.master.transfers import Link, Port, Transfer, group_transfers  # noqa: F401  (re-exported: their old place)
@@ -33,10 +34,18 @@ class MasterAlgorithm:
     given to ``bind`` only when the algorithm says ``solves_loops`` (it then solves the loops at every
     communication point); the system check refuses a system with loops for any other algorithm, whose ``bind``
     may keep the three arguments.
+
+    ``experiment`` (start, stop, step and options) is for algorithms that need it (the adaptive one);
+    the fixed-step algorithms ignore it.  An algorithm with ``variable_step = True`` chooses its own steps:
+    the run asks its ``advance(t)`` for each (see :mod:`cosim.master.adaptive`).
     """
 
     name = "abstract"
     solves_loops = False
+    variable_step = False
+
+    def __init__(self, experiment: Any = None):
+        pass
 
     def bind(self, units: Mapping[str, Unit], order: Sequence[str], connections: Sequence[Link],
              coupling: Coupling | None = None) -> None:
@@ -152,14 +161,23 @@ class JacobiDelayed(Jacobi):
         super().bind(units, order, connections, None)
 
 
-# the one list of master algorithm names
-ALGORITHMS = {GaussSeidel.name: GaussSeidel, Jacobi.name: Jacobi, JacobiDelayed.name: JacobiDelayed}
+def _adaptive(experiment: Any = None) -> MasterAlgorithm:
+    from cosim.master.adaptive import Adaptive  # imported when asked for: it builds on the classes above
+
+    return Adaptive(experiment)
+
+
+# the one list of master algorithm names (each maps to a factory taking the experiment, or nothing)
+ALGORITHMS: dict[str, Callable[..., MasterAlgorithm]] = {
+    GaussSeidel.name: GaussSeidel, Jacobi.name: Jacobi, JacobiDelayed.name: JacobiDelayed, "adaptive": _adaptive}
 DEFAULT_ALGORITHM = GaussSeidel.name
 
 
-def make_algorithm(name: str) -> MasterAlgorithm:
-    """The algorithm called ``name``; raises ValueError for an unknown name."""
+def make_algorithm(name: str, experiment: Any = None) -> MasterAlgorithm:
+    """The algorithm called ``name``, for ``experiment`` (start, stop, step, options; needed by the adaptive
+    algorithm); raises ValueError for an unknown name or options that cannot work."""
     try:
-        return ALGORITHMS[name]()
+        factory = ALGORITHMS[name]
     except KeyError:
         raise ValueError(f"unknown master algorithm '{name}'; use one of {', '.join(ALGORITHMS)}") from None
+    return factory(experiment)

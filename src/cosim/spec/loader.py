@@ -57,6 +57,8 @@ class ExperimentSpec:
     stop_when: str | None = None
     early_stop: str = "ok"  # a unit ending the simulation before 'stop': "ok" (status ok) or "fail"
     loop_solver: LoopSettings = LoopSettings()  # how algebraic loops are solved (method, tolerance, max_iterations)
+    # the adaptive algorithm's options (rtol, atol, min_step, max_step, base, restore), see cosim.master.adaptive
+    adaptive: tuple[tuple[str, Any], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -244,7 +246,23 @@ def _value_problems(raw: dict, file: str, seen: set[tuple[str, str]]) -> list[Pr
                                         f"{(stop - start) / step:.3g} steps, more than the limit of "
                                         f"{limits.limit('steps'):.3g} for one run",
                                         f"use a larger step or a shorter time span; {limits.raise_hint('steps')}"))
+        problems.extend(_adaptive_problems(experiment, file))
     return [p for p in problems if (p.path, p.message) not in seen]
+
+
+def _adaptive_problems(experiment: dict, file: str) -> list[Problem]:
+    """``experiment.adaptive``: options that cannot work together, or given without the adaptive algorithm."""
+    from cosim.master.adaptive import option_problems
+
+    options = experiment.get("adaptive")
+    if not isinstance(options, dict):
+        return []
+    if experiment.get("algorithm", DEFAULT_ALGORITHM) != "adaptive":
+        return [Problem(file, "$.experiment.adaptive", "options of the adaptive algorithm, but 'algorithm' is "
+                        f"'{experiment.get('algorithm', DEFAULT_ALGORITHM)}'",
+                        "set \"algorithm\": \"adaptive\", or remove 'adaptive'")]
+    return [Problem(file, json_path(["experiment", "adaptive", key] if key else ["experiment", "adaptive"]),
+                    message, fix) for key, message, fix in option_problems(options)]
 
 
 _ONE_OF_HINTS = {  # the unit's hint names the registered kinds (cosim.units.registry.one_kind_hint)
@@ -347,7 +365,8 @@ def build_spec(raw: dict, path: Path) -> Spec:
     e = raw["experiment"]
     experiment = ExperimentSpec(start=float(e.get("start", 0.0)), stop=float(e["stop"]), step=float(e["step"]),
                                 algorithm=e.get("algorithm", DEFAULT_ALGORITHM), stop_when=e.get("stop_when"),
-                                early_stop=e.get("early_stop", "ok"), loop_solver=_loop_settings(e.get("loop_solver", {})))
+                                early_stop=e.get("early_stop", "ok"), loop_solver=_loop_settings(e.get("loop_solver", {})),
+                                adaptive=tuple(sorted((e.get("adaptive") or {}).items())))
     objectives = tuple(
         ObjectiveSpec(name=n, signal=o.get("signal"), reduce=o.get("reduce"), expr=o.get("expr"),
                       unit=o.get("unit"), sense=o.get("sense"), description=o.get("description", ""))

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
-from cosim.errors import UnitError  # noqa: F401  (re-exported: units raise it from here)
+from cosim.errors import UnitError  # also re-exported: units raise it from here
 
 _ELEMENT_RE = re.compile(r"^(?P<base>.+?)\[(?P<index>\d+)\]$")
 
@@ -286,6 +286,36 @@ class Unit(abc.ABC):
     @abc.abstractmethod
     def terminate(self) -> None:
         """End the run and free every resource; safe to call more than once."""
+
+    # Saved states: an optional capability ---------------------------------
+    # A master that may take a step back (the adaptive algorithm rejecting a step, a study starting from a
+    # warmed-up state) saves a unit's state and restores it later.  Units that cannot keep the defaults.
+
+    @property
+    def can_save_state(self) -> bool:
+        """Whether :meth:`save_state` and :meth:`restore_state` work (FMI ``canGetAndSetFMUstate``, a
+        :class:`~cosim.units.python.unit.PythonUnit` with ``get_state``/``set_state``)."""
+        return False
+
+    def save_state(self, reuse: Any = None) -> Any:
+        """A snapshot of everything the unit changes while it runs (its time, states and values).
+
+        ``reuse``: an earlier snapshot of this unit that is no longer needed; its storage may be
+        overwritten and returned (FMI allows updating a state in place).  Raises UnitError when the unit
+        cannot save its state (see :attr:`can_save_state`).
+        """
+        raise UnitError(self.name, "cannot save its state (it offers no get/set of its state)", None)
+
+    def restore_state(self, state: Any) -> None:
+        """Return to a snapshot :meth:`save_state` made; the snapshot stays valid (it may be restored again)."""
+        raise UnitError(self.name, "cannot restore a saved state (it offers no get/set of its state)", None)
+
+    def free_state(self, state: Any) -> None:
+        """Release a snapshot's storage (an FMU's memory); the snapshot is not used afterwards."""
+
+    def allow_restore(self) -> None:
+        """Tell the unit a saved state may be restored after later steps (FMI: ``noSetFMUStatePriorToCurrentPoint``
+        becomes false), so it keeps what a restore needs."""
 
     # Conveniences built on the primitives -------------------------------
 

@@ -158,12 +158,26 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
     NOT_SUPPORTED("fmi2SetString (the model has no String variables)");
 }
 
-fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *s) { (void)s; NOT_SUPPORTED("fmi2GetFMUstate"); }
-fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate s) { (void)s; NOT_SUPPORTED("fmi2SetFMUstate"); }
-fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *s) { (void)s; NOT_SUPPORTED("fmi2FreeFMUstate"); }
-fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate s, size_t *n) { (void)s; (void)n; NOT_SUPPORTED("fmi2SerializedFMUstateSize"); }
-fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate s, fmi2Byte b[], size_t n) { (void)s; (void)b; (void)n; NOT_SUPPORTED("fmi2SerializeFMUstate"); }
-fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t n, fmi2FMUstate *s) { (void)s; (void)b; (void)n; NOT_SUPPORTED("fmi2DeSerializeFMUstate"); }
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *s) { return (fmi2Status)framework_get_state(COMP, s); }
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate s) { return (fmi2Status)framework_set_state(COMP, s); }
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *s) {
+    (void)c;
+    framework_free_state(s);
+    return fmi2OK;
+}
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate s, size_t *n) {
+    (void)c;
+    (void)s;
+    *n = framework_serialized_size();
+    return fmi2OK;
+}
+fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate s, fmi2Byte b[], size_t n) {
+    return (fmi2Status)framework_serialize_state(COMP, s, b, n);
+}
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t n, fmi2FMUstate *s) {
+    *s = NULL;
+    return (fmi2Status)framework_deserialize_state(COMP, b, n, s);
+}
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference u[], size_t nu,
                                         const fmi2ValueReference z[], size_t nz, const fmi2Real du[], fmi2Real dz[]) {
     (void)u; (void)nu; (void)z; (void)nz; (void)du; (void)dz;

@@ -204,17 +204,27 @@ fmi3Status fmi3GetVariableDependencies(fmi3Instance instance, fmi3ValueReference
     NOT_SUPPORTED("fmi3GetVariableDependencies");
 }
 
-fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *s) { (void)s; NOT_SUPPORTED("fmi3GetFMUState"); }
-fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState s) { (void)s; NOT_SUPPORTED("fmi3SetFMUState"); }
-fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *s) { (void)s; NOT_SUPPORTED("fmi3FreeFMUState"); }
+fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *s) {
+    return (fmi3Status)framework_get_state(COMP, s);
+}
+fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState s) { return (fmi3Status)framework_set_state(COMP, s); }
+fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *s) {
+    (void)instance;
+    framework_free_state(s);
+    return fmi3OK;
+}
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState s, size_t *n) {
-    (void)s; (void)n; NOT_SUPPORTED("fmi3SerializedFMUStateSize");
+    (void)instance;
+    (void)s;
+    *n = framework_serialized_size();
+    return fmi3OK;
 }
 fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState s, fmi3Byte b[], size_t n) {
-    (void)s; (void)b; (void)n; NOT_SUPPORTED("fmi3SerializeFMUState");
+    return (fmi3Status)framework_serialize_state(COMP, s, (char *)b, n);
 }
 fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte b[], size_t n, fmi3FMUState *s) {
-    (void)s; (void)b; (void)n; NOT_SUPPORTED("fmi3DeserializeFMUState");
+    *s = NULL;
+    return (fmi3Status)framework_deserialize_state(COMP, (const char *)b, n, s);
 }
 
 fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[], size_t nUnknowns,

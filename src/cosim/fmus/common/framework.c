@@ -133,6 +133,97 @@ Status framework_terminate(ModelInstance *comp) {
     return OK;
 }
 
+/* What an instance changes while it runs; a saved state is one of these. */
+typedef struct {
+    double time;
+    double startTime;
+    ModelState state;
+    bool isDirty;
+    EventInfo event;
+    ModelData d;
+} SavedState;
+
+/* Serialized states start with the build's token, so bytes from another build are refused. */
+#define TOKEN_BYTES 64
+
+Status framework_get_state(ModelInstance *comp, void **state) {
+    SavedState *saved;
+    if (!state) {
+        logError(comp, "getFMUState: the state argument is NULL");
+        return Error;
+    }
+    saved = *state ? (SavedState *)*state : malloc(sizeof(SavedState));
+    if (!saved) {
+        logError(comp, "getFMUState: out of memory");
+        return Error;
+    }
+    saved->time = comp->time;
+    saved->startTime = comp->startTime;
+    saved->state = comp->state;
+    saved->isDirty = comp->isDirty;
+    saved->event = comp->event;
+    saved->d = comp->d;
+    *state = saved;
+    return OK;
+}
+
+Status framework_set_state(ModelInstance *comp, const void *state) {
+    const SavedState *saved = (const SavedState *)state;
+    if (!saved) {
+        logError(comp, "setFMUState: the state is NULL");
+        return Error;
+    }
+    comp->time = saved->time;
+    comp->startTime = saved->startTime;
+    comp->state = saved->state;
+    comp->isDirty = saved->isDirty;
+    comp->event = saved->event;
+    comp->d = saved->d;
+    return OK;
+}
+
+void framework_free_state(void **state) {
+    if (!state) return;
+    free(*state);
+    *state = NULL;
+}
+
+size_t framework_serialized_size(void) { return TOKEN_BYTES + sizeof(SavedState); }
+
+Status framework_serialize_state(ModelInstance *comp, const void *state, char *bytes, size_t size) {
+    if (!state || !bytes || size < framework_serialized_size()) {
+        logError(comp, "serializeFMUState: no state, or a buffer of %zu bytes (needs %zu)", size,
+                 framework_serialized_size());
+        return Error;
+    }
+    memset(bytes, 0, TOKEN_BYTES);
+    strncpy(bytes, INSTANTIATION_TOKEN, TOKEN_BYTES - 1);
+    memcpy(bytes + TOKEN_BYTES, state, sizeof(SavedState));
+    return OK;
+}
+
+Status framework_deserialize_state(ModelInstance *comp, const char *bytes, size_t size, void **state) {
+    char token[TOKEN_BYTES];
+    if (!bytes || size != framework_serialized_size() || !state) {
+        logError(comp, "deserializeFMUState: %zu bytes given, a state of this FMU has %zu", size,
+                 framework_serialized_size());
+        return Error;
+    }
+    memset(token, 0, sizeof token);
+    strncpy(token, INSTANTIATION_TOKEN, TOKEN_BYTES - 1);
+    if (memcmp(bytes, token, TOKEN_BYTES) != 0) {
+        logError(comp, "deserializeFMUState: the bytes were saved by another build of this model");
+        return Error;
+    }
+    if (!*state) *state = malloc(sizeof(SavedState));
+    if (!*state) {
+        logError(comp, "deserializeFMUState: out of memory");
+        return Error;
+    }
+    memcpy(*state, bytes + TOKEN_BYTES, sizeof(SavedState));
+    return OK;
+}
+
 void *framework_address(ModelInstance *comp, size_t index, size_t element) {
     const VariableInfo *v = &VARIABLES[index];
     size_t width = v->type == VT_REAL ? sizeof(double) : v->type == VT_INTEGER ? sizeof(int32_t) : sizeof(bool);

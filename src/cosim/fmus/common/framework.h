@@ -111,6 +111,16 @@ Status framework_enter_initialization(ModelInstance *comp, double startTime);
 Status framework_exit_initialization(ModelInstance *comp);
 Status framework_do_step(ModelInstance *comp, double t, double h);
 Status framework_terminate(ModelInstance *comp);
+/* Saved FMU states (fmi2GetFMUstate / fmi3GetFMUState and their Set/Free/Serialize companions): a copy of
+ * everything an instance changes while it runs (time, mode, the ModelData struct), never of its name or
+ * callbacks. `*state` NULL: a new state is allocated; else the given one is overwritten (as FMI allows). */
+Status framework_get_state(ModelInstance *comp, void **state);
+Status framework_set_state(ModelInstance *comp, const void *state);
+void framework_free_state(void **state);
+/* Serialized: the saved state's bytes plus a header naming the model build (its instantiation token). */
+size_t framework_serialized_size(void);
+Status framework_serialize_state(ModelInstance *comp, const void *state, char *bytes, size_t size);
+Status framework_deserialize_state(ModelInstance *comp, const char *bytes, size_t size, void **state);
 /* Make outputs current (calls model_calculate when inputs changed). */
 Status framework_update(ModelInstance *comp);
 /* Where element `element` of variable `index` lives; NULL for time. */

@@ -36,6 +36,7 @@ class Fmi2Unit(FmiInstance):
     _prefix = "fmi2"
     _slave_class: Any = with_cached_signatures(FMU2Slave)
     _interface = "coSimulation"  # the attribute of fmpy's ModelDescription naming the interface used
+    _state_calls = ("fmi2GetFMUstate", "fmi2SetFMUstate", "fmi2FreeFMUstate")
 
     def __init__(self, name: str, unit_type: Any):
         super().__init__(name, unit_type)
@@ -86,7 +87,7 @@ class Fmi2Unit(FmiInstance):
     def do_step(self, t: float, h: float) -> None:
         self.time = t
         self.generation += 1
-        status = self._do_step(self._component, t, h, 1)
+        status = self._do_step(self._component, t, h, self._no_set_prior)
         if status == 2 and self._terminated():  # fmi2Discard + fmi2Terminated: the FMU ends the simulation
             end = self._guard("fmi2GetRealStatus", lambda: self._slave.getRealStatus(fmi2LastSuccessfulTime))
             raise SimulationEnded(self.name, float(end), "ended the simulation (fmi2DoStep: fmi2Discard, "

@@ -32,6 +32,7 @@ class Fmi3Unit(FmiInstance):
     _prefix = "fmi3"
     _slave_class: Any = with_cached_signatures(FMU3Slave)
     _interface = "coSimulation"  # the attribute of fmpy's ModelDescription naming the interface used
+    _state_calls = ("fmi3GetFMUState", "fmi3SetFMUState", "fmi3FreeFMUState")
 
     def __init__(self, name: str, unit_type: Any):
         super().__init__(name, unit_type)
@@ -105,7 +106,7 @@ class Fmi3Unit(FmiInstance):
     def do_step(self, t: float, h: float) -> None:
         self.time = t
         self.generation += 1
-        status = self._do_step(self._component, t, h, True, self._event_ref, self._terminate_ref,
+        status = self._do_step(self._component, t, h, self._no_set_prior, self._event_ref, self._terminate_ref,
                                self._early_ref, self._last_time_ref)
         if status > 1:
             raise self.fail_status("fmi3DoStep", status)

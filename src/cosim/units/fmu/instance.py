@@ -77,6 +77,16 @@ class FmiSelection(Selection):
         self.pick: Callable[[Any], tuple] | None = None  # fast reader for one numeric group
 
 
+class FmuState:
+    """One saved FMU state: the FMU's pointer (``fmi2FMUstate`` / ``fmi3FMUState``) and the time it was at."""
+
+    __slots__ = ("pointer", "time")
+
+    def __init__(self) -> None:
+        self.pointer = ctypes.c_void_p()
+        self.time: float | None = None
+
+
 class FmiInstance(Unit):
     """Common part of :class:`Fmi2Unit` and :class:`Fmi3Unit`.
 
@@ -272,6 +282,54 @@ class FmiInstance(Unit):
         if group.fmi_type == "Binary":  # copied out: the FMU's buffer is only valid until its next call
             return ctypes.string_at(value, group.sizes[index]) if value else b""
         return value
+
+    # Saved states (FMI get/set FMU state) -----------------------------------
+
+    # Names of the version's state calls (get, set, free); set by Fmi2Unit / Fmi3Unit.
+    _state_calls: tuple[str, str, str] = ("", "", "")
+    # doStep's noSetFMUStatePriorToCurrentPoint: true (1) until a master says it may restore (allow_restore).
+    _no_set_prior = 1
+
+    @property
+    def can_save_state(self) -> bool:
+        # A Model Exchange unit's integrator state (CVode's) is not in the FMU state: not restorable here.
+        md = self.unit_type.model_description()
+        interface = getattr(md, getattr(self, "_interface", "coSimulation"), None)
+        return bool(self._plain_calls and interface is not None and getattr(interface, "canGetAndSetFMUstate", False))
+
+    def save_state(self, reuse: Any = None) -> Any:
+        if not self.can_save_state:
+            return super().save_state(reuse)
+        state = reuse if reuse is not None else FmuState()
+        status = self._state_function(0)(self._component, ctypes.byref(state.pointer))
+        if status > 1:
+            raise self.fail_status(self._state_calls[0], status)
+        state.time = self.time
+        return state
+
+    def restore_state(self, state: Any) -> None:
+        if not self.can_save_state:
+            return super().restore_state(state)
+        self.generation += 1  # every value may differ now: no reader may hand out its old buffer
+        status = self._state_function(1)(self._component, state.pointer)
+        if status > 1:
+            raise self.fail_status(self._state_calls[1], status)
+        self.time = state.time
+
+    def free_state(self, state: Any) -> None:
+        if state is None or not state.pointer or not self._alive:
+            return  # a freed instance has freed its states with it
+        status = self._state_function(2)(self._component, ctypes.byref(state.pointer))
+        if status > 1:
+            raise self.fail_status(self._state_calls[2], status)
+
+    def allow_restore(self) -> None:
+        self._no_set_prior = 0
+
+    def _state_function(self, which: int) -> Callable[..., int]:
+        from cosim.units.fmu.fmpy_internals import library
+
+        return getattr(library(self._slave), self._state_calls[which])
 
     # Lifecycle shared by both versions ------------------------------------
 

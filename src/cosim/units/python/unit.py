@@ -203,6 +203,48 @@ class PythonUnit(Unit):
     def close(self) -> None:
         """Free resources held by the instance."""
 
+    def get_state(self) -> Any:
+        """A snapshot of what the unit keeps besides its variables (a copy, not a reference to live data).
+
+        Defining ``get_state`` and :meth:`set_state` makes the unit's state restorable: a master may then
+        take a step back (the adaptive algorithm repeats a rejected step).  cosim saves and restores the
+        values of ``variables`` itself; a unit whose whole state is in its variables returns None.
+        """
+        raise NotImplementedError
+
+    def set_state(self, state: Any) -> None:
+        """Return to a snapshot :meth:`get_state` made (it may be restored more than once: copy what you keep)."""
+        raise NotImplementedError
+
+    # Saved states (see Unit.save_state): the variables by cosim, the rest by the subclass's hooks
+
+    @property
+    def can_save_state(self) -> bool:
+        cls = type(self)
+        return cls.get_state is not PythonUnit.get_state and cls.set_state is not PythonUnit.set_state
+
+    def save_state(self, reuse: Any = None) -> Any:
+        if not self.can_save_state:
+            return super().save_state(reuse)
+        values = {v.name: _copied(getattr(self, v.name)) for v in self.description.variables}
+        try:
+            own = self.get_state()
+        except Exception as exc:
+            raise UnitError(self.name, f"get_state raised {type(exc).__name__}: {exc}", None) from exc
+        return values, self._outputs_stale, own
+
+    def restore_state(self, state: Any) -> None:
+        if not self.can_save_state:
+            return super().restore_state(state)
+        values, stale, own = state
+        for name, value in values.items():
+            setattr(self, name, _copied(value))  # a copy: the snapshot may be restored again
+        self._outputs_stale = stale
+        try:
+            self.set_state(own)
+        except Exception as exc:
+            raise UnitError(self.name, f"set_state raised {type(exc).__name__}: {exc}", None) from exc
+
     def _call(self, hook: str, t: float | None) -> None:
         try:
             getattr(self, hook)()
@@ -354,6 +396,11 @@ class PythonUnitType(UnitType):
         if self.data_paths:
             unit._data_paths = self.data_paths
         return unit
+
+
+def _copied(value: Any) -> Any:
+    """A numpy array copied, any other variable value (an immutable scalar or str) as it is."""
+    return value.copy() if isinstance(value, np.ndarray) else value
 
 
 def zip_source(source: Path) -> Path:
