@@ -149,7 +149,7 @@ def can_run_in_lockstep(system: System) -> bool:
     numeric probes."""
     if not has_twin(system) or system.coupling.loops:  # algebraic loops are solved point by point
         return False
-    if system.spec.experiment.algorithm not in ("gauss-seidel", "jacobi"):
+    if system.spec.experiment.algorithm == "adaptive":
         return False  # adaptive steps differ from point to point: no common grid to step together
     # connections carry Real values only (batches hand values on as float arrays; an Integer or Boolean
     # input keeps its exact type on the one-by-one path)

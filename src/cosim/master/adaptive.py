@@ -38,6 +38,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from cosim.master.algorithms import GaussSeidel, Jacobi, Link, MasterAlgorithm
+from cosim.master.loops import Coupling
 from cosim.units.protocol import Unit
 
 SAFETY = 0.9  # aim below the allowance, so the next step is rarely rejected
@@ -184,17 +185,19 @@ class Adaptive(MasterAlgorithm):
 
     name = "adaptive"
     variable_step = True  # the run loop asks advance() for each step instead of stepping a fixed grid
+    solves_loops = True  # as its base algorithms: the coupling is handed on to them
 
     def __init__(self, experiment: Any = None):
         self.settings = AdaptiveSettings.for_experiment(experiment) if experiment is not None else None
         self.stats = StepStatistics("step doubling")
 
-    def bind(self, units: Mapping[str, Unit], order: Sequence[str], connections: Sequence[Link]) -> None:
+    def bind(self, units: Mapping[str, Unit], order: Sequence[str], connections: Sequence[Link],
+             coupling: Coupling | None = None) -> None:
         if self.settings is None:
             raise ValueError("the adaptive algorithm needs the experiment's settings: make_algorithm(name, experiment)")
         s = self.settings
         self._base = BASES[s.base]()
-        self._base.bind(units, order, connections)
+        self._base.bind(units, order, connections, coupling)
         self._units = list(units.values())
         self._signals = ExchangedSignals(units, connections)
         self.restores = s.restore == "auto" and all(u.can_save_state for u in self._units)
@@ -205,6 +208,9 @@ class Adaptive(MasterAlgorithm):
         self._saved: list[Any] = [None] * len(self._units)
         self._h = min(max(s.initial_step, s.min_step_or_default), s.max_step_or_default)
         self._y: np.ndarray | None = None  # the signals at the current time
+
+    def start(self, t: float) -> None:
+        self._base.start(t)
 
     def step(self, t: float, h: float) -> None:
         """One step of the base algorithm (no control): for callers that step a fixed grid."""

@@ -35,17 +35,13 @@ class MasterAlgorithm:
     communication point); the system check refuses a system with loops for any other algorithm, whose ``bind``
     may keep the three arguments.
 
-    ``experiment`` (start, stop, step and options) is for algorithms that need it (the adaptive one);
-    the fixed-step algorithms ignore it.  An algorithm with ``variable_step = True`` chooses its own steps:
-    the run asks its ``advance(t)`` for each (see :mod:`cosim.master.adaptive`).
+    An algorithm with ``variable_step = True`` chooses its own steps: it is made with the experiment (start,
+    stop, step, options) and the run asks its ``advance(t)`` for each (see :mod:`cosim.master.adaptive`).
     """
 
     name = "abstract"
     solves_loops = False
     variable_step = False
-
-    def __init__(self, experiment: Any = None):
-        pass
 
     def bind(self, units: Mapping[str, Unit], order: Sequence[str], connections: Sequence[Link],
              coupling: Coupling | None = None) -> None:
@@ -161,15 +157,24 @@ class JacobiDelayed(Jacobi):
         super().bind(units, order, connections, None)
 
 
-def _adaptive(experiment: Any = None) -> MasterAlgorithm:
-    from cosim.master.adaptive import Adaptive  # imported when asked for: it builds on the classes above
+class AdaptiveEntry:
+    """The adaptive algorithm's entry in ALGORITHMS: its class attributes, and calling it makes a
+    :class:`cosim.master.adaptive.Adaptive` (imported then: that module builds on the classes above)."""
 
-    return Adaptive(experiment)
+    name = "adaptive"
+    solves_loops = True
+    variable_step = True
+
+    def __new__(cls, experiment: Any = None) -> Any:  # type: ignore[misc]
+        from cosim.master.adaptive import Adaptive
+
+        return Adaptive(experiment)
 
 
-# the one list of master algorithm names (each maps to a factory taking the experiment, or nothing)
+# the one list of master algorithm names (each maps to a class; a variable-step one takes the experiment)
 ALGORITHMS: dict[str, Callable[..., MasterAlgorithm]] = {
-    GaussSeidel.name: GaussSeidel, Jacobi.name: Jacobi, JacobiDelayed.name: JacobiDelayed, "adaptive": _adaptive}
+    GaussSeidel.name: GaussSeidel, Jacobi.name: Jacobi, JacobiDelayed.name: JacobiDelayed,
+    AdaptiveEntry.name: AdaptiveEntry}
 DEFAULT_ALGORITHM = GaussSeidel.name
 
 
@@ -180,4 +185,4 @@ def make_algorithm(name: str, experiment: Any = None) -> MasterAlgorithm:
         factory = ALGORITHMS[name]
     except KeyError:
         raise ValueError(f"unknown master algorithm '{name}'; use one of {', '.join(ALGORITHMS)}") from None
-    return factory(experiment)
+    return factory(experiment) if getattr(factory, "variable_step", False) else factory()

@@ -79,8 +79,9 @@ class PythonUnit(Unit):
     module docstring).  Hooks a subclass may override:
     ``initialize()`` (parameters and start values are set, runs once before the
     first step), ``do_step(t, h)``, ``compute_outputs()`` (only for units with
-    direct feed-through: recompute outputs from the current inputs) and
-    ``close()`` (free resources).
+    direct feed-through: recompute outputs from the current inputs),
+    ``close()`` (free resources) and ``get_state()``/``set_state(state)``
+    (defining both makes the unit's state restorable, see :meth:`get_state`).
     """
 
     variables: ClassVar[Sequence[Variable]] = ()
