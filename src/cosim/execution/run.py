@@ -170,8 +170,10 @@ class Execution:
             observers = [o for o in (recorder, reducer) if o is not None] + self.extra_observers
             stop_column = probe.columns.index(exp.stop_when) if exp.stop_when else None
 
-            algorithm = make_algorithm(exp.algorithm, exp)
+            algorithm = make_algorithm(exp.algorithm)
             variable = algorithm.variable_step  # the adaptive algorithm: steps of its choosing, after the loop
+            if variable:
+                algorithm.configure(exp)  # type: ignore[attr-defined]  # its options, the run's span
             if algorithm.solves_loops:  # given the feed-through and loops to solve (others never see a loop)
                 algorithm.bind(units, self.system.order, self.system.connections, self.system.coupling)
             else:

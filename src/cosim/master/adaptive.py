@@ -188,13 +188,20 @@ class Adaptive(MasterAlgorithm):
     solves_loops = True  # as its base algorithms: the coupling is handed on to them
 
     def __init__(self, experiment: Any = None):
-        self.settings = AdaptiveSettings.for_experiment(experiment) if experiment is not None else None
+        self.settings: AdaptiveSettings | None = None
         self.stats = StepStatistics("step doubling")
+        if experiment is not None:
+            self.configure(experiment)
+
+    def configure(self, experiment: Any) -> None:
+        """Take the options and span of ``experiment`` (``start``, ``stop``, ``step``, ``adaptive``);
+        raises ValueError for options that cannot work."""
+        self.settings = AdaptiveSettings.for_experiment(experiment)
 
     def bind(self, units: Mapping[str, Unit], order: Sequence[str], connections: Sequence[Link],
              coupling: Coupling | None = None) -> None:
         if self.settings is None:
-            raise ValueError("the adaptive algorithm needs the experiment's settings: make_algorithm(name, experiment)")
+            raise ValueError("the adaptive algorithm needs the experiment: configure(experiment) before bind")
         s = self.settings
         self._base = BASES[s.base]()
         self._base.bind(units, order, connections, coupling)

@@ -35,8 +35,9 @@ class MasterAlgorithm:
     communication point); the system check refuses a system with loops for any other algorithm, whose ``bind``
     may keep the three arguments.
 
-    An algorithm with ``variable_step = True`` chooses its own steps: it is made with the experiment (start,
-    stop, step, options) and the run asks its ``advance(t)`` for each (see :mod:`cosim.master.adaptive`).
+    An algorithm with ``variable_step = True`` chooses its own steps: the run gives it the experiment (start,
+    stop, step, options) with ``configure(experiment)`` and asks its ``advance(t)`` for each step (see
+    :mod:`cosim.master.adaptive`).
     """
 
     name = "abstract"
