@@ -718,3 +718,16 @@ def test_a_table_starting_with_a_separator_line_is_read_with_a_note(tmp_path):
     result = _run(path, "gauss-seidel")
     times = result.traces["time"]
     assert result.traces["setpoint.speed"].to_numpy() == pytest.approx([_setpoint(t) for t in times], abs=1e-12)
+
+
+def test_inspect_of_a_spec_on_an_ssp_without_stop_or_step(tmp_path, capsys):
+    import json
+
+    ssd = oms3_ssd().replace('fixedStepSize="0.1"', 'fixedStep_removed="0.1"').replace(' stopTime="1.0"', "")
+    write_archive(tmp_path / "x.ssp", oms3_files(ssd))
+    (tmp_path / "spec.json").write_text(json.dumps({"system": "x.ssp"}))
+    assert main(["inspect", str(tmp_path / "spec.json")]) == 0
+    out = capsys.readouterr().out
+    assert "experiment: 0 .. (no stop time: give --stop to run), step (none: give --step to run)" in out
+    assert _port_rows(out)["sub.B"]["b"][4] == "-0.5 *"
+    assert main(["validate", str(tmp_path / "spec.json")]) == 2  # running needs them

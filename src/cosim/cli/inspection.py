@@ -105,21 +105,27 @@ def inspect_unit(target: str) -> int:
 def inspect_spec(path: str, experiment: dict[str, Any] | None = None, variant: str | None = None) -> int:
     """Print a spec's (or an SSP's) units with their ports, its connections and stepping order; returns the exit
     code. ``experiment`` overrides the experiment's fields (what an SSP often lacks)."""
-    from cosim.system.validate import check_spec
-
+    from cosim.spec.loader import read_raw
     from cosim.ssp import is_ssp, read_ssp
+    from cosim.system.validate import check_spec
 
     experiment = dict(experiment or {})
     ssp = read_ssp(path, variant) if is_ssp(path) else None
+    # inspecting needs neither stop time nor step size (an SSP, or a spec on one, often lacks them): stand-ins,
+    # said as such below
+    raw = ssp.raw if ssp is not None else read_raw(path, None, variant)
+    known = raw.get("experiment") if isinstance(raw, dict) else None
     missing: list[str] = []
-    if ssp is not None:  # inspecting needs neither stop time nor step size: stand-ins, said as such below
-        given = {**ssp.raw["experiment"], **experiment}
+    if isinstance(known, dict):
+        given = {**known, **experiment}
         missing = [k for k in ("stop", "step") if k not in given]
-        start = float(given.get("start", 0.0))
+        start = given.get("start", 0.0)
+        start = float(start) if isinstance(start, (int, float)) else 0.0
+        stop = given.get("stop")
         if "stop" in missing:
-            experiment["stop"] = given["stop"] = start + 1.0
+            experiment["stop"] = stop = start + 1.0
         if "step" in missing:
-            experiment["step"] = float(given["stop"]) - start
+            experiment["step"] = float(stop) - start if isinstance(stop, (int, float)) and stop > start else 1.0
     system = check_spec(path, experiment or None, variant)
     print(f"spec {path}: {system.spec.name}")
     if ssp is not None and len(ssp.files.variants) > 1:
