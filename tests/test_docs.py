@@ -21,6 +21,8 @@ import pytest
 
 from cosim.cli.main import _parser
 
+from .conftest import venv_seeing_this_interpreter
+
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE_READMES = sorted((REPO / "examples").glob("*/README.md"))
 
@@ -198,8 +200,7 @@ def run_shell_block(lines: list[str], root: Path, venv_dir: Path) -> None:
             cwd = (cwd / argv[1]).resolve()
             continue
         if argv[:3] == ["pip", "install", "-e"]:
-            subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv_dir)], check=True)
-            python = str(venv_dir / "bin" / "python")
+            python = str(venv_seeing_this_interpreter(venv_dir))
             # no build isolation: the build backend (setuptools) comes from this interpreter, not the network
             done = subprocess.run([python, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation",
                                    "-e", str(cwd / argv[3])], capture_output=True, text=True)

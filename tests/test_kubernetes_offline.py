@@ -16,11 +16,11 @@ from __future__ import annotations
 import os
 import re
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
+from .conftest import venv_seeing_this_interpreter
 from .sweep_fixtures import free_port
 
 REPO = Path(__file__).resolve().parent.parent
@@ -44,8 +44,7 @@ current-context: offline
 def kubernetes_python(tmp_path_factory):
     """A Python with dask-kubernetes (the kubernetes extra's requirement) beside the suite's packages."""
     venv = tmp_path_factory.mktemp("kubernetes_venv")
-    subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)], check=True)
-    python = venv / "bin" / "python"
+    python = venv_seeing_this_interpreter(venv)
     install = subprocess.run([str(python), "-m", "pip", "install", "-q", "dask-kubernetes>=2024.1"],
                              capture_output=True, text=True, timeout=900)
     assert install.returncode == 0, install.stderr  # under CI too: the registry is reachable there

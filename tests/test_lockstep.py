@@ -61,7 +61,15 @@ def _spec_with(tmp_path: Path, **experiment) -> Path:
                                         {"stop": 1.2, "stop_when": None}],  # every point cut at the stop time
                          ids=["gauss-seidel", "jacobi", "jacobi-delayed", "no-stop-when"])
 def test_lockstep_gives_every_point_the_results_of_its_single_run_bit_for_bit(tmp_path, experiment):
-    """Also the energy FMU's outputs, which lock-step reads only at a point's last sample (final reductions)."""
+    """Also the energy FMU's outputs, which lock-step reads only at a point's last sample (final reductions).
+
+    Exact (``==``), on any IEEE-754 machine: both sides do the same correctly rounded operations in the same
+    order -- the same compiled FMU and pinocchio RNEA per row, numpy element-wise ufuncs, and the TCP path's
+    chords as three squares added left to right (no BLAS: ``ndarray.dot`` picks an OpenBLAS kernel per CPU and
+    was one ulp off on AVX-512 kernels, issue 28). Nothing here is compared to an ulp; the committed table below
+    is (it predates a change of the chord sum's order), and the Exudyn twin to a tolerance (one Newton iteration
+    for all arms, tests/test_panda_exudyn_lockstep.py).
+    """
     system = build_system(load_spec(_spec_with(tmp_path, **experiment)))
     assert can_run_in_lockstep(system)
     batches = instantiate(system, len(POINTS))

@@ -13,12 +13,13 @@ import shutil
 import subprocess
 import sys
 import tomllib
-import venv
 import zipfile
 from pathlib import Path
 
 import pytest
 import setuptools
+
+from .conftest import venv_seeing_this_interpreter
 
 REPO = Path(__file__).resolve().parents[1]
 GENERIC_IMPORT = re.compile(r"^\s*(from|import)\s+(models|fmus)(\.|\s|$)", re.MULTILINE)
@@ -89,8 +90,12 @@ def wheel(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("wheel")
     # built from a copy: setuptools writes build/ and *.egg-info into the tree it builds
     source = out / "source"
-    shutil.copytree(REPO, source, ignore=shutil.ignore_patterns(".git", "build", "*.egg-info", "results", "examples",
-                                                                "__pycache__", ".pytest_cache"))
+    anywhere = shutil.ignore_patterns(".git", "build", "*.egg-info", "__pycache__", ".pytest_cache")
+
+    def ignore(folder, names):  # results/ and examples/ only at the top: src/cosim/results is the package's
+        top = {"results", "examples"} if Path(folder) == REPO else set()
+        return anywhere(folder, names) | (top & set(names))
+    shutil.copytree(REPO, source, ignore=ignore)
     result = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
                              "-w", str(out), str(source)], capture_output=True, text=True, timeout=300,
                             cwd=out)
@@ -106,7 +111,7 @@ def test_the_wheel_installs_nothing_generic_and_ships_its_data(wheel):
     for data in ("cosim/spec/spec.schema.json", "cosim/models/bin_picking_plant.json",
                  "cosim/models/panda_rows_c/panda_rows.c", "cosim/models/panda_rows_c/panda_rows_casadi.h",
                  "cosim/fmus/motor_gear_energy/model.json", "cosim/fmus/common/fmi3.c",
-                 "cosim/fmus/conformance/fmi3_runtime.c", "cosim/fmus/conformance/stair/modelDescription2.xml"):
+                 "cosim/fmus/conformance/fmi3_runtime.c", "cosim/results/store.py", "cosim/fmus/conformance/stair/modelDescription2.xml"):
         assert data in names, data
 
 
@@ -116,8 +121,7 @@ def test_the_installed_wheel_runs_a_spec_from_an_empty_folder(wheel, tmp_path):
     .ci/run does the same in a venv of its own, with the dependencies installed by pip.
     """
     env_dir = tmp_path / "venv"
-    venv.create(env_dir, system_site_packages=True, with_pip=False)
-    python = env_dir / "bin" / "python"
+    python = venv_seeing_this_interpreter(env_dir, with_pip=False)
     site = subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
                           capture_output=True, text=True, check=True).stdout.strip()
     install = subprocess.run([str(python), "-m", "pip", "install", "-q", "--no-deps", "--no-index", str(wheel)],
@@ -149,3 +153,28 @@ def test_a_missing_tool_fails_under_ci_and_skips_elsewhere(monkeypatch):
     with pytest.raises(pytest.skip.Exception, match="Debian package 'no-such-package'"):
         require_tool("no-such-program-cosim", "no-such-package")
     assert require_tool("sh", "dash").endswith("/sh")
+
+
+def test_a_venv_made_inside_a_venv_sees_the_outer_venvs_packages(tmp_path):
+    """Issue 28: after ``pip install -e ".[test]"`` into a fresh venv, the tests that build a venv of their own
+    with ``--system-site-packages`` saw the base interpreter's packages, not the venv's (``No module named
+    'lxml'``). Here an outer venv holds a module the base interpreter lacks; a venv made inside it by the suite's
+    helper imports it (a plain ``venv --system-site-packages`` from the outer venv does not)."""
+    outer = venv_seeing_this_interpreter(tmp_path / "outer", with_pip=False)  # sees pytest, as the suite's venv
+    outer_site = subprocess.run([str(outer), "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
+                                capture_output=True, text=True, check=True).stdout.strip()
+    Path(outer_site, "issue28_only_in_the_outer_venv.py").write_text("WHERE = 'outer venv'\n")
+    make_inner = (f"import sys; sys.path.insert(0, {str(REPO)!r}); from pathlib import Path; "
+                  "from tests.conftest import venv_seeing_this_interpreter as make; "
+                  f"print(make(Path({str(tmp_path / 'inner')!r}), with_pip=False))")
+    made = subprocess.run([str(outer), "-c", make_inner], capture_output=True, text=True, timeout=120, env=_clean_env())
+    assert made.returncode == 0, made.stderr
+    probe = "import issue28_only_in_the_outer_venv as m; print(m.WHERE)"
+    inner = subprocess.run([made.stdout.strip(), "-c", probe], capture_output=True, text=True, timeout=60,
+                           env=_clean_env(), cwd=tmp_path)
+    assert inner.returncode == 0 and inner.stdout.strip() == "outer venv", inner.stderr
+    plain = tmp_path / "plain"
+    subprocess.run([str(outer), "-m", "venv", "--without-pip", "--system-site-packages", str(plain)], check=True)
+    alone = subprocess.run([str(plain / "bin" / "python"), "-c", probe], capture_output=True, text=True,
+                           timeout=60, env=_clean_env(), cwd=tmp_path)
+    assert "No module named 'issue28_only_in_the_outer_venv'" in alone.stderr  # the failure the helper avoids

@@ -61,6 +61,7 @@ def test_symbolic_rnea_matches_pinocchio_at_1000_random_states():
 
 
 def test_generated_c_is_up_to_date_with_the_urdf_and_the_symbolic_model():
+    """The text exactly, every numeric literal to 4 ulp (a constant's last bit follows the CPU's BLAS kernel)."""
     from cosim.models.panda_inverse_dynamics_codegen import stale_files
 
     assert stale_files() == [], "run python -m cosim.models.panda_inverse_dynamics_codegen"

@@ -122,7 +122,45 @@ def test_arrays_of_the_wrong_layout_are_refused():
 
 
 def test_the_checked_in_generated_c_is_up_to_date():
+    """The text exactly, every numeric literal to 4 ulp (a constant's last bit follows the CPU's BLAS kernel)."""
     assert panda_rows.stale_files() == [], "run python -m cosim.models.panda_rows"
+
+
+def _regeneration_with(change):
+    """A ``generate`` giving the checked-in row-kernel C with ``change(text)`` applied: a stand-in for a
+    regeneration on another machine, to see what the up-to-date check lets through."""
+    def generate(out_dir):
+        paths = []
+        for name in ("panda_rows_casadi.c", "panda_rows_casadi.h"):
+            path = out_dir / name
+            text = (panda_rows.SOURCE_DIR / name).read_text()
+            path.write_text(change(text) if name.endswith(".c") else text)
+            paths.append(path)
+        return paths
+    return generate
+
+
+def test_the_up_to_date_check_allows_a_constants_last_bits_and_nothing_else():
+    """Issue 28: an AVX-512 OpenBLAS kernel printed ``a050=5.2878381999606115e-02`` where the checked-in C has
+    ...108e-02 (one ulp): the same code. A constant moved by 1e-13 relative, or any other text, is other code."""
+    import math
+    import re
+
+    from cosim.models.panda_symbolic import stale_generated_files
+
+    original = (panda_rows.SOURCE_DIR / "panda_rows_casadi.c").read_text()
+    literal = re.search(r"=(-?\d\.\d{16}e[-+]\d\d);", original).group(1)
+    value = float(literal)
+
+    def moved(by):
+        return lambda text: text.replace(literal, f"{by(value):.16e}", 1)
+    folder = panda_rows.SOURCE_DIR
+    assert stale_generated_files(_regeneration_with(lambda t: t), folder) == []
+    assert stale_generated_files(_regeneration_with(moved(lambda v: math.nextafter(v, math.inf))), folder) == []
+    assert stale_generated_files(_regeneration_with(moved(lambda v: v + 3 * math.ulp(v))), folder) == []
+    assert stale_generated_files(_regeneration_with(moved(lambda v: v * (1 + 1e-13))), folder) == ["panda_rows_casadi.c"]
+    assert stale_generated_files(_regeneration_with(lambda t: t.replace("+", "-", 1)), folder) == ["panda_rows_casadi.c"]
+    assert stale_generated_files(_regeneration_with(lambda t: t.replace("[1]", "[2]", 1)), folder) == ["panda_rows_casadi.c"]
 
 
 def test_the_library_is_built_once_per_source_digest(tmp_path, monkeypatch):

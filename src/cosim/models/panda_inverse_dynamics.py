@@ -65,8 +65,10 @@ class PandaInverseDynamics(PythonUnit):
         self.ee_pos[:] = pin.updateFramePlacement(m, d, self._ee).translation
         done = getattr(self, "_path_done", None)
         if done is not None:  # the chord from the last communication point to now
-            d = self.ee_pos - done[1]
-            self.ee_path_length = done[0] + math.sqrt(d.dot(d))
+            dx, dy, dz = (float(x) for x in self.ee_pos - done[1])
+            # three squares added left to right, as the twin's (chord * chord).sum(axis=1) does; d.dot(d) went to
+            # OpenBLAS's ddot, whose CPU-picked kernel may fuse or reorder it (one ulp off with AVX-512 kernels)
+            self.ee_path_length = done[0] + math.sqrt(dx * dx + dy * dy + dz * dz)
         self.tracking_error = 0.0
         np.divide(np.abs(self.tau), self.tau_max, out=self.tau_ratio)
         self.limit_violated = limits_exceeded(self.q, self.qd, self.tau_ratio, self.q_min, self.q_max, self.qd_max)
@@ -126,7 +128,8 @@ class PandaInverseDynamicsBatch(PythonBatchUnit):
         done = self._path_done
         if done is not None:  # the chord from the last communication point to now, as the single unit
             chord = ee[active] - done[1][active]
-            # a row's sum of 3 squares adds in the order chord.dot(chord) does, so the length is the same
+            # a row's 3 squares add left to right (numpy's own order for 3 elements, no BLAS), as in the single
+            # unit, so the length is the same bit for bit on any machine
             self.ee_path_length[active] = done[0][active] + np.sqrt((chord * chord).sum(axis=1))
         self.tracking_error[:] = 0.0
         np.divide(np.abs(tau), self.tau_max, out=self.tau_ratio)

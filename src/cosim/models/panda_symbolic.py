@@ -27,6 +27,8 @@ payload to 1e-10 N.m, the TCP position equals pinocchio's forward kinematics.
 from __future__ import annotations
 
 import hashlib
+import math
+import re
 import tempfile
 from pathlib import Path
 from typing import Callable, Sequence
@@ -56,7 +58,11 @@ def _body_inertia(inertia: pin.Inertia) -> tuple:
     m = float(inertia.mass)
     c = np.asarray(inertia.lever, dtype=float)
     i_c = np.asarray(inertia.inertia, dtype=float)
-    i_o = i_c + m * (c.dot(c) * np.eye(3) - np.outer(c, c))  # parallel-axis theorem
+    # |c|^2 as three Python float products summed left to right: every step is one IEEE rounding on any machine.
+    # c.dot(c) went to OpenBLAS's ddot, whose kernel (picked per CPU, or by OPENBLAS_CORETYPE) may fuse or reorder
+    # it: with the AVX-512 kernels one inertia came out one ulp off and the checked-in C no longer matched.
+    cx, cy, cz = (float(x) for x in c)
+    i_o = i_c + m * ((cx * cx + cy * cy + cz * cz) * np.eye(3) - np.outer(c, c))  # parallel-axis theorem
     return ca.DM(m), ca.DM(m * c), ca.DM(i_o)
 
 
@@ -175,12 +181,41 @@ def write_generated_c(functions: Sequence[ca.Function], basename: str, prefix: s
     return paths
 
 
+# a numeric literal of generated C (not a digit inside an identifier or a hex digest): 12, 5.28e-02, .5, 1.
+_NUMBER = re.compile(r"(?<![\w.])[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?(?![\w.])")
+#: how far a numeric literal of a regeneration may be from the checked-in one, in units in the last place
+#: (4 ulp is at most 8.9e-16 relative): the last bit of a constant depends on the CPU's BLAS/libm kernels
+GENERATED_LITERAL_ULPS = 4
+
+
+def same_generated_code(checked_in: str, fresh: str, ulps: int = GENERATED_LITERAL_ULPS) -> bool:
+    """Whether two generated C texts are the same code: the same text with every numeric literal replaced by a
+    placeholder (every operation, identifier, index, comment, the banner: exact), and each pair of literals
+    within ``ulps`` units in the last place of the larger one (a constant's last bits: to an ulp).
+
+    Integers (indices, sizes) are literals too, and differ by at least 1, far more than a few ulp of them.
+    """
+    if _NUMBER.sub("#", checked_in) != _NUMBER.sub("#", fresh):
+        return False
+    for a, b in zip(_NUMBER.findall(checked_in), _NUMBER.findall(fresh)):
+        if a != b:
+            x, y = float(a), float(b)
+            if abs(x - y) > ulps * math.ulp(max(abs(x), abs(y))):
+                return False
+    return True
+
+
 def stale_generated_files(generate: Callable[[Path], list[Path]], folder: Path) -> list[str]:
-    """Names of the files ``generate(out_dir)`` writes that are missing from ``folder`` or differ there."""
+    """Names of the files ``generate(out_dir)`` writes that are missing from ``folder`` or are other code there.
+
+    Compared by :func:`same_generated_code`: the text exactly, the numeric literals to a few ulp, because the last
+    bit of a constant folded from pinocchio's numbers may depend on the machine's BLAS kernel or libm.
+    """
     with tempfile.TemporaryDirectory() as tmp:
         fresh = generate(Path(tmp))
         return [f.name for f in fresh
-                if not (folder / f.name).is_file() or (folder / f.name).read_text() != f.read_text()]
+                if not (folder / f.name).is_file()
+                or not same_generated_code((folder / f.name).read_text(), f.read_text())]
 
 
 def regenerate_or_check(argv: list[str] | None, module: str, description: str,
