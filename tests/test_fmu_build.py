@@ -23,9 +23,10 @@ from cosim.fmus.build import FmuBuildError, build_fmu, ensure_built
 from cosim.fmus.testing import FmuInstance
 
 REPO = Path(__file__).resolve().parents[1]
-MODELS = ["algebraic", "bouncing_ball", "fault", "gain_array", "linear_ode", "motor_gear_energy", "panda_inverse_dynamics",
-          "square_lag"]
-MODEL_EXCHANGE_ONLY = {"bouncing_ball", "square_lag"}  # tests/test_fmu_model_exchange.py runs them
+MODELS = ["algebraic", "bouncing_ball", "fault", "gain_array", "linear_ode", "mass_spring", "motor_gear_energy",
+          "panda_inverse_dynamics", "square_lag"]
+# tests/test_fmu_model_exchange.py runs them (mass_spring: tests/test_coupled_model_exchange.py)
+MODEL_EXCHANGE_ONLY = {"bouncing_ball", "mass_spring", "square_lag"}
 
 
 @pytest.fixture

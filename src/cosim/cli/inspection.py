@@ -158,7 +158,10 @@ def inspect_spec(path: str, experiment: dict[str, Any] | None = None, variant: s
     stop = "(no stop time: give --stop to run)" if "stop" in missing else f"{exp.stop:g} s"
     step = "(none: give --step to run)" if "step" in missing else f"{exp.step:g} s"
     print(f"experiment: {exp.start:g} .. {stop}, step {step}, {exp.algorithm}")
-    print(f"stepping order: {' -> '.join(system.order)}")
+    groups = system.model_exchange.groups
+    print(f"stepping order: {' -> '.join(system.model_exchange.order if groups else system.order)}")
+    for group in groups:  # connected model-exchange units: one solver, one unit to the master
+        print(f"integrated together (one solver): {group.name} = {', '.join(group.members)}")
     print_coupling(system)
     return EXIT_OK
 

@@ -147,7 +147,8 @@ def has_twin(system: System) -> bool:
 def can_run_in_lockstep(system: System) -> bool:
     """Whether points of ``system`` may run in lock-step (module docstring): a twin, Real connections,
     numeric probes."""
-    if not has_twin(system) or system.coupling.loops:  # algebraic loops are solved point by point
+    # algebraic loops are solved point by point; a group of model-exchange units steps as one
+    if not has_twin(system) or system.coupling.loops or system.model_exchange.groups:
         return False
     if system.spec.experiment.algorithm == "adaptive":
         return False  # adaptive steps differ from point to point: no common grid to step together

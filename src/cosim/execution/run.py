@@ -19,6 +19,7 @@ import numpy as np
 
 from cosim.errors import UnitError, UserError
 from cosim.master.algorithms import group_transfers, make_algorithm
+from cosim.master.coupled_me import integrate_together
 from cosim.master.observers import ExactColumns, ObjectiveReducer, Observer, TraceRecorder, flatten_objectives
 from cosim.spec.expressions import evaluate_expressions
 from cosim.system.builder import Assignment, System
@@ -160,6 +161,10 @@ class Execution:
                 for name, system_unit in self.system.units.items():
                     units[name] = system_unit.unit_type.instantiate(name)
             n_steps = step_count(exp.start, exp.stop, exp.step)
+            # groups of model-exchange units: joined before initialization; the master steps each as one unit
+            groups = self.system.model_exchange
+            stepped = integrate_together(units, groups.groups, self.system.connections, self.system.coupling)
+            order = groups.order if groups.groups else self.system.order
             self._initialize(units)
             probe = Probe(self.system, units)
             exact = ExactColumns(probe.exact_columns, probe.read_exact) if probe.exact_columns else None
@@ -175,9 +180,9 @@ class Execution:
             if variable:
                 algorithm.configure(exp)  # type: ignore[attr-defined]  # its options, the run's span
             if algorithm.solves_loops:  # given the feed-through and loops to solve (others never see a loop)
-                algorithm.bind(units, self.system.order, self.system.connections, self.system.coupling)
+                algorithm.bind(stepped.units, order, stepped.links, stepped.coupling)
             else:
-                algorithm.bind(units, self.system.order, self.system.connections)
+                algorithm.bind(stepped.units, order, stepped.links)
             algorithm.start(t)  # e.g. algebraic loops solved at the start time
             values = probe.read()
             for observer in observers:

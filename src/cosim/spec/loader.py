@@ -59,6 +59,7 @@ class ExperimentSpec:
     loop_solver: LoopSettings = LoopSettings()  # how algebraic loops are solved (method, tolerance, max_iterations)
     # the adaptive algorithm's options (rtol, atol, min_step, max_step, base, restore), see cosim.master.adaptive
     adaptive: tuple[tuple[str, Any], ...] = ()
+    coupled_model_exchange: bool = True  # connected model-exchange units integrated together (system/coupled_me)
 
 
 @dataclass(frozen=True)
@@ -366,7 +367,8 @@ def build_spec(raw: dict, path: Path) -> Spec:
     experiment = ExperimentSpec(start=float(e.get("start", 0.0)), stop=float(e["stop"]), step=float(e["step"]),
                                 algorithm=e.get("algorithm", DEFAULT_ALGORITHM), stop_when=e.get("stop_when"),
                                 early_stop=e.get("early_stop", "ok"), loop_solver=_loop_settings(e.get("loop_solver", {})),
-                                adaptive=tuple(sorted((e.get("adaptive") or {}).items())))
+                                adaptive=tuple(sorted((e.get("adaptive") or {}).items())),
+                                coupled_model_exchange=e.get("coupled_model_exchange", True))
     objectives = tuple(
         ObjectiveSpec(name=n, signal=o.get("signal"), reduce=o.get("reduce"), expr=o.get("expr"),
                       unit=o.get("unit"), sense=o.get("sense"), description=o.get("description", ""))

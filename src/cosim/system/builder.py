@@ -17,6 +17,7 @@ from typing import Any, Mapping, Sequence
 from cosim.errors import Problem, SpecError, UserError, did_you_mean, json_path
 from cosim.spec.loader import Spec
 from cosim.system.connection_checks import check_connections
+from cosim.system.coupled_me import ModelExchangeCoupling, model_exchange_coupling
 from cosim.system.parts import Assignment, Connection, LoadedUnits, Signal, SystemUnit  # noqa: F401  (re-exported)
 from cosim.system.signals import add_recorded, resolve_signal, split_unit_name
 from cosim.master.loops import Coupling
@@ -43,6 +44,8 @@ class System:
     recorded: tuple[str, ...]
     # direct feed-through in dependency order and the algebraic loops, as indices into ``connections``
     coupling: Coupling = Coupling()
+    # connected model-exchange units integrated together, and the master's order with them (system/coupled_me.py)
+    model_exchange: ModelExchangeCoupling = ModelExchangeCoupling()
 
     def signal(self, text: str) -> Signal:
         """Resolve a 'unit.port' text against this system; raises SpecError if it does not fit."""
@@ -128,6 +131,7 @@ def build_system(spec: Spec, broken_units: frozenset[str] = frozenset()) -> Syst
     order = stepping_order([u.name for u in spec.units], connections)
     coupling = feedthrough_coupling([u.name for u in spec.units], units, connections, spec.experiment.loop_solver)
     init_order = check_algebraic_loops(units, connections, problems, file, coupling, spec.experiment.algorithm)
+    model_exchange = model_exchange_coupling(spec, units, connections, order, coupling, problems)
 
     probes: dict[str, Signal] = {}
     recorded: list[str] = []
@@ -156,7 +160,7 @@ def build_system(spec: Spec, broken_units: frozenset[str] = frozenset()) -> Syst
         raise SpecError(problems)
     system = System(spec=spec, units=dict(units), connections=tuple(connections), order=tuple(order),
                     init_order=tuple(init_order), assignments=tuple(assignments), probes=tuple(probes.values()),
-                    recorded=tuple(recorded), coupling=coupling)
+                    recorded=tuple(recorded), coupling=coupling, model_exchange=model_exchange)
     attach_data_files(system)  # files named by a unit's data-file parameters: read from the spec's folder, shipped
     return system
 

@@ -351,6 +351,12 @@ class UnitType(abc.ABC):
     def instantiate(self, name: str) -> Unit:
         """A new live instance called ``name``."""
 
+    def offers_equations(self) -> bool:
+        """True when its units give cosim their equations to integrate (continuous states, derivatives, event
+        indicators: a Model Exchange FMU), so that such units connected to each other can be integrated
+        together by one solver (:mod:`cosim.system.coupled_me`). Default False: a unit steps itself."""
+        return False
+
     def files(self) -> list[Path]:
         """Local files this blueprint reads to describe or instantiate its units (default: none).
 

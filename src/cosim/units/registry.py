@@ -321,6 +321,11 @@ FMU = UnitKind("fmu", {
     "max_step": {"type": "number", "exclusiveMinimum": 0,
                  "description": "fmu, model exchange only: largest internal solver step in seconds. Default: the "
                                 "communication step."},
+    "coupled_model_exchange": {"type": "boolean",
+                               "description": "fmu, model exchange only: false integrates this unit alone inside "
+                                              "each communication step even when it is connected to other "
+                                              "model-exchange units (default true: integrated together with "
+                                              "them by one solver)."},
 }, _create_fmu, example='"fmu": "model.fmu"',
     description="an FMI 2.0 or 3.0 FMU: co-simulation, or model exchange integrated by cosim")
 

@@ -160,6 +160,9 @@ class FmuUnitType(UnitType):
             return self.requested_interface
         return CO_SIMULATION if self.model_description().coSimulation is not None else MODEL_EXCHANGE
 
+    def offers_equations(self) -> bool:
+        return self.interface == MODEL_EXCHANGE
+
     @property
     def solver_settings(self) -> Any:
         """The Model Exchange solver settings (defaults when the spec gives none)."""

@@ -102,71 +102,39 @@ class _NoInputs:
         return None
 
 
-class _ModelExchangeStepping:
-    """The integration and event handling shared by FMI 2.0 and 3.0 (a mixin before Fmi2Unit/Fmi3Unit).
+class EventLoop:
+    """CVode over continuous states with events: what one Model Exchange unit and a group of them share.
 
-    Subclasses provide ``_update_discrete_states()`` (fmpy's 6-tuple) and
-    ``_get_derivatives`` (fmpy's name differs between versions).
+    ``do_step(t, h)`` integrates from ``t`` to ``t + h`` as the module docstring says (time events split
+    the step, state events stop the solver, step events after every return, an input change restarts it).
+    A subclass is the model: it supplies
+
+    * ``_solver_model()``: keyword arguments of fmpy's ``CVodeSolver`` (nx, nz, get_x, set_x, get_dx, get_z,
+      get_nominals, set_time), each call wrapped with :meth:`_caught`;
+    * ``_set_time(t)``: the model's time after the solver returned (also ``self._now = t``);
+    * ``_completed_integrator_step()``: True when the model asks for a step event;
+    * ``_enter_event_mode()``, ``_event_iteration()``, ``_enter_continuous_time_mode()``;
+    * ``_next_event_time()``: the next time event, or None;
+    * ``_read_indicators_into(buffer)``: the event indicators now;
+    * ``_callback_failure(exc)``: the UnitError for an exception raised inside a solver callback.
+
+    Call :meth:`_init_loop` from ``__init__``.
     """
-
-    _plain_calls = False  # its set() and do_step() do more than the FMI calls (see FmiInstance._plain_calls)
-
 
     name: str
     time: float | None
-    _slave: Any
 
-    def __init__(self, name: str, unit_type: Any):
-        super().__init__(name, unit_type)  # type: ignore[call-arg]  # Fmi2Unit/Fmi3Unit: the instance, as a model
-        md = unit_type.model_description()
-        self._settings: SolverSettings = unit_type.solver_settings
-        self._nx = md.numberOfContinuousStates
-        self._nz = md.numberOfEventIndicators
-        self._needs_step_call = bool(getattr(md.modelExchange, "needsCompletedIntegratorStep", True))
+    def _init_loop(self, settings: SolverSettings, nz: int) -> None:
+        self._settings = settings
+        self._nz = nz
         self._solver: Any = None
         self._step_cap: float | None = None  # CVode's max step as last set (internal_step_cap)
-        self._now = 0.0  # the time the FMU and the solver are at
-        self._next_event: float | None = None
+        self._now = 0.0  # the time the model and the solver are at
         self._inputs_changed = False
-        self._last_set: dict[int, tuple[Selection, tuple]] = {}
-        self._z = np.zeros(self._nz)
-        self._z_buffer = (ctypes.c_double * max(self._nz, 1))()
+        self._z = np.zeros(nz)
+        self._z_buffer = (ctypes.c_double * max(nz, 1))()
         self._callback_error: BaseException | None = None
         self.events = {"time": 0, "state": 0, "step": 0, "input": 0}  # handled so far (for tests and reports)
-
-    # -- lifecycle -----------------------------------------------------------
-
-    def setup(self, start_time: float, stop_time: float | None) -> None:
-        super().setup(start_time, stop_time)  # type: ignore[misc]
-        self._now = start_time
-
-    # -- inputs ------------------------------------------------------------------
-
-    def set(self, selection: Selection, values: Sequence[Any]) -> None:
-        # Only a *changed* input restarts the solver: masters set every input every step.
-        # The selection is kept with its values so that a new selection reusing its id() is not mistaken for it.
-        new = tuple(values)
-        if self._last_set.get(id(selection)) != (selection, new):
-            self._last_set[id(selection)] = (selection, new)
-            self._inputs_changed = True
-        super().set(selection, values)  # type: ignore[misc]
-
-    def exit_initialization(self) -> None:
-        super().exit_initialization()  # type: ignore[misc]
-        self._event_iteration()  # FMI: the instance is in Event Mode after initialization
-        self._guard("enterContinuousTimeMode", self._slave.enterContinuousTimeMode)  # type: ignore[attr-defined]
-        self._start_solver()
-        self._inputs_changed = False
-
-    def reset(self) -> None:
-        self._solver = None
-        self._next_event = None
-        self._last_set.clear()
-        super().reset()  # type: ignore[misc]
-
-    def terminate(self) -> None:
-        self._solver = None  # CVodeFree runs when fmpy's solver object is collected
-        super().terminate()  # type: ignore[misc]
 
     # -- stepping --------------------------------------------------------------
 
@@ -180,7 +148,7 @@ class _ModelExchangeStepping:
             self._after_input_change()
         events_in_place = 0  # events handled without time advancing: a bound against endless loops
         while not _reached(self._now, end):
-            event_time = self._next_event
+            event_time = self._next_event_time()
             # A time event inside the step, or on its end up to rounding, ends this stretch of integration.
             time_event_due = event_time is not None and (event_time < end or _close(event_time, end))
             target = max(min(event_time, end), self._now) if time_event_due else end
@@ -222,18 +190,6 @@ class _ModelExchangeStepping:
         self._set_time(reached if state_event else target)  # fmpy's solver has set the states already
         return bool(state_event)
 
-    def _set_time(self, time: float) -> None:
-        self._now = time
-        self._guard("setTime", lambda: self._slave.setTime(time))
-
-    def _completed_integrator_step(self) -> bool:
-        if not self._needs_step_call:
-            return False
-        step_event, terminate = self._guard("completedIntegratorStep", self._slave.completedIntegratorStep)
-        if terminate:
-            raise self._ended("completedIntegratorStep")
-        return bool(step_event)
-
     def _after_input_change(self) -> None:
         """Inputs jumped at a communication point: an event if an indicator changed sign, and a solver restart."""
         self._inputs_changed = False
@@ -246,23 +202,10 @@ class _ModelExchangeStepping:
             self._restart_solver()
 
     def _handle_event(self) -> None:
-        self._guard("enterEventMode", self._slave.enterEventMode)
+        self._enter_event_mode()
         self._event_iteration()
-        self._guard("enterContinuousTimeMode", self._slave.enterContinuousTimeMode)
+        self._enter_continuous_time_mode()
         self._restart_solver()
-
-    def _event_iteration(self) -> None:
-        """Update discrete states until the FMU needs no more; note the next time event."""
-        for _ in range(MAX_EVENT_ITERATIONS):
-            needed, terminate, _nominals, _values, next_defined, next_time = self._guard(
-                self._update_call, self._update_discrete_states)
-            if terminate:
-                raise self._ended(self._update_call)
-            if not needed:
-                self._next_event = float(next_time) if next_defined else None
-                return
-        raise UnitError(self.name, f"the event iteration did not converge in {MAX_EVENT_ITERATIONS} rounds "
-                        "(the FMU keeps asking for new discrete states)", self._now)
 
     def _start_solver(self) -> None:
         from fmpy.sundials import CVodeSolver
@@ -270,13 +213,8 @@ class _ModelExchangeStepping:
 
         max_step = self._settings.max_step if self._settings.max_step is not None else float("inf")
         self._step_cap = None  # the communication step's cap is set at the first do_step
-        self._solver = CVodeSolver(
-            nx=self._nx, nz=self._nz, get_x=self._caught(self._slave.getContinuousStates),
-            set_x=self._caught(self._slave.setContinuousStates), get_dx=self._caught(self._get_derivatives()),
-            get_z=self._caught(self._slave.getEventIndicators),
-            get_nominals=self._caught(self._slave.getNominalsOfContinuousStates),
-            set_time=self._caught(self._slave.setTime), input=_NoInputs(), startTime=self._now,
-            maxStep=max_step, relativeTolerance=self._settings.tolerance)
+        self._solver = CVodeSolver(**self._solver_model(), input=_NoInputs(), startTime=self._now,
+                                   maxStep=max_step, relativeTolerance=self._settings.tolerance)
         CVodeSetMaxNumSteps(self._solver.cvode_mem, MAX_INTERNAL_STEPS)
         if self._callback_error is not None:
             raise self._fail_callback()
@@ -292,7 +230,7 @@ class _ModelExchangeStepping:
 
     def _read_indicators(self) -> None:
         if self._nz:
-            self._guard("getEventIndicators", lambda: self._slave.getEventIndicators(self._z_buffer, self._nz))
+            self._read_indicators_into(self._z_buffer)
             self._z = np.array(self._z_buffer[:self._nz])
 
     # -- errors ------------------------------------------------------------------
@@ -310,6 +248,160 @@ class _ModelExchangeStepping:
 
     def _fail_callback(self) -> UnitError:
         exc, self._callback_error = self._callback_error, None
+        return self._callback_failure(exc)
+
+    # -- the model (see the class docstring) -------------------------------------
+
+    def _solver_model(self) -> dict[str, Any]:
+        raise NotImplementedError
+
+    def _set_time(self, time: float) -> None:
+        raise NotImplementedError
+
+    def _completed_integrator_step(self) -> bool:
+        raise NotImplementedError
+
+    def _enter_event_mode(self) -> None:
+        raise NotImplementedError
+
+    def _event_iteration(self) -> None:
+        raise NotImplementedError
+
+    def _enter_continuous_time_mode(self) -> None:
+        raise NotImplementedError
+
+    def _next_event_time(self) -> float | None:
+        raise NotImplementedError
+
+    def _read_indicators_into(self, buffer: Any) -> None:
+        raise NotImplementedError
+
+    def _callback_failure(self, exc: BaseException | None) -> UnitError:
+        raise NotImplementedError
+
+
+class _ModelExchangeStepping(EventLoop):
+    """One Model Exchange FMU as a unit, FMI 2.0 and 3.0 alike (a mixin before Fmi2Unit/Fmi3Unit).
+
+    Subclasses provide ``_update_discrete_states()`` (fmpy's 6-tuple) and
+    ``_get_derivatives`` (fmpy's name differs between versions).
+
+    A unit that a group integrates together with others (:mod:`cosim.units.fmu.coupled_me`,
+    :meth:`join`) has no solver of its own: the group evaluates its equations and handles its events.
+    """
+
+    _plain_calls = False  # its set() and do_step() do more than the FMI calls (see FmiInstance._plain_calls)
+
+    name: str
+    time: float | None
+    _slave: Any
+
+    def __init__(self, name: str, unit_type: Any):
+        super().__init__(name, unit_type)  # type: ignore[call-arg]  # Fmi2Unit/Fmi3Unit: the instance, as a model
+        md = unit_type.model_description()
+        self._init_loop(unit_type.solver_settings, md.numberOfEventIndicators)
+        self._nx = md.numberOfContinuousStates
+        self._needs_step_call = bool(getattr(md.modelExchange, "needsCompletedIntegratorStep", True))
+        self._next_event: float | None = None
+        self._last_set: dict[int, tuple[Selection, tuple]] = {}
+        self.group: Any = None  # the group integrating this unit together with others (join), or None
+
+    # -- lifecycle -----------------------------------------------------------
+
+    def setup(self, start_time: float, stop_time: float | None) -> None:
+        super().setup(start_time, stop_time)  # type: ignore[misc]
+        self._now = start_time
+
+    def join(self, group: Any) -> None:
+        """From now on ``group`` integrates this unit (with others): no solver of its own, no do_step."""
+        self.group = group
+
+    # -- inputs ------------------------------------------------------------------
+
+    def set(self, selection: Selection, values: Sequence[Any]) -> None:
+        # Only a *changed* input restarts the solver: masters set every input every step.
+        # The selection is kept with its values so that a new selection reusing its id() is not mistaken for it.
+        new = tuple(values)
+        if self._last_set.get(id(selection)) != (selection, new):
+            self._last_set[id(selection)] = (selection, new)
+            self._inputs_changed = True
+        super().set(selection, values)  # type: ignore[misc]
+
+    def set_within_group(self, selection: Selection, values: Sequence[Any]) -> None:
+        """Set inputs as the group integrating this unit does while it evaluates the equations: no restart."""
+        super().set(selection, values)  # type: ignore[misc]
+
+    def exit_initialization(self) -> None:
+        super().exit_initialization()  # type: ignore[misc]
+        self._event_iteration()  # FMI: the instance is in Event Mode after initialization
+        self._enter_continuous_time_mode()
+        if self.group is None:
+            self._start_solver()
+        self._inputs_changed = False
+
+    def reset(self) -> None:
+        self._solver = None
+        self._next_event = None
+        self._last_set.clear()
+        super().reset()  # type: ignore[misc]
+
+    def terminate(self) -> None:
+        self._solver = None  # CVodeFree runs when fmpy's solver object is collected
+        super().terminate()  # type: ignore[misc]
+
+    def do_step(self, t: float, h: float) -> None:
+        if self.group is not None:
+            raise UnitError(self.name, f"do_step on a unit that '{self.group.name}' integrates together with "
+                            "others (step the group instead)", t)
+        super().do_step(t, h)
+
+    # -- the model for the solver loop -----------------------------------------------
+
+    def _solver_model(self) -> dict[str, Any]:
+        return dict(nx=self._nx, nz=self._nz, get_x=self._caught(self._slave.getContinuousStates),
+                    set_x=self._caught(self._slave.setContinuousStates), get_dx=self._caught(self._get_derivatives()),
+                    get_z=self._caught(self._slave.getEventIndicators),
+                    get_nominals=self._caught(self._slave.getNominalsOfContinuousStates),
+                    set_time=self._caught(self._slave.setTime))
+
+    def _set_time(self, time: float) -> None:
+        self._now = time
+        self._guard("setTime", lambda: self._slave.setTime(time))
+
+    def _completed_integrator_step(self) -> bool:
+        if not self._needs_step_call:
+            return False
+        step_event, terminate = self._guard("completedIntegratorStep", self._slave.completedIntegratorStep)
+        if terminate:
+            raise self._ended("completedIntegratorStep")
+        return bool(step_event)
+
+    def _enter_event_mode(self) -> None:
+        self._guard("enterEventMode", self._slave.enterEventMode)
+
+    def _enter_continuous_time_mode(self) -> None:
+        self._guard("enterContinuousTimeMode", self._slave.enterContinuousTimeMode)
+
+    def _event_iteration(self) -> None:
+        """Update discrete states until the FMU needs no more; note the next time event."""
+        for _ in range(MAX_EVENT_ITERATIONS):
+            needed, terminate, _nominals, _values, next_defined, next_time = self._guard(
+                self._update_call, self._update_discrete_states)
+            if terminate:
+                raise self._ended(self._update_call)
+            if not needed:
+                self._next_event = float(next_time) if next_defined else None
+                return
+        raise UnitError(self.name, f"the event iteration did not converge in {MAX_EVENT_ITERATIONS} rounds "
+                        "(the FMU keeps asking for new discrete states)", self._now)
+
+    def _next_event_time(self) -> float | None:
+        return self._next_event
+
+    def _read_indicators_into(self, buffer: Any) -> None:
+        self._guard("getEventIndicators", lambda: self._slave.getEventIndicators(buffer, self._nz))
+
+    def _callback_failure(self, exc: BaseException | None) -> UnitError:
         return self.fail("a call during integration", exc)  # type: ignore[attr-defined]
 
     def _ended(self, call: str) -> SimulationEnded:
