@@ -94,8 +94,8 @@ def position_error(traces) -> float:
 @pytest.mark.parametrize("left,right", [(2, 2), (3, 3), (2, 3)], ids=["fmi2", "fmi3", "fmi2+fmi3"])
 def test_two_mass_oscillator_in_two_fmus_matches_the_matrix_exponential(write_spec, left, right):
     system, traces = run(write_spec, oscillator(left, right))
-    assert [g.members for g in system.coupling.groups] == [("left", "right")]
-    assert system.coupling.order == ("left+right",)
+    assert [g.members for g in system.model_exchange.groups] == [("left", "right")]
+    assert system.model_exchange.order == ("left+right",)
     error = position_error(traces)
     # Measured 6.4e-7 at rtol 1e-8 (a stiff coupling spring: ~6 periods of the fast mode in 1 s): the bound is
     # 1000 * rtol of the amplitude; one by one, the old way, it is 0.13 off after 0.5 s (below).
@@ -116,7 +116,7 @@ def test_opting_out_integrates_each_alone_as_before(write_spec):
     _, together = run(write_spec, spec, "together.json")
     spec["experiment"]["coupled_model_exchange"] = False
     system, alone = run(write_spec, spec, "alone.json")
-    assert system.coupling.groups == () and system.coupling.order == system.order
+    assert system.model_exchange.groups == () and system.model_exchange.order == system.order
     error_alone, error_together = position_error(alone), position_error(together)
     # values exchanged at 1 ms communication points only, held in between: measured 0.13 of the amplitude
     # after 0.5 s (together: 6e-7)
@@ -124,7 +124,7 @@ def test_opting_out_integrates_each_alone_as_before(write_spec):
     per_unit = oscillator(stop=0.5)
     per_unit["units"]["right"]["coupled_model_exchange"] = False  # one unit opting out leaves no group
     system, one_out = run(write_spec, per_unit, "one_out.json")
-    assert system.coupling.groups == ()
+    assert system.model_exchange.groups == ()
     assert np.array_equal(one_out[COLUMNS].to_numpy(), alone[COLUMNS].to_numpy())
 
 
@@ -193,7 +193,7 @@ def test_time_events_of_a_member_reach_the_member_it_feeds(write_spec, version):
         "record": ["lag.x", "lag.switches", "ode.y"],
     }
     system, traces = run(write_spec, spec)
-    assert [g.members for g in system.coupling.groups] == [("lag", "ode")]
+    assert [g.members for g in system.model_exchange.groups] == [("lag", "ode")]
     times = traces["time"].to_numpy()
     assert traces["lag.switches"].iloc[-1] == 7  # at 0.1, 0.2, ..., 0.7
     error = np.max(np.abs(traces["ode.y"].to_numpy() - square_lag_reference(times, tau, period, a)))
@@ -233,7 +233,7 @@ def test_a_group_between_other_units_steps_as_one_unit(write_spec):
     spec["connections"].append({"from": "right.x", "to": "probe.u"})
     spec["record"].append("probe.y")
     system, traces = run(write_spec, spec)
-    assert system.coupling.order == ("left+right", "probe")
+    assert system.model_exchange.order == ("left+right", "probe")
     # probe.y = h x the sum of right.x at the ends of the steps (Gauss-Seidel: the group steps first, and the
     # CS FMU integrates its input held over the step)
     h = spec["experiment"]["step"]
@@ -270,3 +270,19 @@ def test_a_member_refuses_to_step_alone(built_fmu):
             member.do_step(0.0, 0.1)
     finally:
         member.terminate()
+
+
+def test_a_sweep_integrates_the_group_in_dask_workers(write_spec, tmp_path):
+    """Two points of the oscillator with a stop, swept on a Dask worker (each point in a child process, the
+    system pickled there, members re-used after reset): each point's contacts as the exact solution has them."""
+    import cosim
+
+    spec = oscillator(step=0.01, stop=1.2, e_stop=0.8)
+    spec["objectives"] = {"hits": {"signal": "right.hits", "reduce": "final"},
+                          "last_hit": {"signal": "right.t_hit", "reduce": "final"}}
+    spec["design"] = {"parameters": {"right.x_stop": {"values": [0.05, 0.1]}}}
+    df = cosim.sweep(str(write_spec(spec)), workers=1, out=tmp_path / "out")
+    assert list(df["status"]) == ["ok", "ok"]
+    for x_stop, hits, last_hit in zip(df["right.x_stop"], df["hits"], df["last_hit"]):
+        times, _ = contacts(x_stop, 0.8, 1.2)
+        assert hits == len(times) and last_hit == pytest.approx(times[-1], abs=1e-5)
