@@ -84,10 +84,10 @@ class Fmi2Unit(FmiInstance):
     def exit_initialization(self) -> None:
         self._guard(f"{self._prefix}ExitInitializationMode", self._slave.exitInitializationMode)
 
-    def do_step(self, t: float, h: float) -> None:
+    def do_step(self, t: float, h: float, no_set_prior: int = 1) -> None:
         self.time = t
         self.generation += 1
-        status = self._do_step(self._component, t, h, self._no_set_prior)
+        status = self._do_step(self._component, t, h, no_set_prior)
         if status == 2 and self._terminated():  # fmi2Discard + fmi2Terminated: the FMU ends the simulation
             end = self._guard("fmi2GetRealStatus", lambda: self._slave.getRealStatus(fmi2LastSuccessfulTime))
             raise SimulationEnded(self.name, float(end), "ended the simulation (fmi2DoStep: fmi2Discard, "

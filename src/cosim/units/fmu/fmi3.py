@@ -103,10 +103,10 @@ class Fmi3Unit(FmiInstance):
     def exit_initialization(self) -> None:
         self._guard(f"{self._prefix}ExitInitializationMode", self._slave.exitInitializationMode)
 
-    def do_step(self, t: float, h: float) -> None:
+    def do_step(self, t: float, h: float, no_set_prior: bool = True) -> None:
         self.time = t
         self.generation += 1
-        status = self._do_step(self._component, t, h, self._no_set_prior, self._event_ref, self._terminate_ref,
+        status = self._do_step(self._component, t, h, no_set_prior, self._event_ref, self._terminate_ref,
                                self._early_ref, self._last_time_ref)
         if status > 1:
             raise self.fail_status("fmi3DoStep", status)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import ctypes
 import operator
+from functools import partial
 from collections import deque
 from typing import Any, Callable, Sequence
 
@@ -287,8 +288,6 @@ class FmiInstance(Unit):
 
     # Names of the version's state calls (get, set, free); set by Fmi2Unit / Fmi3Unit.
     _state_calls: tuple[str, str, str] = ("", "", "")
-    # doStep's noSetFMUStatePriorToCurrentPoint: true (1) until a master says it may restore (allow_restore).
-    _no_set_prior = 1
 
     @property
     def can_save_state(self) -> bool:
@@ -324,7 +323,9 @@ class FmiInstance(Unit):
             raise self.fail_status(self._state_calls[2], status)
 
     def allow_restore(self) -> None:
-        self._no_set_prior = 0
+        # doStep's noSetFMUStatePriorToCurrentPoint is true (do_step's default) until a master may restore:
+        # then this instance's do_step passes false.  The fixed-step path keeps the plain method.
+        self.do_step = partial(type(self).do_step, self, no_set_prior=0)  # type: ignore[method-assign]
 
     def _state_function(self, which: int) -> Callable[..., int]:
         from cosim.units.fmu.fmpy_internals import library
