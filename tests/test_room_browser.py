@@ -22,74 +22,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from cosim.analysis.room import browser as B
 from cosim.analysis.table import load_results
 
 from .conftest import python_unit, require_tool
 from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
-
-# -- in-page scripts ------------------------------------------------------------------------------------------
-
-WAIT_LOADED = """
-const done = arguments[arguments.length - 1];
-(function check() {
-  const B = window.Bokeh, doc = B && B.documents && B.documents[0];
-  const count = doc && doc.get_model_by_name('count');
-  if (doc && doc.is_idle && count && count.text) requestAnimationFrame(() => done(count.text));
-  else setTimeout(check, 20);
-})();
-"""
-
-# set a model's property; resolve when the JS expression `watch` (of doc) changes value: [its new value]
-SET_AND_WAIT = """
-const [name, attr, value, watch, done] = arguments;
-const doc = Bokeh.documents[0];
-const look = () => new Function('doc', watch)(doc);
-const before = look();
-doc.get_model_by_name(name)[attr] = value;
-(function check() {
-  const now = look();
-  if (now !== before && doc.is_idle) requestAnimationFrame(() => done(now));
-  else setTimeout(check, 20);
-})();
-"""
-
-WAIT_FOR = """
-const [js, done] = arguments;
-const f = new Function('doc', js);
-(function check() {
-  const value = f(Bokeh.documents[0]);
-  if (value !== null && value !== undefined && value !== false) requestAnimationFrame(() => done(value));
-  else setTimeout(check, 50);
-})();
-"""
-
-COUNT_TEXT = "return doc.get_model_by_name('count').text;"
-RANKING_SOURCE = "return doc.get_model_by_name('ranking').source.id;"
-
-# the viewport position of data point (x, y) of the cloud
-POINT_ON_SCREEN = """
-const [x, y] = arguments;
-const view = Bokeh.index.find_one(Bokeh.documents[0].get_model_by_name('cloud'));
-const rect = view.canvas_view.el.getBoundingClientRect();
-return [rect.left + view.frame.x_scale.compute(x), rect.top + view.frame.y_scale.compute(y)];
-"""
-
-# the viewport position of a widget's centre
-WIDGET_ON_SCREEN = """
-const view = Bokeh.index.find_one(Bokeh.documents[0].get_model_by_name(arguments[0]));
-const rect = view.el.getBoundingClientRect();
-return [rect.left + rect.width / 2, rect.top + rect.height / 2];
-"""
-
-def count_true(driver, name: str) -> int:
-    return driver.execute_script(f"return Array.from(Bokeh.documents[0].get_model_by_name('{name}').booleans)"
-                                 ".filter(Boolean).length;")
-
-
-def ranking_ids(driver) -> list[str]:
-    return driver.execute_script("return Array.from(Bokeh.documents[0].get_model_by_name('ranking')"
-                                 ".source.data.point_id);")
-
 
 # -- the browser ------------------------------------------------------------------------------------------------
 
@@ -97,35 +34,17 @@ def ranking_ids(driver) -> list[str]:
 @pytest.fixture(scope="module")
 def browser():
     require_tool("chromium", "chromium")
-    driver_path = require_tool("chromedriver", "chromium-driver")
+    require_tool("chromedriver", "chromium-driver")
     try:
-        from selenium import webdriver
-        from selenium.webdriver.chrome.service import Service
+        import selenium  # noqa: F401
     except ImportError:
         if os.environ.get("CI", "").lower() in ("1", "true", "yes"):
             pytest.fail("selenium is not installed (the test extra of pyproject.toml); CI=true, so this test "
                         "must run")
         pytest.skip("selenium is not installed (pip install -e .[test])")
-    options = webdriver.ChromeOptions()
-    options.binary_location = require_tool("chromium", "chromium")
-    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--window-size=1400,1000",
-                "--disable-dev-shm-usage"):
-        options.add_argument(arg)
-    driver = webdriver.Chrome(service=Service(driver_path), options=options)
-    driver.set_script_timeout(180)
-    driver.set_page_load_timeout(180)
+    driver = B.chromium()
     yield driver
     driver.quit()
-
-
-def click_at(driver, x: float, y: float) -> None:
-    """A real mouse click at viewport position (x, y)."""
-    from selenium.webdriver.common.actions.action_builder import ActionBuilder
-
-    actions = ActionBuilder(driver)
-    actions.pointer_action.move_to_location(int(round(x)), int(round(y)))
-    actions.pointer_action.click()
-    actions.perform()
 
 
 def screenshot(driver, name: str) -> None:
@@ -133,11 +52,6 @@ def screenshot(driver, name: str) -> None:
     if folder:
         Path(folder).mkdir(parents=True, exist_ok=True)
         driver.save_screenshot(str(Path(folder) / f"room-{name}.png"))
-
-
-def show_tab(driver, index: int) -> None:
-    driver.execute_script(f"Bokeh.documents[0].get_model_by_name('tabs').active = {index};")
-    driver.execute_async_script(WAIT_FOR, "return doc.is_idle;")
 
 
 # -- the studies --------------------------------------------------------------------------------------------------
@@ -218,53 +132,47 @@ def room(request):
 # -- the tests ----------------------------------------------------------------------------------------------------
 
 
-def load(driver, link: str) -> str:
-    driver.get(link)
-    return driver.execute_async_script(WAIT_LOADED)
-
-
 def exercise(driver, link: str, folder: Path, filter_column: str, name: str) -> dict:
     """The five checks of the module docstring on one folder; returns what the sweep test checks further."""
     table = load_results(folder)
     df = table.df
     n = len(df)
-    text = load(driver, link)
+    text, _ = B.load(driver, link)
     assert f"of {n} designs" in text
     ok = (df["status"] == "ok").to_numpy()
-    assert count_true(driver, "show-ok") == int(ok.sum())
+    assert B.count_true(driver, "show-ok") == int(ok.sum())
     screenshot(driver, f"{name}-points")
 
     # a range filter narrows the points: the upper half of one parameter's range
     values = table.values(filter_column)
     lo, hi = float(np.nanmin(values)), float(np.nanmax(values))
     middle = (lo + hi) / 2
-    driver.execute_async_script(SET_AND_WAIT, f"filter:{filter_column}", "value", [middle, hi], COUNT_TEXT)
+    B.set_and_wait(driver, f"filter:{filter_column}", "value", [middle, hi], B.COUNT_TEXT)
     kept = values >= middle
     assert 0 < kept.sum() < n
-    assert count_true(driver, "show-ok") == int((kept & ok).sum())
-    assert count_true(driver, "show-greyed") == int((~kept).sum())
+    assert B.count_true(driver, "show-ok") == int((kept & ok).sum())
+    assert B.count_true(driver, "show-greyed") == int((~kept).sum())
     assert driver.execute_script("return Bokeh.documents[0].get_model_by_name('count').text;").startswith(
         f"<b>{int(kept.sum())}</b> of {n}")
 
     # a click on the cloud selects the design under the pointer: the best-ranked design, drawn on the axes
-    first = ranking_ids(driver)[0]
+    first = B.ranking_ids(driver)[0]
     row = int(np.flatnonzero(df["point_id"].astype(str).to_numpy() == first)[0])
     x_name, y_name = driver.execute_script(
         "const d = Bokeh.documents[0]; return [d.get_model_by_name('choose-x').value, "
         "d.get_model_by_name('choose-y').value];")
-    x, y = driver.execute_script(POINT_ON_SCREEN, float(table.values(x_name)[row]), float(table.values(y_name)[row]))
-    click_at(driver, x, y)
-    selected = driver.execute_async_script(
-        WAIT_FOR, "const s = doc.get_model_by_name('cloud-source').selected.indices; "
+    B.click_point(driver, table.values(x_name)[row], table.values(y_name)[row])
+    selected = B.wait_for(
+        driver, "const s = doc.get_model_by_name('cloud-source').selected.indices; "
                   "return s.length && doc.get_model_by_name('selected').text.includes('selected') ? Array.from(s) : null;")
     assert row in selected
 
     # the ranking reorders when a weight changes: the first objective's weight to 0 ranks by the others only
     objectives = driver.execute_script(
         "return Bokeh.documents[0].get_model_by_name('weights').children.map((s) => s.name.slice(7));")
-    before = ranking_ids(driver)
-    driver.execute_async_script(SET_AND_WAIT, f"weight:{objectives[0]}", "value", 0.0, RANKING_SOURCE)
-    after = ranking_ids(driver)
+    before = B.ranking_ids(driver)
+    B.set_and_wait(driver, f"weight:{objectives[0]}", "value", 0.0, B.RANKING_IDS)
+    after = B.ranking_ids(driver)
     assert after != before
     senses = table.objective_senses()
     candidates = kept & ok & table.feasible_mask() & np.all(
@@ -278,15 +186,14 @@ def exercise(driver, link: str, folder: Path, filter_column: str, name: str) -> 
         utility += (u if senses[o] == "max" else 1 - u) / len(rest)
     order = np.flatnonzero(candidates)[np.argsort(-utility[candidates], kind="stable")]
     assert after[:5] == list(df["point_id"].astype(str).to_numpy()[order[:5]])
-    show_tab(driver, 1)
+    B.show_tab(driver, 1)
     screenshot(driver, f"{name}-decide")
 
     # a re-run draws the selected design's traces
-    show_tab(driver, 2)
-    bx, by = driver.execute_script(WIDGET_ON_SCREEN, "rerun")
-    click_at(driver, bx, by)
-    traces = driver.execute_async_script(
-        WAIT_FOR, "const c = doc.get_model_by_name('traces'); "
+    B.show_tab(driver, 2)
+    B.click_widget(driver, "rerun")
+    traces = B.wait_for(
+        driver, "const c = doc.get_model_by_name('traces'); "
                   "if (doc.get_model_by_name('rerun-status').text.includes('failed')) return 'failed'; "
                   "return c && c.children.length ? "
                   "c.children.map((f) => [f.name, f.renderers.map((r) => [r.name, Array.from(r.data_source.data.x),"
@@ -295,7 +202,7 @@ def exercise(driver, link: str, folder: Path, filter_column: str, name: str) -> 
         "return Bokeh.documents[0].get_model_by_name('rerun-status').text;")
     screenshot(driver, f"{name}-selection")
     if (folder / "sensitivity.csv").exists() or table.metadata.get("kind") == "optimization":
-        show_tab(driver, 3)
+        B.show_tab(driver, 3)
         screenshot(driver, f"{name}-study")
     return {"table": table, "row": row, "selected": selected, "traces": traces}
 
@@ -309,7 +216,7 @@ def test_sweep_folder_filter_click_rerun_and_ranking(browser, studies, room):
     # failed designs: drawn in their status colour, listed with their message
     failed = (df["status"] == "failed").to_numpy()
     assert failed.sum() == 12
-    show_tab(browser, 0)
+    B.show_tab(browser, 0)
     messages = browser.execute_script("return Array.from(Bokeh.documents[0].get_model_by_name('failures')"
                                       ".source.data.message);")
     assert len(messages) == 12 and all("boom" in m for m in messages)

@@ -88,8 +88,10 @@ class ResultsTable:
 
     def values(self, name: str) -> np.ndarray:
         """A numeric column as float array (booleans as 0/1, missing as NaN)."""
-        self.check_column(name)
-        return pd.to_numeric(self.df[name], errors="coerce").to_numpy(dtype=float, na_value=np.nan)
+        column = self.df[name] if name in self.df.columns else None
+        if column is None or not (pd.api.types.is_numeric_dtype(column) or pd.api.types.is_bool_dtype(column)):
+            self.check_column(name)  # raises, naming the numeric columns
+        return pd.to_numeric(column, errors="coerce").to_numpy(dtype=float, na_value=np.nan)
 
     def unit(self, column: str) -> str:
         """The unit of a column from the spec ('' when unknown)."""

@@ -25,6 +25,7 @@ from functools import partial
 from typing import Any
 
 import numpy as np
+from bokeh.core.property.validation import without_property_validation
 from bokeh.layouts import column, row
 from bokeh.models import MultiChoice, Select, TabPanel, Tabs
 
@@ -41,6 +42,7 @@ MAX_RERUN = 8  # designs re-run at once (one colour each)
 class Room:
     """The models and callbacks of one document (module docstring)."""
 
+    @without_property_validation  # see refresh
     def __init__(self, doc: Any, study: D.Study, webgl: bool = True):
         self.doc, self.study = doc, study
         self.decision = Decision(study.table)
@@ -54,6 +56,7 @@ class Room:
         # -- Points
         self.choosers = V.axis_choosers(columns, self.x, self.y, self.colour)
         self.cloud = V.cloud(D.points(study, self.decision, self.x, self.y, self.colour, None),
+                             D.status_palette(study.status),
                              table.label(self.x), table.label(self.y),
                              table.label(self.colour) if self.colour else None, webgl)
         self.count = V.text("", "count")
@@ -77,6 +80,7 @@ class Room:
                              width=200)
         self.weights = column(name="weights")
         self.ranking = V.ranking_table(self.decision.objectives, D.ranking_rows(study, self.decision, TOP))
+        self.ranking.source.selected.on_change("indices", self._on_ranking_selection)
         self.radar = V.radar(D.radar(self.decision, []), [])
 
         # -- Selection
@@ -127,6 +131,7 @@ class Room:
         self.method.on_change("value", self._on_method)
         self.rerun_button.on_click(self._on_rerun)
 
+    @without_property_validation
     def _on_axis(self, which: str, attr: str, old: Any, new: Any) -> None:
         value = None if new == V.NONE else new
         setattr(self, which, value)
@@ -198,6 +203,7 @@ class Room:
         self.weights.children = sliders
 
     # -- refreshing ------------------------------------------------------------------------------------------
+    @without_property_validation  # bokeh would check each of the 5 masks' n booleans one by one (seconds at 10^5)
     def refresh(self) -> None:
         """Everything that depends on the filters and the objectives."""
         masks = D.masks(self.study, self.decision)
@@ -218,11 +224,15 @@ class Room:
         self.histogram["figure"].xaxis.axis_label = self.study.table.label(name)
 
     def _refresh_ranking(self) -> None:
-        # a new source each time: bokeh 3.9 does not redraw a DataTable whose source's data is replaced by as
-        # many rows as before (bokeh/bokeh#15328); the columns follow the objectives
-        fresh = V.ranking_table(self.decision.objectives, D.ranking_rows(self.study, self.decision, TOP))
-        fresh.source.selected.on_change("indices", self._on_ranking_selection)
-        self.ranking.update(source=fresh.source, columns=fresh.columns)
+        data = D.ranking_rows(self.study, self.decision, TOP)
+        columns = [c.field for c in self.ranking.columns]
+        if columns != ["rank", "point_id", "score", *[f"o{k}" for k in range(len(self.decision.objectives))]] \
+                or [c.title for c in self.ranking.columns[3:]] != [f"{n} ({s})" for n, s in self.decision.objectives]:
+            self.ranking.columns = V.ranking_table(self.decision.objectives, data).columns  # objectives changed
+        # emptied first: bokeh 3.9 does not redraw a DataTable whose source's data is replaced by as many rows
+        # as before (bokeh/bokeh#15328); a new source would make bokeh walk the whole document again
+        self.ranking.source.data = {k: [] for k in data}
+        self.ranking.source.data = data
         self._refresh_radar()
 
     def _refresh_radar(self) -> None:
@@ -230,6 +240,7 @@ class Room:
         self.radar["spokes"].data = {"x": data["spoke_x"], "y": data["spoke_y"], "label": data["labels"]}
         self.radar["designs"].data = V.radar_columns(data, [self.study.ids[r] for r in data["rows"]])
 
+    @without_property_validation
     def _refresh_selection(self) -> None:
         rows = self.decision.selection
         mask = np.zeros(len(self.study.ids), dtype=bool)

@@ -111,26 +111,23 @@ def scaled_sizes(values: np.ndarray) -> np.ndarray:
     return out
 
 
-def status_colours(status: np.ndarray) -> np.ndarray:
-    """The colour of each row's status ('' for ok rows, which the colour map colours)."""
-    out = np.full(len(status), "", dtype=object)
-    for i, s in enumerate(status):
-        if s != "ok":
-            out[i] = STATUS_COLOURS.get(s, OTHER_STATUS)
-    return out
+def status_palette(status: np.ndarray) -> tuple[list[str], list[str]]:
+    """(the statuses other than 'ok' in the table, their colours) for a categorical colour map."""
+    factors = sorted({str(s) for s in status} - {"ok"})
+    return factors, [STATUS_COLOURS.get(s, OTHER_STATUS) for s in factors]
 
 
 def points(study: Study, decision: Decision, x: str, y: str, colour: str | None, size: str | None
            ) -> dict[str, Any]:
     """The columns of the point cloud, one entry per table row: x, y, c (the colour column, NaN without one),
-    s (marker size), status, its colour, message, point_id and row."""
+    s (marker size), status and point_id (the messages are in the table of designs not ok: strings are what
+    makes the page slow to load)."""
     f = decision.filters
     n = len(study.ids)
     return {"x": f.values(x), "y": f.values(y),
             "c": f.values(colour) if colour else np.full(n, np.nan),
             "s": scaled_sizes(f.values(size)) if size else np.full(n, PLAIN_SIZE),
-            "status": study.status, "status_colour": status_colours(study.status), "message": study.messages,
-            "point_id": study.ids, "row": np.arange(n)}
+            "status": study.status, "point_id": study.ids}
 
 
 def masks(study: Study, decision: Decision) -> dict[str, np.ndarray]:

@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import Any, Sequence
 
 import numpy as np
-from bokeh.models import (BooleanFilter, Button, CDSView, ColorBar, Column, ColumnDataSource, DataTable, Div,
+from bokeh.models import (BooleanFilter, Button, CategoricalColorMapper, CDSView, ColorBar, Column, ColumnDataSource, DataTable, Div,
                           HoverTool, LinearColorMapper, NumberFormatter, RangeSlider, Select, Slider, TableColumn,
                           Whisker)
 from bokeh.palettes import Category10_10, Viridis256
@@ -26,7 +26,8 @@ NONE = "(none)"
 WIDTH = 760
 
 
-def cloud(data: dict[str, Any], x_label: str, y_label: str, colour_label: str | None, webgl: bool) -> dict[str, Any]:
+def cloud(data: dict[str, Any], statuses: tuple[list[str], list[str]], x_label: str, y_label: str,
+          colour_label: str | None, webgl: bool) -> dict[str, Any]:
     """The point cloud: greyed (filtered out), ok rows by the colour map, other statuses in their colour, the
     Pareto front ringed, the selection ringed in red.  Returns the figure and the models the app updates."""
     source = ColumnDataSource(data, name="cloud-source")
@@ -42,8 +43,11 @@ def cloud(data: dict[str, Any], x_label: str, y_label: str, colour_label: str | 
                 line_color=None, legend_label="filtered out", name="cloud-greyed", **same)
     ok = fig.scatter("x", "y", source=source, view=CDSView(filter=filters["ok"]), size="s", line_color=None,
                      fill_color={"field": "c", "transform": mapper}, name="cloud-ok", **same)
+    factors, colours = statuses
+    by_status = CategoricalColorMapper(factors=factors or ["failed"], palette=colours or [GREY])
     fig.scatter("x", "y", source=source, view=CDSView(filter=filters["not_ok"]), size="s", marker="x",
-                line_color="status_colour", line_width=2, legend_field="status", name="cloud-not-ok", **same)
+                line_color={"field": "status", "transform": by_status}, line_width=2, legend_field="status",
+                name="cloud-not-ok", **same)
     fig.scatter("x", "y", source=source, view=CDSView(filter=filters["front"]), size=PLAIN_SIZE + 6,
                 fill_color=None, line_color=FRONT, line_width=1.5, legend_label="Pareto front", name="cloud-front",
                 **same)
@@ -55,7 +59,7 @@ def cloud(data: dict[str, Any], x_label: str, y_label: str, colour_label: str | 
     fig.add_tools(HoverTool(renderers=[ok], tooltips=[("design", "@point_id"), ("x", "@x"), ("y", "@y"),
                                                         ("colour", "@c")]))
     fig.add_tools(HoverTool(renderers=[r for r in fig.renderers if r.name == "cloud-not-ok"],
-                            tooltips=[("design", "@point_id"), ("status", "@status"), ("message", "@message")]))
+                            tooltips=[("design", "@point_id"), ("status", "@status")]))
     bar = ColorBar(color_mapper=mapper, title=colour_label or "", width=10)
     fig.add_layout(bar, "right")
     return {"figure": fig, "source": source, "filters": filters, "mapper": mapper, "colour_bar": bar}

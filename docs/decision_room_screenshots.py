@@ -1,0 +1,67 @@
+"""The screenshots of docs/decision-room.md: the walk through the pick-and-place study, in headless chromium.
+
+    python docs/decision_room_screenshots.py [--out docs/figures]
+
+Serves examples/pick_and_place/study (with examples/pick_and_place/spec.json for the re-runs) as
+``cosim explore`` does, and does in the page what the walk through says: narrows duration to the faster
+designs, ranks by e_total, duration and the shoulder's torque peak with TOPSIS, selects the three best designs,
+re-runs them; one screenshot per tab.  Needs Debian's chromium and chromium-driver and selenium.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+STUDY = REPO / "examples" / "pick_and_place" / "study"
+SPEC = REPO / "examples" / "pick_and_place" / "spec.json"
+
+
+def main() -> None:
+    from cosim.analysis.room import browser as B
+    from cosim.analysis.room.data import Study
+    from cosim.analysis.room.server import RoomServer
+    from cosim.analysis.table import load_results
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default=str(REPO / "docs" / "figures"))
+    out = Path(parser.parse_args().out)
+    out.mkdir(parents=True, exist_ok=True)
+    server = RoomServer(Study(load_results(STUDY, SPEC), spec_path=str(SPEC)))
+    browser = B.chromium(1500, 1050)
+    try:
+        text, seconds = B.load(browser, server.link)
+        print(f"loaded in {seconds:.1f} s: {text}")
+        B.set_and_wait(browser, "filter:duration", "value", [1.589, 1.75], B.COUNT_TEXT)
+        B.set_and_wait(browser, "choose-colour", "value", "duration",
+                       "return doc.get_model_by_name('choose-colour').value;")
+        B.set_and_wait(browser, "minimise", "value", ["e_total", "duration", "peak_tau_ratio[2]"], B.RANKING_IDS)
+        B.set_and_wait(browser, "method", "value", "topsis", B.RANKING_IDS)
+        B.set_and_wait(browser, "weight:duration", "value", 0.5, B.RANKING_IDS)
+        rows = browser.execute_script("return Array.from(Bokeh.documents[0].get_model_by_name('ranking')"
+                                      ".source.data.row).slice(0, 3);")
+        browser.execute_script(f"Bokeh.documents[0].get_model_by_name('cloud-source').selected.indices = {rows};")
+        B.wait_for(browser, "return doc.get_model_by_name('selected').text.includes('3 design');")
+        time.sleep(1.0)
+        browser.save_screenshot(str(out / "room-points.png"))
+        B.show_tab(browser, 1)
+        time.sleep(1.0)
+        browser.save_screenshot(str(out / "room-decide.png"))
+        B.show_tab(browser, 2)
+        B.click_widget(browser, "rerun")
+        status = B.wait_for(browser, "const t = doc.get_model_by_name('rerun-status').text; "
+                                     "return doc.get_model_by_name('traces').children.length || t.includes('failed')"
+                                     " ? t : null;")
+        print(f"re-run: {status}")
+        time.sleep(1.5)
+        browser.save_screenshot(str(out / "room-selection.png"))
+        print(f"written: {', '.join(str(out / f'room-{n}.png') for n in ('points', 'decide', 'selection'))}")
+    finally:
+        browser.quit()
+        server.stop()
+
+
+if __name__ == "__main__":
+    main()

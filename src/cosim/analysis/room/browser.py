@@ -1,0 +1,146 @@
+"""Driving the decision room in a real browser: Debian's chromium through selenium and chromium-driver.
+
+Used by the browser tests (tests/test_room_browser.py), the load benchmark (benchmarks/room_load.py) and the
+screenshots of docs/decision-room.md (docs/decision_room_screenshots.py).  The page is read and changed
+through its Bokeh document (``Bokeh.documents[0]``, models found by the names :mod:`.views` gives them);
+clicks are real mouse clicks at the viewport position of a point or widget.  selenium is imported when a
+browser is started.
+"""
+
+from __future__ import annotations
+
+import shutil
+import time
+from typing import Any
+
+# resolves with the 'count' text once the document is idle and the server's first refresh arrived
+WAIT_LOADED = """
+const done = arguments[arguments.length - 1];
+(function check() {
+  const B = window.Bokeh, doc = B && B.documents && B.documents[0];
+  const count = doc && doc.get_model_by_name('count');
+  if (doc && doc.is_idle && count && count.text) requestAnimationFrame(() => done(count.text));
+  else setTimeout(check, 20);
+})();
+"""
+
+# sets a model's property; resolves, once the document is idle again and two frames drawn, with the new value
+# of the JS expression `watch` (a function body of `doc`), when it changed to something other than null
+SET_AND_WAIT = """
+const [name, attr, value, watch, done] = arguments;
+const doc = Bokeh.documents[0];
+const look = () => new Function('doc', watch)(doc);
+const before = look();
+doc.get_model_by_name(name)[attr] = value;
+(function check() {
+  const now = look();
+  if (now !== before && now !== null && doc.is_idle) requestAnimationFrame(() => requestAnimationFrame(() => done(now)));
+  else setTimeout(check, 5);
+})();
+"""
+
+# resolves with the value of the JS expression (a function body of `doc`) once it is neither null nor false
+WAIT_FOR = """
+const [js, done] = arguments;
+const f = new Function('doc', js);
+(function check() {
+  const value = f(Bokeh.documents[0]);
+  if (value !== null && value !== undefined && value !== false) requestAnimationFrame(() => done(value));
+  else setTimeout(check, 50);
+})();
+"""
+
+COUNT_TEXT = "return doc.get_model_by_name('count').text;"
+RANKING_IDS = "const ids = doc.get_model_by_name('ranking').source.data.point_id; return ids.length ? ids.join() : null;"
+
+# the viewport position of data point (x, y) of the cloud
+POINT_ON_SCREEN = """
+const [x, y] = arguments;
+const view = Bokeh.index.find_one(Bokeh.documents[0].get_model_by_name('cloud'));
+const rect = view.canvas_view.el.getBoundingClientRect();
+return [rect.left + view.frame.x_scale.compute(x), rect.top + view.frame.y_scale.compute(y)];
+"""
+
+# the viewport position of a widget's centre
+WIDGET_ON_SCREEN = """
+const view = Bokeh.index.find_one(Bokeh.documents[0].get_model_by_name(arguments[0]));
+const rect = view.el.getBoundingClientRect();
+return [rect.left + rect.width / 2, rect.top + rect.height / 2];
+"""
+
+
+def chromium(width: int = 1400, height: int = 1000) -> Any:
+    """A headless Debian chromium under selenium (chromium and chromedriver from PATH).
+
+    Raises RuntimeError naming the Debian package when one of them is missing, ImportError without selenium.
+    """
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    binary, driver = shutil.which("chromium"), shutil.which("chromedriver")
+    if binary is None or driver is None:
+        raise RuntimeError("the decision room's browser needs Debian's chromium and chromium-driver packages")
+    options = webdriver.ChromeOptions()
+    options.binary_location = binary
+    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", f"--window-size={width},{height}",
+                "--disable-dev-shm-usage"):
+        options.add_argument(arg)
+    browser = webdriver.Chrome(service=Service(driver), options=options)
+    browser.set_script_timeout(600)
+    browser.set_page_load_timeout(600)
+    return browser
+
+
+def load(browser: Any, link: str) -> tuple[str, float]:
+    """Open the room at ``link``; (its count text, seconds from the request until the page is drawn)."""
+    start = time.perf_counter()
+    browser.get(link)
+    text = browser.execute_async_script(WAIT_LOADED)
+    return text, time.perf_counter() - start
+
+
+def set_and_wait(browser: Any, name: str, attr: str, value: Any, watch: str) -> tuple[Any, float]:
+    """Set ``name.attr = value`` in the page; (the new value of ``watch``, seconds until it came and was drawn)."""
+    start = time.perf_counter()
+    now = browser.execute_async_script(SET_AND_WAIT, name, attr, value, watch)
+    return now, time.perf_counter() - start
+
+
+def wait_for(browser: Any, js: str) -> Any:
+    return browser.execute_async_script(WAIT_FOR, js)
+
+
+def click_at(browser: Any, x: float, y: float) -> None:
+    """A real mouse click at viewport position (x, y)."""
+    from selenium.webdriver.common.actions.action_builder import ActionBuilder
+
+    actions = ActionBuilder(browser)
+    actions.pointer_action.move_to_location(int(round(x)), int(round(y)))
+    actions.pointer_action.click()
+    actions.perform()
+
+
+def click_point(browser: Any, x: float, y: float) -> None:
+    """Click data point (x, y) of the cloud."""
+    click_at(browser, *browser.execute_script(POINT_ON_SCREEN, float(x), float(y)))
+
+
+def click_widget(browser: Any, name: str) -> None:
+    click_at(browser, *browser.execute_script(WIDGET_ON_SCREEN, name))
+
+
+def show_tab(browser: Any, index: int) -> None:
+    """Switch to tab ``index`` (0 Points, 1 Decide, 2 Selection, 3 Study) and wait until it is drawn."""
+    browser.execute_script(f"Bokeh.documents[0].get_model_by_name('tabs').active = {index};")
+    wait_for(browser, "return doc.is_idle;")
+
+
+def count_true(browser: Any, name: str) -> int:
+    """How many rows the BooleanFilter ``name`` keeps (``show-ok``, ``show-greyed``, ``show-front``, ...)."""
+    return browser.execute_script(f"return Array.from(Bokeh.documents[0].get_model_by_name('{name}').booleans)"
+                                  ".filter(Boolean).length;")
+
+
+def ranking_ids(browser: Any) -> list[str]:
+    return browser.execute_script("return Array.from(Bokeh.documents[0].get_model_by_name('ranking')"
+                                  ".source.data.point_id);")
