@@ -238,3 +238,23 @@ def test_cosim_run_prints_the_step_statistics(fmu, tmp_path):
     assert f"status: ok; {accepted} steps to t=2 s" in out.stdout
     largest = float(line.split(" .. ")[1].split(" s")[0])
     assert largest <= 0.05
+
+
+def test_jacobi_as_the_base_algorithm_and_stop_when(fmu, tmp_path):
+    """Each step taken by Jacobi (also first-order: the same estimate holds), and stop_when ends the run at the
+    first accepted step where the signal says so."""
+    rtol, atol = 1e-4, 1e-8
+    result, _ = run(oscillator(fmu, fmu, {"step": 0.01, "algorithm": "adaptive",
+                                          "adaptive": {"rtol": rtol, "atol": atol, "base": "jacobi"}}), tmp_path)
+    assert result.ok and result.step_stats["base"] == "jacobi"
+    t, x = states(result)
+    size = np.abs(exact(t)).max(axis=0)
+    assert np.all(local_errors(t, x) <= 1.2 * (atol + rtol * size))
+
+    clock = {"python": python_unit("Clock"), "parameters": {"t_end": 0.5}}
+    spec = oscillator(fmu, fmu, {"step": 0.01, "algorithm": "adaptive", "adaptive": {"rtol": 1e-3},
+                                 "stop_when": "clock.done"})
+    spec["units"]["clock"] = clock
+    stopped, _ = run(spec, tmp_path)
+    assert stopped.ok, stopped.message
+    assert 0.5 <= stopped.end_time < 0.6 and stopped.step_stats["accepted"] == stopped.steps
