@@ -286,3 +286,36 @@ def test_a_sweep_integrates_the_group_in_dask_workers(write_spec, tmp_path):
     for x_stop, hits, last_hit in zip(df["right.x_stop"], df["hits"], df["last_hit"]):
         times, _ = contacts(x_stop, 0.8, 1.2)
         assert hits == len(times) and last_hit == pytest.approx(times[-1], abs=1e-5)
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_a_member_ending_the_simulation_ends_the_run_at_its_event(write_spec, version):
+    """A bouncing ball (state events; terminateSimulation once at rest) feeds its height to an integrator:
+    the run ends at the resting bounce, and the integral of the height over the flights is the exact one."""
+    g, e, h0, v_min = 9.81, 0.7, 1.0, 0.1
+    spec = {
+        "units": {
+            "ball": {"fmu": f"builtin:bouncing_ball_fmi{version}", "tolerance": RTOL,
+                     "parameters": {"g": g, "e": e, "h0": h0, "v_min": v_min, "stop_at_rest": True}},
+            "area": {"fmu": f"builtin:linear_ode_fmi{version}", "interface": "model-exchange", "tolerance": RTOL,
+                     "parameters": {"a": 0.0, "b": 1.0, "x0": 0.0}},
+        },
+        "connections": [{"from": "ball.h", "to": "area.u"}],
+        "experiment": {"stop": 5.0, "step": 0.05},
+        "objectives": {"area": {"signal": "area.y", "reduce": "final"},
+                       "bounces": {"signal": "ball.bounces", "reduce": "final"}},
+    }
+    system = build_system(load_spec(write_spec(spec)))
+    assert [g.members for g in system.model_exchange.groups] == [("ball", "area")]
+    result = Execution(system).run()
+    assert result.ok and "stopped early: unit 'ball' ended the simulation" in result.message, result.message
+    t1 = math.sqrt(2 * h0 / g)  # the drop, then flights launched at e^k * g t1 until one is slower than v_min
+    times, area, v = [t1], h0 * t1 - g * t1 ** 3 / 6, g * t1
+    while e * v >= v_min:
+        v *= e
+        flight = 2 * v / g
+        area += v * flight ** 2 / 2 - g * flight ** 3 / 6
+        times.append(times[-1] + flight)
+    assert result.end_time == pytest.approx(times[-1], abs=1e-6)
+    assert result.objectives["bounces"] == len(times)
+    assert result.objectives["area"] == pytest.approx(area, abs=1e-6)

@@ -35,6 +35,7 @@ communication step, :func:`~cosim.units.fmu.model_exchange.internal_step_cap`).
 from __future__ import annotations
 
 import ctypes
+from functools import partial
 from typing import Any, Callable, Mapping, Protocol, Sequence
 
 from cosim.units.fmu.model_exchange import MAX_EVENT_ITERATIONS, EventLoop, SolverSettings
@@ -220,7 +221,7 @@ class CoupledModelExchange(EventLoop, Unit):
                 address, offset = ctypes.cast(pointer, ctypes.c_void_p).value, 0
                 for member, n in pairs:
                     part = ctypes.cast(address + offset * _DOUBLE_SIZE, _DOUBLE_POINTER)
-                    member._guard(label, lambda: call(member)(part, n))  # a failure names the member
+                    member._guard(label, partial(call(member), part, n))  # a failure names the member
                     offset += n
             return over_members
 
@@ -233,7 +234,7 @@ class CoupledModelExchange(EventLoop, Unit):
 
         def set_time(t: float) -> None:
             for member in self.members.values():
-                member._guard("setTime", lambda: member._slave.setTime(t))
+                member._guard("setTime", partial(member._slave.setTime, t))
 
         return dict(nx=self._nx, nz=self._nz, get_x=self._caught(get_x), set_x=self._caught(set_x),
                     get_dx=self._caught(each(states, "getDerivatives", lambda m: m._get_derivatives())),
