@@ -511,3 +511,59 @@ def test_a_scheduler_address_of_a_server_that_speaks_first_is_a_clear_exit_2(tmp
         server.close()
     assert done.returncode == 2, done.stderr
     assert f"the server at {address} is not a Dask scheduler" in done.stderr and "Traceback" not in done.stderr
+
+
+# 7. Quadratic paths made linear (their time is in benchmarks/hostile_bounds.md); here: the results stay exact ------
+
+def test_recording_a_large_array_keeps_every_element_once_in_order(tmp_path):
+    """`record: ["a.*", "a.y"]` on arrays of 20 000 (was quadratic: 40 000 elements took 28 s)."""
+    from cosim.system.validate import check_spec
+
+    fmu = _gain_array_sized(tmp_path / "wide.fmu", "20000")
+    spec = tmp_path / "spec.json"
+    spec.write_text(json.dumps({"units": {"a": {"fmu": str(fmu)}}, "record": ["a.*", "a.y", "a.y[7]"],
+                                "experiment": {"stop": 0.1, "step": 0.1}}))
+    recorded = check_spec(spec).recorded
+    assert list(recorded) == [f"a.y[{i}]" for i in range(1, 20_001)]
+
+
+def test_many_connections_are_checked_with_each_problem_at_its_own_index(tmp_path):
+    """Plain connections skip the per-item JSON Schema walk; the others are still reported where they are."""
+    from cosim.errors import UserError
+    from cosim.system.validate import check_spec
+
+    fmu = _gain_array_sized(tmp_path / "wide.fmu", "3000")
+    connections = [{"from": f"a.y[{i}]", "to": f"b.u[{i}]"} for i in range(1, 3001)]
+    spec = tmp_path / "spec.json"
+    spec.write_text(json.dumps({"units": {"a": {"fmu": str(fmu)}, "b": {"fmu": str(fmu)}},
+                                "connections": connections, "experiment": {"stop": 0.1, "step": 0.1}}))
+    system = check_spec(spec)
+    assert len(system.connections) == 3000
+    connections[1500] = {"form": "a.y[1]", "to": "b.u[1501]"}
+    connections[2700] = {"from": "a.y[2701]", "to": "b.u[2701]", "factor": "two"}
+    connections[2999] = {"from": "nodot", "to": "b.u[3000]", "convert": 1}
+    spec.write_text(json.dumps({"units": {"a": {"fmu": str(fmu)}, "b": {"fmu": str(fmu)}},
+                                "connections": connections, "experiment": {"stop": 0.1, "step": 0.1}}))
+    with pytest.raises(UserError) as refused:
+        check_spec(spec)
+    found = {(p.path, p.message) for p in refused.value.problems}
+    assert ("$.connections[1500]", "missing field 'from'") in found
+    assert any(path == "$.connections[2700].factor" for path, _ in found)
+    assert any(path == "$.connections[2999].from" for path, _ in found)
+    assert any(path == "$.connections[2999].convert" for path, _ in found)
+    assert len(refused.value.problems) == 5  # 'form' also as an unknown field; nothing about the plain ones
+
+
+# 9. Messages ----------------------------------------------------------------------------------------------------------
+
+def test_a_design_count_above_the_limit_is_written_exactly(tmp_path):
+    """Before: "1e+06 points" for a grid of 1 001 000."""
+    spec = _triple_study(tmp_path / "project", 3)
+    raw = json.loads(spec.read_text())
+    raw["design"]["parameters"] = {"s.k": {"min": 1, "max": 1001, "step": 1},
+                                   "s.pause": {"min": 0, "max": 999, "step": 1}}
+    spec.write_text(json.dumps(raw))
+    done = _cosim("validate", str(spec))
+    assert done.returncode == 2
+    assert "the grid has 1,001,000 points (1001 x 1000), more than the limit of 1,000,000" in done.stderr
+    assert "COSIM_MAX_POINTS (default 1000000)" in done.stderr and "e+06" not in done.stderr

@@ -195,8 +195,8 @@ class _Parameter:
             return _Dimension(None, lo, hi, step, integer)
         count, most = range_count(lo, hi, step), limits.limit("points")
         if count > most:  # checked before a single value is made
-            raise ValueError(f"the range {lo} .. {hi} in steps of {step} has {count:.3g} values, more than the "
-                             f"limit of {most} design points; {limits.raise_hint('points')}")
+            raise ValueError(f"the range {lo} .. {hi} in steps of {step} has {count:,} values, more than the "
+                             f"limit of {most:,} design points; {limits.raise_hint('points')}")
         return _Dimension(range_values(lo, hi, step))
 
     def value(self, parts: Sequence[Any]) -> Any:
@@ -417,8 +417,8 @@ def size_problems(spec: Spec) -> list[Problem]:
     fix = f"use fewer values or larger steps, or a sampler with fewer samples; {limits.raise_hint('points')}"
     if design.method in SAMPLERS:
         if isinstance(design.samples, int) and design.samples > most:
-            return [Problem(spec.path, "$.design.samples", f"{design.samples} samples, more than the limit of "
-                            f"{most} design points", fix)]
+            return [Problem(spec.path, "$.design.samples", f"{design.samples:,} samples, more than the limit of "
+                            f"{most:,} design points", fix)]
         return []
     total, factors = 1, []
     for p in design.parameters:
@@ -427,13 +427,13 @@ def size_problems(spec: Spec) -> list[Problem]:
         except (TypeError, ValueError, ArithmeticError):
             continue
         if count > most:
-            return [Problem(spec.path, json_path(["design", "parameters", p.target]), f"{count:.3g} values, more "
-                            f"than the limit of {most} design points", fix)]
+            return [Problem(spec.path, json_path(["design", "parameters", p.target]), f"{count:,} values, more "
+                            f"than the limit of {most:,} design points", fix)]
         total *= count
         factors.append(str(count))
     if total > most:
-        return [Problem(spec.path, "$.design", f"the grid has {total:.3g} points ({' x '.join(factors)}), more "
-                        f"than the limit of {most}", fix)]
+        return [Problem(spec.path, "$.design", f"the grid has {total:,} points ({' x '.join(factors)}), more "
+                        f"than the limit of {most:,}", fix)]
     return []
 
 

@@ -187,6 +187,11 @@ def _load_unit(u: UnitSpec, folder: str, file: str, problems: list[Problem]) -> 
         problems.append(Problem(file, path, f"cannot load '{u.source}': {exc}",
                                 "check the module path and class name, and that the module imports cleanly"))
         return None
+    except MemoryError:  # not an error in the source: loading it asked for more memory than there is
+        problems.append(Problem(file, path, f"cannot load '{u.source}': it ran out of memory while loading",
+                                "check what the unit allocates when it is loaded (array sizes, data files), or run "
+                                "where there is more memory"))
+        return None
     except Exception as exc:  # a user's module may raise anything while importing
         problems.append(Problem(file, path, f"cannot load '{u.source}': {type(exc).__name__}: {exc}",
                                 "fix the error in the unit's source"))

@@ -91,6 +91,7 @@ def expand_wildcard(text: str, units: Mapping[str, SystemUnit]) -> list[str]:
 def add_recorded(texts: Sequence[tuple[str, str]], units: Mapping[str, SystemUnit], problems: list[Problem],
                   file: str, probes: dict[str, Signal], recorded: list[str]) -> None:
     """Resolve (text, JSON path) record entries (``unit.*``: every output) into ``probes`` and ``recorded``."""
+    seen = set(recorded)  # a set beside the list: an array of 10^5 elements is recorded in linear time
     for text, path in texts:
         for expanded in expand_wildcard(text, units):
             s = resolve_signal(expanded, units, problems, file, path)
@@ -99,4 +100,7 @@ def add_recorded(texts: Sequence[tuple[str, str]], units: Mapping[str, SystemUni
                                         "record value variables only"))
             elif s is not None:
                 probes.setdefault(s.text, s)
-                recorded.extend(c for c in s.columns if c not in recorded)
+                for column in s.columns:
+                    if column not in seen:
+                        seen.add(column)
+                        recorded.append(column)
