@@ -10,8 +10,8 @@ solves the system's equations by hand.
 from __future__ import annotations
 
 import io
-from pathlib import Path
 import zipfile
+from pathlib import Path
 
 import pytest
 
@@ -626,7 +626,7 @@ def test_a_tool_annotation_number_that_is_none_is_a_problem_not_a_traceback(tmp_
     # the SSP schema does not check the tools' own annotations: cosim does, where it reads them
     path = write_archive(tmp_path / "bad.ssp", oms3_files(oms3_ssd().replace(old, new)))
     [problem] = _problems(path)
-    assert problem.message.endswith(f' is not a number') and f'{attribute}="' in problem.message
+    assert problem.message.endswith(' is not a number') and f'{attribute}="' in problem.message
     assert problem.path.split("/")[-1].startswith("oms:")
     assert main(["validate", str(path)]) == 2
     assert "Traceback" not in capsys.readouterr().err

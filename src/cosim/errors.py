@@ -24,7 +24,7 @@ from __future__ import annotations
 import difflib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import Any, Iterable, Sequence
 
 
 @dataclass(frozen=True)
@@ -234,6 +234,17 @@ class UnknownUnit(UnitConversionError):
 
 class IncompatibleUnits(UnitConversionError):
     """Two known units of different quantities (e.g. N.m and A)."""
+
+
+class AnnotationNumberError(ValueError):
+    """An SSP tool annotation's attribute that should hold a positive number does not (cosim.ssp.annotations;
+    the SSP schema does not check the tools' own elements).  The reader turns it into a Problem at
+    ``element``."""
+
+    def __init__(self, element: Any, attribute: str):
+        super().__init__(f"{attribute}=\"{element.get(attribute)}\" is not a number")
+        self.element = element
+        self.attribute = attribute
 
 
 class UnitImportError(ImportError):

@@ -25,6 +25,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from cosim.errors import AnnotationNumberError
 from cosim.ssp.xml import tag
 
 READ_TYPES = ("org.openmodelica", "com.opensimulationplatform", "org.cosim")
@@ -34,26 +35,17 @@ _UNREAD_KEYS = ("initialStepSize", "minimumStepSize", "absoluteTolerance")
 _NUMBERS = ("fixedStepSize", "relativeTolerance", "tolerance", "maximumStepSize", "stepSize", "baseStepSize", "value")
 
 
-class BadNumber(ValueError):
-    """A tool annotation's attribute that should hold a number does not (the schema does not check them)."""
-
-    def __init__(self, element: Any, attribute: str):
-        super().__init__(f"{attribute}=\"{element.get(attribute)}\" is not a number")
-        self.element = element
-        self.attribute = attribute
-
-
 def number(element: Any, attribute: str) -> float | None:
-    """The attribute as a positive finite number, None when absent; raises BadNumber otherwise."""
+    """The attribute as a positive finite number, None when absent; raises AnnotationNumberError otherwise."""
     text = element.get(attribute)
     if text is None:
         return None
     try:
         value = float(text)
     except ValueError:
-        raise BadNumber(element, attribute) from None
+        raise AnnotationNumberError(element, attribute) from None
     if not (0 < value < float("inf")):
-        raise BadNumber(element, attribute)
+        raise AnnotationNumberError(element, attribute)
     return value
 
 
@@ -98,7 +90,7 @@ class Solvers:
 def read_system_solvers(system: Any, path: tuple[str, ...], solvers: Solvers) -> None:
     """Collect the solver definitions on one ``ssd:System`` (OMSimulator 3 and 2 forms) into ``solvers``.
 
-    Raises BadNumber for a setting cosim reads that is no positive number.
+    Raises AnnotationNumberError for a setting cosim reads that is no positive number.
     """
     for info in _simulation_information(system):
         _check_numbers(info)
@@ -153,7 +145,7 @@ def component_solver(component: Any) -> str | None:
 
 
 def step_size_hint(component: Any) -> float | None:
-    """OSP's ``osp:StepSizeHint value`` on a component, if any; raises BadNumber."""
+    """OSP's ``osp:StepSizeHint value`` on a component, if any; raises AnnotationNumberError."""
     for annotation in own_annotations(component, "com.opensimulationplatform"):
         for child in annotation.iter():
             if _local(child) == "StepSizeHint" and child.get("value"):

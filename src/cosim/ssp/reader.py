@@ -11,12 +11,17 @@ connector without a unit passes the unit through) and
 source + offset).  Parameter bindings (inline or .ssv, with ``prefix`` and
 .ssm mappings) become unit parameters and start values; bindings of a higher
 system win over lower ones, later bindings over earlier ones at one level.
-The experiment comes from ``DefaultExperiment`` and the step size from
-OMSimulator's ``FixedStepMaster`` or OSP's ``FixedStepAlgorithm``
-annotations; what is missing is left to the spec or the command line.
+A value reaching an FMU parameter through a parameter connection counts as
+bound where the system connector's value was bound.  A table component (CSV,
+``type="text/csv"``) becomes a player.  The experiment comes from
+``DefaultExperiment`` and the step size from OMSimulator's ``FixedStepMaster``
+or ``oms_ma`` solver, or OSP's ``FixedStepAlgorithm``; ``implementation`` and
+OMSimulator's solvers give a component's interface and solver settings (see
+:mod:`.annotations`); what is missing is left to the spec or the command line.
+Forms tools write against the schema are read with a note (:mod:`.tolerant`).
 
 Every problem is collected (file in the archive, element path, fix) and
-raised at the end as one SpecError.
+raised at the end as one SpecError; nothing else escapes for any input file.
 """
 
 from __future__ import annotations
@@ -30,10 +35,10 @@ from typing import Any
 
 from lxml import etree
 
-from cosim.errors import Problem, SpecError, did_you_mean
+from cosim.errors import AnnotationNumberError, Problem, SpecError, did_you_mean
 from cosim.master.algorithms import ALGORITHMS
-from cosim.ssp.annotations import (BadNumber, Solvers, component_solver, cvode_settings, number,
-                                   read_system_solvers, step_size_hint, unread_annotation_types)
+from cosim.ssp.annotations import (Solvers, component_solver, cvode_settings, number, read_system_solvers,
+                                   step_size_hint, unread_annotation_types)
 from cosim.ssp.archive import SspFiles, open_ssp
 from cosim.ssp.tolerant import tolerated
 from cosim.ssp.xml import display_name, element_path, parse_file, schema_problems, short_name, tag
@@ -301,7 +306,7 @@ class _Reader:
         self.nodes[path] = node
         try:
             read_system_solvers(element, path, self.solvers)  # before the elements: they are assigned by name
-        except BadNumber as exc:
+        except AnnotationNumberError as exc:
             self._bad_number(exc)
         elements = element.find(tag("ssd", "Elements"))
         for child in (elements if elements is not None else []):
@@ -465,14 +470,14 @@ class _Reader:
                     break
         try:
             hint = step_size_hint(element)
-        except BadNumber as exc:
+        except AnnotationNumberError as exc:
             self._bad_number(exc)
             hint = None
         if hint is not None:
             self._hints.append(f"{name} {hint:g} s")
         return True
 
-    def _bad_number(self, exc: BadNumber) -> None:
+    def _bad_number(self, exc: AnnotationNumberError) -> None:
         message = f"{display_name(exc.element)} {exc}"
         if any(p.message == message and p.path == element_path(exc.element) for p in self.problems):
             return  # read twice (a system's solvers and the experiment's step)
@@ -659,7 +664,7 @@ class _Reader:
                     step = number(element, "stepSize")  # OMSimulator
                 elif local == "FixedStepAlgorithm" and (element.get("baseStepSize") or element.get("stepSize")):
                     step = number(element, "baseStepSize" if element.get("baseStepSize") else "stepSize")  # OSP
-            except BadNumber as exc:
+            except AnnotationNumberError as exc:
                 self._bad_number(exc)
                 break
             if step is not None:

@@ -79,8 +79,8 @@ def _merge_bindings(element: Any, label: str, where: str) -> list[str]:
         for binding in list(other):
             first.append(binding)
         element.remove(other)
-    return [f"{label}: {where} has {len(containers)} ssd:ParameterBindings; SSP allows one "
-            "(with several ssd:ParameterBinding inside): read as one, in document order"]
+    return [(f"{label}: {where} has {len(containers)} ssd:ParameterBindings; SSP allows one "
+             "(with several ssd:ParameterBinding inside): read as one, in document order")]
 
 
 def _reorder(element: Any, label: str, where: str) -> list[str]:
@@ -100,5 +100,5 @@ def _reorder(element: Any, label: str, where: str) -> list[str]:
     for child in children:
         element.remove(child)
     element.extend(ordered)
-    return [f"{label}: {where} has its children in a deprecated order ({short_name(moved.tag)} "
-            f"before {short_name(before.tag)}); SSP 2.0 expects {_STANDARD_ORDER[element.tag]}: read as if so"]
+    return [(f"{label}: {where} has its children in a deprecated order ({short_name(moved.tag)} "
+             f"before {short_name(before.tag)}); SSP 2.0 expects {_STANDARD_ORDER[element.tag]}: read as if so")]
