@@ -19,7 +19,9 @@ import pytest
 from cosim import build_system, load_spec
 from cosim.execution.lockstep import LockstepRunner, can_run_in_lockstep, instantiate, run_lockstep
 from cosim.execution.point import assignments_for, run_point
+from cosim.master.algorithms import ALGORITHMS
 from cosim.parallel.isolation import PointRunner
+from cosim.units.python.batch import NotBatchable
 
 FOLDER = Path(__file__).resolve().parents[1] / "examples" / "pick_and_place"
 Q22, Q24 = "traj.waypoints[9]", "traj.waypoints[11]"
@@ -84,6 +86,48 @@ def test_lockstep_gives_every_point_the_results_of_its_single_run_bit_for_bit(tm
         assert g.ok and a.ok, (point, a.message, g.message)
         assert (g.steps, g.end_time) == (a.steps, a.end_time), point
         assert g.objectives == a.objectives, point  # every objective, exactly
+
+
+@pytest.mark.parametrize("algorithm", ["gauss-seidel", "jacobi", "jacobi-delayed"])
+def test_a_group_steps_through_the_master_algorithm_object_a_single_run_uses(tmp_path, monkeypatch, algorithm):
+    """No master algorithm of lock-step's own: the spec's class from cosim.master.algorithms, bound to the
+    batches, steps the group once per communication point until its last point ends."""
+    system = build_system(load_spec(_spec_with(tmp_path, algorithm=algorithm)))
+    cls, calls = ALGORITHMS[algorithm], []
+    step = cls.step
+    monkeypatch.setattr(cls, "step", lambda self, t, h: (calls.append((type(self), t, h)), step(self, t, h))[1])
+    batches = instantiate(system, 4)
+    try:
+        results = run_lockstep(system, [assignments_for(system, _values(*p)) for p in POINTS[:4]], batches)
+    finally:
+        for batch in batches.values():
+            batch.terminate()
+    exp = system.spec.experiment
+    assert all(r.ok for r in results)
+    assert len(calls) == max(r.steps for r in results) > min(r.steps for r in results)  # the longest point's
+    assert {c[0] for c in calls} == {cls}
+    assert [t for _, t, _ in calls] == [exp.start + k * exp.step for k in range(len(calls))]
+    assert all(h == pytest.approx(exp.step, rel=1e-9) for _, _, h in calls)
+
+
+def test_points_of_a_master_algorithm_that_cannot_step_batches_run_one_by_one(monkeypatch):
+    """An algorithm that is not ``batchable`` (e.g. one that needs live units) never runs a lock-step group."""
+    system = build_system(load_spec(FOLDER / "spec.json"))
+    monkeypatch.setattr(ALGORITHMS[system.spec.experiment.algorithm], "batchable", False)
+    assert not can_run_in_lockstep(system)
+    batches = instantiate(system, 2)
+    try:
+        with pytest.raises(NotBatchable, match="gauss-seidel"):
+            run_lockstep(system, [assignments_for(system, _values(*p)) for p in POINTS[:2]], batches)
+    finally:
+        for batch in batches.values():
+            batch.terminate()
+    points = [(f"p{i}", _values(*p)) for i, p in enumerate(POINTS[:4])]
+    runner = LockstepRunner(PointRunner(system))
+    rows = list(runner.rows(points))
+    runner.close()
+    assert runner.group_size == 1
+    assert [r["objectives"] for r in rows] == [a.objectives for a in _single(system, POINTS[:4])]
 
 
 def test_the_committed_coarse_table_re_runs_in_lockstep_within_one_ulp():

@@ -94,9 +94,9 @@ def test_other_configurations_are_not_batchable_and_run_one_by_one(values):
 def test_several_solver_steps_per_communication_step_are_not_batchable():
     twin = _twin(2, ref_timing="step_end", ref_phase=1.0, substep=1e-3)
     twin.exit_initialization()
-    twin.step(0.0, 1e-3)  # one solver step: fine
+    twin.do_step(0.0, 1e-3)  # one solver step: fine
     with pytest.raises(NotBatchable):
-        twin.step(1e-3, 2e-3)
+        twin.do_step(1e-3, 2e-3)
     twin.terminate()
 
 
@@ -107,7 +107,7 @@ def test_a_row_starts_on_its_reference_and_holds_still_at_rest():
     twin.q_ref[:] = poses
     twin.exit_initialization()
     for k in range(50):
-        twin.step(k * 2e-3, 2e-3)
+        twin.do_step(k * 2e-3, 2e-3)
     np.testing.assert_allclose(twin.q, poses, atol=1e-9)
     np.testing.assert_allclose(twin.qd, 0.0, atol=1e-8)
     assert np.all(twin.tracking_error < 1e-9)

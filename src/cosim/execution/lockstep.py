@@ -10,7 +10,10 @@ any other unit is K ordinary instances called in a tight loop
 
 The semantics are those of K separate runs (:class:`~cosim.execution.run.Execution`):
 every point's units see the same communication points, in the same order of
-the master algorithm, with the same initialization; a point that reaches its
+the master algorithm, with the same initialization; the master algorithm is
+the very object a single run uses (:mod:`cosim.master.algorithms`), bound to
+the batches instead of units (each batch steps with ``do_step(t, h)`` like a
+unit) and given transfers that move all K rows at once; a point that reaches its
 ``stop_when`` is no longer stepped (its FMU instances) or read (its rows of a
 twin); its objectives are reduced from its own samples with the same
 reducer.  The results are those of the single runs bit for bit
@@ -25,7 +28,8 @@ Anything unusual makes the points run one by one instead, so a point's row
 never depends on its neighbours (beyond such a stated tolerance): a unit error, an exception, a unit ending the
 simulation, a twin refusing the rows (:class:`~cosim.units.python.batch.NotBatchable`).
 Lock-step is used only where it pays and cannot change a result: no traces
-recorded, only numeric probes, Real connections, and at least one unit with
+recorded, only numeric probes, Real connections, no algebraic loops, a master
+algorithm that can step batches (``batchable``), and at least one unit with
 a twin.  An FMU's outputs that no objective needs before a point's end (only
 ``final`` reductions) are read at that point's last sample only.
 """
@@ -39,9 +43,11 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 import numpy as np
 
 from cosim.execution.run import FAILED, OK, UNIT_FAILURE, RunResult, step_count
+from cosim.master.algorithms import ALGORITHMS, MasterAlgorithm, make_algorithm
 from cosim.master.observers import ObjectiveReducer, flatten_objectives
+from cosim.master.transfers import Link
 from cosim.spec.expressions import evaluate_expressions
-from cosim.system.builder import Assignment, Connection, System
+from cosim.system.builder import Assignment, System
 from cosim.units.fmu.instance import FmiInstance
 from cosim.units.protocol import NUMERIC_TYPES, Selection, Unit
 from cosim.units.python.batch import NotBatchable, batch_class_of
@@ -117,7 +123,8 @@ class InstanceBatch:
         for unit in self.units:
             unit.exit_initialization()
 
-    def step(self, t: float, h: float) -> None:
+    def do_step(self, t: float, h: float) -> None:
+        """Step the active instances from ``t`` to ``t + h`` (what a master algorithm calls, as on a unit)."""
         steps = self._steps
         for k in self._active_list:
             steps[k](t, h)
@@ -145,13 +152,13 @@ def has_twin(system: System) -> bool:
 
 
 def can_run_in_lockstep(system: System) -> bool:
-    """Whether points of ``system`` may run in lock-step (module docstring): a twin, Real connections,
-    numeric probes."""
+    """Whether points of ``system`` may run in lock-step (module docstring): a twin, a batchable master
+    algorithm, no loops, Real connections, numeric probes."""
     # algebraic loops are solved point by point; a group of model-exchange units steps as one
     if not has_twin(system) or system.coupling.loops or system.model_exchange.groups:
         return False
-    if system.spec.experiment.algorithm == "adaptive":
-        return False  # adaptive steps differ from point to point: no common grid to step together
+    if not getattr(ALGORITHMS.get(system.spec.experiment.algorithm), "batchable", False):
+        return False  # e.g. adaptive: its steps differ from point to point, no common grid to step together
     # connections carry Real values only (batches hand values on as float arrays; an Integer or Boolean
     # input keeps its exact type on the one-by-one path)
     if any(c.target.variable.type != "Real" or c.source.variable.type != "Real" for c in system.connections):
@@ -193,14 +200,15 @@ def terminate(batches: Mapping[str, Any]) -> None:
 
 
 class _Transfer:
-    """Output elements of one batch to input elements of another, all rows at once (factor and offset applied)."""
+    """Output elements of one batch to input elements of another, all rows at once (factor and offset applied);
+    a master algorithm runs it as it runs a :class:`~cosim.master.transfers.Transfer` between units."""
 
-    def __init__(self, source: Any, target: Any, connections: Sequence[Connection]):
+    def __init__(self, source: Any, target: Any, connections: Sequence[Link]):
         self.source, self.target = source, target
         self.source_selection = source.select([r for c in connections for r in c.source.refs])
         self.target_selection = target.select([r for c in connections for r in c.target.refs])
         self.factor = self.offset = None
-        if any(c.transforms for c in connections):
+        if any((c.factor, c.offset) != (1.0, 0.0) for c in connections):
             self.factor = np.array([c.factor for c in connections for _ in c.source.refs])
             self.offset = np.array([c.offset for c in connections for _ in c.source.refs])
 
@@ -215,8 +223,10 @@ class _Transfer:
         self.write(self.read())
 
 
-def _transfers(batches: Mapping[str, Any], connections: Sequence[Connection]) -> list[_Transfer]:
-    groups: dict[tuple[str, str], list[Connection]] = {}
+def _transfers(batches: Mapping[str, Any], connections: Sequence[Link]) -> list[_Transfer]:
+    """One _Transfer per (source, target) batch pair, in the order first seen: the lock-step
+    :data:`~cosim.master.transfers.TransferFactory`, as :func:`~cosim.master.transfers.group_transfers` for units."""
+    groups: dict[tuple[str, str], list[Link]] = {}
     for c in connections:
         groups.setdefault((c.source.unit, c.target.unit), []).append(c)
     return [_Transfer(batches[s], batches[t], cs) for (s, t), cs in groups.items()]
@@ -290,7 +300,8 @@ def run_lockstep(system: System, points: Sequence[Sequence[Assignment]], batches
             batches.wiring = wiring
     padded = list(points) + [points[0]] * (rows - n)  # spare rows copy the first point; never read
     wiring.initialize(padded)
-    columns, probe, plan = wiring.columns, wiring.probe, wiring.step
+    wiring.algorithm.start(exp.start)  # as Execution does (no loops here: nothing to solve)
+    columns, probe, plan = wiring.columns, wiring.probe, wiring.algorithm.step
     stop_column = columns.index(exp.stop_when) if exp.stop_when else None
     n_steps = step_count(exp.start, exp.stop, exp.step)
     start, h, last = exp.start, exp.step, n_steps - 1
@@ -360,7 +371,8 @@ def _set_active(batches: Mapping[str, Any], active: np.ndarray) -> None:
 
 
 class _Wiring:
-    """What connects the batches of one system, built once: transfers, the probe, selections, the step."""
+    """What connects the batches of one system, built once: transfers, the probe, selections, the master
+    algorithm bound to the batches."""
 
     def __init__(self, system: System, batches: Mapping[str, Any]):
         self.system, self.batches = system, batches
@@ -373,7 +385,7 @@ class _Wiring:
         end_only = _end_only_columns(system, batches, self.columns)
         self.probe = _BatchProbe(system, batches, self.columns, set(self.columns) - end_only)
         self.end_probe = _BatchProbe(system, batches, self.columns, end_only)
-        self.step = _plan(system, batches)
+        self.algorithm = _bind_algorithm(system, batches)
         self.reducer = ObjectiveReducer(self.columns, [(o.name, o.reduce, _columns_of(system, o.signal))
                                                        for o in system.spec.objectives if o.signal])
         self._selections: dict[tuple[str, tuple], Any] = {}
@@ -402,40 +414,19 @@ class _Wiring:
             transfer.run()
 
 
-def _plan(system: System, batches: Mapping[str, Any]):
-    """The master algorithm's step over batches (Gauss-Seidel or Jacobi, as :mod:`cosim.master.algorithms`)."""
-    algorithm = system.spec.experiment.algorithm
-    if algorithm == "gauss-seidel":
-        order = [(batches[name], _transfers(batches, [c for c in system.connections if c.target.unit == name]))
-                 for name in system.order]
+def _bind_algorithm(system: System, batches: Mapping[str, Any]) -> MasterAlgorithm:
+    """The spec's master algorithm (the class a single run uses) bound to ``batches``: it steps each batch
+    with ``do_step`` and moves values with transfers of all rows (:func:`_transfers`).
 
-        def gauss_seidel(t: float, h: float) -> None:
-            for batch, transfers in order:
-                for transfer in transfers:
-                    transfer.run()
-                batch.step(t, h)
-
-        return gauss_seidel
-    if algorithm in ("jacobi", "jacobi-delayed"):
-        # jacobi sets the inputs that feed outputs directly at each communication point, in dependency order
-        # (no loops here: can_run_in_lockstep); jacobi-delayed sets them with the others
-        direct = system.coupling.direct if algorithm == "jacobi" else frozenset()
-        transfers = _transfers(batches, [c for i, c in enumerate(system.connections) if i not in direct])
-        feeds = [transfer for block in system.coupling.blocks if direct
-                 for transfer in _transfers(batches, [system.connections[i] for i in block])]
-        stepped = [batches[name] for name in system.order]
-
-        def jacobi(t: float, h: float) -> None:  # transfers after the step, as Jacobi.step
-            for batch in stepped:
-                batch.step(t, h)
-            for transfer in feeds:
-                transfer.run()
-            values = [transfer.read() for transfer in transfers]
-            for transfer, v in zip(transfers, values):
-                transfer.write(v)
-
-        return jacobi
-    raise NotBatchable(f"no lock-step version of the master algorithm '{algorithm}'")
+    Raises NotBatchable for an algorithm that is not ``batchable`` (its points then run one by one).
+    """
+    algorithm = make_algorithm(system.spec.experiment.algorithm)
+    if not algorithm.batchable:
+        raise NotBatchable(f"no lock-step version of the master algorithm '{algorithm.name}'")
+    # no loops here (can_run_in_lockstep): the coupling only orders the direct feed-through under Jacobi
+    coupling = system.coupling if algorithm.solves_loops else None
+    algorithm.bind(batches, system.order, system.connections, coupling, transfers=_transfers)
+    return algorithm
 
 
 class LockstepRunner:

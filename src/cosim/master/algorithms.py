@@ -13,7 +13,7 @@ from __future__ import annotations
 from typing import Any, Callable, Mapping, Sequence
 
 from cosim.master.loops import Coupling, CouplingRuntime
-from cosim.master.transfers import Link, Port, Transfer, group_transfers  # noqa: F401  (re-exported: their old place)
+from cosim.master.transfers import Link, Port, Transfer, TransferFactory, group_transfers  # noqa: F401  (re-exported: their old place)
 from cosim.units.protocol import SimulationEnded, Unit, UnitError
 
 
@@ -38,14 +38,21 @@ class MasterAlgorithm:
     An algorithm with ``variable_step = True`` chooses its own steps: the run gives it the experiment (start,
     stop, step, options) with ``configure(experiment)`` and asks its ``advance(t)`` for each step (see
     :mod:`cosim.master.adaptive`).
+
+    ``batchable``: the algorithm uses its units only through their ``name`` and ``do_step(t, h)`` and moves
+    values only through the transfers that ``bind``'s ``transfers`` factory makes (called like
+    :func:`group_transfers`, ``transfers(units, links)``), so it can be bound to other stepping objects
+    than units: the lock-step runner (:mod:`cosim.execution.lockstep`) binds it to batches of K points with
+    transfers that move all K rows at once. Others (the default) run point by point.
     """
 
     name = "abstract"
     solves_loops = False
     variable_step = False
+    batchable = False
 
     def bind(self, units: Mapping[str, Unit], order: Sequence[str], connections: Sequence[Link],
-             coupling: Coupling | None = None) -> None:
+             coupling: Coupling | None = None, transfers: TransferFactory = group_transfers) -> None:
         raise NotImplementedError
 
     def start(self, t: float) -> None:
@@ -63,14 +70,16 @@ class GaussSeidel(MasterAlgorithm):
 
     name = "gauss-seidel"
     solves_loops = True
+    batchable = True
 
     def bind(self, units: Mapping[str, Unit], order: Sequence[str], connections: Sequence[Link],
-             coupling: Coupling | None = None) -> None:
+             coupling: Coupling | None = None, transfers: TransferFactory = group_transfers) -> None:
         self._plan = []
         for name in order:
             incoming = [c for c in connections if c.target.unit == name]
-            self._plan.append((units[name], group_transfers(units, incoming)))
-        self._loops = CouplingRuntime(coupling, units, connections) if coupling and coupling.loops else None
+            self._plan.append((units[name], transfers(units, incoming)))
+        self._loops = (CouplingRuntime(coupling, units, connections, transfers)
+                       if coupling and coupling.loops else None)
         if self._loops is not None:  # only then the step that solves loops (a system without any pays nothing)
             last = {loop: max(order.index(u) for u in loop.units) for loop in coupling.loops}
             self._solve_after = [[self._loops.solver(loop).solve for loop in coupling.loops if last[loop] == i]
@@ -116,14 +125,15 @@ class Jacobi(MasterAlgorithm):
 
     name = "jacobi"
     solves_loops = True
+    batchable = True
 
     def bind(self, units: Mapping[str, Unit], order: Sequence[str], connections: Sequence[Link],
-             coupling: Coupling | None = None) -> None:
+             coupling: Coupling | None = None, transfers: TransferFactory = group_transfers) -> None:
         direct = coupling.direct if coupling is not None else frozenset()
         # links into direct inputs are set in dependency order (propagate), then the others all at once
-        self._transfers = group_transfers(units, [c for i, c in enumerate(connections) if i not in direct])
+        self._transfers = transfers(units, [c for i, c in enumerate(connections) if i not in direct])
         self._units = [units[n] for n in order]
-        self._coupling = CouplingRuntime(coupling, units, connections) if direct else None
+        self._coupling = CouplingRuntime(coupling, units, connections, transfers) if direct else None
         self._loops = bool(coupling and coupling.loops)
 
     def start(self, t: float) -> None:
@@ -154,8 +164,8 @@ class JacobiDelayed(Jacobi):
     solves_loops = False
 
     def bind(self, units: Mapping[str, Unit], order: Sequence[str], connections: Sequence[Link],
-             coupling: Coupling | None = None) -> None:
-        super().bind(units, order, connections, None)
+             coupling: Coupling | None = None, transfers: TransferFactory = group_transfers) -> None:
+        super().bind(units, order, connections, None, transfers)
 
 
 class AdaptiveEntry:

@@ -34,7 +34,7 @@ from typing import Any, Iterable, Mapping, Sequence
 import numpy as np
 
 from cosim.errors import LoopError
-from cosim.master.transfers import Link, Transfer, group_transfers
+from cosim.master.transfers import Link, Transfer, TransferFactory, group_transfers
 from cosim.units.protocol import Unit
 
 Node = tuple[str, str]  # (unit, variable)
@@ -438,9 +438,11 @@ def _size(r: np.ndarray) -> float:
 
 
 class CouplingRuntime:
-    """A :class:`Coupling` bound to live units: its feed blocks as transfers, its loops as solvers."""
+    """A :class:`Coupling` bound to live units: its feed blocks as transfers (made by ``transfers``, as a master
+    algorithm's), its loops as solvers (which set and read units themselves)."""
 
-    def __init__(self, coupling: Coupling, units: Mapping[str, Unit], links: Sequence[Link]):
+    def __init__(self, coupling: Coupling, units: Mapping[str, Unit], links: Sequence[Link],
+                 transfers: TransferFactory = group_transfers):
         self.coupling = coupling
         self.solvers = {loop: LoopSolver(loop, units, links, coupling.settings) for loop in coupling.loops}
         self._actions: list[Any] = []
@@ -448,7 +450,7 @@ class CouplingRuntime:
             if isinstance(block, Loop):
                 self._actions.append(self.solvers[block].solve)
             else:
-                self._actions.extend(_RunAt(t) for t in group_transfers(units, [links[i] for i in block]))
+                self._actions.extend(_RunAt(t) for t in transfers(units, [links[i] for i in block]))
 
     def propagate(self, t: float) -> None:
         """Run every feed block and solve every loop, in dependency order, at time ``t``."""
@@ -465,7 +467,7 @@ class _RunAt:
     __slots__ = ("run",)
 
     def __init__(self, transfer: Transfer):
-        self.run = transfer.run
+        self.run = transfer.run  # any object with run(): a Transfer, or the lock-step runner's
 
     def __call__(self, t: float) -> None:
         self.run()

@@ -78,8 +78,12 @@ def _converting(read: Callable[[], Sequence], connections: Sequence[Link],
     return lambda: (np.asarray(read(), dtype=float) * factor + offset).tolist()
 
 
+# how an algorithm makes its transfers: (units by name, links) -> objects with run(), read() and write(values)
+TransferFactory = Callable[[Mapping[str, Any], Sequence[Link]], Sequence[Any]]
+
+
 def group_transfers(units: Mapping[str, Unit], connections: Sequence[Link]) -> list[Transfer]:
-    """One Transfer per (source unit, target unit) pair, in the order first seen."""
+    """One Transfer per (source unit, target unit) pair, in the order first seen (a :data:`TransferFactory`)."""
     groups: dict[tuple[str, str], list[Link]] = {}
     for c in connections:
         groups.setdefault((c.source.unit, c.target.unit), []).append(c)

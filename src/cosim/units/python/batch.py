@@ -51,7 +51,9 @@ class PythonBatchUnit:
 
     ``get`` returns a float array (K, n) of the selected elements, ``set``
     takes one (``set_row`` sets one row, for parameters); ``do_step(t, h)``
-    advances every row.  Raises UnitError naming the unit when a hook raises.
+    advances every row: the master algorithm calls it as it calls a unit's (and
+    reports what it raises as a UnitError naming the unit, as for a unit).  The
+    other hooks raise UnitError naming the unit when they raise.
     """
 
     single_class: ClassVar[type[PythonUnit]]
@@ -145,9 +147,6 @@ class PythonBatchUnit:
     def exit_initialization(self) -> None:
         self._call("initialize", self.start_time)
         self._outputs_stale = self._has_feedthrough
-
-    def step(self, t: float, h: float) -> None:
-        self._call("do_step", t, t, h)
 
     def reset(self) -> None:
         self._call("close", None)
