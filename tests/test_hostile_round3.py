@@ -567,3 +567,26 @@ def test_a_design_count_above_the_limit_is_written_exactly(tmp_path):
     assert done.returncode == 2
     assert "the grid has 1,001,000 points (1001 x 1000), more than the limit of 1,000,000" in done.stderr
     assert "COSIM_MAX_POINTS (default 1000000)" in done.stderr and "e+06" not in done.stderr
+
+
+# 3. Signals: SIGHUP stops a study like SIGTERM ------------------------------------------------------------------------
+
+def test_sighup_stops_a_sweep_like_sigterm_and_resume_is_exact(tmp_path, local_cluster):
+    """Before: SIGHUP (terminal or ssh session closed) killed the client without a word."""
+    import signal
+
+    import pandas as pd
+
+    spec = _triple_study(tmp_path / "project", 30, pause=0.1)
+    out = tmp_path / "out"
+    sweep = ("sweep", str(spec), "--out", str(out), "--scheduler", local_cluster, "--batch-size", "2")
+    proc = _popen_cosim(*sweep)
+    _wait_for(lambda: len(list((out / "parts").glob("part-*.parquet"))) >= 2)
+    proc.send_signal(signal.SIGHUP)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "cosim: interrupted" in err and "--resume" in err and "Traceback" not in err, err
+    done = _cosim(*sweep, "--resume")
+    assert done.returncode == 0, done.stderr
+    table = pd.read_parquet(out / "results.parquet")
+    assert list(table["s.k"]) == list(range(1, 31)) and list(table["y"]) == [3.0 * k for k in range(1, 31)]

@@ -7,7 +7,7 @@ machine.  Only the client decides what happens (it stops the sweep, keeps
 the rows written so far and says ``cosim: interrupted``):
 
 - :func:`stop_cleanly_on_signals` (called by ``cosim``'s ``main``) turns
-  SIGINT and SIGTERM into KeyboardInterrupt in the client and, once a stop has
+  SIGINT, SIGTERM and SIGHUP into KeyboardInterrupt in the client and, once a stop has
   begun, hushes what Dask logs while its half-stopped workers go down.
 - :func:`dask_setup` is a Dask *preload*: every worker process a cluster
   file starts here runs it at start-up and ignores SIGINT from then on, so it neither
@@ -31,7 +31,10 @@ WORKER_PRELOAD = __name__  # the module name given to Dask's ``preload`` for the
 
 
 def stop_cleanly_on_signals() -> dict[int, Any]:
-    """Make SIGINT and SIGTERM raise KeyboardInterrupt in the main thread, and quiet Dask after a stop.
+    """Make SIGINT, SIGTERM and SIGHUP raise KeyboardInterrupt in the main thread, and quiet Dask after a stop.
+
+    SIGHUP (the terminal or ssh session closed, a job scheduler's hang-up) stops a study like SIGTERM:
+    unhandled, it killed the client at once, before it could say where the rows are.
 
     Returns the handlers it replaced, for :func:`restore_signals`.  Does
     nothing outside the main thread (signal handlers can only be set there).
@@ -46,7 +49,8 @@ def stop_cleanly_on_signals() -> dict[int, Any]:
 
     if threading.current_thread() is not threading.main_thread():
         return {}
-    return {signum: signal.signal(signum, stop) for signum in (signal.SIGTERM, signal.SIGINT)}
+    stopping = [signal.SIGTERM, signal.SIGINT] + ([signal.SIGHUP] if hasattr(signal, "SIGHUP") else [])
+    return {signum: signal.signal(signum, stop) for signum in stopping}
 
 
 def restore_signals(previous: dict[int, Any]) -> None:
