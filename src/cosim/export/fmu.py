@@ -128,7 +128,8 @@ def export_python_unit(target: str, out: str | Path, base_dir: str | Path | None
     with tempfile.TemporaryDirectory(prefix="cosim_export_fmu_") as scratch:
         script = Path(scratch) / f"{key}.py"
         script.write_text(_WRAPPER.format(
-            target=target, module=None if packed else module_name, file=packed.name if packed else None,
+            # imported by the name it was loaded under: a spec's models.X is cosim.models.X (no top-level models)
+            target=target, module=None if packed else cls.__module__, file=packed.name if packed else None,
             class_name=class_name, key=f"{key}_unit", model_name=model_name,
             description=description.description or f"cosim Python unit {target}"))
         from pythonfmu.builder import FmuBuilder
