@@ -102,18 +102,32 @@ def json_path(parts: Iterable[object]) -> str:
 
 
 class UnitError(CosimError):
-    """A unit failed at run time: names the unit, the simulation time and what went wrong."""
+    """A unit failed at run time: names the unit, the simulation time and what went wrong.
 
+    ``traceback``: when a Python unit's own code raised, the frames of that code (see :func:`unit_traceback`),
+    else ``""``; ``str()`` of the error is the one line without them, :meth:`with_traceback_text` adds them.
+    """
 
-    def __init__(self, unit: str, message: str, time: float | None = None):
+    def __init__(self, unit: str, message: str, time: float | None = None, traceback: str = ""):
         self.unit = unit
         self.time = time
         self.message = message
+        self.traceback = traceback
         where = f"unit '{unit}'" + (f" at t={time:g}" if time is not None else "")
         super().__init__(f"{where}: {message}")
 
+    @classmethod
+    def raised(cls, unit: str, call: str, exc: BaseException, time: float | None) -> "UnitError":
+        """The error for a unit whose ``call`` (``do_step``, ``initialize()``) raised ``exc``: its type and
+        text in the message, the unit's own frames in ``traceback``."""
+        return cls(unit, f"{call} raised {type(exc).__name__}: {exc}", time, unit_traceback(exc))
+
+    def with_traceback_text(self) -> str:
+        """The one-line message, then the unit's frames when its Python code raised (what a row keeps)."""
+        return f"{self}\n{self.traceback}" if self.traceback else str(self)
+
     def __reduce__(self):
-        return type(self), (self.unit, self.message, self.time)
+        return type(self), (self.unit, self.message, self.time, self.traceback)
 
 
 class LoopError(UnitError):
@@ -122,12 +136,60 @@ class LoopError(UnitError):
     A UnitError, so the run is a failed row like any unit's failure; ``unit`` holds the loop's name.
     """
 
-    def __init__(self, loop: str, message: str, time: float | None = None):
+    def __init__(self, loop: str, message: str, time: float | None = None, traceback: str = ""):
         self.unit = loop
         self.time = time
         self.message = message
+        self.traceback = traceback
         CosimError.__init__(self, f"algebraic {loop}" + (f" at t={time:g}" if time is not None else "")
                             + f": {message}")
+
+
+#: bounds of the traceback a row keeps: the innermost frames of the unit's code, and at most so many characters
+UNIT_TRACEBACK_FRAMES = 12
+UNIT_TRACEBACK_CHARS = 4000
+_COSIM_DIR = Path(__file__).resolve().parent
+#: set (to "1") by ``cosim --debug``; inherited by the processes that run points, whose unit errors then keep
+#: their whole traceback
+DEBUG_VARIABLE = "COSIM_DEBUG"
+
+
+def _cosim_own(filename: str) -> bool:
+    """Whether a frame's file is cosim's engine (not a unit: the built-in units of cosim.models are units)."""
+    try:
+        relative = Path(filename).resolve().relative_to(_COSIM_DIR)
+    except ValueError:
+        return False
+    return relative.parts[:1] != ("models",)
+
+
+def unit_traceback(exc: BaseException, frames: int = UNIT_TRACEBACK_FRAMES, chars: int = UNIT_TRACEBACK_CHARS) -> str:
+    """The traceback of ``exc`` raised by a unit's code, as Python prints it, without cosim's calling frames.
+
+    Under ``cosim --debug`` (:data:`DEBUG_VARIABLE` set): the whole traceback, unbounded.  Else bounded for a
+    results row: the ``frames`` innermost frames (a line says how many outer ones were left out)
+    and at most ``chars`` characters (the end kept: the frame that raised and the exception).  ``""`` when no
+    frame is the unit's (the error came from cosim itself).
+    """
+    import os
+    import traceback
+
+    if os.environ.get(DEBUG_VARIABLE):  # `cosim --debug`: everything, cosim's frames and the chain included
+        return "".join(traceback.format_exception(exc)).rstrip("\n")
+    stack = traceback.extract_tb(exc.__traceback__)
+    while stack and _cosim_own(stack[0].filename):
+        stack = traceback.StackSummary.from_list(stack[1:])
+    if not stack:
+        return ""
+    left_out = max(0, len(stack) - frames)
+    lines = ["Traceback (most recent call last):\n"]
+    if left_out:
+        lines.append(f"  ... {left_out} outer frame{'s' if left_out != 1 else ''} left out\n")
+    lines += traceback.format_list(stack[left_out:]) + traceback.format_exception_only(type(exc), exc)
+    text = "".join(lines).rstrip("\n")
+    if len(text) > chars:
+        text = "... (cut to its last " + str(chars) + " characters)\n" + text[-chars:]
+    return text
 
 
 class InternalError(CosimError):

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 import traceback
 from typing import Any, Sequence
@@ -17,7 +18,7 @@ from typing import Any, Sequence
 from cosim.cli.exit_codes import EXIT_INTERNAL, EXIT_OK, EXIT_RUN_FAILED, EXIT_USAGE, exit_code
 from cosim.cli.options import add_experiment_options, experiment_overrides  # noqa: F401  (their old place)
 from cosim.cli.spec import cmd_inspect, cmd_run, cmd_validate, parse_assignment  # noqa: F401  (their old place)
-from cosim.errors import UsageError, UserError
+from cosim.errors import DEBUG_VARIABLE, UnitError, UsageError, UserError
 
 __all__ = ["EXIT_INTERNAL", "EXIT_OK", "EXIT_RUN_FAILED", "EXIT_USAGE", "UsageError", "main"]
 
@@ -42,7 +43,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     (exit 2), anything unexpected prints a traceback (exit 70).
     """
     parser = _parser()
-    args = parser.parse_args(argv)
+    arguments = list(sys.argv[1:] if argv is None else argv)
+    if "--debug" in arguments:  # `cosim run spec.json --debug` as well as `cosim --debug run spec.json`
+        arguments = ["--debug"] + [a for a in arguments if a != "--debug"]
+    args = parser.parse_args(arguments)
+    if args.debug:  # the processes that run points inherit it: their unit errors keep the whole traceback
+        os.environ[DEBUG_VARIABLE] = "1"
     if not getattr(args, "handler", None):
         parser.print_help()
         return EXIT_USAGE
@@ -59,7 +65,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BaseException as exc:  # noqa: BLE001 - every outcome gets its exit code here, and only here
         if isinstance(exc, SystemExit):
             raise
-        report_error(exc)
+        report_error(exc, debug=args.debug)
         return exit_code(exc)
     finally:
         sys.stdout = stdout
@@ -126,14 +132,20 @@ def _discard_stdout() -> None:
     os.close(devnull)
 
 
-def report_error(exc: BaseException) -> None:
-    """Print what a user needs to know about ``exc`` on stderr (no traceback for a user's mistake)."""
+def report_error(exc: BaseException, debug: bool = False) -> None:
+    """Print what a user needs to know about ``exc`` on stderr: no traceback for a user's mistake, unless
+    ``debug`` (``cosim --debug``), which prints every error's whole traceback after its message."""
     if isinstance(exc, UserError):
         _print_problems(exc.problems)
     elif isinstance(exc, KeyboardInterrupt):
         print("cosim: interrupted", file=sys.stderr)
+        return
+    elif isinstance(exc, UnitError):  # a unit that failed outside a run's result: its own frames
+        print(f"cosim: {exc.with_traceback_text()}", file=sys.stderr)
     else:
         print("cosim: internal error (please report it with the text below)", file=sys.stderr)
+        debug = True
+    if debug:
         traceback.print_exception(exc)
 
 
@@ -142,6 +154,10 @@ def _parser() -> argparse.ArgumentParser:
 
     parser = argparse.ArgumentParser(prog="cosim", description="FMI co-simulation orchestrator.")
     parser.add_argument("--version", action="version", version=f"cosim {__version__}")
+    parser.add_argument("--debug", action="store_true",
+                        help="print every error's whole traceback (also a user's mistake), and keep the whole "
+                             "traceback, cosim's frames included, of a Python unit that raised (anywhere on the "
+                             "command line)")
     sub = parser.add_subparsers(title="commands")
     for module, register in SUBCOMMAND_MODULES:
         getattr(importlib.import_module(f"cosim.cli.{module}"), register)(sub)

@@ -236,8 +236,8 @@ class Execution:
                                  time.perf_counter() - started, steps, t, step_stats=stats)
             return RunResult(OK, "", flat, recorder.frame() if recorder else None,
                              time.perf_counter() - started, steps, t, step_stats=stats)
-        except UnitError as exc:
-            return RunResult(FAILED, str(exc), elapsed=time.perf_counter() - started, steps=steps, end_time=t,
+        except UnitError as exc:  # a Python unit's own frames kept in the message: where the user looks
+            return RunResult(FAILED, exc.with_traceback_text(), elapsed=time.perf_counter() - started, steps=steps, end_time=t,
                              failure=UNIT_FAILURE)
         except UserError as exc:  # e.g. an FMU archive found unsafe when it is extracted
             return RunResult(FAILED, str(exc).replace("\n", " "), elapsed=time.perf_counter() - started,

@@ -24,7 +24,7 @@ def step_unit(unit: Unit, t: float, h: float) -> None:
     except (UnitError, SimulationEnded):
         raise
     except Exception as exc:  # a Python unit's own bug, reported like an FMU's error status
-        raise UnitError(unit.name, f"do_step raised {type(exc).__name__}: {exc}", t) from exc
+        raise UnitError.raised(unit.name, "do_step", exc, t) from exc
 
 
 class MasterAlgorithm:
@@ -147,7 +147,7 @@ class Jacobi(MasterAlgorithm):
         except (UnitError, SimulationEnded):
             raise
         except Exception as exc:
-            raise UnitError(unit.name, f"do_step raised {type(exc).__name__}: {exc}", t) from exc
+            raise UnitError.raised(unit.name, "do_step", exc, t) from exc
         if self._coupling is not None:  # the direct feed-through inputs first, in dependency order; loops solved
             self._coupling.propagate(t + h)
         # each transfer reads into its source's buffer, so all reads stay valid until the writes

@@ -177,7 +177,7 @@ class PythonBatchUnit:
         except (UnitError, SimulationEnded, NotBatchable):
             raise
         except Exception as exc:
-            raise UnitError(self.name, f"{hook}() raised {type(exc).__name__}: {exc}", t) from exc
+            raise UnitError.raised(self.name, f"{hook}()", exc, t) from exc
 
 
 def batch_class_of(cls: type) -> type[PythonBatchUnit] | None:

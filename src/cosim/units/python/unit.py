@@ -231,7 +231,7 @@ class PythonUnit(Unit):
         try:
             own = self.get_state()
         except Exception as exc:
-            raise UnitError(self.name, f"get_state raised {type(exc).__name__}: {exc}", None) from exc
+            raise UnitError.raised(self.name, "get_state", exc, None) from exc
         return values, self._outputs_stale, own
 
     def restore_state(self, state: Any) -> None:
@@ -244,7 +244,7 @@ class PythonUnit(Unit):
         try:
             self.set_state(own)
         except Exception as exc:
-            raise UnitError(self.name, f"set_state raised {type(exc).__name__}: {exc}", None) from exc
+            raise UnitError.raised(self.name, "set_state", exc, None) from exc
 
     def _call(self, hook: str, t: float | None) -> None:
         try:
@@ -252,7 +252,7 @@ class PythonUnit(Unit):
         except (UnitError, SimulationEnded):  # SimulationEnded: the unit ends the run, not an error
             raise
         except Exception as exc:  # a unit's own bug becomes a named unit error
-            raise UnitError(self.name, f"{hook}() raised {type(exc).__name__}: {exc}", t) from exc
+            raise UnitError.raised(self.name, f"{hook}()", exc, t) from exc
 
 
 class PythonUnitType(UnitType):
