@@ -319,3 +319,22 @@ def test_a_member_ending_the_simulation_ends_the_run_at_its_event(write_spec, ve
     assert result.end_time == pytest.approx(times[-1], abs=1e-6)
     assert result.objectives["bounces"] == len(times)
     assert result.objectives["area"] == pytest.approx(area, abs=1e-6)
+
+
+@pytest.mark.parametrize("algorithm", ["gauss-seidel", "jacobi"])
+def test_an_input_from_outside_reaches_the_member_through_the_group(write_spec, algorithm):
+    """A constant force on the right mass from a co-simulation unit (set through the group's port
+    right.F): the exact solution is the matrix exponential of the system with the force as a fifth state."""
+    force = 30.0
+    spec = oscillator(step=0.01, stop=1.0)
+    spec["units"]["push"] = {"fmu": "builtin:linear_ode_fmi3", "parameters": {"a": 0.0, "b": 0.0, "x0": force}}
+    spec["connections"].append({"from": "push.y", "to": "right.F"})
+    spec["experiment"]["algorithm"] = algorithm
+    system, traces = run(write_spec, spec)
+    assert [g.members for g in system.model_exchange.groups] == [("left", "right")]
+    forced = np.zeros((5, 5))
+    forced[:4, :4], forced[3, 4] = A, 1.0 / M2  # der(v2) gets F / m2; the fifth state is the force, constant
+    times = traces["time"].to_numpy()
+    expected = np.array([expm(forced * t) @ np.append(X0, force) for t in times[::10]])[:, :4]
+    got = traces[COLUMNS].to_numpy()[::10]
+    assert np.max(np.abs(got - expected)) < 1000 * RTOL * np.max(np.abs(expected))
