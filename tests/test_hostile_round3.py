@@ -590,3 +590,20 @@ def test_sighup_stops_a_sweep_like_sigterm_and_resume_is_exact(tmp_path, local_c
     assert done.returncode == 0, done.stderr
     table = pd.read_parquet(out / "results.parquet")
     assert list(table["s.k"]) == list(range(1, 31)) and list(table["y"]) == [3.0 * k for k in range(1, 31)]
+
+
+def test_an_fmi_1_fmu_is_refused_by_its_version_not_a_type_error(tmp_path):
+    """Before: "cannot read it: int() argument must be a string ... not 'NoneType'" (fmpy's reader on FMI 1.0)."""
+    source = ensure_built("gain_array", 2)
+    with zipfile.ZipFile(source) as zin, zipfile.ZipFile(tmp_path / "old.fmu", "w") as zout:
+        for info in zin.infolist():
+            data = zin.read(info)
+            if info.filename == "modelDescription.xml":
+                data = data.replace(b'fmiVersion="2.0"', b'fmiVersion="1.0"')
+            zout.writestr(info, data)
+    for command, target in (("inspect", "old.fmu"), ("validate", str(_spec_of(tmp_path, {"g": {"fmu": "old.fmu"}})))):
+        done = _cosim(command, target, cwd=tmp_path)
+        text = done.stdout + done.stderr
+        assert done.returncode == 2, text
+        assert "FMI version 1.0 is not supported" in text and "export the FMU as FMI 2.0 or 3.0" in text, text
+        assert "int() argument" not in text

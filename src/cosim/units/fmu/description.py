@@ -197,6 +197,10 @@ class FmuUnitType(UnitType):
             check_archive(self.path)
         except ArchiveError as exc:
             raise FmuProblems(self.path, exc.problems) from None
+        version = _declared_fmi_version(self.path)
+        if version is not None and version not in ("2.0", "3.0"):  # fmpy's reader fails on FMI 1.0 with a TypeError
+            raise FmuProblems(self.path, [Problem(self.path, "modelDescription.xml", f"FMI version {version[:20]} "
+                                                  "is not supported", "export the FMU as FMI 2.0 or 3.0")])
         try:
             md = read_model_description(self.path, validate=False)
         except Exception as exc:  # fmpy raises many kinds for a broken XML
@@ -285,6 +289,17 @@ class FmuUnitType(UnitType):
         from cosim.units.fmu.fmi3 import Fmi3Unit
 
         return Fmi3Unit(name, self)
+
+
+def _declared_fmi_version(path: str) -> str | None:
+    """The ``fmiVersion`` the FMU's modelDescription.xml declares (read from its first 4 kB), or None."""
+    try:
+        with zipfile.ZipFile(path) as zf, zf.open("modelDescription.xml") as f:
+            head = f.read(4096).decode("utf-8", "replace")
+    except (KeyError, OSError, zipfile.BadZipFile, RuntimeError):
+        return None  # fmpy's reader says what is wrong
+    found = re.search(r"<fmiModelDescription\b[^>]*?\bfmiVersion\s*=\s*[\"']([^\"']*)[\"']", head)
+    return found.group(1) if found else None
 
 
 def _number(text: Any, kind: str) -> Any:

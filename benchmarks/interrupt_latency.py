@@ -1,0 +1,100 @@
+"""Signal-to-exit latency of `cosim sweep` and the finished points it keeps (issue 29, item 3).
+
+    python benchmarks/interrupt_latency.py                      # points of 0.3 s, 5 s and 60 s
+    python benchmarks/interrupt_latency.py --seconds 0.3,5      # quicker
+
+For each point time P, ``cosim sweep`` (its own local cluster of 2 workers, batch size left to cosim) runs a
+Python unit that sleeps P s and then appends its point and the time it finished to a log. Once points
+are running (the first part file for short points, else 2.5 P or 20 s after start), the client gets SIGTERM;
+the script measures the time from the signal to the client's exit, and compares the points finished
+before the signal (the log) with the rows kept in the results folder's part files.
+
+Target (issue 29): exit within about 2 s of the signal whatever P, every point finished before it kept.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+
+UNIT = """
+import time
+from cosim import PythonUnit, Variable
+
+class Slow(PythonUnit):
+    variables = (Variable("k", "parameter", start=1.0), Variable("pause", "parameter", start=0.0),
+                 Variable("y", "output", start=0.0))
+
+    def do_step(self, t, h):
+        time.sleep(self.pause)
+        self.y = 3.0 * self.k
+        with open(LOG, "a") as log:
+            log.write(f"{self.k:g} {time.time():.3f}\\n")
+"""
+
+
+def run_case(folder: Path, pause: float) -> dict:
+    points = max(8, int(40 / max(pause, 0.3)))
+    log = folder / "finished.log"
+    (folder / "slow.py").write_text(UNIT.replace("LOG", repr(str(log))))
+    spec = {"name": "slow", "units": {"s": {"python": "slow.py:Slow", "parameters": {"pause": pause}}},
+            "experiment": {"stop": 0.1, "step": 0.1}, "objectives": {"y": {"signal": "s.y", "reduce": "final"}},
+            "design": {"parameters": {"s.k": {"min": 1, "max": points, "step": 1}}}}
+    (folder / "spec.json").write_text(json.dumps(spec))
+    out = folder / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "cosim.cli.main", "sweep", str(folder / "spec.json"), "--out",
+                             str(out), "--workers", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=dict(os.environ, PYTHONPATH=str(REPO / "src")), start_new_session=True)
+    started = time.monotonic()
+    wait = 2.5 * pause if pause >= 1 else None
+    while True:
+        parts = list((out / "parts").glob("part-*.parquet")) if (out / "parts").exists() else []
+        if wait is None and parts or wait is not None and log.exists() and time.monotonic() - started > max(wait, 20):
+            break
+        time.sleep(0.05)
+    signalled = time.time()
+    os.kill(proc.pid, signal.SIGTERM)
+    _, err = proc.communicate(timeout=600)
+    latency = time.time() - signalled
+    finished = {float(line.split()[0]) for line in log.read_text().split("\n") if line.strip()
+                and float(line.split()[1]) <= signalled}
+    import pandas as pd
+
+    files = sorted((out / "parts").glob("part-*.parquet"))
+    kept = set(pd.concat([pd.read_parquet(p) for p in files])["s.k"]) if files else set()
+    try:  # the point children of the local cluster are ended with the client; none may outlive it long
+        subprocess.run(["pkill", "-s", str(proc.pid)], check=False)  # only this sweep's own session
+    except OSError:
+        pass
+    return {"pause": pause, "exit_code": proc.returncode, "latency": latency, "finished": len(finished),
+            "kept": len(kept & finished), "kept_rows": len(kept), "traceback": "Traceback" in err,
+            "broken_pipe": "BrokenPipe" in err}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--seconds", default="0.3,5,60")
+    pauses = [float(s) for s in parser.parse_args().seconds.split(",")]
+    print(time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()), "load", open("/proc/loadavg").read().split()[:3])
+    print("| point time | exit code | signal to exit | points finished before the signal | of them kept | "
+          "traceback | BrokenPipe |")
+    print("|---|---|---|---|---|---|---|")
+    for pause in pauses:
+        with tempfile.TemporaryDirectory() as tmp:
+            r = run_case(Path(tmp), pause)
+        print(f"| {pause:g} s | {r['exit_code']} | {r['latency']:.1f} s | {r['finished']} | {r['kept']} | "
+              f"{'yes' if r['traceback'] else 'no'} | {'yes' if r['broken_pipe'] else 'no'} |", flush=True)
+    print(time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()), "load", open("/proc/loadavg").read().split()[:3])
+
+
+if __name__ == "__main__":
+    main()
