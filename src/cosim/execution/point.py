@@ -16,18 +16,22 @@ from cosim.errors import Problem, SpecError
 from cosim.execution.run import Execution, RunResult
 from cosim.master.observers import Observer
 from cosim.system.builder import Assignment, System
+from cosim.system.study_checks import converted
 from cosim.units.protocol import Unit
 
 
 def assignments_for(system: System, values: Mapping[str, Any] | None) -> list[Assignment]:
     """The checked assignments setting ``values`` ('unit.param' -> value) on ``system``, in order.
 
-    Raises SpecError listing every target or value that does not fit (not
-    only the first).
+    A design parameter's value is in its design ``unit`` (as in the results table) and is converted to its
+    port's unit here.  Raises SpecError listing every target or value that does not fit (not only the first).
     """
     assignments: list[Assignment] = []
     problems: list[Problem] = []
+    conversions = getattr(system, "design_conversions", {})
     for target, value in (values or {}).items():
+        if target in conversions:
+            value = converted(value, *conversions[target])
         try:
             assignments.append(system.assignment_for(target, value))
         except SpecError as exc:

@@ -229,8 +229,11 @@ class TrajectoryGenerator(PythonUnit):
     """
 
     variables = (
-        Variable("waypoints", "parameter", unit="rad", start=0.0, shape=(N_MAX_WAYPOINTS * N_JOINTS,),
-                 description="flat n_max x 7 waypoints, row k = waypoint k", variability="fixed"),
+        # no declared unit: rad or deg depending on `convention`, so a design parameter's "unit": "deg" on it
+        # labels the values and is not converted (a declared "rad" would turn the thesis's degrees into radians)
+        Variable("waypoints", "parameter", start=0.0, shape=(N_MAX_WAYPOINTS * N_JOINTS,),
+                 description="flat n_max x 7 waypoints, row k = waypoint k; rad under convention 'urdf_rad', "
+                             "deg under 'thesis_deg'", variability="fixed"),
         Variable("n_waypoints", "parameter", type="Integer", start=2, min=1, max=N_MAX_WAYPOINTS,
                  description="number of waypoints used", variability="fixed"),
         Variable("convention", "parameter", type="String", start="urdf_rad",

@@ -11,7 +11,7 @@ A System is picklable: it holds unit *types* (blueprints), never live units.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any, Mapping, Sequence
 
 from cosim.errors import Problem, SpecError, UserError, did_you_mean, json_path
@@ -46,6 +46,8 @@ class System:
     coupling: Coupling = Coupling()
     # connected model-exchange units integrated together, and the master's order with them (system/coupled_me.py)
     model_exchange: ModelExchangeCoupling = ModelExchangeCoupling()
+    # design parameter -> (factor, offset) from its design `unit` to its port's unit (identities left out)
+    design_conversions: Mapping[str, tuple[float, float]] = field(default_factory=dict)
 
     def signal(self, text: str) -> Signal:
         """Resolve a 'unit.port' text against this system; raises SpecError if it does not fit."""
@@ -155,12 +157,13 @@ def build_system(spec: Spec, broken_units: frozenset[str] = frozenset()) -> Syst
                                         "name a Boolean output such as 'trajectory.finished'"))
             probes.setdefault(s.text, s)
     check_objective_expressions(spec, problems)
-    check_design(spec, units, problems)
+    design_conversions = check_design(spec, units, problems)
     if problems:
         raise SpecError(problems)
     system = System(spec=spec, units=dict(units), connections=tuple(connections), order=tuple(order),
                     init_order=tuple(init_order), assignments=tuple(assignments), probes=tuple(probes.values()),
-                    recorded=tuple(recorded), coupling=coupling, model_exchange=model_exchange)
+                    recorded=tuple(recorded), coupling=coupling, model_exchange=model_exchange,
+                    design_conversions=design_conversions)
     attach_data_files(system)  # files named by a unit's data-file parameters: read from the spec's folder, shipped
     return system
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from cosim.errors import Problem, did_you_mean, json_path
 from cosim.spec.design import range_problem, size_problems
 from cosim.spec.expressions import Expression, ExpressionError
@@ -10,7 +12,9 @@ from cosim.system.parts import LoadedUnits
 from cosim.system.signals import split_unit_name
 from cosim.system.stepping import strongly_connected
 from cosim.system.value_checks import assignment
+from cosim.units.protocol import parse_port, resolve_port
 from cosim.units.registry import replaying_units
+from cosim.util.quantities import IncompatibleUnits, UnitConversionError, conversion
 
 
 def check_objective_expressions(spec: Spec, problems: list[Problem]) -> None:
@@ -39,8 +43,47 @@ def check_objective_expressions(spec: Spec, problems: list[Problem]) -> None:
                                     + ", ".join(sorted(comp)), "make one of them a signal reduction"))
 
 
-def check_design(spec: Spec, units: LoadedUnits, problems: list[Problem]) -> None:
-    """Problems of the design space: unknown targets, values that do not fit, bad ranges, size, constraint."""
+def converted(value: Any, factor: float, offset: float) -> Any:
+    """``value`` (a number, or a list of them; booleans and text as they are) as ``factor * value + offset``."""
+    if isinstance(value, (list, tuple)):
+        return [converted(v, factor, offset) for v in value]
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return value
+    return factor * value + offset
+
+
+def _design_unit_conversion(p: Any, unit: Any, port: str, file: str, path: str,
+                            problems: list[Problem]) -> tuple[float, float] | None:
+    """``(factor, offset)`` from a design parameter's ``unit`` to its port's declared unit; None (after adding a
+    Problem) when the two are not the same quantity or a unit is not understood.  A port that declares no unit
+    takes the values as written (the design's unit only labels the table's column)."""
+    base, index = parse_port(port)
+    actual = unit.variable_name(port) if index is None else f"{unit.variable_name(base)}[{index}]"
+    try:
+        var, _ = resolve_port(unit.description, actual)
+    except (KeyError, IndexError):
+        return (1.0, 0.0)  # reported by the value check
+    if not var.unit:
+        return (1.0, 0.0)
+    try:
+        return conversion(p.unit, var.unit, None, unit.description.unit_definitions)
+    except UnitConversionError as exc:
+        what = "different quantities" if isinstance(exc, IncompatibleUnits) else "not understood"
+        problems.append(Problem(file, path + ".unit", f"'{p.unit}' cannot be converted to '{var.unit}', the unit "
+                                f"of '{p.target}' ({what}): {exc}", f"write the range in '{var.unit}' (or a unit of the same "
+                                "quantity, converted when the point is set), or drop 'unit'"))
+        return None
+
+
+def check_design(spec: Spec, units: LoadedUnits, problems: list[Problem]) -> dict[str, tuple[float, float]]:
+    """Problems of the design space: unknown targets, values that do not fit, bad ranges, size, constraint.
+
+    Returns the conversions ``target -> (factor, offset)`` from each design parameter's ``unit`` to its port's
+    unit, for the parameters where they are not the identity: a point's values are in the design's units (as the
+    table's columns are) and are converted when they are set (:func:`cosim.execution.point.assignments_for`).
+    The values and range ends are checked against the port's range after conversion.
+    """
+    conversions: dict[str, tuple[float, float]] = {}
     players = replaying_units(spec.units)
     for p in spec.design.parameters:
         path = json_path(["design", "parameters", p.target])
@@ -53,6 +96,13 @@ def check_design(spec: Spec, units: LoadedUnits, problems: list[Problem]) -> Non
                                         f"{did_you_mean(unit_name, units)}", "use 'unit.parameter'"))
             continue
         samples = list(p.values) if p.values is not None else [p.min, p.max] if p.min is not None else [False, True]
+        if p.unit:
+            factor_offset = _design_unit_conversion(p, units[unit_name], port, spec.path, path, problems)
+            if factor_offset is None:
+                continue
+            if factor_offset != (1.0, 0.0):
+                conversions[p.target] = factor_offset
+                samples = [converted(value, *factor_offset) for value in samples]
         for value in samples:
             if assignment(units[unit_name], port, value, None, problems, spec.path, path) is None:
                 break
@@ -70,3 +120,4 @@ def check_design(spec: Spec, units: LoadedUnits, problems: list[Problem]) -> Non
             Expression(spec.design.constraint)
         except ExpressionError as exc:
             problems.append(Problem(spec.path, "$.design.constraint", str(exc), "write a comparison of parameters"))
+    return conversions
