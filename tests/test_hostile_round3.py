@@ -607,3 +607,13 @@ def test_an_fmi_1_fmu_is_refused_by_its_version_not_a_type_error(tmp_path):
         assert done.returncode == 2, text
         assert "FMI version 1.0 is not supported" in text and "export the FMU as FMI 2.0 or 3.0" in text, text
         assert "int() argument" not in text
+
+
+def test_a_boolean_index_in_an_expression_is_refused_not_read_as_1():
+    """Before: `x[True]` was read as `x[1]` (a bool is an int to Python)."""
+    from cosim.errors import ExpressionError
+    from cosim.spec.expressions import Expression
+
+    with pytest.raises(ExpressionError, match=r"only name\[i\] with a whole number i is allowed"):
+        Expression("x[True] + 1")
+    assert Expression("x[1] + 1").names == {"x"}

@@ -164,7 +164,8 @@ class Expression:
                 self._check(arg)
         elif isinstance(node, ast.Subscript):
             if not (isinstance(node.value, (ast.Name, ast.Attribute)) and isinstance(node.slice, ast.Constant)
-                    and isinstance(node.slice.value, int)):
+                    and isinstance(node.slice.value, int) and not isinstance(node.slice.value, bool)):
+                # bool is an int to Python: x[True] would read x[1]
                 raise ExpressionError(f"'{self._shown}': only name[i] with a whole number i is allowed")
             self.names.add(self._dotted(node.value))
             self._elements.add((self._dotted(node.value), node.slice.value))
