@@ -268,3 +268,70 @@ def test_progress_line_counts_failures_front_and_hypervolume(write_spec, tmp_pat
     assert failed > 0 and len(usable) < len(df) - failed  # both a failure and an infeasible row were seen
     assert last.startswith(f"24/24 evaluations, {failed} not ok, front {len(front)}, "
                            f"hypervolume {staircase_area(scaled, 1.1):.4f}, "), last
+
+
+def test_a_discrete_space_whose_optimum_is_found_early_ends_with_every_design_run_once(write_spec, tmp_path,
+                                                                                      local_cluster, capsys):
+    # 5 x 3 = 15 designs and a budget of 200: TPE finds the front (y = 0, x in 0..2) and then proposes designs
+    # already evaluated; the search switches to the designs not yet run and stops when there are none left
+    spec_dict = bowls_spec(budget=200, batch=4, seed=2)
+    spec_dict["design"]["parameters"] = {"b.x": {"min": -1, "max": 3, "step": 1},
+                                         "b.y": {"values": [-1.0, 0.0, 1.0]}}
+    spec = write_spec(spec_dict)
+    code = main(["optimize", str(spec), "--out", str(tmp_path / "out"), "--scheduler", local_cluster])
+    assert code == 0
+    err = capsys.readouterr().err
+    df = pd.read_parquet(tmp_path / "out" / "results.parquet")
+    designs = set(zip(df["b.x"], df["b.y"]))
+    assert len(df) == 15 and designs == {(x, y) for x in range(-1, 4) for y in (-1.0, 0.0, 1.0)}
+    assert "brought no design not yet evaluated (tpe proposes designs already evaluated)" in err
+    assert "stopped: every design of the space is evaluated (15 designs; the budget of 200 is not spent)" in err
+    assert set(df["sampler"]) <= {"tpe", "random"} and (df["sampler"] == "tpe").any()
+    np.testing.assert_allclose(df["f1"], df["b.x"] ** 2 + df["b.y"] ** 2, rtol=1e-12)
+
+
+class FormulaEvaluator:
+    """TwoBowls answered from its formula, without Dask (as benchmarks answer from a table); raises
+    KeyboardInterrupt at call ``interrupt_at`` (Ctrl-C in the middle of a run)."""
+
+    def __init__(self, interrupt_at: int | None = None):
+        self.calls, self.interrupt_at, self.asked = 0, interrupt_at, []
+
+    def evaluate(self, points):
+        self.calls += 1
+        self.asked.append([pid for pid, _ in points])
+        if self.calls == self.interrupt_at:
+            raise KeyboardInterrupt
+        return [{"point_id": pid, "status": "ok", "objectives": {
+            "f1": v["b.x"] ** 2 + v["b.y"] ** 2, "f2": (v["b.x"] - 2) ** 2 + v["b.y"] ** 2}} for pid, v in points]
+
+
+def test_the_switch_happens_at_the_same_batch_on_resume_and_proposals_stay_few(write_spec, tmp_path):
+    spec_dict = bowls_spec(budget=300, batch=4, seed=4)
+    spec_dict["design"]["parameters"] = {"b.x": {"min": -1.0, "max": 3.0, "step": 0.5},
+                                         "b.y": {"min": -2, "max": 2, "step": 1}}
+    spec_dict["design"]["constraint"] = "b.x + b.y <= 3"
+    spec = write_spec(spec_dict)
+    run, whole = Optimization(spec, tmp_path / "whole", quiet=True), FormulaEvaluator()
+    run.run(evaluator=whole)
+    df = run.store.table()
+    allowed = {(x / 2, y) for x in range(-2, 7) for y in range(-2, 3) if x / 2 + y <= 3}
+    assert len(df) == len(allowed) and set(zip(df["b.x"], df["b.y"])) == allowed and df["point_id"].is_unique
+    assert run.stop_reason.startswith("stopped: every design of the space is evaluated")
+    switch = df.index[df["sampler"] == "random"][0]
+    assert switch > 0 and (df["sampler"][switch:] == "random").all()
+    # proposals: one per evaluation, the designs outside the constraint and the repeats TPE asked before the
+    # switch, and no more than one batch of repeats after it (the 20x budget cap would allow 6000)
+    assert run.trials_asked <= len(allowed) + df.loc[switch - 1, "trial"] + 4
+    # interrupted after the switch and resumed: the same table, the same switch
+    interrupted = tmp_path / "cut"
+    first_random = next(i for i, ids in enumerate(whole.asked, start=1) if df.loc[switch, "point_id"] in ids)
+    assert first_random < whole.calls  # a random batch stored before the cut, another after it
+    with pytest.raises(KeyboardInterrupt):
+        Optimization(spec, interrupted, quiet=True).run(evaluator=FormulaEvaluator(interrupt_at=first_random + 1))
+    resumed = Optimization(spec, interrupted, resume=True, quiet=True)
+    resumed.run(evaluator=FormulaEvaluator())
+    again = resumed.store.table()
+    assert len(again) == len(df)
+    pd.testing.assert_frame_equal(again.drop(columns=["run_time", "worker"], errors="ignore"),
+                                  df.drop(columns=["run_time", "worker"], errors="ignore"))

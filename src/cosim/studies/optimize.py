@@ -28,6 +28,16 @@ Optuna's ask-and-tell drives the search; cosim only translates:
 - **Budget**: evaluations, i.e. rows.  A design asked again (samplers on
   stepped or categorical dimensions do that) is told the stored result and
   costs nothing; at most ``20 * budget`` trials are asked in all.
+- **Designs asked again**: once the optimum of a discrete space is found, TPE
+  (and the others) propose evaluated designs batch after batch, each ask
+  slower than the last.  So a batch that brings no design new to the run
+  switches the search, with a one-line message, to the designs not yet
+  evaluated in a random order (seeded; on a space of at most
+  ``MAX_ENUMERATED`` designs: every stepped or categorical dimension), or to
+  Optuna's random sampler on a space with a continuous dimension; their rows
+  say ``random`` in ``sampler``.  The run stops, saying why, when every
+  design of the space is evaluated or when a batch after the switch brings
+  nothing new.  The switch happens at the same batch when a run is resumed.
 - **Resume**: the table is the optimiser's memory.  With the same seed,
   sampler and batch, asking again from a fresh study proposes the same
   designs in the same order (Optuna's samplers are deterministic given their
@@ -42,10 +52,12 @@ Optuna's ask-and-tell drives the search; cosim only translates:
 from __future__ import annotations
 
 import ast
+import itertools
 import math
 import random
 import re
 import sys
+import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, TextIO
@@ -65,6 +77,7 @@ SAMPLERS = ("tpe", "nsga2", "gp", "random", "qmc")
 DEFAULT_BUDGET = 200
 DEFAULT_BATCH = {"nsga2": 20}  # a generation of NSGA-II is one batch; the others ask 8 at a time
 MAX_TRIALS_PER_EVALUATION = 20
+MAX_ENUMERATED = 200_000  # a discrete space up to this size is listed to find the designs not yet evaluated
 _ELEMENT = re.compile(r"^(.*)\[(\d+)\]$")
 
 
@@ -213,6 +226,24 @@ def design_values(space: Any, params: Mapping[str, Any]) -> dict[str, Any]:
     return space.values_of(flat)
 
 
+def finite_choices(dists: Mapping[str, Any]) -> dict[str, list[Any]] | None:
+    """Every value of each distribution (Optuna's params), or None when one is continuous."""
+    from optuna.distributions import CategoricalDistribution, FloatDistribution, IntDistribution
+
+    out: dict[str, list[Any]] = {}
+    for name, dist in dists.items():
+        if isinstance(dist, CategoricalDistribution):
+            out[name] = list(dist.choices)
+        elif isinstance(dist, IntDistribution) and not dist.log:
+            out[name] = list(range(dist.low, dist.high + 1, dist.step))
+        elif isinstance(dist, FloatDistribution) and dist.step is not None:
+            n = round((dist.high - dist.low) / dist.step)
+            out[name] = [dist.low + k * dist.step for k in range(n + 1)]
+        else:
+            return None
+    return out
+
+
 def make_sampler(name: str, seed: int, batch: int) -> Any:
     """The Optuna sampler ``name`` (see SAMPLERS), seeded; raises OptimizeError when it cannot be had."""
     import optuna
@@ -335,6 +366,10 @@ class Optimization:
         self.quiet, self.progress_stream = quiet, progress
         self.payload = make_payload(self.system)
         self._outcomes: dict[tuple, tuple] = {}  # (point id, status) -> _outcome: each row is read once
+        self._sampler_label = self.settings.sampler  # "random" once the search switched (see _switch)
+        self.stop_reason: str | None = None  # why the run ended before its budget (None: the budget was spent)
+        self.sampler_seconds = 0.0  # time spent in the sampler's ask, over the whole run
+        self.trials_asked = 0
 
     def _say(self, text: str) -> None:
         say(text, self.quiet, self.progress_stream)
@@ -344,7 +379,7 @@ class Optimization:
         out: dict[str, Any] = {"point_id": row["point_id"]}
         out.update(self.space.columns(values))
         out.update(row.get("objectives", {}))
-        out.update(trial=trial, batch=batch, sampler=self.settings.sampler)
+        out.update(trial=trial, batch=batch, sampler=self._sampler_label)
         values, violations = self._outcome({**out, "status": row.get("status")})
         out["feasible"] = values is not None and all(v <= 0 for v in violations)
         for key in TAIL_COLUMNS:
@@ -444,15 +479,35 @@ class Optimization:
         unreplayed = set(stored)
         progress = Progress(s.budget, self.progress_stream) if not self.quiet else None
         batch_index, trials_asked = 0, 0
+        queue: list[dict[str, Any]] | None = None  # after the switch on a finite space: the designs not yet run
+        switched = False
         while len(rows) < s.budget:
             if trials_asked >= MAX_TRIALS_PER_EVALUATION * s.budget:
-                self._say(f"stopped after {trials_asked} proposals: the sampler keeps proposing designs already "
-                          f"evaluated or outside the design constraint ({len(rows)} evaluations)")
+                self._stop(f"stopped after {trials_asked} proposals: the sampler keeps proposing designs already "
+                           f"evaluated or outside the design constraint ({len(rows)} evaluations)")
                 break
-            trials = [study.ask(dists) for _ in range(min(s.batch, s.budget - len(rows)))]
+            wanted = min(s.batch, s.budget - len(rows))
+            if queue is not None:
+                picked = []
+                while queue and len(picked) < wanted:
+                    params = queue.pop()  # stored rows added meanwhile (see _absorb) are not asked again
+                    if self.space.point_id(design_values(self.space, params)) not in rows:
+                        picked.append(params)
+                if not picked:
+                    self._stop(f"stopped: every design of the space is evaluated ({len(rows)} designs; the budget "
+                               f"of {s.budget} is not spent)")
+                    break
+                wanted = len(picked)
+                for params in picked:
+                    study.enqueue_trial(params)
+            clock = time.perf_counter()
+            trials = [study.ask(dists) for _ in range(wanted)]
+            self.sampler_seconds += time.perf_counter() - clock
             trials_asked += len(trials)
+            self.trials_asked = trials_asked
             plan: list[tuple[Any, str | None]] = []  # per trial: its point id (None: outside the constraint)
             to_run: dict[str, dict[str, Any]] = {}
+            known = len(rows)
             for trial in trials:
                 values = design_values(self.space, trial.params)
                 if not self.space.accepts(values):
@@ -481,8 +536,49 @@ class Optimization:
             batch_index += 1
             if progress is not None:
                 progress.show(len(rows), *self._front_summary(rows))
+            if len(rows) == known and len(rows) < s.budget:  # the batch brought no design new to the run
+                if switched:
+                    self._stop(f"stopped: batch {batch_index} of random designs brought none not yet evaluated "
+                               f"({len(rows)} evaluations; the budget of {s.budget} is not spent)")
+                    break
+                switched = True
+                queue = self._switch(study, dists, rows, batch_index)
         if progress is not None:
             progress.close()
+
+    def _stop(self, reason: str) -> None:
+        self.stop_reason = reason
+        per_trial = self.sampler_seconds / max(self.trials_asked, 1)
+        self._say(f"{reason}; the sampler took {per_trial * 1e3:.1f} ms per proposal")
+
+    def _switch(self, study: Any, dists: dict[str, Any], rows: dict[str, dict],
+                batch_index: int) -> list[dict[str, Any]] | None:
+        """Batch ``batch_index`` brought nothing new: go on with the designs not yet evaluated, in a seeded random
+        order (returned, for a space of at most MAX_ENUMERATED designs), or with Optuna's random sampler (None)."""
+        import optuna
+
+        s = self.settings
+        rng = random.Random(s.seed)
+        study.sampler = optuna.samplers.RandomSampler(seed=s.seed)
+        self._sampler_label = "random"
+        choices = finite_choices(dists)
+        size = math.prod(len(c) for c in choices.values()) if choices is not None else None
+        if size is None or size > MAX_ENUMERATED:
+            self._say(f"batch {batch_index} brought no design not yet evaluated ({s.sampler} proposes designs "
+                      f"already evaluated): going on with random designs")
+            return None
+        names = list(choices)
+        queue = []
+        for combo in itertools.product(*(choices[n] for n in names)):
+            params = dict(zip(names, combo))
+            values = design_values(self.space, params)
+            if self.space.accepts(values) and self.space.point_id(values) not in rows:
+                queue.append(params)
+        rng.shuffle(queue)
+        self._say(f"batch {batch_index} brought no design not yet evaluated ({s.sampler} proposes designs already "
+                  f"evaluated): going on with the {len(queue)} designs of the space not yet evaluated, in random "
+                  "order")
+        return queue
 
     @staticmethod
     def _trial_of(plan: list[tuple[Any, str | None]], pid: str) -> int:
