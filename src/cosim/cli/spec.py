@@ -20,10 +20,19 @@ def add_variant_option(p: argparse.ArgumentParser) -> None:
                         "SystemStructure.ssd")
 
 
+#: the studies `cosim validate --for` checks a spec's design for
+STUDIES = ("sweep", "optimize", "sensitivity")
+
+
 def add_parsers(sub: Any) -> None:
     """Register validate, run and inspect on the ``cosim`` subparsers ``sub``."""
     p = sub.add_parser("validate", help="check a spec and report every problem at once")
     p.add_argument("spec", help="path to spec.json, or an SSP (.ssp, .ssd, or a folder with SystemStructure.ssd)")
+    p.add_argument("--for", dest="study", choices=STUDIES,
+                   help="check the design for this study: sweep (a grid's ranges need a step), optimize or "
+                        "sensitivity (ranges {min, max} are continuous; the optimize section, its objectives and "
+                        "constraints are checked). Default: optimize when the spec has an 'optimize' section, "
+                        "else sweep")
     add_experiment_options(p)
     add_variant_option(p)
     p.set_defaults(handler=cmd_validate)
@@ -54,11 +63,21 @@ def cmd_validate(args: argparse.Namespace) -> int:
     from cosim.system.validate import check_design, check_spec
 
     system = check_spec(args.spec, experiment_overrides(args), args.variant)
-    check_design(system)  # what `cosim sweep` would refuse, validate refuses too
+    study = args.study or ("optimize" if "optimize" in system.spec.raw else "sweep")
+    if study == "sweep":
+        check_design(system)  # what `cosim sweep` would refuse, validate refuses too
+    elif study == "optimize":
+        from cosim.studies.optimize import check_optimization
+
+        check_optimization(system)  # what `cosim optimize` refuses before its first evaluation
+    else:
+        from cosim.studies.sensitivity import sensitivity_space
+
+        sensitivity_space(system.spec)
     spec = system.spec
     print(f"{args.spec}: ok: {len(spec.units)} unit(s), {len(spec.connections)} connection(s), "
           f"{len(spec.objectives)} objective(s); {spec.experiment.algorithm}, step {spec.experiment.step:g} s, "
-          f"order: {' -> '.join(system.order)}")
+          f"order: {' -> '.join(system.order)}; design checked for cosim {study}")
     return EXIT_OK
 
 

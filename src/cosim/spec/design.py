@@ -95,7 +95,9 @@ def range_problem(lo: Any, hi: Any, step: Any, grid: bool = True) -> tuple[str, 
     """
     if grid and step is None:
         return ("a grid needs a 'step' for each range",
-                "add 'step', or use method 'lhs', 'sobol' or 'random' with 'samples'")
+                "add 'step', or use method 'lhs', 'sobol' or 'random' with 'samples'; for cosim optimize or cosim "
+                "sensitivity, which draw from [min, max] and need no step, check it with "
+                "'cosim validate SPEC --for optimize' (or --for sensitivity)")
     if isinstance(step, (int, float)) and step <= 0:
         return f"step must be positive, got {step}", "write a positive step"
     if isinstance(lo, (int, float)) and isinstance(hi, (int, float)) and hi < lo:
@@ -103,10 +105,17 @@ def range_problem(lo: Any, hi: Any, step: Any, grid: bool = True) -> tuple[str, 
     return None
 
 
+class _RangeProblem(ValueError):
+    """A range that :func:`range_problem` refuses: ``args`` are (what is wrong, the fix)."""
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
 def _check_range(lo: Any, hi: Any, step: Any, grid: bool = True) -> None:
     problem = range_problem(lo, hi, step, grid)
     if problem is not None:
-        raise ValueError(problem[0])
+        raise _RangeProblem(*problem)
 
 
 def range_count(lo: Any, hi: Any, step: Any) -> int:
@@ -183,6 +192,8 @@ class _Parameter:
                 else:
                     per = [[lo, hi, step]]
                 self.dims = [self._range(a, b, s, sampled) for a, b, s in per]
+        except _RangeProblem as exc:  # the one check of a range: its own fix
+            raise SpecError([Problem(file, path, *exc.args)]) from None
         except (ValueError, TypeError) as exc:
             raise SpecError([Problem(file, path, str(exc), "write numbers with min <= max and a positive step, "
                                                            "and each value once")]) from None

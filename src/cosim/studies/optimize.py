@@ -60,7 +60,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, TextIO
+from typing import Any, Mapping, Sequence, TextIO
 
 import numpy as np
 
@@ -130,6 +130,39 @@ class OptimizeSettings:
                                      "at least 2", "use a batch of 2 or more, e.g. 20")])
         return cls(objectives=dict(objectives), constraints=list(section.get("constraints", [])), sampler=sampler,
                    budget=int(section.get("budget", DEFAULT_BUDGET)), batch=int(batch), seed=section.get("seed"))
+
+
+def optimization_space(spec: Any) -> Any:
+    """The design space as the optimiser's dimensions (a range ``{min, max}`` is continuous and needs no step,
+    with or without an ``optimize`` section); raises SpecError when a range is bad or nothing is to optimise."""
+    from cosim.spec.design import DesignSpace
+
+    space = DesignSpace.dimensions_of(spec)
+    if not space.dimensions:
+        raise SpecError([Problem(spec.path, "$.design.parameters", "nothing to optimise: no design parameters",
+                                 "add parameters with ranges or value lists")])
+    return space
+
+
+def output_constraints(spec: Any, space: Any, texts: Sequence[str]) -> list["OutputConstraint"]:
+    """The ``optimize.constraints`` of ``spec`` as OutputConstraints over its objectives and ``space``'s
+    parameters; raises SpecError naming the constraint that does not parse or names unknown values."""
+    from cosim.spec.design import expression_name
+
+    names = {o.name for o in spec.objectives} | {expression_name(t) for t in space.targets} | set(space.targets)
+    return [OutputConstraint(text, names | {expression_name(n) for n in names}, spec.path,
+                             f"$.optimize.constraints[{i}]") for i, text in enumerate(texts)]
+
+
+def check_optimization(system: Any) -> "OptimizeSettings":
+    """What ``cosim optimize`` checks of a built system's spec before any evaluation (``cosim validate --for
+    optimize``): the space, the settings of the ``optimize`` section (if any) and its constraints.
+
+    Returns the settings; raises SpecError with the problem found."""
+    space = optimization_space(system.spec)
+    settings = OptimizeSettings.from_spec(system.spec)
+    output_constraints(system.spec, space, settings.constraints)
+    return settings
 
 
 class OutputConstraint:
@@ -311,7 +344,6 @@ class Optimization:
         from cosim.parallel.evaluator import check_timeout
         from cosim.parallel.isolation import make_payload
         from cosim.results.store import ResultsStore
-        from cosim.spec.design import DesignSpace, expression_name
         from cosim.system.validate import check_spec
 
         check_timeout(timeout, OptimizeError)
@@ -322,10 +354,7 @@ class Optimization:
             read_cluster_file(cluster)  # a bad cluster file is reported before any work (ClusterFileError)
         self.system = check_spec(spec_path)
         self.spec = self.system.spec
-        self.space = DesignSpace.dimensions_of(self.spec)
-        if not self.space.dimensions:
-            raise SpecError([Problem(self.spec.path, "$.design.parameters", "nothing to optimise: no design "
-                                     "parameters", "add parameters with ranges or value lists")])
+        self.space = optimization_space(self.spec)
         self.out, self.resume = Path(out), resume
         with results_writes(self.out):  # a read-only or full disk: said with what to do (exit 2)
             self.store = ResultsStore(self.out)
@@ -357,11 +386,7 @@ class Optimization:
         self.settings = OptimizeSettings.from_spec(self.spec, **given)
         if self.settings.seed is None:  # a resume must replay the same proposals: the seed is chosen and kept
             self.settings.seed = random.SystemRandom().randrange(2**31)
-        names = {o.name for o in self.spec.objectives} | {expression_name(t) for t in self.space.targets} \
-            | set(self.space.targets)
-        self.constraints = [OutputConstraint(text, names | {expression_name(n) for n in names}, self.spec.path,
-                                             f"$.optimize.constraints[{i}]")
-                            for i, text in enumerate(self.settings.constraints)]
+        self.constraints = output_constraints(self.spec, self.space, self.settings.constraints)
         self.workers, self.scheduler, self.timeout = workers or os.cpu_count() or 1, scheduler, timeout
         self.quiet, self.progress_stream = quiet, progress
         self.payload = make_payload(self.system)

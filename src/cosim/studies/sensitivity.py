@@ -146,6 +146,22 @@ def choose_objectives(spec: Any, asked: Sequence[str] | None) -> list[str]:
     return optimized or [o.name for o in spec.objectives if o.sense] or names
 
 
+def sensitivity_space(spec: Any) -> Any:
+    """The design space as the dimensions a sensitivity study samples (ranges need no step): what ``cosim
+    sensitivity`` and ``cosim validate --for sensitivity`` check.  Raises SpecError for a constraint (the
+    whole box is sampled), a bad range, or no parameters."""
+    from cosim.spec.design import DesignSpace
+
+    space = DesignSpace.dimensions_of(spec)
+    if space.constraint is not None:
+        raise SpecError([Problem(spec.path, "$.design.constraint", "a sensitivity study samples the whole box of "
+                                 "the parameter ranges", "remove the constraint, or narrow the ranges instead")])
+    if not space.dimensions:
+        raise SpecError([Problem(spec.path, "$.design.parameters", "no design parameters to study",
+                                 "add parameters with ranges or value lists")])
+    return space
+
+
 class SensitivityStudy:
     """A prepared study of the spec at ``spec_path``; :meth:`run` samples, runs, analyses and writes.
 
@@ -155,7 +171,6 @@ class SensitivityStudy:
 
     def __init__(self, spec_path: str | Path, out: str | Path, method: str = "sobol", n: int | None = None,
                  seed: int | None = None, objectives: Sequence[str] | None = None, **sweep_options: Any):
-        from cosim.spec.design import DesignSpace
         from cosim.studies.sweep import Sweep
 
         if method not in METHODS:
@@ -168,14 +183,7 @@ class SensitivityStudy:
         self.sample_space: SampleSpace | None = None
 
         def space_of(spec: Any) -> SampleSpace:
-            space = DesignSpace.dimensions_of(spec)
-            if space.constraint is not None:
-                raise SpecError([Problem(spec.path, "$.design.constraint", "a sensitivity study samples the "
-                                         "whole box of the parameter ranges", "remove the constraint, or narrow "
-                                         "the ranges instead")])
-            if not space.dimensions:
-                raise SpecError([Problem(spec.path, "$.design.parameters", "no design parameters to study",
-                                         "add parameters with ranges or value lists")])
+            space = sensitivity_space(spec)
             self.problem = salib_problem(space)
             self.sample = draw(self.problem, method, self.n, self.seed)
             self.sample_space = SampleSpace(space, self.sample, f"{method} (SALib, n={self.n}, seed={self.seed})")

@@ -107,8 +107,9 @@ def check_design(spec: Spec, units: LoadedUnits, problems: list[Problem]) -> dic
             if assignment(units[unit_name], port, value, None, problems, spec.path, path) is None:
                 break
         if p.values is None and not p.is_bool:
-            grid = spec.design.method == "grid" and "optimize" not in spec.raw  # an optimiser draws from [min, max]
-            problem = range_problem(p.min, p.max, p.step, grid)
+            # the ends only: whether a range needs a step is the study's (a sweep's grid does, cosim optimize and
+            # cosim sensitivity draw from [min, max]); DesignSpace checks it for a sweep, validate --for chooses
+            problem = range_problem(p.min, p.max, p.step, grid=False)
             if problem is not None:
                 problems.append(Problem(spec.path, path, *problem))
     if spec.design.method != "grid" and spec.design.parameters and spec.design.samples is None:
