@@ -87,6 +87,12 @@ def _decimal(x: Any) -> Decimal:
     return Decimal(repr(x)) if isinstance(x, float) else Decimal(int(x))
 
 
+_GRID_NEEDS_A_STEP = ("a grid needs a 'step' for each range",
+                      "add 'step', or use method 'lhs', 'sobol' or 'random' with 'samples'; for cosim optimize or "
+                      "cosim sensitivity, which draw from [min, max] and need no step, check it with "
+                      "'cosim validate SPEC --for optimize' (or --for sensitivity)")
+
+
 def range_problem(lo: Any, hi: Any, step: Any, grid: bool = True) -> tuple[str, str] | None:
     """(what is wrong, the fix) for a range ``min``/``max``/``step``, or None: the one check of a range.
 
@@ -94,10 +100,7 @@ def range_problem(lo: Any, hi: Any, step: Any, grid: bool = True) -> tuple[str, 
     needs no step).  Used by the design space and by ``cosim validate``.
     """
     if grid and step is None:
-        return ("a grid needs a 'step' for each range",
-                "add 'step', or use method 'lhs', 'sobol' or 'random' with 'samples'; for cosim optimize or cosim "
-                "sensitivity, which draw from [min, max] and need no step, check it with "
-                "'cosim validate SPEC --for optimize' (or --for sensitivity)")
+        return _GRID_NEEDS_A_STEP
     if isinstance(step, (int, float)) and step <= 0:
         return f"step must be positive, got {step}", "write a positive step"
     if isinstance(lo, (int, float)) and isinstance(hi, (int, float)) and hi < lo:
@@ -105,17 +108,10 @@ def range_problem(lo: Any, hi: Any, step: Any, grid: bool = True) -> tuple[str, 
     return None
 
 
-class _RangeProblem(ValueError):
-    """A range that :func:`range_problem` refuses: ``args`` are (what is wrong, the fix)."""
-
-    def __str__(self) -> str:
-        return str(self.args[0])
-
-
 def _check_range(lo: Any, hi: Any, step: Any, grid: bool = True) -> None:
     problem = range_problem(lo, hi, step, grid)
     if problem is not None:
-        raise _RangeProblem(*problem)
+        raise ValueError(problem[0])
 
 
 def range_count(lo: Any, hi: Any, step: Any) -> int:
@@ -192,11 +188,10 @@ class _Parameter:
                 else:
                     per = [[lo, hi, step]]
                 self.dims = [self._range(a, b, s, sampled) for a, b, s in per]
-        except _RangeProblem as exc:  # the one check of a range: its own fix
-            raise SpecError([Problem(file, path, *exc.args)]) from None
         except (ValueError, TypeError) as exc:
-            raise SpecError([Problem(file, path, str(exc), "write numbers with min <= max and a positive step, "
-                                                           "and each value once")]) from None
+            fix = (_GRID_NEEDS_A_STEP[1] if str(exc) == _GRID_NEEDS_A_STEP[0]  # not a number to correct: a study
+                   else "write numbers with min <= max and a positive step, and each value once")
+            raise SpecError([Problem(file, path, str(exc), fix)]) from None
 
     @staticmethod
     def _range(lo: Any, hi: Any, step: Any, sampled: bool) -> _Dimension:
