@@ -21,7 +21,7 @@ from cosim.spec.design import DesignSpace
 from cosim.spec.loader import load_spec
 from cosim.studies.sweep import Sweep, SweepError
 
-from .conftest import TESTS
+from .conftest import TESTS, python_unit
 from .sweep_fixtures import dask_processes, local_cluster  # noqa: F401  (fixtures)
 
 STOP = 0.5
@@ -164,3 +164,25 @@ def test_resume_after_kill_9_of_the_client_runs_only_missing_points(write_spec, 
     kept = df.set_index("point_id").loc[before["point_id"], "run_time"]
     assert list(kept) == list(before["run_time"])  # rows from before the kill were not recomputed
     assert len(json.loads((out / "metadata.json").read_text())["runs"]) == 2
+
+
+def test_dry_run_estimate_counts_the_few_slow_points(write_spec, capsys):
+    # 12 points of 10 steps each: the last 3 sleep 10x longer per step than the others. The median of the
+    # samples (points 4, 7 and 11 after the warm-up run of point 0) would say 10 fast steps a point; the work is
+    # 9 fast and 3 slow points, 3.25x that
+    fast, slow, steps = 0.004, 0.04, 10
+    spec = write_spec({
+        "name": "uneven",
+        "units": {"s": {"python": python_unit("Sleeper")}},
+        "experiment": {"stop": 1.0, "step": 1.0 / steps},
+        "objectives": {"y_end": {"signal": "s.y", "reduce": "final"}},
+        "design": {"parameters": {"s.delay": {"values": [fast, fast + 1e-4, fast + 2e-4, slow]},
+                                  "s.gain": {"values": [1.0, 2.0, 3.0]}}}})
+    assert main(["sweep", str(spec), "--dry-run", "--workers", "1"]) == 0
+    text = capsys.readouterr().out
+    samples = [float(line.split(" in ")[1].split()[0]) for line in text.splitlines() if line.startswith("sample ")]
+    per_point = float(text.split("estimate: ")[1].split()[0])
+    assert per_point == pytest.approx(sum(samples[1:]) / 3, abs=1.5e-3)  # the mean of the steady samples
+    true_total = steps * (9 * fast + 3 * slow)  # the sleeps alone (the 1e-4 apart: each value once)
+    assert 0.9 * true_total <= 12 * per_point <= 2.0 * true_total, (per_point, text)
+    assert "about" in text and "on 1 worker(s)" in text and "differ more than 3x" in text

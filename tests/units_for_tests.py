@@ -268,3 +268,19 @@ class RestorableLinearOde(LinearOde):
 
     def set_state(self, state):
         self.steps_kept = state
+
+
+class Sleeper(PythonUnit):
+    """Sleeps ``delay`` seconds per step (a point whose cost depends on its design); y = gain * t."""
+
+    variables = (
+        Variable("delay", "parameter", start=0.0),
+        Variable("gain", "parameter", start=1.0),
+        Variable("y", "output", start=0.0),
+    )
+
+    def do_step(self, t, h):
+        import time
+
+        time.sleep(self.delay)
+        self.y = self.gain * (t + h)

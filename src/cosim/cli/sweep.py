@@ -119,14 +119,20 @@ def _dry_run(args: argparse.Namespace) -> int:
     if times:
         # the first run also instantiates the units; the others show the steady cost per point
         steady = sorted(times[1:] or times)
-        per_point = steady[len(steady) // 2]
+        # the mean, not the median: on an uneven space a few dear points make most of the total, and the
+        # median of a few samples ignores them (5-6x under on a space where the mean is 10x the median)
+        per_point = sum(steady) / len(steady)
+        spread = f"mean of {len(steady)} sample run(s), {steady[0]:.3f}-{steady[-1]:.3f} s"
         workers = args.workers or os.cpu_count() or 1
         if args.scheduler or args.cluster:
-            print(f"estimate: {per_point:.3f} s per point; {total * per_point:.0f} s of work in total "
+            print(f"estimate: {per_point:.3f} s per point ({spread}); {total * per_point:.0f} s of work in total "
                   "(divide by the scheduler's worker count)")
         else:
-            print(f"estimate: {per_point:.3f} s per point, about {_fmt_time(total * per_point / workers)} "
-                  f"on {workers} worker(s)")
+            print(f"estimate: {per_point:.3f} s per point ({spread}), about "
+                  f"{_fmt_time(total * per_point / workers)} on {workers} worker(s)")
+        if steady[-1] > 3 * steady[0]:
+            print("note: the sample runs differ more than 3x: the points' cost depends on the design, and the "
+                  "estimate is only as good as the few samples are typical of the space")
         if args.timeout is None:
             from cosim.studies.sweep import TIMEOUT_FACTOR, default_timeout
 
