@@ -617,3 +617,36 @@ def test_a_boolean_index_in_an_expression_is_refused_not_read_as_1():
     with pytest.raises(ExpressionError, match=r"only name\[i\] with a whole number i is allowed"):
         Expression("x[True] + 1")
     assert Expression("x[1] + 1").names == {"x"}
+
+
+def test_sigterm_does_not_wait_for_a_long_point_to_finish(tmp_path):
+    """Before: the client waited for the running points (62 s with 5 s points; minutes with slow ones), past a
+    job scheduler's grace period. Points of 10 minutes: the sweep must be gone long before the first ends."""
+    import signal
+
+    folder = tmp_path / "project"
+    folder.mkdir()
+    (folder / "slow.py").write_text(f"""
+import time
+from cosim import PythonUnit, Variable
+
+class Slow(PythonUnit):
+    variables = (Variable("k", "parameter", start=1.0), Variable("y", "output", start=0.0))
+
+    def do_step(self, t, h):
+        open({str(folder / 'started')!r}, "a").write("x")
+        time.sleep(600)
+        self.y = self.k
+""")
+    spec = folder / "spec.json"
+    spec.write_text(json.dumps({"units": {"s": {"python": "slow.py:Slow"}}, "experiment": {"stop": 0.1, "step": 0.1},
+                                "objectives": {"y": {"signal": "s.y", "reduce": "final"}},
+                                "design": {"parameters": {"s.k": {"min": 1, "max": 4, "step": 1}}}}))
+    proc = _popen_cosim("sweep", str(spec), "--out", str(tmp_path / "out"), "--workers", "2")
+    _wait_for(lambda: (folder / "started").exists(), 180)  # a point is running
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)  # far less than the 600 s point
+    assert proc.returncode == 130, err
+    assert "cosim: interrupted" in err and "Traceback" not in err and "BrokenPipe" not in err, err
+    leftover = subprocess.run(["pgrep", "-s", str(proc.pid)], capture_output=True, text=True).stdout.split()
+    assert not leftover, f"processes of the stopped sweep still running: {leftover}"

@@ -45,6 +45,9 @@ def stop_cleanly_on_signals() -> dict[int, Any]:
         for name in ("distributed", "asyncio"):  # asyncio reports tasks of workers that never started
             logging.getLogger(name).setLevel(logging.CRITICAL + 1)
         sys.unraisablehook = lambda unraisable: None
+        from cosim.parallel.isolation import kill_point_children_now
+
+        kill_point_children_now()  # their points are unfinished: waiting for them could take minutes
         raise KeyboardInterrupt
 
     if threading.current_thread() is not threading.main_thread():

@@ -349,6 +349,23 @@ def _kill_children() -> None:
         runner.close()
 
 
+def kill_point_children_now() -> None:
+    """Kill every point child of this process at once, without waiting (the study is being stopped).
+
+    Called from the client's stop-signal handler: a point may take minutes, and waiting for it
+    kept a stopped sweep alive long past a job scheduler's grace period.  The points these
+    children were running are not finished, so no row of theirs is lost; the worker threads
+    waiting on them see the child gone and return at once.
+    """
+    for runner in list(_LIVE) + list(_SPARES):
+        proc = runner._proc
+        if proc is not None and proc.poll() is None:
+            try:
+                proc.kill()
+            except OSError:
+                pass
+
+
 _SPARES: list["IsolatedRunner"] = []  # children started ahead of their payload (start_spare_children)
 _SPARES_LOCK = threading.Lock()
 
