@@ -52,6 +52,8 @@ class ResultsTable:
     path: Path
     metadata: dict[str, Any] | None = None
     spec: dict[str, Any] | None = None
+    # what the reader should know about where the rows came from (an unfinished study's parts), or ""
+    note: str = ""
     _units: dict[str, str] = field(default_factory=dict, repr=False)
     # senses chosen by the reader (`cosim report --min A --min B`); they replace the spec's
     _chosen_senses: dict[str, str] | None = field(default=None, repr=False)
@@ -220,6 +222,9 @@ class ColumnExpression(Expression):
 def load_results(path: str | Path, spec: str | Path | None = None) -> ResultsTable:
     """Read a results table: a sweep folder, a ``.parquet`` or a ``.csv`` file.
 
+    A folder whose study was interrupted (or is still running) holds rows in ``parts/``: they are read with the
+    compacted table, each point once (:meth:`cosim.results.store.ResultsStore.read`), and ``note`` says so.
+
     A ``metadata.json`` beside the table is read when present (its ``spec``
     entry gives units and senses).  ``spec`` (a spec.json) replaces the spec
     of the metadata, for tables stored without one; re-runs then use it too.
@@ -227,17 +232,27 @@ def load_results(path: str | Path, spec: str | Path | None = None) -> ResultsTab
     when ``spec`` is broken.
     """
     path = Path(path)
-    if path.is_dir():
-        path = path / "results.parquet"
-    if not path.exists():
+    folder = path if path.is_dir() else None
+    if folder is not None:
+        path = folder / "results.parquet"
+    parts = sorted((folder / "parts").glob("part-*.parquet")) if folder is not None else []
+    if not path.exists() and not parts:
         raise AnalysisError(f"{path}: no such results table (give a results.parquet, a .csv or a sweep folder)")
+    note = ""
     try:
-        if path.suffix.lower() == ".csv":
+        if parts:  # an interrupted (or running) study: its rows so far, as --resume would find them
+            from cosim.results.store import ResultsStore
+
+            df = ResultsStore(folder).read()
+            note = (f"{folder}: an unfinished study (interrupted, or still running): {len(df)} rows read from "
+                    f"{len(parts)} part file(s){' and results.parquet' if path.exists() else ''}; the same "
+                    "command with --resume completes it")
+        elif path.suffix.lower() == ".csv":
             df = pd.read_csv(path)
         else:
             df = pd.read_parquet(path)
     except Exception as exc:  # pyarrow and pandas raise many kinds for a bad file
-        raise AnalysisError(f"{path}: cannot read the table: {exc}") from None
+        raise AnalysisError(f"{path if not parts else folder}: cannot read the table: {exc}") from None
     metadata = None
     meta_path = path.parent / "metadata.json"
     if meta_path.exists():
@@ -251,7 +266,7 @@ def load_results(path: str | Path, spec: str | Path | None = None) -> ResultsTab
         loaded = load_spec(spec)
         metadata = {**(metadata or {}), "spec_path": str(Path(spec).resolve()), "spec_digest": loaded.digest,
                     "spec": dict(loaded.raw)}
-    return ResultsTable(df=df, path=path, metadata=metadata, spec=spec_of(metadata))
+    return ResultsTable(df=df, path=path, metadata=metadata, spec=spec_of(metadata), note=note)
 
 
 def spec_of(metadata: Mapping[str, Any] | None) -> dict[str, Any] | None:

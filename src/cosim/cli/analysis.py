@@ -9,6 +9,7 @@ a UserError: exit code 2 and one line of text, never a traceback.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -54,7 +55,8 @@ def add_analysis_parsers(sub: Any) -> None:
 
     p = sub.add_parser("report", help="one self-contained HTML page about a sweep")
     p.add_argument("table", help="results.parquet, a .csv, or a sweep folder")
-    p.add_argument("-o", "--out", required=True, help="the .html file to write")
+    p.add_argument("-o", "--out", help="the .html file to write (default: report.html in the results folder, or "
+                                        "beside the table file)")
     p.add_argument("--min", dest="objectives", action=_Objective, metavar="OBJ",
                    help="minimize OBJ in the Pareto front (repeatable; replaces the senses of the spec)")
     p.add_argument("--max", dest="objectives", action=_Objective, metavar="OBJ",
@@ -95,6 +97,12 @@ def _figure_path(text: str, option: str) -> Path:
     return path
 
 
+def _say_note(table: Any) -> None:
+    """What the reader should know about the rows read (an unfinished study's parts), on stderr."""
+    if table.note:
+        print(f"cosim: note: {table.note}", file=sys.stderr)
+
+
 def cmd_plot(args: argparse.Namespace) -> int:
     """``cosim plot``: rows failing ``--where`` are greyed; ``--only-ok`` leaves failed rows out."""
     from cosim.analysis.plots import new_figure, save, scatter_cloud
@@ -102,6 +110,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
 
     out = _figure_path(args.out, "-o")
     table = load_results(args.table, args.spec)
+    _say_note(table)
     for column in (args.x, args.y, args.z, args.color):
         if column:
             table.check_column(column)
@@ -123,6 +132,7 @@ def cmd_pareto(args: argparse.Namespace) -> int:
     from cosim.analysis.table import AnalysisError, load_results
 
     table = load_results(args.table, args.spec)
+    _say_note(table)
     objectives = resolve_objectives(table, args.objectives)
     if args.color:
         table.check_column(args.color)
@@ -158,8 +168,10 @@ def cmd_report(args: argparse.Namespace) -> int:
     from cosim.analysis.report import write_report
     from cosim.analysis.table import load_results
 
-    out = Path(args.out)
+    given = Path(args.table)
+    out = Path(args.out) if args.out else (given if given.is_dir() else given.parent) / "report.html"
     table = load_results(args.table, args.spec)
+    _say_note(table)
     if args.objectives:
         table.choose_objectives(args.objectives)
     write_report(table, out)
@@ -172,6 +184,7 @@ def cmd_explore(args: argparse.Namespace) -> int:
     from cosim.analysis.table import AnalysisError, load_results
 
     table = load_results(args.table, args.spec)
+    _say_note(table)
     if not args.tk:
         from cosim.analysis.room.data import Study
         from cosim.analysis.room.server import serve
