@@ -82,3 +82,25 @@ def test_libcosim_runs_the_exported_ssp_to_the_same_values(tmp_path):
     assert theirs.shape == mine.shape == (100, 3)
     assert np.max(np.abs(theirs - mine)) <= 1e-12
     assert not np.allclose(mine[-1], mine[0])  # the ring really moved
+
+
+def test_export_of_fmi3_builtins_warns_and_fmi_2_writes_what_libcosim_loads(tmp_path, capsys):
+    from cosim.cli.main import main
+
+    _libcosimpy()
+    ring3 = json.loads(json.dumps(RING).replace("_fmi2", "_fmi3"))  # the built-ins as the docs name them
+    (tmp_path / "ring.json").write_text(json.dumps(ring3))
+    assert main(["export", str(tmp_path / "ring.json"), "-o", str(tmp_path / "three.ssp")]) == 0
+    err = capsys.readouterr().err
+    assert "warning: FMI 3.0 FMUs in the archive (a, b, c)" in err and "cosim export --fmi 2" in err
+    with zipfile.ZipFile(tmp_path / "three.ssp") as zf:
+        zf.extractall(tmp_path / "three")
+    with pytest.raises(AssertionError, match="Unable to create execution"):  # what the warning is about
+        run_libcosim(tmp_path / "three", 0.01, 1)
+    assert main(["export", str(tmp_path / "ring.json"), "-o", str(tmp_path / "two.ssp"), "--fmi", "2"]) == 0
+    assert "warning" not in capsys.readouterr().err
+    with zipfile.ZipFile(tmp_path / "two.ssp") as zf:
+        zf.extractall(tmp_path / "two")
+    ours = Execution(check_spec(tmp_path / "ring.json"), record=True).run()  # the FMI 3.0 system, run by cosim
+    theirs = run_libcosim(tmp_path / "two", 0.01, 100)
+    assert np.max(np.abs(theirs - ours.traces[["a.y", "b.y", "c.y"]].to_numpy()[1:])) <= 1e-12
