@@ -155,3 +155,16 @@ def test_port_mappings_survive_the_export(tmp_path):
 
     direct, again = run(tmp_path / "spec.json"), run(tmp_path / "mapped.spec.json")
     assert direct.objectives == again.objectives == {"state": 2.0}  # 4 steps of 0.25 s, b = 1, u = 2
+
+
+@pytest.mark.parametrize("cls", ["LinearOde", "Clock"])
+def test_exported_fmu_passes_fmpy_validation(tmp_path, cls):
+    # FMPy's checks as a user runs them on an FMU: every calculated output listed in ModelStructure/InitialUnknowns
+    from fmpy import read_model_description
+    from fmpy.validation import validate_fmu
+
+    assert main(["export-fmu", python_unit(cls), "-o", str(tmp_path / "unit.fmu")]) == 0
+    assert validate_fmu(str(tmp_path / "unit.fmu")) == []
+    description = read_model_description(str(tmp_path / "unit.fmu"), validate=True)
+    outputs = sorted(v.name for v in description.modelVariables if v.causality == "output")
+    assert outputs and sorted(u.variable.name for u in description.initialUnknowns) == outputs

@@ -161,6 +161,25 @@ def _file_to_pack(module_name: str, cls: type, base_dir: str | Path | None) -> P
     return Path(source).resolve() if source else None
 
 
+def _add_initial_unknowns(root: ElementTree.Element, variables: ElementTree.Element) -> None:
+    """List under ModelStructure/InitialUnknowns what FMI 2.0 (section 2.2.8) requires there and pythonfmu leaves
+    out: outputs whose ``initial`` is calculated (an output's default) or approx, and calculated parameters.
+    Without them FMPy's validation (``fmpy.validation.validate_fmu``) rejects the FMU. No ``dependencies``
+    attribute: during initialisation an output may depend on any parameter or input (FMI's "depends on all")."""
+    structure = root.find("ModelStructure")
+    if structure is None:
+        structure = ElementTree.SubElement(root, "ModelStructure")
+    for old in structure.findall("InitialUnknowns"):
+        structure.remove(old)
+    indices = [i + 1 for i, sv in enumerate(variables)
+               if (sv.get("causality") == "output" and sv.get("initial", "calculated") in ("calculated", "approx"))
+               or sv.get("causality") == "calculatedParameter"]
+    if indices:  # after Outputs and Derivatives, as the schema orders them
+        unknowns = ElementTree.SubElement(structure, "InitialUnknowns")
+        for index in indices:
+            ElementTree.SubElement(unknowns, "Unknown", index=str(index))
+
+
 def _complete_model_description(fmu: Path, description, out: Path) -> None:
     """Copy the FMU to ``out`` with units and output dependencies added to modelDescription.xml."""
     with zipfile.ZipFile(fmu) as zf:
@@ -190,6 +209,7 @@ def _complete_model_description(fmu: Path, description, out: Path) -> None:
             inputs = description.depends_on(base)
             indices = [index_of[e] for i in inputs for e in description.variable(i).element_names() if e in index_of]
             unknown.set("dependencies", " ".join(map(str, sorted(indices))))
+    _add_initial_unknowns(root, variables)
     members["modelDescription.xml"] = ElementTree.tostring(root, encoding="utf-8", xml_declaration=True)
     tmp = out.with_suffix(out.suffix + ".part")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zf:
