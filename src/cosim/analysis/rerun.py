@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
+import pandas as pd
 
 from cosim.analysis.table import AnalysisError, ResultsTable
 
@@ -154,14 +155,17 @@ def port_groups(columns: Sequence[str], limit: int = 12) -> list[tuple[str, list
     return list(groups.items())[:limit]
 
 
-def find_table_for(spec_path: str | Path, given: str | Path | None, digest: str | None = None) -> Path:
+def find_table_for(spec_path: str | Path, given: str | Path | None, digest: str | None = None,
+                   point_id: str | None = None) -> Path:
     """The results table of ``cosim run SPEC --point ID``: ``given``, else the sweep of this spec.
 
     First where ``cosim sweep`` writes by default, ``results/<spec name>/``
-    under the current directory, then under the spec's folder; else the newest
+    under the current directory, then under the spec's folder; else the one
     sweep folder ``results/*/`` (in the same two places) whose metadata names
-    this spec file or its ``digest``, e.g. one written with ``--out
-    results/my_run``.  Raises AnalysisError when there is none.
+    this spec file or its ``digest`` (e.g. one written with ``--out
+    results/my_run``) and, when several do, the one holding ``point_id``.
+    Raises AnalysisError when there is none, or when several hold the point
+    (listing them: a guess could re-run another sweep's row).
     """
     if given is not None:
         return Path(given)
@@ -173,8 +177,17 @@ def find_table_for(spec_path: str | Path, given: str | Path | None, digest: str 
         if c.exists():
             return c
     sweeps = _sweeps_of(Path(spec_path), digest)
-    if sweeps:
+    if len(sweeps) > 1 and point_id is not None:
+        holding = [t for t in sweeps if point_id in set(pd.read_parquet(t, columns=["point_id"])["point_id"])]
+        if len(holding) > 1:
+            raise AnalysisError(f"--point {point_id}: {len(holding)} sweeps of this spec hold the point: "
+                                + ", ".join(str(t.parent) for t in holding) + "; choose one with --results DIR")
+        sweeps = holding or sweeps
+    if len(sweeps) == 1 or (sweeps and point_id is None):
         return sweeps[0]
+    if sweeps:
+        raise AnalysisError(f"--point {point_id}: none of the {len(sweeps)} sweeps of this spec holds the point ("
+                            + ", ".join(str(t.parent) for t in sweeps) + "); check the id, or give --results DIR")
     raise AnalysisError("--point: no results table found at " + " or ".join(map(str, candidates))
                         + " nor a sweep of this spec in results/*/; give it with --results DIR")
 
@@ -208,7 +221,7 @@ def prepare_point_run(system: Any, point_id: str, results: str | Path | None, ou
     from cosim.analysis.table import load_results
 
     spec_path = system.spec.path
-    table = load_results(find_table_for(spec_path, results, system.spec.digest))
+    table = load_results(find_table_for(spec_path, results, system.spec.digest, point_id))
     row = find_row(table, point_id)
     digest = (table.metadata or {}).get("spec_digest")
     if digest and digest != system.spec.digest:

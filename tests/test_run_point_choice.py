@@ -1,0 +1,28 @@
+"""``cosim run SPEC --point ID`` when several sweeps of the spec hold the point: refused, listing them
+(issue 28, item 15); before, the newest folder was picked silently."""
+
+from __future__ import annotations
+
+import cosim
+from cosim.cli.main import main
+
+from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
+from .test_hostile_files import _spec
+
+
+def test_run_point_refuses_to_guess_between_sweeps_holding_the_point(tmp_path, monkeypatch, capsys,
+                                                                    local_cluster):  # noqa: F811
+    monkeypatch.chdir(tmp_path)
+    spec = _spec(tmp_path, 3)
+    first = cosim.sweep(str(spec), out="results/first", scheduler=local_cluster, quiet=True)
+    cosim.sweep(str(spec), out="results/second", scheduler=local_cluster, quiet=True)
+    point = first.loc[first["s.k"] == 2, "point_id"].item()
+    assert main(["run", str(spec), "--point", point]) == 2
+    err = capsys.readouterr().err
+    assert f"--point {point}: 2 sweeps of this spec hold the point" in err
+    assert "results/first" in err and "results/second" in err and "--results DIR" in err
+    assert main(["run", str(spec), "--point", point, "--results", "results/second"]) == 0
+    out = capsys.readouterr().out
+    assert "s.k=2" in out and "6" in out  # y = 3 k
+    assert main(["run", str(spec), "--point", "0000000000000000"]) == 2
+    assert "none of the 2 sweeps of this spec holds the point" in capsys.readouterr().err
