@@ -87,3 +87,31 @@ def test_design_constraint_and_unknown_objective_are_exit_2(write_spec, tmp_path
     spec = write_spec(ishigami_spec(), "b.json")
     assert main(["sensitivity", str(spec), "--objective", "energy", "--out", str(tmp_path / "b")]) == 2
     assert "not an objective" in capsys.readouterr().err
+
+
+def test_sobol_indices_from_too_small_a_sample_come_with_a_warning_naming_n(write_spec, tmp_path, local_cluster,
+                                                                            capsys):  # noqa: F811
+    """Issue 28: `cosim sensitivity -n 8` printed indices of 1.21 and -0.31 without a word."""
+    spec = write_spec(ishigami_spec())
+    code = main(["sensitivity", str(spec), "-n", "8", "--objective", "y", "--out", str(tmp_path / "s"),
+                 "--scheduler", local_cluster])
+    assert code == 0
+    err = capsys.readouterr().err
+    indices = pd.read_csv(tmp_path / "s" / "sensitivity.csv")
+    outside = indices[(indices["value"] < -0.05) | (indices["value"] > 1.05)]
+    assert len(outside) or (indices["conf"] > 0.25).any()  # what 40 runs give for the Ishigami function
+    assert "cosim: warning: Sobol indices with n = 8 are not reliable" in err and "larger -n" in err
+    for row in outside.itertuples():
+        assert f"{row.index} of {row.parameter} for y = {row.value:.2f}" in err or len(outside) > 3
+
+
+def test_no_warning_for_indices_within_their_bounds():
+    from cosim.studies.sensitivity import unreliable_indices
+
+    rows = [{"objective": "y", "parameter": p, "index": i, "value": v, "conf": c}
+            for p, i, v, c in [("b.x1", "S1", 0.31, 0.05), ("b.x1", "ST", 0.56, 0.06), ("b.x2", "S1", 0.44, 0.04),
+                               ("b.x3", "S1", -0.01, 0.03), ("b.x3", "ST", 0.24, 0.05)]]
+    assert unreliable_indices(pd.DataFrame(rows), "sobol", 512) == ""
+    rows[0]["value"] = 1.21
+    assert "S1 of b.x1 for y = 1.21" in unreliable_indices(pd.DataFrame(rows), "sobol", 8)
+    assert unreliable_indices(pd.DataFrame(rows), "morris", 8) == ""  # mu* and sigma have no bound

@@ -40,7 +40,7 @@ def add_sensitivity_parser(sub: Any) -> None:
 def cmd_sensitivity(args: argparse.Namespace) -> int:
     """Sample, run, analyse; prints the indices. SpecError and UserErrors reach cli.main."""
     from cosim.results.store import default_folder
-    from cosim.studies.sensitivity import FIGURE_NAME, TABLE_NAME, SensitivityStudy
+    from cosim.studies.sensitivity import FIGURE_NAME, TABLE_NAME, SensitivityStudy, unreliable_indices
 
     if args.n is not None and args.n < 2:
         raise UsageError("-n must be at least 2")
@@ -57,6 +57,9 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
     print(wide.to_string(float_format=lambda v: f"{v:.4f}"))
     print(f"{total} designs: " + ", ".join(f"{n} {s}" for s, n in sorted(counts.items()) if n)
           + f"; indices: {out / TABLE_NAME}, figure: {out / FIGURE_NAME}")
+    warning = unreliable_indices(indices, args.method, study.n)
+    if warning:
+        print(f"cosim: warning: {warning}", file=sys.stderr)
     not_ok = total - counts.get("ok", 0)
     if not_ok:
         print(f"{not_ok} runs not ok: the indices of the objectives they leave without a value are NaN",

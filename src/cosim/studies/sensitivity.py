@@ -133,6 +133,35 @@ def index_rows(problem: dict[str, Any], method: str, objective: str, result: dic
     return rows
 
 
+#: a Sobol index this far outside [0, 1], or a 95 % half-width this wide, is the sampling's noise, not the model
+SOBOL_SLACK, SOBOL_WIDE_CONF = 0.05, 0.25
+
+
+def unreliable_indices(indices: Any, method: str, n: int) -> str:
+    """A warning when Sobol indices cannot be trusted (some outside [0, 1] by more than SOBOL_SLACK, or with
+    confidence half-widths above SOBOL_WIDE_CONF), naming the worst ones and the base size ``n``; else ``""``.
+
+    Estimated indices are unbiased but noisy: with a small ``n`` they leave [0, 1] (issue 28: -n 8 gave 1.21 and
+    -0.31 with no word said).  Morris indices have no such bound: ``""``.
+    """
+    if method != "sobol" or indices is None or not len(indices):
+        return ""
+    values, conf = indices["value"].astype(float), indices["conf"].astype(float)
+    outside = indices[(values < -SOBOL_SLACK) | (values > 1 + SOBOL_SLACK)]
+    wide = indices[conf > SOBOL_WIDE_CONF]
+    if outside.empty and wide.empty:
+        return ""
+    said = []
+    if not outside.empty:
+        worst = outside.assign(off=(outside["value"] - outside["value"].clip(0, 1)).abs()).nlargest(3, "off")
+        said.append("outside [0, 1]: " + ", ".join(f"{r.index} of {r.parameter} for {r.objective} = {r.value:.2f}"
+                                                  for r in worst.itertuples()))
+    if not wide.empty:
+        said.append(f"95 % confidence half-widths up to {float(wide['conf'].max()):.2f}")
+    return (f"Sobol indices with n = {n} are not reliable ({'; '.join(said)}): the sample is too small for "
+            f"them; run again with a larger -n (each doubling halves the variance; e.g. -n {max(4 * n, 256)})")
+
+
 def choose_objectives(spec: Any, asked: Sequence[str] | None) -> list[str]:
     """Objectives analysed: those asked, else those with a sense (or in ``optimize``), else all."""
     names = [o.name for o in spec.objectives]
