@@ -94,3 +94,33 @@ def test_the_committed_full_study_is_a_sweep_folder_that_opens_without_spec(caps
     assert load_rerun_spec(table, None).digest == table.metadata["spec_digest"]  # re-runs (explore) need no --spec
     assert main(["pareto", str(study), "--min", "e_total", "--min", "duration"]) == 0
     assert "Pareto front (min e_total, min duration): 1 of 17061 rows" in capsys.readouterr().out
+
+
+def test_quiet_and_verbose_anywhere_on_the_command_line(write_spec, tmp_path, capsys, local_cluster):  # noqa: F811
+    import logging
+
+    from .conftest import python_unit
+
+    spec = str(write_spec({
+        "name": "gain", "units": {"g": {"python": python_unit("LinearOde")}},
+        "experiment": {"stop": 0.1, "step": 0.05},
+        "objectives": {"y_end": {"signal": "g.y", "reduce": "final"}},
+        "design": {"parameters": {"g.a": {"values": [-1.0, -2.0, -3.0]}}}}))
+    assert main(["sweep", spec, "--out", str(tmp_path / "loud"), "--scheduler", local_cluster]) == 0
+    loud = capsys.readouterr()
+    assert "cosim sweep" in loud.err and "3 points" in loud.out  # the header line and the summary
+    assert main(["sweep", spec, "--out", str(tmp_path / "quiet"), "--scheduler", local_cluster, "-q"]) == 0
+    quiet = capsys.readouterr()
+    assert quiet.err == "" and "3 points: 3 ok" in quiet.out  # the result, and nothing else
+    assert pd.read_parquet(tmp_path / "quiet" / "results.parquet")["y_end"].tolist() == \
+        pytest.approx([np.exp(a * 0.1) for a in (-1.0, -2.0, -3.0)], rel=1e-12)
+    root = logging.getLogger().level
+    try:
+        assert main(["validate", spec, "-vv"]) == 0 and logging.getLogger("cosim").level == logging.DEBUG
+        assert main(["--log-level", "info", "validate", spec]) == 0 and logging.getLogger("cosim").level == logging.INFO
+    finally:
+        logging.getLogger().setLevel(root)
+        logging.getLogger("cosim").setLevel(logging.NOTSET)
+    with pytest.raises(SystemExit) as exited:  # argparse: not allowed with each other
+        main(["validate", spec, "-q", "-v"])
+    assert exited.value.code == 2 and "not allowed with argument" in capsys.readouterr().err

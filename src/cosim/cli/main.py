@@ -44,9 +44,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     parser = _parser()
     arguments = list(sys.argv[1:] if argv is None else argv)
-    if "--debug" in arguments:  # `cosim run spec.json --debug` as well as `cosim --debug run spec.json`
-        arguments = ["--debug"] + [a for a in arguments if a != "--debug"]
+    arguments = _global_options_first(arguments)
     args = parser.parse_args(arguments)
+    _configure_logging(args)
     if args.debug:  # the processes that run points inherit it: their unit errors keep the whole traceback
         os.environ[DEBUG_VARIABLE] = "1"
     if not getattr(args, "handler", None):
@@ -149,6 +149,42 @@ def report_error(exc: BaseException, debug: bool = False) -> None:
         traceback.print_exception(exc)
 
 
+GLOBAL_FLAGS = ("--debug", "-q", "--quiet", "-v", "-vv", "--verbose")
+
+
+def _global_options_first(arguments: list[str]) -> list[str]:
+    """The options of every command (--debug, -q, -v, --log-level LEVEL) moved to the front, so that
+    ``cosim sweep spec.json -q`` works as well as ``cosim -q sweep spec.json``."""
+    front, rest, i = [], [], 0
+    while i < len(arguments):
+        a = arguments[i]
+        if a == "--":  # everything after it is positional
+            rest.extend(arguments[i:])
+            break
+        if a in GLOBAL_FLAGS or a.startswith("--log-level="):
+            front.append(a)
+        elif a == "--log-level" and i + 1 < len(arguments):
+            front.extend(arguments[i:i + 2])
+            i += 1
+        else:
+            rest.append(a)
+        i += 1
+    return front + rest
+
+
+def _configure_logging(args: argparse.Namespace) -> None:
+    """Python logging at the level asked: --log-level, else -q (errors only, and studies without progress
+    line or notes), -v (info) or -vv (debug); left alone (warnings and above shown) when none is given."""
+    import logging
+
+    if not (args.log_level or args.quiet or args.verbose):
+        return  # as Python leaves it (a program calling main() keeps its own logging)
+    level = args.log_level or ("ERROR" if args.quiet else {1: "INFO"}.get(args.verbose, "DEBUG"))
+    logging.basicConfig(level=level, format="cosim %(levelname)s %(name)s: %(message)s", stream=sys.stderr)
+    logging.getLogger().setLevel(level)
+    logging.getLogger("cosim").setLevel(level)
+
+
 def _parser() -> argparse.ArgumentParser:
     from cosim import __version__
 
@@ -158,6 +194,14 @@ def _parser() -> argparse.ArgumentParser:
                         help="print every error's whole traceback (also a user's mistake), and keep the whole "
                              "traceback, cosim's frames included, of a Python unit that raised (anywhere on the "
                              "command line)")
+    loudness = parser.add_mutually_exclusive_group()
+    loudness.add_argument("-q", "--quiet", action="store_true",
+                          help="only errors: no progress line or notes from sweep, optimize and sensitivity, log "
+                               "level ERROR (anywhere on the command line)")
+    loudness.add_argument("-v", "--verbose", action="count", default=0,
+                          help="log level INFO (-vv: DEBUG) (anywhere on the command line)")
+    parser.add_argument("--log-level", choices=("DEBUG", "INFO", "WARNING", "ERROR"), type=str.upper,
+                        help="the level of Python logging (cosim's and its libraries'); default WARNING")
     sub = parser.add_subparsers(title="commands")
     for module, register in SUBCOMMAND_MODULES:
         getattr(importlib.import_module(f"cosim.cli.{module}"), register)(sub)

@@ -60,7 +60,7 @@ def cmd_optimize(args: argparse.Namespace) -> int:
     objectives = {name: f"{sense}imize" for name, sense in args.objectives} if args.objectives else None
     run = Optimization(args.spec, out, objectives=objectives, budget=args.budget, sampler=args.sampler, batch=args.batch,
                        seed=args.seed, resume=args.resume, workers=args.workers, scheduler=args.scheduler,
-                       cluster=args.cluster, timeout=args.timeout)
+                       cluster=args.cluster, timeout=args.timeout, quiet=getattr(args, "quiet", False))
     counts = run.run()
     total = sum(counts.values())
     summary = ", ".join(f"{n} {s}" for s, n in sorted(counts.items()) if n)

@@ -48,7 +48,7 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
     study = SensitivityStudy(args.spec, out, method=args.method, n=args.n, seed=args.seed,
                              objectives=args.objective, workers=args.workers, scheduler=args.scheduler,
                              cluster=args.cluster,
-                             timeout=args.timeout, resume=args.resume)
+                             timeout=args.timeout, resume=args.resume, quiet=getattr(args, "quiet", False))
     counts, indices = study.run()
     total = sum(counts.values())
     wide = indices.pivot_table(index=["objective", "parameter"], columns="index", values=["value", "conf"],

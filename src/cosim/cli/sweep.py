@@ -70,7 +70,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     sweep = Sweep(args.spec, workers=args.workers, out=out, scheduler=args.scheduler, cluster=args.cluster,
                   timeout=args.timeout,
                   resume=args.resume, batch_size=args.batch_size, csv=args.csv, experiment=experiment_overrides(args),
-                  recompute=args.recompute,
+                  recompute=args.recompute, quiet=getattr(args, "quiet", False),
                   start_early=True)  # the local cluster starts while the results folder and payload are prepared
     counts = sweep.run_to_disk()  # a huge sweep's table never sits in memory
     total = sum(counts.values())
