@@ -26,3 +26,23 @@ def test_run_point_refuses_to_guess_between_sweeps_holding_the_point(tmp_path, m
     assert "s.k=2" in out and "6" in out  # y = 3 k
     assert main(["run", str(spec), "--point", "0000000000000000"]) == 2
     assert "none of the 2 sweeps of this spec holds the point" in capsys.readouterr().err
+
+
+def test_metadata_records_the_versions_that_change_results(tmp_path, local_cluster):  # noqa: F811
+    """Issue 28, item 15: cosim's own version (distribution fmi-cosim) and the physics and code generation of
+    the built-in units (pin, exudyn, casadi) were missing from metadata.json."""
+    import importlib.metadata
+    import json
+
+    import casadi
+    import exudyn
+    import numpy
+    import pinocchio
+
+    cosim.sweep(str(_spec(tmp_path, 2)), out=str(tmp_path / "out"), scheduler=local_cluster, quiet=True)
+    packages = json.loads((tmp_path / "out" / "metadata.json").read_text())["packages"]
+    assert packages["fmi-cosim"] == cosim.__version__
+    assert packages["casadi"] == casadi.__version__ and packages["pin"] == pinocchio.__version__
+    assert packages["exudyn"] == exudyn.__version__ and packages["numpy"] == numpy.__version__
+    assert packages["SALib"] == importlib.metadata.version("SALib")
+    assert "cosim" not in packages  # another project's name on the package index

@@ -27,7 +27,11 @@ from typing import Any, Callable, Iterator, Mapping, TextIO
 
 from cosim.errors import OutputError, UserError
 
-PACKAGES = ("cosim", "fmpy", "dask", "distributed", "numpy", "pandas", "pyarrow", "scipy")
+# The distributions whose versions can change a row's numbers (cosim's own is fmi-cosim: "cosim" on the index
+# is another project): the FMI runtime, the built-in units' physics and code generation (pin, exudyn, casadi,
+# the Panda's URDF in example-robot-data), numerics, the samplers and the sensitivity analysis.
+PACKAGES = ("fmi-cosim", "fmpy", "dask", "distributed", "numpy", "pandas", "pyarrow", "scipy", "pin", "exudyn",
+            "casadi", "example-robot-data", "optuna", "SALib")
 
 
 def study_identity(spec_digest: str, kind: str, units: Mapping[str, str],
