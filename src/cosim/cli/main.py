@@ -205,6 +205,9 @@ def _parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(title="commands")
     for module, register in SUBCOMMAND_MODULES:
         getattr(importlib.import_module(f"cosim.cli.{module}"), register)(sub)
+    from cosim.cli.examples import add_examples
+
+    add_examples(sub)
     return parser
 
 
