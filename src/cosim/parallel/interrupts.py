@@ -57,9 +57,13 @@ def stop_cleanly_on_signals() -> dict[int, Any]:
 
 
 def restore_signals(previous: dict[int, Any]) -> None:
-    """Put back the handlers :func:`stop_cleanly_on_signals` replaced."""
+    """Put back the handlers :func:`stop_cleanly_on_signals` replaced (and let point children start again)."""
     for signum, handler in previous.items():
         signal.signal(signum, handler)
+    if previous:
+        from cosim.parallel.isolation import allow_point_children
+
+        allow_point_children()
 
 
 @contextmanager

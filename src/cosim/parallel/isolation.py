@@ -349,6 +349,14 @@ def _kill_children() -> None:
         runner.close()
 
 
+_STOPPING = threading.Event()  # set by a stop signal: runners start no new child and run no further point
+
+
+def allow_point_children() -> None:
+    """Undo :func:`kill_point_children_now`'s stop for this process (a program that goes on after a study)."""
+    _STOPPING.clear()
+
+
 def kill_point_children_now() -> None:
     """Kill every point child of this process at once, without waiting (the study is being stopped).
 
@@ -357,6 +365,7 @@ def kill_point_children_now() -> None:
     children were running are not finished, so no row of theirs is lost; the worker threads
     waiting on them see the child gone and return at once.
     """
+    _STOPPING.set()  # first: a batch's next point must not start a fresh child
     for runner in list(_LIVE) + list(_SPARES):
         proc = runner._proc
         if proc is not None and proc.poll() is None:
@@ -531,6 +540,10 @@ class IsolatedRunner:
         remaining = list(points)
         mode = "run"  # after a crash or timeout the rest runs one point at a time (no lock-step groups)
         while remaining:
+            if _STOPPING.is_set():  # the study is being stopped: the rest of the batch does not run
+                keep(*(_row(pid, "failed", "not run: the study was stopped", time.perf_counter())
+                       for pid, _ in remaining))
+                break
             if self._proc is None or self._proc.poll() is not None:
                 self.close()
                 problem = self._start()
