@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from cosim.cli.exit_codes import EXIT_OK
-from cosim.errors import UsageError
+from cosim.errors import SpecError, UsageError
 from cosim.units.protocol import UnitDescription, UnitType
 
 HEADER = ("name", "causality", "type", "shape", "unit", "start", "range", "description")
@@ -126,7 +126,12 @@ def inspect_spec(path: str, experiment: dict[str, Any] | None = None, variant: s
             experiment["stop"] = stop = start + 1.0
         if "step" in missing:
             experiment["step"] = float(stop) - start if isinstance(stop, (int, float)) and stop > start else 1.0
-    system = check_spec(path, experiment or None, variant)
+    try:
+        system = check_spec(path, experiment or None, variant)
+    except SpecError:
+        if ssp is None:
+            print_units_that_load(path, raw)  # what can be listed is listed; the problems follow (exit 2)
+        raise
     print(f"spec {path}: {system.spec.name}")
     if ssp is not None and len(ssp.files.variants) > 1:
         print("variants: " + ", ".join(f"{name} ({Path(p).name}{', shown' if name == ssp.files.variant else ''})"
@@ -164,6 +169,35 @@ def inspect_spec(path: str, experiment: dict[str, Any] | None = None, variant: s
         print(f"integrated together (one solver): {group.name} = {', '.join(group.members)}")
     print_coupling(system)
     return EXIT_OK
+
+
+def print_units_that_load(path: str, raw: Any) -> None:
+    """For a spec with problems: the ports of each unit that loads on its own, and which units do not.
+
+    ``cosim validate``'s advice to inspect the spec is then no dead end: the variables a misspelt parameter
+    or connection should name are listed, while the problems (printed after this) say what to fix."""
+    from cosim.errors import CosimError
+    from cosim.spec.loader import build_spec
+    from cosim.system.builder import make_unit_type
+
+    units = raw.get("units") if isinstance(raw, dict) else None
+    if not isinstance(units, dict) or not units:
+        print(f"spec {path}: no units to list (the problems follow)")
+        return
+    print(f"spec {path} has problems (listed after its units); the units that load on their own:")
+    for name, entry in units.items():
+        try:
+            alone = build_spec({"units": {name: entry}, "experiment": {"stop": 1.0, "step": 1.0}}, Path(path))
+            unit_spec = alone.units[0]
+            d = make_unit_type(unit_spec, alone.folder).describe()
+        except (CosimError, OSError, ValueError, TypeError, KeyError, IndexError, AttributeError) as exc:
+            reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            print(f"unit {name}: does not load ({reason[:200]})")
+            continue
+        kind = f"FMI {d.fmi_version}" if d.kind == "fmu" else d.kind
+        print(f"unit {name}: {kind} {unit_spec.source}")
+        print_table(port_rows(d))
+    print("connections, stepping order and loops: not shown until the problems below are fixed")
 
 
 def print_coupling(system: Any) -> None:
