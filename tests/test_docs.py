@@ -236,6 +236,37 @@ def test_example_shell_block_runs_whole_as_written(tmp_path, example, lines):
     run_shell_block(lines, tmp_path, tmp_path / "venv")
 
 
+OUTPUT_OPTIONS = ("--out", "-o", "--csv", "--plot")
+
+
+def cosim_outputs(lines: list[str]) -> list[tuple[str, Path]]:
+    """(command, the path it writes by an output option) of each cosim command in ``lines``, as a repository
+    path (``cd`` lines followed; /tmp stays absolute)."""
+    cwd, found = Path("."), []
+    for line in lines:
+        argv = shlex.split(line)
+        if argv[0] == "cd":
+            cwd = cwd / argv[1]
+        elif argv[0] == "cosim":
+            for i, arg in enumerate(argv[:-1]):
+                if arg in OUTPUT_OPTIONS and not (argv[1] == "sweep" and arg == "--csv"):  # sweep --csv is a flag
+                    found.append((line, Path(os.path.normpath(cwd / argv[i + 1]))))
+    return found
+
+
+def test_example_readme_cosim_commands_write_under_results_or_tmp():
+    """Following an example's README leaves the tracked tree as it was: every cosim command writes under the
+    git-ignored results/ (or /tmp), never over committed tables and figures beside the examples."""
+    ignored = (REPO / ".gitignore").read_text(encoding="utf-8").splitlines()
+    assert "/results/" in ignored
+    outputs = [o for path in EXAMPLE_READMES for o in cosim_outputs(indented_commands(path))]
+    outputs += [o for _, lines in shell_blocks() for o in cosim_outputs(lines)]
+    assert len(outputs) >= 6
+    for command, written in outputs:
+        assert written.parts[0] in ("results", "/") and (written.parts[0] == "results" or written.parts[1] == "tmp"), \
+            (command, written)
+
+
 def test_the_project_cites_no_document_outside_it():
     """The team's design notes are not part of the project: what a reader needs is in the project's own docs."""
     import subprocess as sp
