@@ -461,7 +461,7 @@ def test_a_closed_stdout_does_not_turn_failed_points_into_success(tmp_path, loca
     proc.stdout.close()  # what `| head -0` does: the reader is gone before the summary is printed
     err = proc.stderr.read()
     assert proc.wait(timeout=180) == 1, err  # points failed: exit 1, as with a reader
-    assert "Traceback" not in err and "BrokenPipe" not in err
+    assert "BrokenPipe" not in err and "internal error" not in err, err  # (the unit's own traceback is shown)
     table = pd.read_parquet(out / "results.parquet")
     assert list(table["status"]) == ["ok"] * 3 + ["failed"] * 3
 
