@@ -180,8 +180,15 @@ def _configure_logging(args: argparse.Namespace) -> None:
     if not (args.log_level or args.quiet or args.verbose):
         return  # as Python leaves it (a program calling main() keeps its own logging)
     level = args.log_level or ("ERROR" if args.quiet else {1: "INFO"}.get(args.verbose, "DEBUG"))
-    logging.basicConfig(level=level, format="cosim %(levelname)s %(name)s: %(message)s", stream=sys.stderr)
-    logging.getLogger().setLevel(level)
+    root = logging.getLogger()
+    handler = next((h for h in root.handlers if getattr(h, "cosim_cli", False)), None)
+    if handler is None:  # main() may run more than once in a process: one handler
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("cosim %(levelname)s %(name)s: %(message)s"))
+        handler.cosim_cli = True  # type: ignore[attr-defined]
+        root.addHandler(handler)
+    handler.setLevel(level)  # libraries that set their own loggers' levels (Dask: INFO) still reach only this far
+    root.setLevel(level)
     logging.getLogger("cosim").setLevel(level)
 
 
