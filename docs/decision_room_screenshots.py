@@ -33,13 +33,17 @@ def main() -> None:
     browser = B.chromium(1500, 1050)
     try:
         text, seconds = B.load(browser, server.link)
-        print(f"loaded in {seconds:.1f} s: {text}")
+        print(f"loaded in {seconds:.1f} s: {text}", flush=True)
         B.set_and_wait(browser, "filter:duration", "value", [1.589, 1.75], B.COUNT_TEXT)
         B.set_and_wait(browser, "choose-colour", "value", "duration",
                        "return doc.get_model_by_name('choose-colour').value;")
-        B.set_and_wait(browser, "minimise", "value", ["e_total", "duration", "peak_tau_ratio[2]"], B.RANKING_IDS)
-        B.set_and_wait(browser, "method", "value", "topsis", B.RANKING_IDS)
-        B.set_and_wait(browser, "weight:duration", "value", 0.5, B.RANKING_IDS)
+        B.set_and_wait(browser, "minimise", "value", ["e_total", "duration", "peak_tau_ratio[2]"], B.RANKING_SCORES)
+        B.set_and_wait(browser, "method", "value", "topsis", B.RANKING_SCORES)
+        B.set_and_wait(browser, "weight:duration", "value", 0.5, B.RANKING_SCORES)
+        print("best:", browser.execute_script("const d = Bokeh.documents[0].get_model_by_name('ranking').source.data;"
+                                              "return [Array.from(d.point_id).slice(0, 3), Array.from(d.score)"
+                                              ".slice(0, 3), Array.from(d.o0).slice(0, 3), Array.from(d.o1)"
+                                              ".slice(0, 3), Array.from(d.o2).slice(0, 3)];"))
         rows = browser.execute_script("return Array.from(Bokeh.documents[0].get_model_by_name('ranking')"
                                       ".source.data.row).slice(0, 3);")
         browser.execute_script(f"Bokeh.documents[0].get_model_by_name('cloud-source').selected.indices = {rows};")

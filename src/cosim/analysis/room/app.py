@@ -51,6 +51,7 @@ class Room:
         self.size: str | None = None
         self.runs: list = []
         self._pending = False
+        self._weight_sliders: dict[str, Any] = {}
         columns = self.decision.filters.columns
 
         # -- Points
@@ -197,10 +198,16 @@ class Room:
         self._refresh_ranking()
 
     def _rebuild_weights(self) -> None:
-        sliders = V.weight_sliders(self.decision.weights)
-        for s in sliders:
-            s.on_change("value", partial(self._on_weight, s.name.split(":", 1)[1]))
-        self.weights.children = sliders
+        # one slider per objective name for the tab's life: the page keeps a removed model for a while, and two
+        # models of one name would make it ambiguous
+        for slider in V.weight_sliders(self.decision.weights):
+            name = slider.name.split(":", 1)[1]
+            if name not in self._weight_sliders:
+                slider.on_change("value", partial(self._on_weight, name))
+                self._weight_sliders[name] = slider
+            else:
+                self.decision.set_weight(name, self._weight_sliders[name].value)
+        self.weights.children = [self._weight_sliders[name] for name in self.decision.weights]
 
     # -- refreshing ------------------------------------------------------------------------------------------
     @without_property_validation  # bokeh would check each of the 5 masks' n booleans one by one (seconds at 10^5)

@@ -31,10 +31,12 @@ const [name, attr, value, watch, done] = arguments;
 const doc = Bokeh.documents[0];
 const look = () => new Function('doc', watch)(doc);
 const before = look();
+const start = performance.now();
 doc.get_model_by_name(name)[attr] = value;
 (function check() {
   const now = look();
   if (now !== before && now !== null && doc.is_idle) requestAnimationFrame(() => requestAnimationFrame(() => done(now)));
+  else if (performance.now() - start > 100000) done('no change within 100 s');
   else setTimeout(check, 5);
 })();
 """
@@ -51,6 +53,7 @@ const f = new Function('doc', js);
 """
 
 COUNT_TEXT = "return doc.get_model_by_name('count').text;"
+RANKING_SCORES = "const s = doc.get_model_by_name('ranking').source.data.score; return s.length ? s.join() : null;"
 RANKING_IDS = "const ids = doc.get_model_by_name('ranking').source.data.point_id; return ids.length ? ids.join() : null;"
 
 # the viewport position of data point (x, y) of the cloud
@@ -100,9 +103,13 @@ def load(browser: Any, link: str) -> tuple[str, float]:
 
 
 def set_and_wait(browser: Any, name: str, attr: str, value: Any, watch: str) -> tuple[Any, float]:
-    """Set ``name.attr = value`` in the page; (the new value of ``watch``, seconds until it came and was drawn)."""
+    """Set ``name.attr = value`` in the page; (the new value of ``watch``, seconds until it came and was drawn).
+
+    Raises RuntimeError when ``watch`` did not change within 100 s."""
     start = time.perf_counter()
     now = browser.execute_async_script(SET_AND_WAIT, name, attr, value, watch)
+    if now == "no change within 100 s":
+        raise RuntimeError(f"setting {name}.{attr} = {value!r}: {watch} did not change within 100 s")
     return now, time.perf_counter() - start
 
 
