@@ -204,6 +204,27 @@ def staircase_area(points: np.ndarray, reference: float) -> float:
     return area
 
 
+def test_one_hypervolume_in_the_scale_of_the_first_batch_never_decreases():
+    """Issue 28: the progress line scaled by the current front (constant 1.21 on a converged grid, dropping
+    between batches elsewhere) and disagreed with the report. Now one figure: the scale of the first batch's
+    usable rows, fixed, reference 1.1; later rows beyond that batch's nadir add nothing, better ones add."""
+    from cosim.analysis.hypervolume import hypervolume_history, progress_hypervolume
+
+    values = np.array([[2.0, 2.0], [4.0, 1.0], [1.0, 4.0],   # batch 0: ideal (1, 1), nadir (4, 4)
+                       [9.0, 9.0], [0.5, 3.0],               # batch 1: one far worse, one beyond the ideal
+                       [3.0, 3.0], [1.0, 1.5]])              # batch 2: dominated, then a new best
+    batches = np.array([0, 0, 0, 1, 1, 2, 2])
+    usable = np.ones(7, dtype=bool)
+    history = hypervolume_history(values, ["min", "min"], usable, batches)
+    scale = {"ideal": np.array([1.0, 1.0]), "nadir": np.array([4.0, 4.0])}
+    for i in range(7):  # after each row: the front so far, in the first batch's scale, by the staircase
+        losses = normalised_losses(values[:i + 1], ["min", "min"], **scale)
+        kept = losses[np.all(losses < 1.1, axis=1)]
+        assert history[i] == pytest.approx(staircase_area(kept, 1.1) if len(kept) else 0.0, rel=1e-12)
+    assert np.all(np.diff(history) >= 0.0) and history[3] == history[2] and history[5] == history[4]
+    assert progress_hypervolume(values, ["min", "min"], usable, batches) == history[-1]
+
+
 def test_hypervolume_and_its_history_in_the_report(tmp_path):
     from cosim.analysis.hypervolume import hypervolume_history
     from cosim.analysis.report import build_report
@@ -217,9 +238,8 @@ def test_hypervolume_and_its_history_in_the_report(tmp_path):
     usable[[3, 17]] = False
     history = hypervolume_history(values, ["min", "max"], usable)
     assert np.all(np.diff(history) >= -1e-12)  # a front never loses hypervolume
-    final = values[usable][pareto_mask(values[usable], ["min", "max"])]
-    scaled = normalised_losses(values[usable], ["min", "max"], final.min(axis=0) * [1, 0] + final.max(axis=0) * [0, 1],
-                               final.max(axis=0) * [1, 0] + final.min(axis=0) * [0, 1])
+    # without batch numbers the scale is that of all usable rows (issue 28: one fixed reference, not the front's)
+    scaled = normalised_losses(values[usable], ["min", "max"])
     assert history[-1] == pytest.approx(staircase_area(scaled, 1.1), rel=1e-12)
     # an optimisation's table: the report plots that history
     df = pd.DataFrame({"point_id": [f"p{i}" for i in range(30)], "a": values[:, 0], "b": values[:, 1],
@@ -260,11 +280,15 @@ def test_progress_line_counts_failures_front_and_hypervolume(write_spec, tmp_pat
     df = run.store.table()
     last = stream.getvalue().strip().splitlines()[-1]
     # recomputed from the table: failures, the feasible front and its area (staircase, objectives scaled over
-    # the feasible rows, reference 1.1)
+    # the feasible rows of the first batch, fixed for the whole run (issue 28), reference 1.1, rows beyond it
+    # left out)
     failed = int((df["status"] != "ok").sum())
-    usable = df[(df["status"] == "ok") & df["feasible"]][["f1", "f2"]].to_numpy(float)
+    ok = df[(df["status"] == "ok") & df["feasible"]]
+    usable = ok[["f1", "f2"]].to_numpy(float)
+    first = ok[ok["batch"] == ok["batch"].min()][["f1", "f2"]].to_numpy(float)
     front = usable[pareto_mask(usable)]
-    scaled = (front - usable.min(axis=0)) / (usable.max(axis=0) - usable.min(axis=0))
+    scaled = (front - first.min(axis=0)) / (first.max(axis=0) - first.min(axis=0))
+    scaled = scaled[np.all(scaled < 1.1, axis=1)]
     assert failed > 0 and len(usable) < len(df) - failed  # both a failure and an infeasible row were seen
     assert last.startswith(f"24/24 evaluations, {failed} not ok, front {len(front)}, "
                            f"hypervolume {staircase_area(scaled, 1.1):.4f}, "), last

@@ -45,17 +45,41 @@ def hypervolume(losses: np.ndarray, reference: float = HV_REFERENCE) -> float:
     return float(compute_hypervolume(losses, np.full(losses.shape[1], reference)))
 
 
-def hypervolume_history(values: np.ndarray, senses: Sequence[str], usable: np.ndarray) -> np.ndarray:
+def fixed_scale(values: np.ndarray, senses: Sequence[str], usable: np.ndarray,
+                batches: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(ideal, nadir) of the usable rows of the first batch that has any: the scale every later hypervolume of
+    the optimisation is measured in, fixed once that batch is told, so the measure never decreases as rows come
+    (a scale from the current front moved with it: constant on a converged grid, dropping between batches)."""
+    first = np.asarray(batches)[usable].min()
+    rows = np.asarray(values, dtype=float)[usable & (np.asarray(batches) == first)]
+    signs = np.array([1.0 if s.startswith("min") else -1.0 for s in senses])
+    ideal = np.where(signs > 0, rows.min(axis=0), rows.max(axis=0))
+    nadir = np.where(signs > 0, rows.max(axis=0), rows.min(axis=0))
+    return ideal, nadir
+
+
+def progress_hypervolume(values: np.ndarray, senses: Sequence[str], usable: np.ndarray,
+                         batches: np.ndarray) -> float:
+    """The hypervolume of the usable rows' front in the optimisation's :func:`fixed_scale`, reference point
+    HV_REFERENCE: the one figure the progress line, the report and the decision room show (0 before any row)."""
+    history = hypervolume_history(values, senses, usable, batches)
+    return float(history[-1]) if len(history) else 0.0
+
+
+def hypervolume_history(values: np.ndarray, senses: Sequence[str], usable: np.ndarray,
+                        batches: np.ndarray | None = None) -> np.ndarray:
     """Hypervolume of the front after each row (rows in evaluation order) of the ``usable`` rows (ok and
-    feasible), objectives scaled to [0, 1] between the ideal and nadir points of the final front, reference
-    point HV_REFERENCE: it rises to the final front's value as the search converges."""
+    feasible), objectives scaled to [0, 1] between the ideal and nadir of the first batch's usable rows
+    (:func:`fixed_scale`; without ``batches``, of all usable rows), reference point HV_REFERENCE in
+    every scaled objective: it never decreases, and its last value is the progress line's."""
+    values = np.asarray(values, dtype=float)
+    usable = np.asarray(usable, dtype=bool)
     out = np.zeros(len(values))
     if not usable.any():
         return out
-    signs = np.array([1.0 if s.startswith("min") else -1.0 for s in senses])
-    final = values[usable][pareto_mask(values[usable] * signs)]
-    ideal = np.where(signs > 0, final.min(axis=0), final.max(axis=0))
-    nadir = np.where(signs > 0, final.max(axis=0), final.min(axis=0))
+    if batches is None:  # a table without batch numbers (not written by cosim optimize): one batch, all rows
+        batches = np.zeros(len(values), dtype=int)
+    ideal, nadir = fixed_scale(values, senses, usable, batches)
     losses = normalised_losses(values[usable], senses, ideal, nadir)
     front: np.ndarray = np.zeros((0, losses.shape[1]))
     index = np.flatnonzero(usable)

@@ -202,7 +202,8 @@ def _optimization_section(table: ResultsTable) -> str:
         else np.arange(len(table.df))
     values = np.column_stack([table.values(n) for n in names])[order]
     usable = (table.ok_mask() & table.feasible_mask())[order] & np.all(np.isfinite(values), axis=1)
-    history = hypervolume_history(values, [senses[n] for n in names], usable)
+    batches = table.values("batch")[order] if "batch" in table.df.columns else None
+    history = hypervolume_history(values, [senses[n] for n in names], usable, batches)
     fig = new_figure(6.0, 4.0)
     ax = fig.add_subplot(111)
     ax.plot(np.arange(1, len(history) + 1), history, drawstyle="steps-post")

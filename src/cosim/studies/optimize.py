@@ -64,7 +64,7 @@ from typing import Any, Mapping, Sequence, TextIO
 
 import numpy as np
 
-from cosim.analysis.hypervolume import hypervolume, normalised_losses
+from cosim.analysis.hypervolume import progress_hypervolume
 from cosim.errors import OptimizeError, Problem, SpecError
 from cosim.results.checksums import data_file_checksums, unit_checksums
 from cosim.results.columns import TAIL_COLUMNS
@@ -631,18 +631,22 @@ class Optimization:
         unreplayed.clear()
 
     def _front_summary(self, rows: dict[str, dict]) -> tuple[int, int, float]:
-        """(rows not ok, size of the feasible front, its hypervolume scaled to the rows so far)."""
+        """(rows not ok, size of the feasible front, its hypervolume in the optimisation's fixed scale: the
+        figure the report and the decision room show, never decreasing; see analysis.hypervolume)."""
         from cosim.analysis.pareto import pareto_mask
 
         not_ok = sum(r.get("status") != "ok" for r in rows.values())
-        good = [self._outcome(r) for r in rows.values()]
-        values = np.array([v for v, c in good if v is not None and all(x <= 0 for x in c)], dtype=float)
-        if len(values) == 0:
+        ordered = sorted(rows.values(), key=lambda r: r.get("trial", 0))
+        good = [self._outcome(r) for r in ordered]
+        kept = [(v, r.get("batch", 0)) for (v, c), r in zip(good, ordered) if v is not None and all(x <= 0 for x in c)]
+        if not kept:
             return not_ok, 0, 0.0
+        values = np.array([v for v, _ in kept], dtype=float)
         senses = list(self.settings.objectives.values())
-        losses = normalised_losses(values, senses)
-        front = losses[pareto_mask(losses)]
-        return not_ok, len(front), hypervolume(front)
+        signs = np.array([1.0 if s.startswith("min") else -1.0 for s in senses])
+        front = pareto_mask(values * signs)
+        hv = progress_hypervolume(values, senses, np.ones(len(values), dtype=bool), np.array([b for _, b in kept]))
+        return not_ok, int(front.sum()), hv
 
     def _metadata(self, started: str, scheduler: str, n_workers: int) -> dict[str, Any]:
         info = {"started": started, "scheduler": scheduler, "workers": n_workers, "timeout": self.timeout,

@@ -82,7 +82,8 @@ class Study:
             else np.arange(len(self.table.df))
         values = np.column_stack([self.table.values(n) for n in names])[order]
         usable = (self.table.ok_mask() & self.table.feasible_mask())[order] & np.all(np.isfinite(values), axis=1)
-        history = hypervolume_history(values, [senses[n] for n in names], usable)
+        batches = self.table.values("batch")[order] if "batch" in self.table.df.columns else None
+        history = hypervolume_history(values, [senses[n] for n in names], usable, batches)
         return np.arange(1, len(history) + 1), history
 
     def sensitivity(self) -> pd.DataFrame | None:
