@@ -251,6 +251,9 @@ def test_hypervolume_and_its_history_in_the_report(tmp_path):
     (tmp_path / "o" / "metadata.json").write_text(json.dumps(meta))
     page = build_report(load_results(tmp_path / "o"))
     assert "<h2>Optimisation</h2>" in page and f"final {history[-1]:.4f}" in page
+    # issue 28: titled for what it is, settings as a reader writes them, no raw Python dicts, no empty header
+    assert "<h1>Optimisation report: " in page and "Sweep report" not in page
+    assert "a: minimize, b: maximize" in page and "{'a'" not in page and "<th class='l'></th>" not in page
     assert f"{int(pareto_mask(values[usable], ['min', 'max']).sum())} non-dominated of 28 ok, feasible rows" in page
 
 

@@ -75,13 +75,28 @@ def roles(table: ResultsTable) -> tuple[list[str], list[str]]:
     return [], [c for c in table.numeric_columns() if c not in ("run_time", "worker")]
 
 
+def _kind_title(table: ResultsTable) -> str:
+    """What the page reports on, by the folder's kind (metadata ``kind``): a sweep unless said otherwise."""
+    kind = (table.metadata or {}).get("kind")
+    return {"optimization": "Optimisation report", "sensitivity": "Sensitivity report"}.get(kind, "Sweep report")
+
+
+def _setting_text(value: Any) -> str:
+    """A setting as a reader writes it: ``name: value`` pairs, items joined, "none" for nothing (no raw dicts)."""
+    if isinstance(value, dict):
+        return ", ".join(f"{k}: {_setting_text(v)}" for k, v in value.items()) or "none"
+    if isinstance(value, (list, tuple)):
+        return "; ".join(_setting_text(v) for v in value) or "none"
+    return "none" if value is None else str(value)
+
+
 def build_report(table: ResultsTable) -> str:
     """The HTML text of the report."""
     parameters, objectives = roles(table)
     ok = table.ok_mask()
     parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>cosim report: {html.escape(_name(table))}"
              f"</title><style>{CSS}</style></head><body>",
-             f"<h1>Sweep report: {html.escape(_name(table))}</h1>", _overview(table, parameters, objectives),
+             f"<h1>{_kind_title(table)}: {html.escape(_name(table))}</h1>", _overview(table, parameters, objectives),
              _status_section(table), _objective_section(table, parameters, objectives, ok),
              _pareto_section(table, parameters, ok & table.feasible_mask()), _optimization_section(table),
              _sobol_section(table),
@@ -110,7 +125,7 @@ def _overview(table: ResultsTable, parameters: list[str], objectives: list[str])
     for key in ("spec_path", "spec_digest", "design_method", "started", "ended"):
         if meta.get(key):
             rows.append((key, str(meta[key])))
-    return "<h2>Table</h2>" + _table(["", ""], rows, left=2)
+    return "<h2>Table</h2>" + _table(["of the table", "value"], rows, left=2)
 
 
 def _status_section(table: ResultsTable) -> str:
@@ -191,9 +206,9 @@ def _optimization_section(table: ResultsTable) -> str:
     from cosim.analysis.hypervolume import HV_REFERENCE, hypervolume_history
 
     settings = meta.get("optimize") or {}
-    text = "<h2>Optimisation</h2>" + _table(["", ""], [(k, str(settings.get(k))) for k in
-                                                      ("sampler", "budget", "batch", "seed", "objectives",
-                                                       "constraints")], left=2)
+    text = "<h2>Optimisation</h2>" + _table(["setting", "value"], [(k, _setting_text(settings.get(k))) for k in
+                                                                  ("sampler", "budget", "batch", "seed", "objectives",
+                                                                   "constraints")], left=2)
     senses = table.objective_senses()
     if not senses:
         return text
