@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from cosim.cli.exit_codes import EXIT_OK, EXIT_RUN_FAILED
+from cosim.cli.options import message_line
 from cosim.errors import UsageError
 
 
@@ -69,5 +70,5 @@ def cmd_optimize(args: argparse.Namespace) -> int:
     not_ok = total - counts.get("ok", 0)
     if not_ok:
         for row in first_not_ok(run.store.table_path, 5):
-            print(f"  {row['point_id']} {row['status']}: {str(row['message'])[:120]}", file=sys.stderr)
+            print(f"  {row['point_id']} {row['status']}: {message_line(row['message'])}", file=sys.stderr)
     return EXIT_OK if not_ok == 0 else EXIT_RUN_FAILED

@@ -20,3 +20,15 @@ def add_experiment_options(p: argparse.ArgumentParser) -> None:
 def experiment_overrides(args: argparse.Namespace) -> dict[str, Any]:
     """The experiment fields given on the command line."""
     return {k: getattr(args, k) for k in ("start", "stop", "step", "algorithm") if getattr(args, k, None) is not None}
+
+
+def message_line(message: object, width: int = 120) -> str:
+    """The first line of a row's message, cut to ``width`` characters, for a summary on the terminal.
+
+    A failed row's message may go on with the unit's traceback (cosim.errors.unit_traceback); the summary shows
+    what failed, and says where the rest is.
+    """
+    text = str(message)
+    first, _, rest = text.partition("\n")
+    shown = first[:width]
+    return shown + (" (the traceback is in the 'message' column)" if rest.strip() else "")

@@ -60,7 +60,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         from cosim.parallel.isolation import start_spare_children
 
         start_spare_children(args.workers or os.cpu_count() or 1)
-    from cosim.cli.options import experiment_overrides
+    from cosim.cli.options import experiment_overrides, message_line
     from cosim.results.folder import default_folder
     from cosim.studies.sweep import Sweep
 
@@ -79,7 +79,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     not_ok = total - counts.get("ok", 0)
     if not_ok:
         for row in first_not_ok(sweep.store.table_path, 5):
-            print(f"  {row['point_id']} {row['status']}: {str(row['message'])[:120]}", file=sys.stderr)
+            print(f"  {row['point_id']} {row['status']}: {message_line(row['message'])}", file=sys.stderr)
         if not_ok > 5:
             print(f"  ... and {not_ok - 5} more (see the 'message' column)", file=sys.stderr)
     return EXIT_OK if not_ok == 0 else EXIT_RUN_FAILED
@@ -98,7 +98,7 @@ def _dry_run(args: argparse.Namespace) -> int:
     import os
     import tempfile
 
-    from cosim.cli.options import experiment_overrides
+    from cosim.cli.options import experiment_overrides, message_line
     from cosim.studies.sweep import Sweep
 
     with tempfile.TemporaryDirectory(prefix="cosim_dry_") as scratch:
@@ -114,7 +114,7 @@ def _dry_run(args: argparse.Namespace) -> int:
         samples = sweep.sample_runs(4)
     for row in samples:
         print(f"sample {row['point_id']}: {row['status']} in {row['run_time']:.3f} s"
-              + (f" ({row['message'][:100]})" if row["message"] else ""))
+              + (f" ({message_line(row['message'], 100)})" if row["message"] else ""))
     times = [r["run_time"] for r in samples if r["status"] == "ok"]
     if times:
         # the first run also instantiates the units; the others show the steady cost per point
