@@ -46,7 +46,7 @@ runner.run(batch, 60.0)  # start the child and warm up
 started = time.perf_counter()
 for _ in range(points // 100):
     rows = runner.run(batch, 60.0)
-    assert all(r["status"] == "ok" for r in rows), rows[0]
+    assert all(r.status == "ok" for r in rows), rows[0]
 elapsed = time.perf_counter() - started
 runner.close()
 print(json.dumps(elapsed / (points // 100 * 100) * 1e6))

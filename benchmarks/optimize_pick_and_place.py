@@ -52,6 +52,7 @@ sys.path.insert(0, str(ROOT))
 
 from cosim.analysis.hypervolume import hypervolume, normalised_losses  # noqa: E402
 from cosim.analysis.pareto import pareto_mask  # noqa: E402
+from cosim.execution.point_row import PointRow  # noqa: E402
 from cosim.spec.design import DesignSpace  # noqa: E402
 from cosim.spec.loader import load_spec  # noqa: E402
 from cosim.studies.optimize import Optimization  # noqa: E402
@@ -74,8 +75,7 @@ class GridEvaluator:
         rows = []
         for pid, values in points:
             e, d = self.lookup[(int(values[Q2]), int(values[Q4]))]
-            rows.append({"point_id": pid, "status": "ok", "message": "", "run_time": 0.0, "worker": "grid table",
-                         "objectives": {"e_total": e, "duration": d}})
+            rows.append(PointRow(pid, "ok", "", 0.0, {"e_total": e, "duration": d}, "grid table"))
         return rows
 
 

@@ -177,5 +177,5 @@ def test_every_caller_runs_a_point_through_run_point(tmp_path, write_spec, monke
     result, _ = rerun(load_results(table_path), 0)
     assert result.ok and list(result.traces.columns) == ["time", "ode.y"]
     row = PointRunner(check_spec(spec)).run("p", {"ode.a": -1.5})
-    assert row["status"] == "ok" and row["objectives"]["y_end"] == pytest.approx(np.exp(-1.5), rel=1e-5)
+    assert row.status == "ok" and row.objectives["y_end"] == pytest.approx(np.exp(-1.5), rel=1e-5)
     assert seen == [{"ode.a": -2.0}, {"ode.a": -0.5}, {"ode.a": -1.0}, {"ode.a": -2.0}, {"ode.a": -1.5}]

@@ -12,6 +12,7 @@ import os
 import time
 from multiprocessing.connection import Connection
 
+from cosim.execution.point_row import PointRow
 from cosim.parallel.isolation import IsolatedRunner, _Channel, make_payload
 from cosim.system.validate import check_spec
 
@@ -22,8 +23,8 @@ def test_the_reader_thread_closes_the_pipe_itself_once_the_child_is_gone():
     read_fd, write_fd = os.pipe()
     inbox, outbox = Connection(read_fd, writable=False), Connection(write_fd, readable=False)
     channel = _Channel(inbox)
-    outbox.send(("row", {"point_id": "p"}))
-    assert channel.get(5) == ("row", {"point_id": "p"})
+    outbox.send(("row", (PointRow("p", "ok", "", 0.5), None)))
+    assert channel.get(5) == ("row", (PointRow("p", "ok", "", 0.5), None))
     outbox.close()  # the child is gone
     assert channel.get(5) == ("eof", None)
     deadline = time.monotonic() + 5
@@ -45,4 +46,4 @@ def test_children_recycled_after_every_point_give_every_row(write_spec, monkeypa
         rows = runner.run([(f"p{i}", {}) for i in range(40)])
     finally:
         runner.close()
-    assert [r["status"] for r in rows] == ["ok"] * 40, [r["message"] for r in rows if r["status"] != "ok"]
+    assert [r.status for r in rows] == ["ok"] * 40, [r.message for r in rows if r.status != "ok"]

@@ -165,5 +165,5 @@ def test_a_sweep_worker_refuses_an_fmu_the_client_was_allowed_to_use(built_fmu, 
         rows = runner.run([("p1", {})], timeout=60)
     finally:
         runner.close()
-    assert rows[0]["status"] == "failed"
-    assert "bomb.fmu" in rows[0]["message"] and "more than the limit of 4.0 MB" in rows[0]["message"]
+    assert rows[0].status == "failed"
+    assert "bomb.fmu" in rows[0].message and "more than the limit of 4.0 MB" in rows[0].message

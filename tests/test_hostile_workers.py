@@ -82,13 +82,13 @@ def _run(tmp_path: Path, modes: list[int], timeout: float | None, env: dict | No
 def test_junk_on_the_channel_costs_one_point_and_never_hangs(tmp_path, monkeypatch):
     modes = [0, 1, 0, 2, 0, 3, 0]
     rows = _run(tmp_path, modes, timeout=10, monkeypatch=monkeypatch)
-    assert [r["point_id"] for r in rows] == [f"p{i}" for i in range(7)]
-    statuses = [r["status"] for r in rows]
+    assert [r.point_id for r in rows] == [f"p{i}" for i in range(7)]
+    statuses = [r.status for r in rows]
     assert statuses[1] == "crashed" and statuses[5] == "crashed" and statuses[3] in ("crashed", "timeout")
-    assert "other than a result on its channel" in rows[1]["message"]
+    assert "other than a result on its channel" in rows[1].message
     for i in (0, 2, 4, 6):  # a fresh child took over after each broken one
-        assert statuses[i] == "ok" and rows[i]["objectives"]["y"] == 3.0 * i
-    assert len({rows[i]["objectives"]["pid"] for i in (0, 2, 4, 6)}) == 4
+        assert statuses[i] == "ok" and rows[i].objectives["y"] == 3.0 * i
+    assert len({rows[i].objectives["pid"] for i in (0, 2, 4, 6)}) == 4
 
 
 def test_junk_in_a_real_sweep_keeps_rows_in_equal_rows_out(tmp_path, local_cluster):
@@ -102,8 +102,8 @@ def test_junk_in_a_real_sweep_keeps_rows_in_equal_rows_out(tmp_path, local_clust
 
 def test_a_leaking_child_is_recycled_by_its_resident_memory(tmp_path, monkeypatch):
     rows = _run(tmp_path, [4] * 10, timeout=60, env={"COSIM_CHILD_RSS_MB": "400"}, monkeypatch=monkeypatch)
-    assert all(r["status"] == "ok" for r in rows), [r["message"] for r in rows]
-    pids = [r["objectives"]["pid"] for r in rows]
+    assert all(r.status == "ok" for r in rows), [r.message for r in rows]
+    pids = [r.objectives["pid"] for r in rows]
     assert len(set(pids)) >= 2  # 10 x 60 MB would be 600 MB in one child
     for pid in set(pids):
         # 60 MB more per point, recycled above 400 MB: after the 7th point at the latest, whatever the child held
@@ -113,15 +113,15 @@ def test_a_leaking_child_is_recycled_by_its_resident_memory(tmp_path, monkeypatc
 
 def test_a_child_is_recycled_after_n_points(tmp_path, monkeypatch):
     rows = _run(tmp_path, [0] * 6, timeout=60, env={"COSIM_CHILD_POINTS": "2"}, monkeypatch=monkeypatch)
-    pids = [r["objectives"]["pid"] for r in rows]
-    assert all(r["status"] == "ok" for r in rows)
+    pids = [r.objectives["pid"] for r in rows]
+    assert all(r.status == "ok" for r in rows)
     assert pids[0] == pids[1] != pids[2] == pids[3] != pids[4] == pids[5] and len(set(pids)) == 3
 
 
 def test_the_memory_limit_of_a_child_fails_the_point_not_the_machine(tmp_path, monkeypatch):
     rows = _run(tmp_path, [0, 5, 0], timeout=60, env={"COSIM_CHILD_MEMORY_MB": "1024"}, monkeypatch=monkeypatch)
-    assert [r["status"] for r in rows] == ["ok", "failed", "ok"]
-    assert "MemoryError" in rows[1]["message"]
+    assert [r.status for r in rows] == ["ok", "failed", "ok"]
+    assert "MemoryError" in rows[1].message
 
 
 def _cosim(*args: str, env: dict, timeout: float = 180) -> subprocess.CompletedProcess:

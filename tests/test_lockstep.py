@@ -127,7 +127,7 @@ def test_points_of_a_master_algorithm_that_cannot_step_batches_run_one_by_one(mo
     rows = list(runner.rows(points))
     runner.close()
     assert runner.group_size == 1
-    assert [r["objectives"] for r in rows] == [a.objectives for a in _single(system, POINTS[:4])]
+    assert [r.objectives for r in rows] == [a.objectives for a in _single(system, POINTS[:4])]
 
 
 def test_the_committed_coarse_table_re_runs_in_lockstep_within_one_ulp():
@@ -162,11 +162,11 @@ def test_a_group_with_a_failing_point_gives_the_rows_of_single_runs():
     rows = list(grouped.rows(points))
     alone = [PointRunner(system).run(pid, values) for pid, values in points]
     grouped.close()
-    assert [r["point_id"] for r in rows] == [pid for pid, _ in points]
-    assert [r["status"] for r in rows] == ["ok", "ok", "ok", "failed", "ok", "ok"]
+    assert [r.point_id for r in rows] == [pid for pid, _ in points]
+    assert [r.status for r in rows] == ["ok", "ok", "ok", "failed", "ok", "ok"]
     for g, a in zip(rows, alone):
-        assert (g["status"], g["message"], g["objectives"]) == (a["status"], a["message"], a["objectives"])
-    assert "k_m[2]" in rows[3]["message"]
+        assert (g.status, g.message, g.objectives) == (a.status, a.message, a.objectives)
+    assert "k_m[2]" in rows[3].message
 
 
 def test_rows_that_disagree_on_the_trajectory_sampling_run_one_by_one(tmp_path):
@@ -178,9 +178,9 @@ def test_rows_that_disagree_on_the_trajectory_sampling_run_one_by_one(tmp_path):
     rows = list(grouped.rows(points))
     grouped.close()
     alone = [PointRunner(system).run(pid, values) for pid, values in points]
-    assert [r["status"] for r in rows] == ["ok"] * 4
-    assert [r["objectives"] for r in rows] == [a["objectives"] for a in alone]
-    assert rows[0]["objectives"]["e_total"] != rows[1]["objectives"]["e_total"]  # the sampling mattered
+    assert [r.status for r in rows] == ["ok"] * 4
+    assert [r.objectives for r in rows] == [a.objectives for a in alone]
+    assert rows[0].objectives["e_total"] != rows[1].objectives["e_total"]  # the sampling mattered
 
 
 def test_the_runner_times_two_points_alone_then_groups_the_rest():
@@ -189,9 +189,9 @@ def test_the_runner_times_two_points_alone_then_groups_the_rest():
     grouped = LockstepRunner(PointRunner(system))
     rows = list(grouped.rows(points))
     assert grouped.group_size is not None and grouped.group_size >= 2  # a point takes milliseconds
-    assert [r["point_id"] for r in rows] == [pid for pid, _ in points]
+    assert [r.point_id for r in rows] == [pid for pid, _ in points]
     alone = _single(system, POINTS)
-    assert [r["objectives"] for r in rows] == [a.objectives for a in alone]
+    assert [r.objectives for r in rows] == [a.objectives for a in alone]
     grouped.close()
 
 
@@ -209,11 +209,11 @@ def test_a_sweep_child_runs_its_points_in_lockstep_groups(monkeypatch):
         rows = runner.run(points, timeout=120)
     finally:
         runner.close()
-    assert [r["status"] for r in rows] == ["ok"] * len(points)
-    times = [r["run_time"] for r in rows]
+    assert [r.status for r in rows] == ["ok"] * len(points)
+    times = [r.run_time for r in rows]
     assert len(set(times[2:])) == 1  # one group: its time divided among its points
     for row, (_, expected) in zip(rows, table.iterrows()):
-        assert np.isclose(row["objectives"]["e_total"], expected["e_total"], rtol=1e-12, atol=0.0)
+        assert np.isclose(row.objectives["e_total"], expected["e_total"], rtol=1e-12, atol=0.0)
 
 
 @pytest.mark.parametrize("mode, status, fragment", [(1, "crashed", "SIGSEGV"), (2, "timeout", "timeout of 5 s")])
@@ -237,10 +237,10 @@ def test_a_point_that_kills_or_hangs_its_lockstep_group_alone_gets_the_blame(tmp
         rows = runner.run(points, timeout=5)
     finally:
         runner.close()
-    assert [r["point_id"] for r in rows] == [pid for pid, _ in points]
-    assert [r["status"] for r in rows] == ["ok"] * culprit + [status] + ["ok"] * (len(points) - culprit - 1)
-    assert fragment in rows[culprit]["message"]
+    assert [r.point_id for r in rows] == [pid for pid, _ in points]
+    assert [r.status for r in rows] == ["ok"] * culprit + [status] + ["ok"] * (len(points) - culprit - 1)
+    assert fragment in rows[culprit].message
     alone = _single(build_system(load_spec(FOLDER / "spec.json")), POINTS)
     for i, (row, single) in enumerate(zip(rows, alone)):
         if i != culprit:
-            assert row["objectives"] == single.objectives
+            assert row.objectives == single.objectives

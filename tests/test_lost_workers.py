@@ -90,9 +90,9 @@ def test_the_optimizers_evaluator_blames_only_the_killer(write_spec, worker_proc
     points = [(f"p{i}", {"sq.x": float(i)}) for i in range(6)]
     with dask_client(2, scheduler=worker_processes) as (client, n_workers, _):
         rows = Evaluator(client, make_payload(system), n_workers).evaluate(points)
-    assert [r["point_id"] for r in rows] == [pid for pid, _ in points]  # every point once, in order
-    assert rows[3]["status"] == "crashed" and "while it ran alone" in rows[3]["message"]
+    assert [r.point_id for r in rows] == [pid for pid, _ in points]  # every point once, in order
+    assert rows[3].status == "crashed" and "while it ran alone" in rows[3].message
     for i, row in enumerate(rows):
         if i != 3:
-            assert row["status"] == "ok", row
-            assert row["objectives"]["y_end"] == float(i) ** 2
+            assert row.status == "ok", row
+            assert row.objectives["y_end"] == float(i) ** 2

@@ -17,6 +17,7 @@ import pytest
 from cosim.analysis.hypervolume import hypervolume, normalised_losses
 from cosim.analysis.pareto import pareto_mask
 from cosim.cli.main import main
+from cosim.execution.point_row import PointRow
 from cosim.studies.optimize import Optimization
 
 from .conftest import python_unit
@@ -265,11 +266,9 @@ class BowlsInProcess:
         for pid, values in points:
             x, y = values["b.x"], values["b.y"]
             if x > 2.5:
-                rows.append({"point_id": pid, "status": "failed", "message": "x > 2.5", "run_time": 0.0,
-                             "worker": "test", "objectives": {}})
+                rows.append(PointRow(pid, "failed", "x > 2.5", 0.0, {}, "test"))
             else:
-                rows.append({"point_id": pid, "status": "ok", "message": "", "run_time": 0.0, "worker": "test",
-                             "objectives": {"f1": x * x + y * y, "f2": (x - 2) ** 2 + y * y}})
+                rows.append(PointRow(pid, "ok", "", 0.0, {"f1": x * x + y * y, "f2": (x - 2) ** 2 + y * y}, "test"))
         return rows
 
 

@@ -67,8 +67,8 @@ def test_a_runner_takes_a_spare_child_and_runs_its_points_there(tmp_path):
         rows = runner.run([("a", {"u.k": 1.5}), ("b", {"u.k": -3.0})])
     finally:
         runner.close()
-    assert [r["objectives"]["y"] for r in rows] == [3.0, -6.0]
-    assert rows[0]["objectives"]["pid"] == rows[1]["objectives"]["pid"] == float(pids[0])  # the first spare
+    assert [r.objectives["y"] for r in rows] == [3.0, -6.0]
+    assert rows[0].objectives["pid"] == rows[1].objectives["pid"] == float(pids[0])  # the first spare
     assert spare_pids() == pids[1:]  # the other one still waits
 
 
@@ -82,9 +82,9 @@ def test_a_preloaded_spare_serves_its_payload_only(tmp_path):
     owner = IsolatedRunner(first)
     try:
         [row] = stranger.run([("x", {"u.k": 1.0})])
-        assert row["objectives"]["pid"] != pid and spare_pids() == [pid]
+        assert row.objectives["pid"] != pid and spare_pids() == [pid]
         [row] = owner.run([("y", {"u.k": 4.0})])
-        assert row["objectives"] == {"y": 8.0, "pid": float(pid)} and spare_pids() == []
+        assert row.objectives == {"y": 8.0, "pid": float(pid)} and spare_pids() == []
     finally:
         stranger.close()
         owner.close()
@@ -99,7 +99,7 @@ def test_a_spare_started_under_other_limits_is_not_taken(tmp_path, monkeypatch):
         rows = runner.run([("a", {"u.k": 1.0}), ("b", {"u.k": 2.0})])
     finally:
         runner.close()
-    used = {r["objectives"]["pid"] for r in rows}
+    used = {r.objectives["pid"] for r in rows}
     assert len(used) == 2 and float(pid) not in used  # a child per point (the limit), none of them the spare
     assert spare_pids() == [pid]
 

@@ -74,7 +74,7 @@ def test_isolated_runner_restarts_after_crash_and_hang(write_spec):
         rows = runner.run(points, timeout=1.0)
     finally:
         runner.close()
-    assert [r["point_id"] for r in rows] == list("abcdef")
-    assert [r["status"] for r in rows] == ["ok", "crashed", "ok", "timeout", "ok", "failed"]
-    assert rows[4]["objectives"] == {"t_end": pytest.approx(0.2)}
-    assert "outside the range of 'mode'" in rows[5]["message"]  # checked like a spec value, not run
+    assert [r.point_id for r in rows] == list("abcdef")
+    assert [r.status for r in rows] == ["ok", "crashed", "ok", "timeout", "ok", "failed"]
+    assert rows[4].objectives == {"t_end": pytest.approx(0.2)}
+    assert "outside the range of 'mode'" in rows[5].message  # checked like a spec value, not run

@@ -113,9 +113,9 @@ def _dry_run(args: argparse.Namespace) -> int:
             print(f"  ... and {total - 5} more")
         samples = sweep.sample_runs(4)
     for row in samples:
-        print(f"sample {row['point_id']}: {row['status']} in {row['run_time']:.3f} s"
-              + (f" ({message_line(row['message'], 100)})" if row["message"] else ""))
-    times = [r["run_time"] for r in samples if r["status"] == "ok"]
+        print(f"sample {row.point_id}: {row.status} in {row.run_time:.3f} s"
+              + (f" ({message_line(row.message, 100)})" if row.message else ""))
+    times = [r.run_time for r in samples if r.ok]
     if times:
         # the first run also instantiates the units; the others show the steady cost per point
         steady = sorted(times[1:] or times)

@@ -42,6 +42,7 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
+from cosim.execution.point_row import PointRow
 from cosim.execution.run import FAILED, OK, UNIT_FAILURE, RunResult, step_count
 from cosim.master.algorithms import ALGORITHMS, MasterAlgorithm, make_algorithm
 from cosim.master.observers import ObjectiveReducer, flatten_objectives
@@ -433,7 +434,7 @@ class LockstepRunner:
     """A sweep child's points in lock-step groups where that is possible, else one by one.
 
     Wraps the child's :class:`~cosim.parallel.isolation.PointRunner` and gives
-    the same rows (point_id, status, message, run_time, objectives).  The
+    the same rows (:class:`~cosim.execution.point_row.PointRow`).  The
     first two points run alone, which times a point; then groups of up to
     GROUP_SIZE points, as many as take about COSIM_LOCKSTEP_SECONDS, run in lock-step; if the system does not
     qualify (:func:`can_run_in_lockstep`) or anything in the group goes wrong,
@@ -452,7 +453,7 @@ class LockstepRunner:
         self._announce: Callable[[int], None] | None = None
 
     def rows(self, points: Sequence[tuple[str, dict[str, Any]]],
-             announce: Callable[[int], None] | None = None) -> Iterator[dict[str, Any]]:
+             announce: Callable[[int], None] | None = None) -> Iterator[PointRow]:
         """One row per point, in order (a generator: a group's rows come when the group is done).
 
         ``announce(n)`` is called before a lock-step group of n points starts: the sweep's parent
@@ -463,8 +464,8 @@ class LockstepRunner:
         points = list(points)
         while points and self.enabled and self.group_size is None:  # first measure a point run alone
             row = self.single.run(*points.pop(0))
-            if row["status"] == "ok":
-                self._single_times.append(row["run_time"])
+            if row.ok:
+                self._single_times.append(row.run_time)
             if len(self._single_times) == 2:  # the first run also instantiated the units: take the faster
                 seconds = limit("lockstep_seconds")
                 self.group_size = max(1, min(GROUP_SIZE, int(seconds / max(min(self._single_times), 1e-6))))
@@ -481,7 +482,7 @@ class LockstepRunner:
             else:
                 yield from self._group(group)
 
-    def _group(self, group: Sequence[tuple[str, dict[str, Any]]]) -> Iterator[dict[str, Any]]:
+    def _group(self, group: Sequence[tuple[str, dict[str, Any]]]) -> Iterator[PointRow]:
         from cosim.execution.point import assignments_for
 
         results = None
@@ -509,8 +510,7 @@ class LockstepRunner:
                 yield self.single.run(point_id, values)
             return
         for (point_id, _), result in zip(group, results):
-            yield {"point_id": point_id, "status": result.status, "message": result.message,
-                   "run_time": result.elapsed, "objectives": result.objectives}
+            yield PointRow.of(point_id, result, result.elapsed)
 
     def _keep(self, rows: int, batches: dict[str, Any]) -> None:
         self._batches[rows] = batches

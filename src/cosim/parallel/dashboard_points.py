@@ -36,10 +36,13 @@ import json
 import sys
 import time
 from contextlib import contextmanager
-from typing import Any, Iterator
+from typing import TYPE_CHECKING, Any, Iterator
 
 from distributed.diagnostics.plugin import SchedulerPlugin
 from tornado import web
+
+if TYPE_CHECKING:  # only named: this module is sent to the scheduler by value, needing nothing of cosim there
+    from cosim.execution.point_row import PointRow
 
 TOPIC = "cosim-points"
 PLUGIN_NAME = "cosim-points-1"  # the version of the event protocol: a scheduler may keep an older plugin
@@ -79,10 +82,10 @@ class BatchProgress:
         if study_of(self._key) is None:
             self._worker = None
 
-    def row(self, row: dict[str, Any]) -> None:
+    def row(self, row: PointRow) -> None:
         """One more point finished with ``row``: sent now, or within EVERY seconds (the next point may take hours)."""
         self.done += 1
-        self.failed += row.get("status") != "ok"
+        self.failed += not row.ok
         if self._worker is None:
             return
         wait = EVERY - (time.monotonic() - self._sent_at)
@@ -287,9 +290,9 @@ class Board:
             raise
         self.end("finished")
 
-    def rows_made_here(self, key: str, rows: list[dict[str, Any]]) -> None:
+    def rows_made_here(self, key: str, rows: list[PointRow]) -> None:
         """Rows the client made for the points of task ``key`` (lost with its workers): counted on the page."""
-        self._send({"key": key, "done": len(rows), "failed": sum(r.get("status") != "ok" for r in rows),
+        self._send({"key": key, "done": len(rows), "failed": sum(not r.ok for r in rows),
                     "final": True})
 
     def end(self, state: str) -> None:

@@ -34,6 +34,7 @@ from contextlib import contextmanager
 from typing import Any, Iterator, Sequence
 
 from cosim.errors import ClusterError, UserError
+from cosim.execution.point_row import PointRow
 
 
 def check_timeout(timeout: float | None, error: type[UserError] = UserError) -> None:
@@ -330,7 +331,7 @@ def _alive(scattered: Any) -> bool:
     return all(f.status == "finished" for f in futures)
 
 
-def lost_rows(point_ids: Sequence[str], exc: BaseException, alone: bool = False) -> list[dict[str, Any]]:
+def lost_rows(point_ids: Sequence[str], exc: BaseException, alone: bool = False) -> list[PointRow]:
     """``crashed`` rows for points whose task failed with its workers (``alone``: see :class:`Reruns`)."""
     from concurrent.futures import CancelledError
 
@@ -342,8 +343,7 @@ def lost_rows(point_ids: Sequence[str], exc: BaseException, alone: bool = False)
                    f"(the point kills them, e.g. by using up the memory); {cause}")
     else:
         message = f"the task running this point failed: {type(exc).__name__}: {exc}"
-    return [{"point_id": pid, "status": "crashed", "message": message,
-             "run_time": float("nan"), "worker": "", "objectives": {}} for pid in point_ids]
+    return [PointRow(pid, "crashed", message) for pid in point_ids]  # run time unknown (NaN), no worker
 
 
 class Evaluator:
@@ -362,18 +362,17 @@ class Evaluator:
         self.board = board
         self._payload = ScatteredPayload(client, payload)
 
-    def evaluate(self, points: Sequence[tuple[str, dict[str, Any]]]) -> list[dict[str, Any]]:
+    def evaluate(self, points: Sequence[tuple[str, dict[str, Any]]]) -> list[PointRow]:
         """One row per ``(point_id, values)``, in the order given; never raises for a failing point.
 
         The points are split into one task per worker, so a batch of K runs
-        K / workers points per process.  A row has point_id, status, message,
-        run_time, worker and objectives (a flat dict).  Points of a task lost
+        K / workers points per process (rows: :class:`~cosim.execution.point_row.PointRow`).  Points of a task lost
         with its workers are run again (:class:`Reruns`).
         """
         if not points:
             return []
         size = math.ceil(len(points) / self.n_workers)
-        rows: list[dict[str, Any] | None] = [None] * len(points)
+        rows: list[PointRow | None] = [None] * len(points)
         reruns = Reruns()
         chunks = [list(range(i, min(i + size, len(points)))) for i in range(0, len(points), size)]
         in_flight = [(chunk, False, self._submit(points, chunk)) for chunk in chunks]  # (indices, alone, future)

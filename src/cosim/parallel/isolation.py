@@ -51,6 +51,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
+from cosim.execution.point_row import PointRow
 from cosim.units.python import import_guard
 from cosim.util.limits import LIMITS, limit
 
@@ -110,8 +111,8 @@ class PointRunner:
         self.system = system
         self.units: dict[str, Any] | None = None
 
-    def run(self, point_id: str, values: dict[str, Any]) -> dict[str, Any]:
-        """One row for one point: point_id, status (ok|failed), message, run_time, objectives."""
+    def run(self, point_id: str, values: dict[str, Any]) -> PointRow:
+        """One row for one point: status ok or failed, its message, run_time and objectives."""
         from cosim.errors import CosimError, SpecError
         from cosim.execution.point import run_point
 
@@ -135,9 +136,7 @@ class PointRunner:
                 self.close()  # a unit that cannot reset is instantiated afresh for the next point
         else:
             self.close()  # after a failure, trust no instance's state
-        row = _row(point_id, result.status, result.message, started)
-        row["objectives"] = result.objectives
-        return row
+        return PointRow.of(point_id, result, time.perf_counter() - started)
 
     def close(self) -> None:
         for unit in (self.units or {}).values():
@@ -148,9 +147,9 @@ class PointRunner:
         self.units = None
 
 
-def _row(point_id: str, status: str, message: str, started: float) -> dict[str, Any]:
-    return {"point_id": point_id, "status": status, "message": message,
-            "run_time": time.perf_counter() - started, "objectives": {}}
+def _row(point_id: str, status: str, message: str, started: float) -> PointRow:
+    """The row of a point that gave no result (it failed before running, hung or crashed)."""
+    return PointRow(point_id, status, message, time.perf_counter() - started)
 
 
 def _remove_own_folder() -> None:
@@ -247,10 +246,8 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
                 rows = (runner.run(point_id, values) for point_id, values in points)
             for row in rows:
                 served += 1
-                reason = _recycle_reason(served)
-                if reason:
-                    row["recycle"] = reason  # the parent starts a fresh child for the rest
-                outbox.send(("row", row))
+                reason = _recycle_reason(served)  # not None: the parent starts a fresh child for the rest
+                outbox.send(("row", (row, reason)))
                 if reason:
                     return
     finally:
@@ -267,7 +264,9 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
 # -- the parent side -----------------------------------------------------------------------
 
 MAX_MESSAGE = 64 << 20  # bytes of one message from a child (a row is a few kB)
-_KINDS = ("ready", "error", "row", "group")  # "group": n rows of one lock-step run follow (cosim.execution.lockstep)
+# "row": (PointRow, why the child ends itself after it or None); "group": n rows of one lock-step run follow
+# (cosim.execution.lockstep)
+_KINDS = ("ready", "error", "row", "group")
 
 
 class _Channel:
@@ -424,6 +423,12 @@ def stop_spare_children() -> None:
         spare.close(force=True)
 
 
+def _is_row_of(body: Any, point_id: str) -> bool:
+    """Whether a "row" message's body is (PointRow of ``point_id``, recycle reason or None)."""
+    return (isinstance(body, tuple) and len(body) == 2 and isinstance(body[0], PointRow)
+            and body[0].point_id == point_id and (body[1] is None or isinstance(body[1], str)))
+
+
 class IsolatedRunner:
     """Runs batches of points of one payload in a child process with a watchdog (module docstring)."""
 
@@ -522,7 +527,7 @@ class IsolatedRunner:
         return spare._loading == self.key
 
     def run(self, points: Sequence[tuple[str, dict[str, Any]]], timeout: float | None = None,
-            on_row: Callable[[dict], None] | None = None) -> list[dict]:
+            on_row: Callable[[PointRow], None] | None = None) -> list[PointRow]:
         """One row per point, in order; statuses ok, failed, timeout or crashed.
 
         Without ``timeout`` a point may run for the ``timeout_first_seconds``
@@ -530,9 +535,9 @@ class IsolatedRunner:
         ``on_row`` is called with each row as soon as its point is done.
         """
         deadline = timeout if timeout is not None else float(limit("timeout_first_seconds"))
-        rows: list[dict] = []
+        rows: list[PointRow] = []
 
-        def keep(*new: dict) -> None:
+        def keep(*new: PointRow) -> None:
             rows.extend(new)
             for row in new if on_row is not None else ():
                 on_row(row)
@@ -570,7 +575,7 @@ class IsolatedRunner:
                                                    "the run was stopped", started))
                     done += 1
                     break
-                kind, row = received
+                kind, body = received
                 if kind == "eof":
                     mode = "run_each"
                     if grouped:  # as for a timeout: which point of the group killed the child is found alone
@@ -581,11 +586,11 @@ class IsolatedRunner:
                     self.close()
                     done += 1
                     break
-                if kind == "group" and isinstance(row, int) and row > 0 and not grouped:
-                    grouped = row  # the next `row` rows come from one lock-step run (cosim.execution.lockstep)
+                if kind == "group" and isinstance(body, int) and body > 0 and not grouped:
+                    grouped = body  # the next `body` rows come from one lock-step run (cosim.execution.lockstep)
                     continue
-                if kind != "row" or not isinstance(row, dict) or row.get("point_id") != point_id:
-                    why = row if kind == "junk" else "a message that is not this point's row"
+                if kind != "row" or not _is_row_of(body, point_id):
+                    why = body if kind == "junk" else "a message that is not this point's row"
                     self.close(force=True)  # its channel is out of step: trust nothing more from it
                     mode = "run_each"
                     if grouped:  # written by some point of the group: found when they run one by one
@@ -595,7 +600,7 @@ class IsolatedRunner:
                                                    "replaced", started))
                     done += 1
                     break
-                recycle = row.pop("recycle", None)
+                row, recycle = body
                 keep(row)
                 done += 1
                 grouped = max(0, grouped - 1)

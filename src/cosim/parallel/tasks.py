@@ -13,6 +13,7 @@ import socket
 import threading
 from typing import Any, Sequence
 
+from cosim.execution.point_row import PointRow
 from cosim.parallel.isolation import IsolatedRunner
 
 _IDLE: dict[str, list[IsolatedRunner]] = {}
@@ -58,7 +59,7 @@ def _point_batch(pickled: bytes) -> PointBatch:
 
 
 def run_batch(payload: dict[str, Any], points: PointBatch | Sequence[tuple[str, dict[str, Any]]],
-              timeout: float | None) -> list[dict[str, Any]]:
+              timeout: float | None) -> list[PointRow]:
     """Run ``points`` on this worker; one row per point (see IsolatedRunner.run), with the worker named.
 
     Runs on a Dask worker (or anywhere): the child process holding the system
@@ -83,9 +84,7 @@ def run_batch(payload: dict[str, Any], points: PointBatch | Sequence[tuple[str, 
             _IDLE.setdefault(payload["key"], []).append(runner)
         progress.close()
     name = _worker_name()
-    for row in rows:
-        row["worker"] = name
-    return rows
+    return [row.on_worker(name) for row in rows]
 
 
 def _worker_name() -> str:

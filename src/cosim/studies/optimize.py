@@ -66,8 +66,8 @@ import numpy as np
 
 from cosim.analysis.hypervolume import progress_hypervolume
 from cosim.errors import OptimizeError, Problem, SpecError
+from cosim.execution.point_row import PointRow
 from cosim.results.checksums import data_file_checksums, unit_checksums
-from cosim.results.columns import TAIL_COLUMNS
 from cosim.results.lock import FolderLock
 from cosim.studies.driver import (check_results_folder, finish_metadata, now_utc, package_versions, resume_differences,
                                   results_writes, run_metadata, say, study_identity)
@@ -400,15 +400,12 @@ class Optimization:
         say(text, self.quiet, self.progress_stream)
 
     # -- rows and trials ------------------------------------------------------------
-    def _table_row(self, values: dict[str, Any], row: dict[str, Any], trial: int, batch: int) -> dict[str, Any]:
-        out: dict[str, Any] = {"point_id": row["point_id"]}
-        out.update(self.space.columns(values))
-        out.update(row.get("objectives", {}))
-        out.update(trial=trial, batch=batch, sampler=self._sampler_label)
-        values, violations = self._outcome({**out, "status": row.get("status")})
+    def _table_row(self, values: dict[str, Any], row: PointRow, trial: int, batch: int) -> dict[str, Any]:
+        out: dict[str, Any] = {"point_id": row.point_id, **self.space.columns(values), **row.objectives,
+                               "trial": trial, "batch": batch, "sampler": self._sampler_label}
+        values, violations = self._outcome({**out, "status": row.status})  # as before the tail is added
         out["feasible"] = values is not None and all(v <= 0 for v in violations)
-        for key in TAIL_COLUMNS:
-            out[key] = row.get(key, "")
+        out.update(row.tail())
         return out
 
     def _outcome(self, row: Mapping[str, Any]) -> tuple[list[float] | None, list[float] | None]:
@@ -551,7 +548,7 @@ class Optimization:
                 self._absorb(study, dists, stored, unreplayed, rows)
             if to_run:
                 ran = evaluator.evaluate(list(to_run.items()))
-                new = [self._table_row(to_run[r["point_id"]], r, self._trial_of(plan, r["point_id"]), batch_index)
+                new = [self._table_row(to_run[r.point_id], r, self._trial_of(plan, r.point_id), batch_index)
                        for r in ran]
                 with results_writes(self.out):
                     self.store.append(new)

@@ -44,12 +44,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterator, Sequence, TextIO
 
 from cosim.errors import OutputError, SweepError  # noqa: F401  (OutputError: imported from here too)
+from cosim.execution.point_row import PointRow
 from cosim.parallel.early_cluster import EarlyCluster
 from cosim.parallel.evaluator import Reruns, ScatteredPayload, check_timeout, lost_rows
 from cosim.parallel.isolation import IsolatedRunner, make_payload, preload_spare_children, stop_spare_children
 from cosim.parallel.tasks import PointBatch, run_batch
 from cosim.results.checksums import changed_files, data_file_checksums, unit_checksums
-from cosim.results.columns import TAIL_COLUMNS
 from cosim.results.lock import FolderLock
 from cosim.spec.design import DesignSpace, Point
 from cosim.studies.driver import (check_results_folder, finish_metadata, now_utc, results_writes,  # noqa: F401
@@ -118,11 +118,11 @@ class BatchSizer:
         """The mean run time of an ok point so far (None before the first)."""
         return max(self._seconds / self._count, 1e-5) if self._count else None
 
-    def observe(self, rows: Sequence[dict[str, Any]]) -> None:
+    def observe(self, rows: Sequence[PointRow]) -> None:
         """Learn the time a point takes from the rows of a completed task."""
         for row in rows:
-            if row.get("status") == "ok" and row.get("run_time", 0) > 0:
-                self._seconds += row["run_time"]
+            if row.ok and row.run_time > 0:
+                self._seconds += row.run_time
                 self._count += 1
 
     def next(self) -> int:
@@ -416,22 +416,18 @@ class Sweep:
             sizer.observe(rows)
             with results_writes(self.out):
                 self.store.append([self._row(p, r) for p, r in zip(batch, rows)])
-            times.extend(r["run_time"] for r in rows if r["status"] == "ok")
+            times.extend(r.run_time for r in rows if r.ok)
             if progress is not None:
-                progress.update(len(rows), sum(r["status"] != "ok" for r in rows))
+                progress.update(len(rows), sum(not r.ok for r in rows))
             fill()
         if progress is not None:
             progress.close()
 
-    def _row(self, point: Point, row: dict[str, Any]) -> dict[str, Any]:
-        out = {"point_id": point.id, self.store.INDEX_COLUMN: point.index}  # only in part files: results.py
-        out.update(self.space.columns(point.values))
-        out.update(row.get("objectives", {}))
-        for key in TAIL_COLUMNS:
-            out[key] = row.get(key, "")
-        return out
+    def _row(self, point: Point, row: PointRow) -> dict[str, Any]:
+        # the design index is only in part files (cosim.results.store)
+        return row.to_dict({self.store.INDEX_COLUMN: point.index, **self.space.columns(point.values)})
 
-    def sample_runs(self, n: int = 3) -> list[dict[str, Any]]:
+    def sample_runs(self, n: int = 3) -> list[PointRow]:
         """Run ``n`` points spread over the space locally (in a child process, so a crash cannot hit the caller)."""
         runner = IsolatedRunner(self.payload)
         try:
