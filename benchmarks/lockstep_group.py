@@ -111,7 +111,8 @@ def main() -> None:
             ratios.append(a["seconds"] / b["seconds"])
             cpu_ratios.append(a["cpu"] / b["cpu"])
         print(f"{algorithm}: {a['points']} points in groups of {args.group}, objectives equal bit for bit; "
-              f"groups' time this tree median {statistics.median(mine):.3f} s, other {statistics.median(theirs):.3f} s, "
+              f"groups' time this tree median {statistics.median(mine):.3f} s, "
+              f"other {statistics.median(theirs):.3f} s, "
               f"median wall ratio {statistics.median(ratios):.3f}, CPU ratio {statistics.median(cpu_ratios):.3f} "
               f"(CPU pairs: {', '.join(f'{r:.3f}' for r in cpu_ratios)})")
 

@@ -5,6 +5,8 @@ No Dask runs here: both drivers check their folder when they are made.
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from cosim.results.store import ResultsStore
@@ -34,9 +36,12 @@ def folder_with_rows(path, digest: str, **metadata) -> ResultsStore:
 def test_a_folder_with_rows_is_refused_without_resume_by_both_drivers(spec, tmp_path):
     digest = check_spec(spec).spec.digest
     folder_with_rows(tmp_path / "out", digest)
-    with pytest.raises(SweepError, match="already holds results; add --resume to finish that sweep"):
+    # said for both callers: the command's option and the Python argument
+    with pytest.raises(SweepError, match=re.escape("already holds results; add --resume (or resume=True from "
+                                                   "Python) to finish that sweep")):
         Sweep(spec, out=tmp_path / "out", quiet=True)
-    with pytest.raises(OptimizeError, match="already holds results; add --resume to continue that optimisation"):
+    with pytest.raises(OptimizeError, match=re.escape("already holds results; add --resume (or resume=True from "
+                                                      "Python) to continue that optimisation")):
         Optimization(spec, tmp_path / "out", quiet=True)
 
 

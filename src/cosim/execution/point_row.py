@@ -15,7 +15,8 @@ from typing import TYPE_CHECKING, Any, Mapping
 if TYPE_CHECKING:
     from cosim.execution.run import RunResult
 
-STATUSES = ("ok", "failed", "timeout", "crashed")  # a point's status: ran / failed in its run / hung / killed its process
+# a point's status: it ran; it failed in its run; it hung (killed at its timeout); it killed its process
+STATUSES = ("ok", "failed", "timeout", "crashed")
 TAIL_COLUMNS = ("status", "message", "run_time", "worker")  # a results table's last columns, in this order
 
 

@@ -49,7 +49,7 @@ def check_results_folder(store: Any, resume: bool, spec_digest: str, kind: str, 
     raises ``error`` when the folder is unusable.
 
     ``kind`` is the metadata's ``kind`` the driver writes (a sweep writes
-    none: "sweep"); ``to_resume`` completes "add --resume to ..." in the
+    none: "sweep"); ``to_resume`` completes "add --resume (...) to ..." in the
     message for a folder that already holds rows.  The spec digest and kind
     are checked against ``metadata.json`` and against the identity every file
     of rows carries, so a lost or damaged ``metadata.json`` does not let rows
@@ -59,8 +59,8 @@ def check_results_folder(store: Any, resume: bool, spec_digest: str, kind: str, 
     """
     if not resume:
         if store.has_rows():
-            raise error(f"{store.folder} already holds results; add --resume to {to_resume}, "
-                        "or choose another --out")
+            raise error(f"{store.folder} already holds results; add --resume (or resume=True from Python) to "
+                        f"{to_resume}, or choose another --out")
         return None
     with results_writes(store.folder):
         for line in store.set_aside_damaged():
@@ -73,7 +73,8 @@ def check_results_folder(store: Any, resume: bool, spec_digest: str, kind: str, 
         if record.get("spec_digest") != spec_digest:
             raise error(f"{store.folder} holds results of a different spec (digest "
                         f"{str(record.get('spec_digest'))[:12]}…, this one {spec_digest[:12]}…); "
-                        "use another --out, or run without --resume into an empty folder")
+                        "use another --out, or run without --resume (resume=False from Python) into an empty "
+                        "folder")
         if record.get("kind", "sweep") != kind:
             raise error(f"{store.folder} holds {record.get('kind', 'sweep')} results, not {kind} results; use "
                         "another --out, or resume it with the command that started it")
@@ -130,11 +131,12 @@ def results_writes(out: Path) -> Iterator[None]:
         if exc.errno == errno.ENOENT and not out.is_dir():  # removed (rm -rf) while the study wrote into it
             raise OutputError(f"cannot write the results into {out}: the folder was removed while cosim wrote "
                               f"into it ({reason}); the rows it held are gone", file=str(out),
-                              fix="run the same command again without --resume (into a folder nothing else "
-                                  "removes)") from None
+                              fix="run the same command again without --resume (resume=False from Python), "
+                                  "into a folder nothing else removes") from None
         if _holds_rows(out):
             fix = ("free space on that filesystem or make the folder writable (or choose another --out); the rows "
-                   "written so far are kept: run the same command with --resume to finish")
+                   "written so far are kept: run the same command with --resume (or resume=True from Python) to "
+                   "finish")
         else:
             fix = ("free space on that filesystem or make the folder writable, or choose another --out; then run "
                    "the same command again")

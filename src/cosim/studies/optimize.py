@@ -491,7 +491,8 @@ class Optimization:
         except ClusterError as exc:
             raise OptimizeError(str(exc)) from None
         except KeyboardInterrupt:
-            self._say(f"interrupted: the rows so far are in {self.out}; run again with --resume to go on")
+            self._say(f"interrupted: the rows so far are in {self.out}; run again with --resume (or resume=True "
+                      "from Python) to go on")
             raise
         return self._finish()
 
@@ -659,8 +660,8 @@ class Optimization:
             counts = self.store.compact()  # rows stay in the order they were evaluated
             finish_metadata(self.store, counts)
         if aside:
-            raise OptimizeError(f"{self.out}: " + "; ".join(aside) + "; run the same command with --resume to "
-                                "evaluate their designs again")
+            raise OptimizeError(f"{self.out}: " + "; ".join(aside) + "; run the same command with --resume (or "
+                                "resume=True from Python) to evaluate their designs again")
         return counts
 
 

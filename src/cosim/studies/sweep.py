@@ -343,7 +343,8 @@ class Sweep:
         except ClusterError as exc:
             raise SweepError(str(exc)) from None
         except KeyboardInterrupt:
-            self._say(f"interrupted: the rows so far are in {self.out}; run again with --resume to finish")
+            self._say(f"interrupted: the rows so far are in {self.out}; run again with --resume (or resume=True "
+                      "from Python) to finish")
             raise
         finally:
             self.close()  # the early cluster, if dask_client did not take it
@@ -360,7 +361,8 @@ class Sweep:
             finish_metadata(self.store, counts)
         if aside:
             raise SweepError(f"{self.out}: " + "; ".join(aside) + f"; the table holds {sum(counts.values())} of "
-                             f"{len(self.space)} points: run the same command with --resume to compute the others")
+                             f"{len(self.space)} points: run the same command with --resume (or resume=True "
+                             "from Python) to compute the others")
         return counts
 
     def _evaluate(self, client: Any, done: set[str], todo: int, n_workers: int, board: Any = None) -> None:
