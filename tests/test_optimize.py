@@ -328,8 +328,8 @@ class FormulaEvaluator:
         self.asked.append([pid for pid, _ in points])
         if self.calls == self.interrupt_at:
             raise KeyboardInterrupt
-        return [{"point_id": pid, "status": "ok", "objectives": {
-            "f1": v["b.x"] ** 2 + v["b.y"] ** 2, "f2": (v["b.x"] - 2) ** 2 + v["b.y"] ** 2}} for pid, v in points]
+        return [PointRow(pid, "ok", "", 0.0, {"f1": v["b.x"] ** 2 + v["b.y"] ** 2,
+                                              "f2": (v["b.x"] - 2) ** 2 + v["b.y"] ** 2}) for pid, v in points]
 
 
 def test_the_switch_happens_at_the_same_batch_on_resume_and_proposals_stay_few(write_spec, tmp_path):
