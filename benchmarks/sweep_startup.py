@@ -47,7 +47,7 @@ TARGET_RATIO, TARGET_SECONDS = 0.8, 2.5
 
 def env() -> dict[str, str]:
     """This checkout first on the path, for the processes started here and their Dask workers."""
-    return dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    return dict(os.environ, PYTHONPATH=str(ROOT / "src") + os.pathsep + os.environ.get("PYTHONPATH", ""))
 
 
 def cosim_command() -> list[str]:

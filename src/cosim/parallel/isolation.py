@@ -480,7 +480,7 @@ class IsolatedRunner:
         for setting in LIMITS.values():  # the limits of the client that made the payload, not this worker's
             env.pop(setting.env, None)
         env.update(limits)
-        root = str(Path(__file__).resolve().parent.parent)
+        root = str(Path(__file__).resolve().parents[2])  # the folder holding the cosim package (src/ in a checkout)
         env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")  # works from a source checkout too
         self._proc = subprocess.Popen(
             # gc.freeze once child_main is done: the interpreter's final collections over the units' modules
