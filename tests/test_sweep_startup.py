@@ -10,6 +10,7 @@ import sys
 import psutil
 import pytest
 
+from cosim.execution.point_row import PointRow
 from cosim.studies.sweep import BatchSizer, Sweep, SweepError
 
 from .conftest import TESTS
@@ -30,10 +31,10 @@ def square_spec(values: list[float]) -> dict:
 def test_tasks_of_cheap_points_grow_and_shrink_again_towards_the_end():
     sizer = BatchSizer(todo=100_000, n_workers=2)
     assert sizer.next() == 64  # before any point time is known: small tasks spread over both workers
-    sizer.observe([{"status": "ok", "run_time": 0.001}] * 10 + [{"status": "failed", "run_time": 5.0}])
+    sizer.observe([PointRow("p", "ok", run_time=0.001)] * 10 + [PointRow("q", "failed", run_time=5.0)])
     assert sizer.point_seconds == pytest.approx(0.001)  # failed points do not count
     assert sizer.next() == 500  # 0.5 s of 1 ms points
-    sizer.observe([{"status": "ok", "run_time": 1e-7}] * 1000)  # now nearly free: capped
+    sizer.observe([PointRow("p", "ok", run_time=1e-7)] * 1000)  # now nearly free: capped
     assert sizer.next() == BatchSizer.MAX_BATCH
     sizer.remaining = 1000
     assert sizer.next() == 125  # the last 1000 points in tasks of 1000 / (4 x 2 workers)
@@ -48,7 +49,7 @@ def test_the_first_tasks_of_a_small_sweep_are_a_quarter_of_each_workers_share():
 
 def test_a_given_batch_size_is_kept_and_take_counts_down():
     sizer = BatchSizer(todo=10, n_workers=2, size=4)
-    sizer.observe([{"status": "ok", "run_time": 1e-6}] * 4)
+    sizer.observe([PointRow("p", "ok", run_time=1e-6)] * 4)
     points = iter(range(10))
     assert [len(sizer.take(points)) for _ in range(4)] == [4, 4, 2, 0]
     assert sizer.remaining == 0
