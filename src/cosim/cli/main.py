@@ -177,6 +177,9 @@ def _configure_logging(args: argparse.Namespace) -> None:
     line or notes), -v (info) or -vv (debug); left alone (warnings and above shown) when none is given."""
     import logging
 
+    # A log record that cannot be written (Dask's threads logging while the process exits and stderr is closed)
+    # is dropped, as a program in production does, instead of printing "--- Logging error ---" with a traceback.
+    logging.raiseExceptions = False
     if not (args.log_level or args.quiet or args.verbose):
         return  # as Python leaves it (a program calling main() keeps its own logging)
     level = args.log_level or ("ERROR" if args.quiet else {1: "INFO"}.get(args.verbose, "DEBUG"))
