@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from cosim.errors import CosimError, UnitError, UserError
+from cosim.errors import UnitError, UserError
 
 EXIT_OK = 0  # everything ran
 EXIT_RUN_FAILED = 1  # a run (or some sweep points) failed
@@ -35,9 +35,7 @@ def exit_code(error: BaseException | None) -> int:
         return EXIT_USAGE
     if isinstance(error, UnitError):
         return EXIT_RUN_FAILED
-    if isinstance(error, CosimError):
-        return EXIT_INTERNAL
-    return EXIT_INTERNAL
+    return EXIT_INTERNAL  # an InternalError, or anything unexpected
 
 
 def run_exit_code(result: Any) -> int:

@@ -8,12 +8,10 @@ command line.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 from typing import Any
 
 from cosim.cli.exit_codes import EXIT_OK, EXIT_RUN_FAILED
-from cosim.cli.options import message_line
 from cosim.errors import UsageError
 
 
@@ -49,7 +47,7 @@ def add_optimize_parser(sub: Any) -> None:
 
 def cmd_optimize(args: argparse.Namespace) -> int:
     """Run an optimisation; returns the exit code. SpecError, OptimizeError and UsageError reach cli.main."""
-    from cosim.cli.sweep import first_not_ok
+    from cosim.cli.sweep import print_not_ok
     from cosim.results.store import default_folder
     from cosim.studies.optimize import Optimization
 
@@ -69,6 +67,5 @@ def cmd_optimize(args: argparse.Namespace) -> int:
     print(f"front: cosim pareto {run.store.table_path}; report: cosim report {out} -o report.html")
     not_ok = total - counts.get("ok", 0)
     if not_ok:
-        for row in first_not_ok(run.store.table_path, 5):
-            print(f"  {row['point_id']} {row['status']}: {message_line(row['message'])}", file=sys.stderr)
+        print_not_ok(run.store.table_path, 5)
     return EXIT_OK if not_ok == 0 else EXIT_RUN_FAILED

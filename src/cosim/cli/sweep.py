@@ -60,7 +60,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         from cosim.parallel.isolation import start_spare_children
 
         start_spare_children(args.workers or os.cpu_count() or 1)
-    from cosim.cli.options import experiment_overrides, message_line
+    from cosim.cli.options import experiment_overrides
     from cosim.results.folder import default_folder
     from cosim.studies.sweep import Sweep
 
@@ -78,11 +78,19 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     print(f"{total} points: {summary or 'none'}; table: {sweep.store.table_path}")
     not_ok = total - counts.get("ok", 0)
     if not_ok:
-        for row in first_not_ok(sweep.store.table_path, 5):
-            print(f"  {row['point_id']} {row['status']}: {message_line(row['message'])}", file=sys.stderr)
+        print_not_ok(sweep.store.table_path, 5)
         if not_ok > 5:
             print(f"  ... and {not_ok - 5} more (see the 'message' column)", file=sys.stderr)
     return EXIT_OK if not_ok == 0 else EXIT_RUN_FAILED
+
+
+def print_not_ok(table: Path, n: int) -> None:
+    """Print the first ``n`` rows of ``table`` whose status is not ok, one line each, on stderr (also for
+    ``cosim optimize``)."""
+    from cosim.cli.options import message_line
+
+    for row in first_not_ok(table, n):
+        print(f"  {row['point_id']} {row['status']}: {message_line(row['message'])}", file=sys.stderr)
 
 
 def first_not_ok(table: Path, n: int) -> list[dict]:
