@@ -1,0 +1,68 @@
+"""The experiment an SSP gives: ``ssd:DefaultExperiment`` start and stop, the step size from OMSimulator's
+``FixedStepMaster`` or ``oms_ma`` solvers or OSP's ``FixedStepAlgorithm``, cosim's own master algorithm; and one
+note per kind of tool annotation cosim does not use."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from cosim.errors import AnnotationNumberError
+from cosim.master.algorithms import ALGORITHMS
+from cosim.ssp.annotations import number, unread_annotation_types
+from cosim.ssp.reading import Reading
+from cosim.ssp.xml import tag
+
+
+def read_experiment(reading: Reading, root: Any) -> dict:
+    """The spec's ``experiment`` from the SSD ``root``: what it gives of start, stop, step and algorithm.
+
+    No note for a missing stop time or step size: the spec or the command line may give them, and
+    ``ssp_raw_spec`` reports them when neither does.
+    """
+    experiment: dict[str, Any] = {}
+    default = root.find(tag("ssd", "DefaultExperiment"))
+    if default is not None:
+        if default.get("startTime") is not None:
+            experiment["start"] = float(default.get("startTime"))
+        if default.get("stopTime") is not None:
+            experiment["stop"] = float(default.get("stopTime"))
+    step = None
+    for element in root.iter():
+        if not isinstance(element.tag, str):
+            continue
+        local = element.tag.split("}")[-1]
+        try:
+            if local == "FixedStepMaster" and element.get("stepSize"):
+                step = number(element, "stepSize")  # OMSimulator
+            elif local == "FixedStepAlgorithm" and (element.get("baseStepSize") or element.get("stepSize")):
+                step = number(element, "baseStepSize" if element.get("baseStepSize") else "stepSize")  # OSP
+        except AnnotationNumberError as exc:
+            reading.bad_number(exc)
+            break
+        if step is not None:
+            break
+    steps = reading.solvers.steps
+    if step is None and steps:  # OMSimulator 3: oms_ma solvers' fixedStepSize
+        step = min(steps)
+        if len(set(steps)) > 1:
+            reading.note(f"OMSimulator solvers give several steps ({', '.join(f'{s:g}' for s in steps)}"
+                         f"): cosim steps every unit with the smallest, {step:g} s")
+    if step is not None:
+        experiment["step"] = step
+    for annotation in root.iter(tag("ssc", "Annotation")):
+        if annotation.get("type") == "org.cosim":  # written by cosim export: its master algorithm
+            for child in annotation:
+                if isinstance(child.tag, str) and child.get("algorithm") in ALGORITHMS:
+                    experiment["algorithm"] = child.get("algorithm")
+    return experiment
+
+
+def note_unread(reading: Reading, root: Any) -> None:
+    """One note per kind of annotation content cosim does not use."""
+    for text in sorted(reading.solvers.unused):
+        reading.note(text)
+    if reading.hints:
+        reading.note(f"OSP step size hints ignored ({', '.join(reading.hints)}): cosim steps every unit with one "
+                     "communication step")
+    for kind in unread_annotation_types(root):
+        reading.note(f"annotations of type '{kind}' are not read")

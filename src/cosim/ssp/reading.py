@@ -1,0 +1,112 @@
+"""One reading of one SSP: its files, the problems and notes collected so far, and the elements read.
+
+Every step of the reader (:mod:`.elements`, :mod:`.connections`, :mod:`.bindings`, :mod:`.experiment`) records
+its problems here (file inside the archive, element path, fix) instead of raising, so that all of them are
+reported at once; the reader raises them as one SpecError.
+"""
+
+from __future__ import annotations
+
+import logging
+import urllib.parse
+from pathlib import Path
+from typing import Any
+
+from cosim.errors import AnnotationNumberError, Problem
+from cosim.ssp.annotations import Solvers
+from cosim.ssp.archive import SspFiles
+from cosim.ssp.model import Edge, Node
+from cosim.ssp.tolerant import tolerated
+from cosim.ssp.xml import display_name, element_path, parse_file, schema_problems
+from cosim.util.quantities import UnitDefinition
+
+log = logging.getLogger("cosim.ssp")
+_LOGGED: set[tuple[str, str]] = set()
+
+
+class Reading:
+    """The state of reading one SSP: shared by the reader's steps."""
+
+    def __init__(self, files: SspFiles):
+        self.files = files
+        self.label = files.label(files.ssd)
+        self.problems: list[Problem] = []
+        self.notes: list[str] = []
+        for note in files.notes:
+            self.note(note)
+        self.units: dict[str, UnitDefinition] = {}  # ssd:Units
+        self.nodes: dict[tuple[str, ...], Node] = {}
+        self.edges: list[Edge] = []
+        self.solvers = Solvers()
+        self.hints: list[str] = []  # OSP step size hints, for one note
+
+    def note(self, text: str) -> None:
+        """Keep a note for the user; log it once per SSP and process (an SSP is often read twice)."""
+        self.notes.append(text)
+        if (self.files.given, text) not in _LOGGED:  # an SSP is often read twice (validate, then run)
+            _LOGGED.add((self.files.given, text))
+            log.warning("%s: %s", self.files.given, text)
+
+    def problem(self, element: Any, message: str, fix: str, label: str | None = None) -> None:
+        """Record a problem at ``element`` of the file ``label`` (the SSD when None)."""
+        where = element_path(element) if element is not None else "/"
+        self.problems.append(Problem(label or self.label, where, message, fix))
+
+    def bad_number(self, exc: AnnotationNumberError) -> None:
+        """A problem for an annotation attribute that is no positive number (once, though read twice)."""
+        message = f"{display_name(exc.element)} {exc}"
+        if any(p.message == message and p.path == element_path(exc.element) for p in self.problems):
+            return  # read twice (a system's solvers and the experiment's step)
+        self.problem(exc.element, message, f"write {exc.attribute} as a positive number, e.g. {exc.attribute}=\"0.01\"")
+
+    def parse(self, path: Path, label: str, kind: str) -> Any:
+        """The root of an SSP file checked against the schema, or None (its problems recorded).
+
+        A file in a form popular tools write against the schema (see :mod:`.tolerant`) is read as corrected,
+        with a note per correction; when the correction does not satisfy the schema either, the original's
+        problems are reported, so that they point at the user's own file.
+        """
+        root, problems = parse_file(path, label, kind)
+        if root is not None and problems:
+            fixed, notes = tolerated(root, label)
+            if notes and not schema_problems(fixed, label, kind):
+                for note in notes:
+                    self.note(note)
+                return fixed
+        self.problems.extend(problems)
+        return None if problems else root
+
+    def checked_inline(self, root: Any, label: str, kind: str) -> Any:
+        """An inline ssv:ParameterSet or ssm:ParameterMapping checked against its schema (tolerated forms
+        corrected, as :meth:`parse`), or None with its problems recorded."""
+        problems = schema_problems(root, label, kind)
+        if problems:
+            fixed, notes = tolerated(root, label)
+            if notes and not schema_problems(fixed, label, kind):
+                for note in notes:
+                    self.note(note)
+                return fixed
+            self.problems.extend(problems)
+            return None
+        return root
+
+    def resolve(self, uri: str, base: Path) -> Path | None:
+        """A file a component or binding refers to: inside the SSP first, then next to the archive."""
+        parsed = urllib.parse.urlparse(uri)
+        if parsed.scheme == "file":
+            candidate = Path(urllib.parse.unquote(parsed.path))
+            return candidate if candidate.is_file() else None
+        if parsed.scheme:
+            return None  # no network: http(s) sources are not fetched
+        relative = urllib.parse.unquote(parsed.path)
+        candidate = base / relative
+        if self.files.inside(candidate) and candidate.is_file():
+            return candidate
+        if self.files.beside is not None:
+            beside = self.files.beside / relative
+            if beside.is_file():
+                return beside
+            beside = self.files.beside / Path(relative).name
+            if beside.is_file():
+                return beside
+        return None
