@@ -315,6 +315,17 @@ class ScatteredPayload:
                     time.sleep(1.0)  # the scheduler removes the dead worker meanwhile
         return self._future
 
+    def release(self) -> None:
+        """Let go of the scattered payload; call it before the client closes.
+
+        A future still alive when the interpreter exits is released by its
+        ``__del__`` after the modules are torn down, which distributed 2024.1
+        (the declared floor) reports as "Exception ignored in Future.__del__"
+        tracebacks; a released future's ``__del__`` does nothing.
+        """
+        release_futures(self._future.values() if isinstance(self._future, dict) else [self._future])
+        self._future = None
+
     def _wait_for_a_worker(self) -> None:
         """Raises ClusterError when no worker is there within WORKER_WAIT seconds (all died, none came back)."""
         try:
@@ -323,6 +334,13 @@ class ScatteredPayload:
             raise ClusterError(f"every Dask worker died and none came back within {WORKER_WAIT:g} s (a Dask nanny "
                                "does not restart a worker killed while it starts); the rows so far are kept: start "
                                "workers, or run again with --resume (or resume=True from Python)") from None
+
+
+def release_futures(futures: Any) -> None:
+    """Release every future of ``futures`` (None entries skipped); see :meth:`ScatteredPayload.release`."""
+    for future in futures:
+        if future is not None:
+            future.release()
 
 
 def _alive(scattered: Any) -> bool:
@@ -376,10 +394,19 @@ class Evaluator:
         reruns = Reruns()
         chunks = [list(range(i, min(i + size, len(points)))) for i in range(0, len(points), size)]
         in_flight = [(chunk, False, self._submit(points, chunk)) for chunk in chunks]  # (indices, alone, future)
+        try:
+            self._collect(points, rows, in_flight, reruns)
+        finally:  # an interruption or an error leaves futures in flight: released while the client lives
+            release_futures(future for _, _, future in in_flight)
+        return rows  # type: ignore[return-value]  (every index was filled)
+
+    def _collect(self, points: Sequence[tuple[str, dict[str, Any]]], rows: list[PointRow | None],
+                 in_flight: list[tuple[list[int], bool, Any]], reruns: Reruns) -> None:
+        """Fill ``rows`` from the tasks ``in_flight`` (emptied as they finish), running suspects alone after."""
         while in_flight or reruns.suspects:
             if not in_flight:  # every other task is done: the next suspect runs alone
                 suspect = reruns.suspects.popleft()
-                in_flight = [(suspect, True, self._submit(points, suspect))]
+                in_flight.append((suspect, True, self._submit(points, suspect)))
             for indices, alone, future in in_flight:
                 try:
                     done = future.result()  # waits; the others run meanwhile
@@ -393,8 +420,11 @@ class Evaluator:
                     future.release()
                 for i, row in zip(indices, done):
                     rows[i] = row
-            in_flight = []
-        return rows  # type: ignore[return-value]  (every index was filled)
+            in_flight.clear()
+
+    def close(self) -> None:
+        """Release the payload scattered to the workers; call it before the client closes."""
+        self._payload.release()
 
     def _submit(self, points: Sequence[tuple[str, dict[str, Any]]], indices: list[int]) -> Any:
         """The task future for the points at ``indices``."""

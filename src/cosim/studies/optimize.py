@@ -486,8 +486,11 @@ class Optimization:
                           f"{link} ({board.describe()}); results: {self.out}")
                 evaluator = Evaluator(client, self.payload, n_workers, self.timeout, study=self.spec.name,
                                       board=board)
-                with board.running():
-                    self._loop(study, dists, evaluator, stored)
+                try:
+                    with board.running():
+                        self._loop(study, dists, evaluator, stored)
+                finally:
+                    evaluator.close()
         except ClusterError as exc:
             raise OptimizeError(str(exc)) from None
         except KeyboardInterrupt:

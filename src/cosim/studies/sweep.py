@@ -46,7 +46,7 @@ from typing import TYPE_CHECKING, Any, Iterator, Sequence, TextIO
 from cosim.errors import OutputError, SweepError  # noqa: F401  (OutputError: imported from here too)
 from cosim.execution.point_row import PointRow
 from cosim.parallel.early_cluster import EarlyCluster
-from cosim.parallel.evaluator import Reruns, ScatteredPayload, check_timeout, lost_rows
+from cosim.parallel.evaluator import Reruns, ScatteredPayload, check_timeout, lost_rows, release_futures
 from cosim.parallel.isolation import IsolatedRunner, make_payload, preload_spare_children, stop_spare_children
 from cosim.parallel.tasks import PointBatch, run_batch
 from cosim.results.checksums import changed_files, data_file_checksums, unit_checksums
@@ -375,14 +375,14 @@ class Sweep:
         unsubmitted = (p for p in self.space if p.id not in done)  # never rebound (a rerun once rebound 'points')
         payload = ScatteredPayload(client, self.payload)
         progress = Progress(todo, self.progress_stream) if not self.quiet else None
-        in_flight: dict[str, tuple[list[Point], bool]] = {}  # task key -> points, alone (see evaluator.Reruns)
+        in_flight: dict[str, tuple[list[Point], bool, Any]] = {}  # task key -> points, alone (Reruns), future
         pending = as_completed()
         reruns = Reruns()
 
         times: collections.deque[float] = collections.deque(maxlen=1000)  # recent ok point times
 
         def submit() -> bool:
-            alone = bool(reruns.suspects) or any(a for _, a in in_flight.values())
+            alone = bool(reruns.suspects) or any(a for _, a, _ in in_flight.values())
             if alone and in_flight:
                 return False  # no new work until the suspects have run, each group alone on the cluster
             batch = reruns.suspects.popleft() if alone else sizer.take(unsubmitted)
@@ -393,7 +393,7 @@ class Sweep:
                            run=board.run if board is not None else "")
             future = client.submit(run_batch, payload.future(), PointBatch([(p.id, p.values) for p in batch]),
                                    timeout, pure=False, retries=0, key=key)
-            in_flight[future.key] = batch, alone
+            in_flight[future.key] = batch, alone, future
             pending.add(future)
             return True
 
@@ -401,27 +401,31 @@ class Sweep:
             while len(in_flight) < 2 * n_workers + 1 and submit():
                 pass
 
-        fill()
-        for future in pending:
-            batch, alone = in_flight.pop(future.key)
-            try:
-                rows = future.result()
-            except Exception as exc:  # the worker process itself died (KilledWorker) or the task broke
-                if reruns.after_failure(batch, exc, alone):  # innocent points are never crashed
-                    future.release()
-                    fill()
-                    continue
-                rows = lost_rows([p.id for p in batch], exc, alone)
-                if board is not None:
-                    board.rows_made_here(future.key, rows)
-            future.release()
-            sizer.observe(rows)
-            with results_writes(self.out):
-                self.store.append([self._row(p, r) for p, r in zip(batch, rows)])
-            times.extend(r.run_time for r in rows if r.ok)
-            if progress is not None:
-                progress.update(len(rows), sum(not r.ok for r in rows))
+        try:
             fill()
+            for future in pending:
+                batch, alone, _ = in_flight.pop(future.key)
+                try:
+                    rows = future.result()
+                except Exception as exc:  # the worker process itself died (KilledWorker) or the task broke
+                    if reruns.after_failure(batch, exc, alone):  # innocent points are never crashed
+                        future.release()
+                        fill()
+                        continue
+                    rows = lost_rows([p.id for p in batch], exc, alone)
+                    if board is not None:
+                        board.rows_made_here(future.key, rows)
+                future.release()
+                sizer.observe(rows)
+                with results_writes(self.out):
+                    self.store.append([self._row(p, r) for p, r in zip(batch, rows)])
+                times.extend(r.run_time for r in rows if r.ok)
+                if progress is not None:
+                    progress.update(len(rows), sum(not r.ok for r in rows))
+                fill()
+        finally:  # an interruption or an error leaves futures: released while the client lives
+            release_futures(future for _, _, future in in_flight.values())
+            payload.release()
         if progress is not None:
             progress.close()
 
