@@ -168,3 +168,54 @@ def test_exported_fmu_passes_fmpy_validation(tmp_path, cls):
     description = read_model_description(str(tmp_path / "unit.fmu"), validate=True)
     outputs = sorted(v.name for v in description.modelVariables if v.causality == "output")
     assert outputs and sorted(u.variable.name for u in description.initialUnknowns) == outputs
+
+
+@pytest.mark.parametrize("experiment", [
+    {"algorithm": "jacobi", "coupled_model_exchange": False, "early_stop": "fail",
+     "loop_solver": {"method": "fixed-point", "max_iterations": 20, "tolerance": 1e-9}},
+    {"algorithm": "adaptive", "adaptive": {"rtol": 1e-5, "atol": 1e-7, "max_step": 0.2, "base": "jacobi"}},
+])
+def test_implementation_and_solver_settings_survive_the_export(tmp_path, experiment):
+    # issue 25: the archive carries how each unit runs (implementation), a model-exchange unit's tolerance and
+    # max_step (as OMSimulator 3's cvode solver assigned to its component), the step (also as OMSimulator 3's
+    # oms_ma solver) and cosim's own experiment options, so reading it back (without the companion spec) gives
+    # the same experiment
+    spec = {
+        "name": "solvers",
+        "units": {"src": {"fmu": "builtin:linear_ode_fmi2", "parameters": {"a": 0.0, "b": 0.0, "x0": 2.0}},
+                  "me": {"fmu": "builtin:linear_ode_fmi2", "interface": "model-exchange", "tolerance": 1e-8,
+                         "max_step": 0.01, "parameters": {"a": -1.0, "b": 1.0, "x0": 0.0}},
+                  "me_default": {"fmu": "builtin:linear_ode_fmi3", "interface": "model-exchange",
+                                 "parameters": {"a": -2.0, "b": 1.0, "x0": 0.0}}},
+        "connections": [{"from": "src.y", "to": "me.u"}, {"from": "src.y", "to": "me_default.u"}],
+        "experiment": {"stop": 1.0, "step": 0.1, **experiment},
+        "record": ["src.*", "me.*", "me_default.*"],  # as the SSP records: every unit's ports
+    }
+    (tmp_path / "spec.json").write_text(json.dumps(spec))
+    original = check_spec(tmp_path / "spec.json")
+    archive = export_ssp(original, tmp_path / "solvers.ssp", spec_copy=False)
+    with zipfile.ZipFile(archive) as zf:
+        ssd = etree.fromstring(zf.read("SystemStructure.ssd"))
+    components = {c.get("name"): c for c in ssd.iter(f"{{{NS['ssd']}}}Component")}
+    assert {n: c.get("implementation") for n, c in components.items()} == \
+        {"src": "CoSimulation", "me": "ModelExchange", "me_default": "ModelExchange"}
+    infos = [e for e in ssd.iter() if isinstance(e.tag, str) and e.tag.endswith("}SimulationInformation")]
+    definitions = {e.get("name"): dict(e.attrib) for e in infos if e.get("method")}
+    assigned = {n: [e.get("name") for e in c.iter() if e in infos] for n, c in components.items()}
+    assert definitions[assigned["me"][0]] == {"name": assigned["me"][0], "method": "cvode",
+                                              "relativeTolerance": "1e-08", "maximumStepSize": "0.01"}
+    assert definitions[assigned["me_default"][0]] == {"name": assigned["me_default"][0], "method": "cvode"}
+    assert assigned["src"] == []
+    assert [d["fixedStepSize"] for d in definitions.values() if d["method"] == "oms_ma"] == ["0.1"]
+
+    again = check_spec(archive)
+    assert again.spec.experiment == original.spec.experiment
+    for name, unit in original.units.items():
+        twin = again.units[name]
+        assert (twin.unit_type.interface, twin.unit_type.solver_settings) == \
+            (unit.unit_type.interface, unit.unit_type.solver_settings), name
+    first, second = (Execution(s, record=True).run() for s in (original, again))
+    assert first.ok and second.ok, (first.message, second.message)
+    assert np.array_equal(first.traces.to_numpy(), second.traces.to_numpy())
+    # me: der(x) = -x + 2 from x = 0: x(1) = 2 (1 - e^-1), integrated by CVode at rtol 1e-8
+    assert second.traces["me.y"].iloc[-1] == pytest.approx(2 * (1 - np.exp(-1.0)), rel=1e-6)

@@ -3,13 +3,17 @@
 :func:`export_ssp` writes ``SystemStructure.ssd`` with one flat root system:
 one ``ssd:Component`` per unit (FMUs copied to ``resources/``; Python units
 built into FMI 2.0 FMUs with pythonfmu, see :mod:`cosim.export.fmu`),
-its connectors, one ``resources/<unit>.ssv`` per unit with the spec's
+its connectors and ``implementation`` (``CoSimulation`` or ``ModelExchange``, as the unit runs), one
+``resources/<unit>.ssv`` per unit with the spec's
 parameter and start values (written with 17 significant digits, so they read
 back bit for bit), the connections (a factor or offset as a
 ``LinearTransformation``; ``suppressUnitConversion`` because cosim itself does
-not convert), ``DefaultExperiment`` and the fixed step size both as
-OMSimulator's ``FixedStepMaster`` and OSP's ``FixedStepAlgorithm``
-annotation, and cosim's own master algorithm as a ``org.cosim`` annotation.
+not convert), ``DefaultExperiment`` and the fixed step size as OMSimulator
+2's ``FixedStepMaster``, OMSimulator 3's ``oms_ma`` solver and OSP's
+``FixedStepAlgorithm`` annotation, a model-exchange unit's ``tolerance`` and
+``max_step`` as an OMSimulator 3 ``cvode`` solver assigned to its component,
+and cosim's own master algorithm and experiment options as a ``org.cosim``
+annotation: reading the archive back gives the same experiment.
 Array ports are connected element by element (``x[1]`` .. ``x[n]``: the
 scalar variables of an FMI 2.0 FMU, as tools reading FMI 2.0 expect; the
 elements of an FMI 3.0 array).  Next to the
@@ -24,12 +28,14 @@ import json
 import shutil
 import tempfile
 import zipfile
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from lxml import etree
 
 from cosim.errors import Problem, SpecError
+from cosim.ssp.experiment import COSIM_EXPERIMENT_FLAGS, COSIM_EXPERIMENT_GROUPS
 from cosim.ssp.xml import NS, schema_problems
 from cosim.system.builder import System
 from cosim.units.protocol import parse_port
@@ -163,10 +169,11 @@ def _ssd(system: System, fmus: dict[str, tuple[str, str]], resources: Path) -> A
     top = _e(root, "ssd", "System", name=spec.name)
     elements = _e(top, "ssd", "Elements")
     values = _unit_values(system)
+    solvers = _cvode_solvers(system)
     for name, unit in system.units.items():
         source, fmi_version = fmus[name]
         component = _e(elements, "ssd", "Component", name=name, type="application/x-fmu-sharedlibrary",
-                       source=source)
+                       source=source, implementation=_implementation(unit))
         connectors = _e(component, "ssd", "Connectors")
         for variable in unit.description.variables:
             if variable.causality not in ("input", "output", "parameter", "calculatedParameter",
@@ -185,6 +192,9 @@ def _ssd(system: System, fmus: dict[str, tuple[str, str]], resources: Path) -> A
                 etree.tostring(ssv.getroottree(), xml_declaration=True, encoding="UTF-8", pretty_print=True))
             bindings = _e(component, "ssd", "ParameterBindings")
             _e(bindings, "ssd", "ParameterBinding", source=f"resources/{name}.ssv")
+        if name in solvers.assigned:  # OMSimulator 3's form: the component names the solver the system defines
+            _e(_e(_e(_e(component, "ssd", "Annotations"), "ssc", "Annotation", type="org.openmodelica"),
+                  "oms", "Annotations"), "oms", "SimulationInformation", name=solvers.assigned[name])
     connections = _e(top, "ssd", "Connections")
     for c in system.connections:
         for start, end in zip(_element_names(c.source), _element_names(c.target), strict=True):
@@ -194,15 +204,64 @@ def _ssd(system: System, fmus: dict[str, tuple[str, str]], resources: Path) -> A
                 _e(connection, "ssc", "LinearTransformation", factor=c.factor, offset=c.offset)
     exp = spec.experiment
     annotations = _e(top, "ssd", "Annotations")
-    oms = _e(_e(_e(annotations, "ssc", "Annotation", type="org.openmodelica"), "oms", "Annotations"),
-             "oms", "SimulationInformation")
-    _e(oms, "oms", "FixedStepMaster", description="oms-ma", stepSize=exp.step)
-    _e(_e(annotations, "ssc", "Annotation", type="org.cosim"), "cosim", "Experiment", algorithm=exp.algorithm)
+    oms_annotations = _e(_e(annotations, "ssc", "Annotation", type="org.openmodelica"), "oms", "Annotations")
+    # the step as OMSimulator 2 (FixedStepMaster) and 3 (an oms_ma solver) write it; OMSimulator 3's cvode
+    # solvers carry the model-exchange units' tolerance and max_step
+    _e(_e(oms_annotations, "oms", "SimulationInformation"), "oms", "FixedStepMaster", description="oms-ma",
+       stepSize=exp.step)
+    _e(oms_annotations, "oms", "SimulationInformation", name="cosim_master", method="oms_ma", fixedStepSize=exp.step)
+    for solver_name, settings in solvers.defined.items():
+        _e(oms_annotations, "oms", "SimulationInformation", name=solver_name, method="cvode", **settings)
+    _cosim_experiment(_e(annotations, "ssc", "Annotation", type="org.cosim"), spec)
     default = _e(root, "ssd", "DefaultExperiment", startTime=exp.start, stopTime=exp.stop)
     osp = _e(_e(_e(default, "ssd", "Annotations"), "ssc", "Annotation", type="com.opensimulationplatform"),
              "osp", "Algorithm")
     _e(osp, "osp", "FixedStepAlgorithm", baseStepSize=exp.step)
     return root
+
+
+@dataclass
+class _Solvers:
+    """OMSimulator 3 cvode solvers for the model-exchange units: one per distinct tolerance and max_step."""
+
+    defined: dict[str, dict[str, float]] = field(default_factory=dict)  # solver name -> its attributes
+    assigned: dict[str, str] = field(default_factory=dict)  # unit name -> solver name
+
+
+def _cvode_solvers(system: System) -> _Solvers:
+    solvers = _Solvers()
+    by_settings: dict[tuple, str] = {}
+    for name, unit in system.units.items():
+        if _implementation(unit) != "ModelExchange":
+            continue
+        options = unit.spec.options
+        settings = {attribute: float(options[key]) for key, attribute in (("tolerance", "relativeTolerance"),
+                                                                           ("max_step", "maximumStepSize"))
+                    if options.get(key) is not None}
+        key = tuple(sorted(settings.items()))
+        if key not in by_settings:
+            by_settings[key] = f"cosim_cvode{len(by_settings) + 1}"
+            solvers.defined[by_settings[key]] = settings
+        solvers.assigned[name] = by_settings[key]
+    return solvers
+
+
+def _implementation(unit: Any) -> str:
+    """The SSP ``implementation`` of a unit: how it runs (a Python unit becomes a co-simulation FMU)."""
+    interface = getattr(unit.unit_type, "interface", "co-simulation") if unit.spec.kind == "fmu" else "co-simulation"
+    return "ModelExchange" if interface == "model-exchange" else "CoSimulation"
+
+
+def _cosim_experiment(annotation: Any, spec: Any) -> None:
+    """cosim's own experiment settings an SSP has no place for: the master algorithm and its options (adaptive
+    steps, the loop solver, coupled model exchange, early stop), as ``cosim:Experiment`` with one child per
+    option group; :func:`cosim.ssp.experiment.read_experiment` reads them back."""
+    raw = spec.raw.get("experiment") or {}
+    experiment = _e(annotation, "cosim", "Experiment", algorithm=spec.experiment.algorithm,
+                    **{k: raw[k] for k in COSIM_EXPERIMENT_FLAGS if raw.get(k) is not None})
+    for group in COSIM_EXPERIMENT_GROUPS:
+        if isinstance(raw.get(group), dict) and raw[group]:
+            _e(experiment, "cosim", group, **raw[group])
 
 
 def _element_names(signal: Any) -> list[str]:

@@ -1,9 +1,10 @@
 """The experiment an SSP gives: ``ssd:DefaultExperiment`` start and stop, the step size from OMSimulator's
-``FixedStepMaster`` or ``oms_ma`` solvers or OSP's ``FixedStepAlgorithm``, cosim's own master algorithm; and one
-note per kind of tool annotation cosim does not use."""
+``FixedStepMaster`` or ``oms_ma`` solvers or OSP's ``FixedStepAlgorithm``, cosim's own master algorithm and
+experiment options (its ``org.cosim`` annotation); and one note per kind of tool annotation cosim does not use."""
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 from cosim.errors import AnnotationNumberError
@@ -11,6 +12,11 @@ from cosim.master.algorithms import ALGORITHMS
 from cosim.ssp.annotations import number, unread_annotation_types
 from cosim.ssp.reading import Reading
 from cosim.ssp.xml import tag
+
+# cosim's experiment settings an SSP has no place for, in its org.cosim annotation (cosim.export.ssp writes them):
+# flags as attributes of cosim:Experiment, option groups as its children
+COSIM_EXPERIMENT_FLAGS = ("coupled_model_exchange", "early_stop")
+COSIM_EXPERIMENT_GROUPS = ("adaptive", "loop_solver")
 
 
 def read_experiment(reading: Reading, root: Any) -> dict:
@@ -50,11 +56,37 @@ def read_experiment(reading: Reading, root: Any) -> dict:
     if step is not None:
         experiment["step"] = step
     for annotation in root.iter(tag("ssc", "Annotation")):
-        if annotation.get("type") == "org.cosim":  # written by cosim export: its master algorithm
+        if annotation.get("type") == "org.cosim":  # written by cosim export: its master algorithm and options
             for child in annotation:
                 if isinstance(child.tag, str) and child.get("algorithm") in ALGORITHMS:
-                    experiment["algorithm"] = child.get("algorithm")
+                    experiment.update(_cosim_experiment(child))
     return experiment
+
+
+def _cosim_experiment(element: Any) -> dict:
+    """The experiment settings of a ``cosim:Experiment`` (as :mod:`cosim.export.ssp` writes them): the algorithm,
+    the flags among its attributes, one option group per child.  Their form is the spec's, checked with it."""
+    experiment: dict[str, Any] = {"algorithm": element.get("algorithm")}
+    for flag in COSIM_EXPERIMENT_FLAGS:
+        if element.get(flag) is not None:
+            experiment[flag] = _scalar(element.get(flag))
+    for child in element:
+        local = child.tag.split("}")[-1] if isinstance(child.tag, str) else ""
+        if local in COSIM_EXPERIMENT_GROUPS:
+            experiment[local] = {key: _scalar(value) for key, value in child.attrib.items()}
+    return experiment
+
+
+def _scalar(text: str) -> Any:
+    """An attribute's text as the JSON value it was written from: Boolean, integer, number or string."""
+    if text in ("true", "false"):
+        return text == "true"
+    if re.fullmatch(r"[+-]?\d+", text):
+        return int(text)
+    try:
+        return float(text)
+    except ValueError:
+        return text
 
 
 def note_unread(reading: Reading, root: Any) -> None:
