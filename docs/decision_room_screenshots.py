@@ -34,7 +34,7 @@ def main() -> None:
     try:
         text, seconds = B.load(browser, server.link)
         print(f"loaded in {seconds:.1f} s: {text}", flush=True)
-        B.set_and_wait(browser, "filter:duration", "value", [1.589, 1.75], B.COUNT_TEXT)
+        B.set_filter(browser, "duration", 1.589, 1.75)
         B.set_and_wait(browser, "choose-colour", "value", "duration",
                        "return doc.get_model_by_name('choose-colour').value;")
         B.set_and_wait(browser, "minimise", "value", ["e_total", "duration", "peak_tau_ratio[2]"], B.RANKING_SCORES)

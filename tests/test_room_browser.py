@@ -147,7 +147,7 @@ def exercise(driver, link: str, folder: Path, filter_column: str, name: str) -> 
     values = table.values(filter_column)
     lo, hi = float(np.nanmin(values)), float(np.nanmax(values))
     middle = (lo + hi) / 2
-    B.set_and_wait(driver, f"filter:{filter_column}", "value", [middle, hi], B.COUNT_TEXT)
+    B.set_filter(driver, filter_column, middle, hi)
     kept = values >= middle
     assert 0 < kept.sum() < n
     assert B.count_true(driver, "show-ok") == int((kept & ok).sum())
@@ -156,7 +156,9 @@ def exercise(driver, link: str, folder: Path, filter_column: str, name: str) -> 
         f"<b>{int(kept.sum())}</b> of {n}")
 
     # a click on the cloud selects the design under the pointer: the best-ranked design, drawn on the axes
+    B.show_tab(driver, 1)  # the ranking is built with its tab
     first = B.ranking_ids(driver)[0]
+    B.show_tab(driver, 0)
     row = int(np.flatnonzero(df["point_id"].astype(str).to_numpy() == first)[0])
     x_name, y_name = driver.execute_script(
         "const d = Bokeh.documents[0]; return [d.get_model_by_name('choose-x').value, "
@@ -164,8 +166,9 @@ def exercise(driver, link: str, folder: Path, filter_column: str, name: str) -> 
     B.click_point(driver, table.values(x_name)[row], table.values(y_name)[row])
     selected = B.wait_for(
         driver, "const s = doc.get_model_by_name('cloud-source').selected.indices; "
-                  "return s.length && doc.get_model_by_name('selected').text.includes('selected') ? Array.from(s) : null;")
+                  "return s.length && doc.is_idle ? Array.from(s) : null;")
     assert row in selected
+    assert B.count_true(driver, "show-selected") == len(selected)
 
     # the ranking reorders when a weight changes: the first objective's weight to 0 ranks by the others only
     objectives = driver.execute_script(
@@ -191,6 +194,8 @@ def exercise(driver, link: str, folder: Path, filter_column: str, name: str) -> 
 
     # a re-run draws the selected design's traces
     B.show_tab(driver, 2)
+    assert str(df["point_id"].iloc[row]) in driver.execute_script(
+        "return Bokeh.documents[0].get_model_by_name('selected').text;")
     B.click_widget(driver, "rerun")
     traces = B.wait_for(
         driver, "const c = doc.get_model_by_name('traces'); "

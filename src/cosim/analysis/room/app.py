@@ -2,15 +2,20 @@
 
 Tabs of the page:
 
-- **Points**: x, y, colour and size choosers; the cloud (WebGL); a range filter per numeric column; a
-  histogram of any column, all rows against the rows kept; the failed, timed-out and crashed designs with
-  their messages.  A click (tap, box or lasso) on the cloud selects designs.
+- **Points**: x, y, colour and size choosers; the cloud; one range filter for the column chosen beside it
+  (any numeric column; the narrowed ones listed under it); a histogram of any column, all rows against the
+  rows kept; the failed, timed-out and crashed designs with their messages.  A click (tap, box or lasso) on
+  the cloud selects designs.
 - **Decide**: objectives to minimise and to maximise, the ranking method (weighted sum, TOPSIS), a weight
   per objective, the best designs (a click on a row selects it), the radar of the selected designs.
 - **Selection**: the selected designs, their re-run with the spec's recorded signals (traces overlaid per
   port), the selection as CSV and as ``cosim run --point`` commands.
 - **Study**: counts by status; an optimisation's hypervolume against evaluations; a sensitivity analysis's
   indices with their confidence intervals.
+
+Only the Points tab is built with the page; the others are built on the server the first time they are
+shown (what makes a page of a wide table slow is the number of bokeh models, not its rows: the 17061-point
+study had ~350 models and 70 range sliders, see benchmarks/room_load.md).
 
 Every change goes through the Decision, and :meth:`Room.refresh` recomputes what depends on it.  A re-run
 runs in a thread of its own so the server keeps answering; its traces are drawn from the document's next
@@ -37,13 +42,15 @@ from cosim.analysis.room import views as V
 
 TOP = 20  # designs in the ranking table
 MAX_RERUN = 8  # designs re-run at once (one colour each)
+MAX_FAILURES_LISTED = 500  # rows of the table of designs not ok (the count says how many there are)
+WEBGL_ABOVE = 50_000  # rows from which the cloud is drawn through WebGL rather than canvas
 
 
 class Room:
     """The models and callbacks of one document (module docstring)."""
 
     @without_property_validation  # see refresh
-    def __init__(self, doc: Any, study: D.Study, webgl: bool = True):
+    def __init__(self, doc: Any, study: D.Study, webgl: bool | None = None):
         self.doc, self.study = doc, study
         self.decision = Decision(study.table)
         table = study.table
@@ -52,7 +59,10 @@ class Room:
         self.runs: list = []
         self._pending = False
         self._weight_sliders: dict[str, Any] = {}
+        self.ranking = self.radar = None  # the Decide tab's, built when it is first shown
         columns = self.decision.filters.columns
+        if webgl is None:  # canvas draws a few ten thousand points faster than software WebGL (benchmarks)
+            webgl = len(study.ids) > WEBGL_ABOVE
 
         # -- Points
         self.choosers = V.axis_choosers(columns, self.x, self.y, self.colour)
@@ -61,17 +71,18 @@ class Room:
                              table.label(self.x), table.label(self.y),
                              table.label(self.colour) if self.colour else None, webgl)
         self.count = V.text("", "count")
-        self.sliders = V.range_sliders(self.decision.filters.bounds, {c: table.label(c) for c in columns})
+        first = (table.parameter_columns() + columns)[0]
+        self.filter_column = Select(title="filter by", value=first, options=list(columns), name="filter-column",
+                                    width=300)
+        self.filter = V.range_filter(self._filter_state(first))
+        self.narrowed = V.text("", "narrowed", width=300)
         self.reset = V.button("Reset filters", "reset-filters")
         self.histogram_column = Select(title="histogram of", value=self.colour or self.x, options=list(columns),
                                        name="choose-histogram", width=220)
         self.histogram = V.histogram(D.histogram(self.decision.filters.values(self.histogram_column.value),
                                                  self.decision.active()), table.label(self.histogram_column.value))
-        not_ok = np.flatnonzero(study.status != "ok")
-        self.failures = V.failures_table({"point_id": list(study.ids[not_ok]), "status": list(study.status[not_ok]),
-                                          "message": list(study.messages[not_ok])})
 
-        # -- Decide
+        # -- Decide: the choosers are cheap; the table and the radar are built with the tab
         senses = dict(self.decision.objectives)
         self.minimise = MultiChoice(title="minimise", options=list(columns), name="minimise", width=360,
                                     value=[c for c, s in senses.items() if s == "min"])
@@ -80,9 +91,6 @@ class Room:
         self.method = Select(title="ranking", value="weighted_sum", options=list(METHODS.items()), name="method",
                              width=200)
         self.weights = column(name="weights")
-        self.ranking = V.ranking_table(self.decision.objectives, D.ranking_rows(study, self.decision, TOP))
-        self.ranking.source.selected.on_change("indices", self._on_ranking_selection)
-        self.radar = V.radar(D.radar(self.decision, []), [])
 
         # -- Selection
         self.selected = V.text("<p>No design selected: click points of the cloud or rows of the ranking.</p>",
@@ -92,38 +100,55 @@ class Room:
         self.traces = column(name="traces")
         self.export = V.text("", "export")
 
-        # -- Study
-        self.summary = V.text(self._summary(), "summary")
-        study_views: list = [self.summary]
-        history = study.hypervolume()
-        if history is not None:
-            study_views.append(V.hypervolume(*history))
-        indices = study.sensitivity()
-        if indices is not None:
-            study_views.extend(V.sensitivity(indices))
-
         self._wire()
         self._rebuild_weights()
         self.refresh()
         self.doc.title = f"cosim: {study.name}"
         points = row(column(row(*self.choosers.values()), self.cloud["figure"], self.count,
                             row(self.histogram_column), self.histogram["figure"],
-                            V.text("<b>not ok</b> (failed, timed out, crashed)", "failures-title"), self.failures),
-                     column(self.reset, V.scrolling(list(self.sliders.values()), 900, "filters")))
-        decide = row(column(row(self.minimise, self.maximise), self.method, self.weights),
-                     column(self.ranking, self.radar["figure"]))
-        selection = column(self.selected, row(self.rerun_button, self.rerun_status), self.traces, self.export)
-        self.tabs = Tabs(tabs=[TabPanel(child=points, title="Points"), TabPanel(child=decide, title="Decide"),
-                               TabPanel(child=selection, title="Selection"),
-                               TabPanel(child=column(*study_views), title="Study")], name="tabs")
+                            *self._failures()),
+                     column(self.filter_column, self.filter, self.reset, self.narrowed))
+        self._builders = {1: self._build_decide, 2: self._build_selection, 3: self._build_study}
+        self.tabs = Tabs(tabs=[TabPanel(child=points, title="Points")] +
+                         [TabPanel(child=column(name=f"tab:{name}"), title=name.capitalize())
+                          for name in ("decide", "selection", "study")], name="tabs")
+        self.tabs.on_change("active", self._on_tab)
         doc.add_root(self.tabs)
+
+    # -- the tabs built when first shown --------------------------------------------------------------------------
+    def _on_tab(self, attr: str, old: Any, new: Any) -> None:
+        build = self._builders.pop(new, None)
+        if build is not None:
+            self.tabs.tabs[new].child.children = build()
+
+    @without_property_validation
+    def _build_decide(self) -> list:
+        self.ranking = V.ranking_table(self.decision.objectives, D.ranking_rows(self.study, self.decision, TOP))
+        self.ranking.source.selected.on_change("indices", self._on_ranking_selection)
+        self.radar = V.radar(D.radar(self.decision, []), [])
+        self._refresh_radar()
+        return [row(column(row(self.minimise, self.maximise), self.method, self.weights),
+                    column(self.ranking, self.radar["figure"]))]
+
+    def _build_selection(self) -> list:
+        return [self.selected, row(self.rerun_button, self.rerun_status), self.traces, self.export]
+
+    def _build_study(self) -> list:
+        views: list = [V.text(self._summary(), "summary")]
+        history = self.study.hypervolume()
+        if history is not None:
+            views.append(V.hypervolume(*history))
+        indices = self.study.sensitivity()
+        if indices is not None:
+            views.extend(V.sensitivity(indices))
+        return views
 
     # -- wiring -------------------------------------------------------------------------------------------------
     def _wire(self) -> None:
         for which, select in self.choosers.items():
             select.on_change("value", partial(self._on_axis, which))
-        for name, slider in self.sliders.items():
-            slider.on_change("value", partial(self._on_filter, name))
+        self.filter.on_change("value", self._on_filter)
+        self.filter_column.on_change("value", self._on_filter_column)
         self.reset.on_click(self._on_reset)
         self.histogram_column.on_change("value", lambda attr, old, new: self._refresh_histogram())
         self.cloud["source"].selected.on_change("indices", self._on_cloud_selection)
@@ -149,10 +174,21 @@ class Room:
         keys = {"x": ["x"], "y": ["y"], "colour": ["c"], "size": ["s"]}[which]
         return {k: columns[k] for k in keys}
 
-    def _on_filter(self, name: str, attr: str, old: Any, new: Any) -> None:
+    def _filter_state(self, name: str) -> dict[str, Any]:
+        """The range filter's properties showing column ``name``: its bounds and its current range."""
+        b, r = self.decision.filters.bounds[name], self.decision.filters.ranges[name]
+        end = b.hi if b.hi > b.lo else b.lo + 1.0  # a constant column: a slider it cannot narrow
+        return {"title": self.study.table.label(name), "start": b.lo, "end": end, "step": (end - b.lo) / 1000,
+                "value": (r.lo, r.hi if b.hi > b.lo else end), "tags": [name]}
+
+    def _on_filter_column(self, attr: str, old: Any, new: Any) -> None:
+        self.filter.update(**self._filter_state(new))  # its value's echo from the page changes nothing
+
+    def _on_filter(self, attr: str, old: Any, new: Any) -> None:
+        name = self.filter.tags[0]
         before = self.decision.filters.ranges[name]
         self.decision.filters.set_range(name, *new)
-        if self.decision.filters.ranges[name] != before:  # a slider's first report of its own value changes nothing
+        if self.decision.filters.ranges[name] != before:  # the slider's report of a value set here changes nothing
             self._refresh_soon()
 
     def _refresh_soon(self) -> None:
@@ -167,9 +203,7 @@ class Room:
 
     def _on_reset(self) -> None:
         self.decision.filters.reset()
-        for name, slider in self.sliders.items():
-            b = self.decision.filters.bounds[name]
-            slider.value = (b.lo, slider.end)  # each fires _on_filter; the last refresh counts
+        self.filter.update(**self._filter_state(self.filter.tags[0]))
         self.refresh()
 
     def _on_cloud_selection(self, attr: str, old: Any, new: Any) -> None:
@@ -177,6 +211,7 @@ class Room:
         self._refresh_selection()
 
     def _on_ranking_selection(self, attr: str, old: Any, new: Any) -> None:
+        assert self.ranking is not None  # its own callback
         rows = self.ranking.source.data["row"]
         chosen = [int(rows[i]) for i in new]
         if chosen:
@@ -218,6 +253,7 @@ class Room:
             self.cloud["filters"][layer].booleans = mask
         active = int((~masks["greyed"]).sum())
         front = int(masks["front"].sum())
+        self._refresh_narrowed()
         self._refresh_histogram()
         self._refresh_ranking()
         self._refresh_selection()
@@ -225,12 +261,21 @@ class Room:
                            f"{front} on the Pareto front of "
                            + (", ".join(f"{s} {c}" for c, s in self.decision.objectives) or "no objective"))
 
+    def _refresh_narrowed(self) -> None:
+        f, label = self.decision.filters, self.study.table.label
+        lines = [f"<li>{html.escape(label(c))}: {f.ranges[c].lo:.6g} … {f.ranges[c].hi:.6g}</li>"
+                 for c in f.narrowed()]
+        self.narrowed.text = ("<b>narrowed</b><ul>" + "".join(lines) + "</ul>") if lines else \
+            "<i>no column narrowed: choose one above and drag its range</i>"
+
     def _refresh_histogram(self) -> None:
         name = self.histogram_column.value
         self.histogram["source"].data = D.histogram(self.decision.filters.values(name), self.decision.active())
         self.histogram["figure"].xaxis.axis_label = self.study.table.label(name)
 
     def _refresh_ranking(self) -> None:
+        if self.ranking is None:  # the Decide tab was not shown yet
+            return
         data = D.ranking_rows(self.study, self.decision, TOP)
         columns = [c.field for c in self.ranking.columns]
         if columns != ["rank", "point_id", "score", *[f"o{k}" for k in range(len(self.decision.objectives))]] \
@@ -243,6 +288,8 @@ class Room:
         self._refresh_radar()
 
     def _refresh_radar(self) -> None:
+        if self.radar is None:
+            return
         data = D.radar(self.decision, self.decision.selection[:MAX_RERUN])
         self.radar["spokes"].data = {"x": data["spoke_x"], "y": data["spoke_y"], "label": data["labels"]}
         self.radar["designs"].data = V.radar_columns(data, [self.study.ids[r] for r in data["rows"]])
@@ -272,6 +319,15 @@ class Room:
             f"<p><a download='selection.csv' href='{D.data_url(self.decision.selection_csv(), 'text/csv')}'>"
             f"selection as CSV</a> · <a download='selection.sh' href='{D.data_url(script, 'text/x-shellscript')}'>"
             f"as cosim run commands</a></p><pre>{html.escape(script)}</pre>")
+
+    def _failures(self) -> list:
+        """The title and table of the designs not ok; none when every design is ok."""
+        n = int((self.study.status != "ok").sum())
+        if not n:
+            return []
+        more = f", the first {MAX_FAILURES_LISTED} listed" if n > MAX_FAILURES_LISTED else ""
+        return [V.text(f"<b>not ok</b> (failed, timed out, crashed): {n}{more}", "failures-title"),
+                V.failures_table(D.failures(self.study, MAX_FAILURES_LISTED))]
 
     def _summary(self) -> str:
         counts = self.decision.status_counts()
@@ -315,6 +371,6 @@ class Room:
             + (f" ({html.escape(run.result.message)})" if run.result.message else "") for run in outcome)
 
 
-def make_document(doc: Any, study: D.Study, webgl: bool = True) -> Room:
+def make_document(doc: Any, study: D.Study, webgl: bool | None = None) -> Room:
     """Fill ``doc`` (a new browser tab) with the room of ``study``."""
     return Room(doc, study, webgl)

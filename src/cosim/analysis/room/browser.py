@@ -9,6 +9,7 @@ browser is started.
 
 from __future__ import annotations
 
+import json
 import shutil
 import time
 from typing import Any
@@ -113,6 +114,14 @@ def set_and_wait(browser: Any, name: str, attr: str, value: Any, watch: str) -> 
     return now, time.perf_counter() - start
 
 
+def set_filter(browser: Any, column: str, lo: float, hi: float, watch: str = COUNT_TEXT) -> tuple[Any, float]:
+    """Narrow ``column`` to [lo, hi] with the page's range filter: choose the column (the server sets the slider
+    to it), then set the range; (the new value of ``watch``, seconds from setting the range until drawn)."""
+    browser.execute_script("Bokeh.documents[0].get_model_by_name('filter-column').value = arguments[0];", column)
+    wait_for(browser, f"const f = doc.get_model_by_name('filter'); return doc.is_idle && f.tags[0] === {json.dumps(column)};")
+    return set_and_wait(browser, "filter", "value", [float(lo), float(hi)], watch)
+
+
 def wait_for(browser: Any, js: str) -> Any:
     return browser.execute_async_script(WAIT_FOR, js)
 
@@ -137,9 +146,11 @@ def click_widget(browser: Any, name: str) -> None:
 
 
 def show_tab(browser: Any, index: int) -> None:
-    """Switch to tab ``index`` (0 Points, 1 Decide, 2 Selection, 3 Study) and wait until it is drawn."""
+    """Switch to tab ``index`` (0 Points, 1 Decide, 2 Selection, 3 Study) and wait until it is built (the
+    server builds a tab the first time it is shown) and drawn."""
     browser.execute_script(f"Bokeh.documents[0].get_model_by_name('tabs').active = {index};")
-    wait_for(browser, "return doc.is_idle;")
+    wait_for(browser, f"const c = doc.get_model_by_name('tabs').tabs[{index}].child; "
+                      "return doc.is_idle && (c.children === undefined || c.children.length > 0);")
 
 
 def count_true(browser: Any, name: str) -> int:

@@ -139,6 +139,13 @@ def masks(study: Study, decision: Decision) -> dict[str, np.ndarray]:
     return {"greyed": ~active, "ok": active & ok, "not_ok": active & ~ok, "front": decision.pareto()}
 
 
+def failures(study: Study, limit: int) -> dict[str, list]:
+    """The first ``limit`` designs not ok: point_id, status, message (a 10^6-row table may have 10^4 of them:
+    strings are what makes a page slow)."""
+    rows = np.flatnonzero(study.status != "ok")[:limit]
+    return {"point_id": list(study.ids[rows]), "status": list(study.status[rows]), "message": list(study.messages[rows])}
+
+
 def histogram(values: np.ndarray, active: np.ndarray, bins: int = HISTOGRAM_BINS) -> dict[str, np.ndarray]:
     """Counts of every row and of the active rows over the same bins of the finite values: left, right, all,
     active."""

@@ -89,9 +89,9 @@ def free_port(host: str) -> int:
 
 
 def make_server(study: Study, host: str = LOOPBACK, port: int = 0, token: str | None = None,
-                webgl: bool = True, io_loop: Any = None) -> tuple[Any, str]:
+                webgl: bool | None = None, io_loop: Any = None) -> tuple[Any, str]:
     """(a started-to-be bokeh Server of the room on ``host:port``, its link).  A token is made when ``host`` is
-    not loopback and none is given.  Raises AnalysisError when the address cannot be bound."""
+    not loopback and none is given; ``webgl`` None lets the room choose by the table's size.  Raises AnalysisError when the address cannot be bound."""
     from bokeh.application import Application
     from bokeh.application.handlers.function import FunctionHandler
     from bokeh.server.server import Server
@@ -143,7 +143,7 @@ class RoomServer:
     """The room served from a daemon thread with its own event loop: ``link``, ``stop()``."""
 
     def __init__(self, study: Study, host: str = LOOPBACK, port: int = 0, token: str | None = None,
-                 webgl: bool = True):
+                 webgl: bool | None = None):
         self._ready = threading.Event()
         self._error: BaseException | None = None
         self.link = ""
@@ -154,7 +154,7 @@ class RoomServer:
         if self._error is not None:
             raise self._error
 
-    def _run(self, study: Study, host: str, port: int, token: str | None, webgl: bool) -> None:
+    def _run(self, study: Study, host: str, port: int, token: str | None, webgl: bool | None) -> None:
         from tornado.ioloop import IOLoop
 
         asyncio.set_event_loop(asyncio.new_event_loop())

@@ -1,7 +1,8 @@
 """The decision room's bokeh views: figures, tables and widgets, each built from plain columns (:mod:`.data`).
 
 Every model a test or a user script may look for carries a ``name`` (``Bokeh.documents[0].get_model_by_name``
-in the page): ``cloud``, ``count``, ``filter:<column>``, ``histogram``, ``ranking``, ``weight:<objective>``,
+in the page): ``cloud``, ``count``, ``filter-column`` and ``filter`` (the range filter of the column chosen,
+``tags[0]``), ``narrowed``, ``histogram``, ``ranking``, ``weight:<objective>``,
 ``radar``, ``rerun``, ``trace:<port>``, ``export``, ``hypervolume``, ``sensitivity:<objective>``.
 """
 
@@ -10,7 +11,7 @@ from __future__ import annotations
 from typing import Any, Sequence
 
 import numpy as np
-from bokeh.models import (BooleanFilter, Button, CategoricalColorMapper, CDSView, ColorBar, Column, ColumnDataSource, DataTable, Div,
+from bokeh.models import (BooleanFilter, Button, CategoricalColorMapper, CDSView, ColorBar, ColumnDataSource, DataTable, Div,
                           HoverTool, LinearColorMapper, NumberFormatter, RangeSlider, Select, Slider, TableColumn,
                           Whisker)
 from bokeh.palettes import Category10_10, Viridis256
@@ -87,20 +88,9 @@ def axis_choosers(columns: Sequence[str], x: str, y: str, colour: str | None) ->
             "size": Select(title="size", value=NONE, options=[NONE, *options], name="choose-size", width=180)}
 
 
-def range_sliders(bounds: dict[str, Any], labels: dict[str, str]) -> dict[str, RangeSlider]:
-    """One RangeSlider per numeric column over its bounds (a constant column gets a slider it cannot narrow)."""
-    out = {}
-    for column, b in bounds.items():
-        lo, hi = float(b.lo), float(b.hi)
-        end = hi if hi > lo else lo + 1.0
-        out[column] = RangeSlider(title=labels[column], start=lo, end=end, value=(lo, end), step=(end - lo) / 1000,
-                                  name=f"filter:{column}", width=300, format="0[.]0000")
-    return out
-
-
-def scrolling(children: list, height: int, name: str) -> Column:
-    """A column of widgets that scrolls when taller than ``height``."""
-    return Column(*children, height=height, name=name, styles={"overflow-y": "auto"}, width=330)
+def range_filter(state: dict[str, Any]) -> RangeSlider:
+    """The one range filter (``filter``): the app sets its column (``tags[0]``), bounds and range."""
+    return RangeSlider(name="filter", width=300, format="0[.]0000", **state)
 
 
 def histogram(data: dict[str, np.ndarray], label: str) -> dict[str, Any]:
