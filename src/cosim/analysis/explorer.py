@@ -21,7 +21,8 @@ in another thread.
 
 from __future__ import annotations
 
-from typing import Any
+from contextlib import contextmanager
+from typing import Any, Iterator
 
 import numpy as np
 
@@ -367,7 +368,12 @@ class ExplorerWindow:
 
 
 def run_explorer(table: ResultsTable) -> None:
-    """Open the window and run the Tk main loop until it is closed; raises AnalysisError without a display."""
+    """Open the window and run the Tk main loop until it is closed or the process is told to stop.
+
+    Raises AnalysisError without a display.  Ctrl-C, SIGTERM and SIGHUP close every window and raise
+    KeyboardInterrupt (``cosim explore --tk`` then says ``cosim: interrupted`` and exits 130), also while an
+    arm animation runs or a re-run is under way, and without a traceback: see :func:`_stop_on_signals`.
+    """
     import tkinter as tk
 
     state = ExplorerState(table)
@@ -376,4 +382,62 @@ def run_explorer(table: ResultsTable) -> None:
     except tk.TclError as exc:
         raise AnalysisError(f"cannot open a window ({exc}); set DISPLAY, or use cosim plot/report") from None
     ExplorerWindow(root, state)
-    root.mainloop()
+    with _stop_on_signals(root) as stopped:
+        try:
+            root.mainloop()
+        except KeyboardInterrupt:  # the signal came while Tk itself was waiting, not inside a callback
+            stopped.append("interrupted")
+        if stopped:
+            root.destroy()
+    if stopped:
+        raise KeyboardInterrupt
+
+
+SIGNAL_CHECK_MS = 100  # how often the main loop wakes to let Python run its signal handlers
+
+
+@contextmanager
+def _stop_on_signals(root: Any) -> Iterator[list]:
+    """While the block runs, SIGINT, SIGTERM and SIGHUP end ``root``'s main loop; yields the list of signals seen.
+
+    Tk runs Python code (a timer of the arm animation, a re-run) inside callbacks, and tkinter prints a
+    traceback for whatever a callback raises, KeyboardInterrupt included, and goes on: a Ctrl-C during the
+    animation printed a traceback per press and the window stayed.  So the handler asks the loop to end
+    (``root.quit``) before it raises, and a KeyboardInterrupt reaching Tk's report of callback errors is kept
+    silent.  The raise leaves a long callback (a re-run) at once.  A threaded Tcl waits in C between events
+    and would run the handler only at the next event: a timer wakes the loop every SIGNAL_CHECK_MS.  Only in
+    the main thread (signal handlers can be set only there); the previous handlers come back afterwards.
+    """
+    import signal
+    import threading
+
+    stopped: list = []
+    if threading.current_thread() is not threading.main_thread():
+        yield stopped
+        return
+
+    def stop(signum: int, frame: Any) -> None:
+        first = not stopped
+        stopped.append(signum)
+        root.quit()
+        if first:
+            raise KeyboardInterrupt
+
+    report = root.report_callback_exception
+
+    def report_unless_stopping(kind: type, value: BaseException, tb: Any) -> None:
+        if not issubclass(kind, KeyboardInterrupt):
+            report(kind, value, tb)
+
+    def wake() -> None:
+        root.after(SIGNAL_CHECK_MS, wake)
+
+    names = ("SIGINT", "SIGTERM", "SIGHUP")
+    previous = {n: signal.signal(n, stop) for n in (getattr(signal, name) for name in names if hasattr(signal, name))}
+    root.report_callback_exception = report_unless_stopping
+    root.after(SIGNAL_CHECK_MS, wake)
+    try:
+        yield stopped
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)

@@ -127,14 +127,18 @@ def make_server(study: Study, host: str = LOOPBACK, port: int = 0, token: str | 
 
 def serve(study: Study, host: str = LOOPBACK, port: int = 0, token: str | None = None,
           announce: Callable[[str], None] = print) -> None:
-    """Serve the room until Ctrl-C, announcing its link first."""
+    """Serve the room until interrupted, announcing its link first.
+
+    Runs until KeyboardInterrupt (Ctrl-C; under the ``cosim`` command also SIGTERM and SIGHUP, which
+    :func:`cosim.parallel.interrupts.stop_cleanly_on_signals` turns into it): the server then closes its
+    sockets and the KeyboardInterrupt is raised again, so the command ends as every interrupted command does
+    (``cosim: interrupted``, exit 130).  Open pages and a re-run in progress (a daemon thread) do not hold it.
+    """
     server, link = make_server(study, host, port, token)
     server.start()
     announce(f"cosim explore: the decision room of {study.name} is at {link}  (Ctrl-C stops it)")
     try:
         server.io_loop.start()
-    except KeyboardInterrupt:
-        pass
     finally:
         server.stop()
 
