@@ -89,8 +89,11 @@ class Bindings:
                     if target is None and reading.problems:
                         continue  # an FMU that did not load has no variables to match: already reported
                     if target is None:
-                        reading.note(f"parameter '{target_name}' of {label} matches no variable of "
-                                     f"'{'.'.join(path) or 'the root system'}' and is ignored (as SSP prescribes)")
+                        owner_name = ".".join(path) or "the root system"
+                        reading.alike.add(("unmatched", label, path),
+                                          f"parameter '{target_name}' of {label} matches no variable of "
+                                          f"'{owner_name}' and is ignored (as SSP prescribes)", f"'{target_name}'",
+                                          "more parameters of that file match none and are ignored")
                         continue
                     self._order += 1
                     self.found.append((len(path), self._order, target, value,
@@ -101,6 +104,8 @@ class Bindings:
         reading = self.reading
         source = binding.get("source")
         if source:
+            if reading.leaves_ssp(source, base, binding):
+                return None, "", {}
             path = reading.resolve(source, base)
             if path is None:
                 reading.problem(binding, f"parameter file '{source}' not found", "fix the binding's 'source'")
@@ -133,8 +138,10 @@ class Bindings:
                 text = child.get("value")
                 if local == "Enumeration" and text is not None and re.fullmatch(r"[+-]?\d+", text.strip()):
                     # OMSimulator 3 writes an enumeration value as its integer; SSP writes the item's name
-                    reading.note(f"{label}: {element_path(child)} gives the enumeration value as the integer "
-                                 f"{text}; SSP gives the item's name: read as the integer")
+                    reading.alike.add(("enumeration integer", label),
+                                      f"{label}: {element_path(child)} gives the enumeration value as the integer "
+                                      f"{text}; SSP gives the item's name: read as the integer",
+                                      f"'{parameter.get('name')}'", "more enumeration values of that file likewise")
                     parameters[parameter.get("name")] = (int(text), child.get("unit"), type_, child)
                     continue
                 try:
@@ -153,6 +160,8 @@ class Bindings:
             return {}
         source = element.get("source")
         if source:
+            if reading.leaves_ssp(source, base, element):
+                return None
             path = reading.resolve(source, base)
             if path is None:
                 reading.problem(element, f"parameter mapping '{source}' not found", "fix the mapping's 'source'")
@@ -237,8 +246,10 @@ class Bindings:
             direct = chosen.get(end)
             if direct is not None and direct[0] <= depth:
                 if direct[0] == depth:
-                    self.reading.note(f"'{'.'.join(end[0])}.{end[1]}' is bound directly ({direct[5]}) and through "
-                                      f"{via} by the same system: the direct binding {direct[2]!r} is used")
+                    self.reading.alike.add("bound twice", f"'{'.'.join(end[0])}.{end[1]}' is bound directly "
+                                           f"({direct[5]}) and through {via} by the same system: the direct "
+                                           f"binding {direct[2]!r} is used", f"'{'.'.join(end[0])}.{end[1]}'",
+                                           "more variables bound both ways keep their direct binding")
                 continue
             if isinstance(value, float):  # into the system connector's unit, then along the chain
                 value = self.converted(value, unit, extra, label, flow.unit_of(start))
@@ -246,9 +257,10 @@ class Bindings:
                 value = factor * value + offset
             if direct is not None:
                 binder = ".".join(end[0][:direct[0]]) or "the root system"
-                self.reading.note(f"'{'.'.join(end[0])}.{end[1]}': {value!r} from {via} overrides the value "
-                                  f"{direct[2]!r} bound by '{binder}' ({direct[5]}), as bindings of a higher "
-                                  "system win")
+                self.reading.alike.add("overridden", f"'{'.'.join(end[0])}.{end[1]}': {value!r} from {via} "
+                                       f"overrides the value {direct[2]!r} bound by '{binder}' ({direct[5]}), as "
+                                       "bindings of a higher system win", f"'{'.'.join(end[0])}.{end[1]}'",
+                                       "more values from parameter connections override a lower binding likewise")
             fed[end] = (value, (None, {}, extra[2], extra[3]), label)
         for target, (depth, order, value, unit, extra, label) in chosen.items():
             node = nodes[target[0]]

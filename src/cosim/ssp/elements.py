@@ -95,7 +95,8 @@ def unit_names(reading: Reading) -> dict[tuple[str, ...], str]:
                  for p in ".".join(node.path).split(".")]
         name = ".".join(parts)
         if name != ".".join(node.path):
-            reading.note(f"component '{'.'.join(node.path)}' is called '{name}' (names keep letters, digits, _)")
+            reading.alike.add("renamed", f"component '{'.'.join(node.path)}' is called '{name}' (names keep "
+                              "letters, digits, _)", f"'{name}'", "more components renamed likewise")
         if name in seen:
             reading.problem(node.element, f"two components flatten to the same unit name '{name}'",
                             "rename one of them")
@@ -118,6 +119,8 @@ def _read_component(reading: Reading, element: Any, path: tuple[str, ...]) -> No
     source = element.get("source")
     if not source:
         reading.problem(element, "the component has no 'source'", "set source=\"resources/model.fmu\"")
+        return node
+    if reading.leaves_ssp(source, reading.files.ssd.parent, element):
         return node
     fmu = reading.resolve(source, reading.files.ssd.parent)
     if fmu is None:
@@ -166,6 +169,8 @@ def _read_table(reading: Reading, node: Node) -> Node:
         reading.problem(element, f"table '{source}' is no CSV file: cosim reads table components from CSV only "
                         "(not MAT result files)", "export the table as CSV (a 'time' column, then one column per "
                         "output) and point the component's source at it")
+        return node
+    if reading.leaves_ssp(source, reading.files.ssd.parent, element):
         return node
     path = reading.resolve(source, reading.files.ssd.parent)
     if path is None:

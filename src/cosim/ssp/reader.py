@@ -59,6 +59,13 @@ def read_ssp(path: str | Path, variant: str | None = None) -> SspSystem:
     """Read, check and flatten the SSP at ``path`` (.ssp, folder or .ssd), its SSD of ``variant`` if given (see
     :func:`~cosim.ssp.archive.open_ssp`); raises SpecError."""
     reading = Reading(open_ssp(path, variant))
+    try:
+        return _read(reading)
+    finally:  # also when problems are raised: the notes say what was read as what
+        reading.flush_alike()
+
+
+def _read(reading: Reading) -> SspSystem:
     root = reading.parse(reading.files.ssd, reading.label, "ssd")
     if root is None:
         raise SpecError(reading.problems)

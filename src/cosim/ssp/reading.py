@@ -16,6 +16,7 @@ from cosim.errors import AnnotationNumberError, Problem
 from cosim.ssp.annotations import Solvers
 from cosim.ssp.archive import SspFiles
 from cosim.ssp.model import Edge, Node
+from cosim.ssp.notes import AlikeNotes
 from cosim.ssp.tolerant import tolerated
 from cosim.ssp.xml import display_name, element_path, parse_file, schema_problems
 from cosim.util.quantities import UnitDefinition
@@ -32,6 +33,7 @@ class Reading:
         self.label = files.label(files.ssd)
         self.problems: list[Problem] = []
         self.notes: list[str] = []
+        self.alike = AlikeNotes()  # notes of which a file may hold thousands: one line per kind (see .notes)
         for note in files.notes:
             self.note(note)
         self.units: dict[str, UnitDefinition] = {}  # ssd:Units
@@ -46,6 +48,12 @@ class Reading:
         if (self.files.given, text) not in _LOGGED:  # an SSP is often read twice (validate, then run)
             _LOGGED.add((self.files.given, text))
             log.warning("%s: %s", self.files.given, text)
+
+    def flush_alike(self) -> None:
+        """Turn the notes kept in :attr:`alike` into one note per kind (at the end of a reading)."""
+        for line in self.alike.lines():
+            self.note(line)
+        self.alike.clear()
 
     def problem(self, element: Any, message: str, fix: str, label: str | None = None) -> None:
         """Record a problem at ``element`` of the file ``label`` (the SSD when None)."""
@@ -71,7 +79,7 @@ class Reading:
             fixed, notes = tolerated(root, label)
             if notes and not schema_problems(fixed, label, kind):
                 for note in notes:
-                    self.note(note)
+                    self.alike.add(*note)
                 return fixed
         self.problems.extend(problems)
         return None if problems else root
@@ -84,18 +92,24 @@ class Reading:
             fixed, notes = tolerated(root, label)
             if notes and not schema_problems(fixed, label, kind):
                 for note in notes:
-                    self.note(note)
+                    self.alike.add(*note)
                 return fixed
             self.problems.extend(problems)
             return None
         return root
 
     def resolve(self, uri: str, base: Path) -> Path | None:
-        """A file a component or binding refers to: inside the SSP first, then next to the archive."""
+        """A file a component or binding refers to: inside the SSP first, then next to the archive; a
+        ``file:`` URI where it names.  A file read from outside the SSP gets a note saying where from.
+
+        Call :meth:`leaves_ssp` first: a relative path that leaves the SSP is refused there.
+        """
         parsed = urllib.parse.urlparse(uri)
         if parsed.scheme == "file":
+            if parsed.netloc not in ("", "localhost"):
+                return None  # another host's file: no network
             candidate = Path(urllib.parse.unquote(parsed.path))
-            return candidate if candidate.is_file() else None
+            return self._outside(uri, candidate, "a file: URI") if candidate.is_file() else None
         if parsed.scheme:
             return None  # no network: http(s) sources are not fetched
         relative = urllib.parse.unquote(parsed.path)
@@ -103,10 +117,29 @@ class Reading:
         if self.files.inside(candidate) and candidate.is_file():
             return candidate
         if self.files.beside is not None:
-            beside = self.files.beside / relative
-            if beside.is_file():
-                return beside
-            beside = self.files.beside / Path(relative).name
-            if beside.is_file():
-                return beside
+            folder = self.files.beside.resolve()
+            for beside in (self.files.beside / relative, self.files.beside / Path(relative).name):
+                if folder in beside.resolve().parents and beside.is_file():
+                    return self._outside(uri, beside, "not in the archive: next to it")
         return None
+
+    def _outside(self, uri: str, path: Path, how: str) -> Path:
+        """``path``, noted once: ''uri' is read from outside the SSP: /abs/path (how)'."""
+        text = f"'{uri}' is read from outside the SSP: {path.resolve()} ({how})"
+        if text not in self.notes:
+            self.note(text)
+        return path
+
+    def leaves_ssp(self, uri: str, base: Path, element: Any) -> bool:
+        """Whether the relative path ``uri`` leads out of the SSP (``../``, an absolute path, a link out of an
+        SSP folder), with a problem at ``element`` if so: an SSP's files are read from inside it (a missing one
+        also from next to the archive, with a note); a file elsewhere must be named by a ``file:`` URI."""
+        parsed = urllib.parse.urlparse(uri)
+        if parsed.scheme:
+            return False
+        if self.files.inside(base / urllib.parse.unquote(parsed.path)):
+            return False
+        self.problem(element, f"'{uri}' leads outside the SSP: cosim reads an SSP's files from inside it",
+                     "put the file under resources/ of the SSP and refer to it as resources/NAME (a file that must "
+                     "stay elsewhere: name it by a file: URI, file:///abs/path)")
+        return True

@@ -1,7 +1,9 @@
 """Forms popular tools write although the SSP schema says otherwise, read as what they mean.
 
 :func:`tolerated` returns a corrected copy of a parsed SSD, .ssv or .ssm and one
-note per correction, naming the file, the element and the standard's form:
+note per correction, naming the file, the element and the standard's form
+(keyed by the kind of correction, so that the reader writes many alike as one
+line with a count, see :mod:`.notes`):
 
 - an ``ssv:ParameterSet`` or ``ssm:ParameterMapping`` without ``version``
   (OMSimulator 3 writes its inline .ssm so): read as the document's version;
@@ -21,6 +23,7 @@ from __future__ import annotations
 import copy
 from typing import Any
 
+from cosim.ssp.notes import Note
 from cosim.ssp.xml import NS, element_path, short_name, tag
 
 _ELEMENT = ["ssd:Connectors", "ssd:ElementGeometry", "ssd:ParameterBindings", "ssc:MetaData", "ssc:Signature"]
@@ -49,28 +52,30 @@ def _clark(short: str) -> str:
     return f"{{{NS[prefix]}}}{local}"
 
 
-def tolerated(root: Any, label: str) -> tuple[Any, list[str]]:
+def tolerated(root: Any, label: str) -> tuple[Any, list[Note]]:
     """A copy of ``root`` with the tolerated forms corrected, and one note per correction; ``(root, [])`` when
     there is nothing to correct."""
     fixed = copy.deepcopy(root)
-    notes: list[str] = []
+    notes: list[Note] = []
     version = root.get("version") if root.get("version") in ("1.0", "2.0") else "2.0"
     # notes name the user's element: an inline element's copy has lost its ancestors
     for element, original in list(zip(fixed.iter(), root.iter())):  # a list: the loop moves children around
         if not isinstance(element.tag, str):
             continue
-        where = element_path(original)
+        found = []
         if element.tag in _VERSIONED and element.get("version") is None:
             element.set("version", version)
-            notes.append(f"{label}: {where} has no 'version' (SSP requires version=\"1.0\" or "
-                         f"\"2.0\"); read as version {version}")
+            found.append(f"has no 'version' (SSP requires version=\"1.0\" or \"2.0\"); read as version {version}")
         if element.tag in _ORDER:
-            notes.extend(_merge_bindings(element, label, where))
-            notes.extend(_reorder(element, label, where))
+            found.extend(_merge_bindings(element))
+            found.extend(_reorder(element))
+        where = element_path(original) if found else ""  # only then: a path costs a walk over the siblings
+        notes.extend(Note(("tolerated", label, what), f"{label}: {where} {what}", where,
+                          f"more elements of {label} likewise") for what in found)
     return (fixed, notes) if notes else (root, [])
 
 
-def _merge_bindings(element: Any, label: str, where: str) -> list[str]:
+def _merge_bindings(element: Any) -> list[str]:
     containers = [c for c in element if isinstance(c.tag, str) and c.tag == tag("ssd", "ParameterBindings")]
     if len(containers) < 2:
         return []
@@ -79,11 +84,11 @@ def _merge_bindings(element: Any, label: str, where: str) -> list[str]:
         for binding in list(other):
             first.append(binding)
         element.remove(other)
-    return [(f"{label}: {where} has {len(containers)} ssd:ParameterBindings; SSP allows one "
-             "(with several ssd:ParameterBinding inside): read as one, in document order")]
+    return [(f"has {len(containers)} ssd:ParameterBindings; SSP allows one (with several ssd:ParameterBinding "
+             "inside): read as one, in document order")]
 
 
-def _reorder(element: Any, label: str, where: str) -> list[str]:
+def _reorder(element: Any) -> list[str]:
     rank = {_clark(name): i for i, name in enumerate(_ORDER[element.tag])}
     children = list(element)
     keyed, last = [], -1
@@ -100,5 +105,5 @@ def _reorder(element: Any, label: str, where: str) -> list[str]:
     for child in children:
         element.remove(child)
     element.extend(ordered)
-    return [(f"{label}: {where} has its children in a deprecated order ({short_name(moved.tag)} "
-             f"before {short_name(before.tag)}); SSP 2.0 expects {_STANDARD_ORDER[element.tag]}: read as if so")]
+    return [(f"has its children in a deprecated order ({short_name(moved.tag)} before {short_name(before.tag)}); "
+             f"SSP 2.0 expects {_STANDARD_ORDER[element.tag]}: read as if so")]

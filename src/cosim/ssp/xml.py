@@ -1,9 +1,12 @@
 """SSP XML: a hardened parser, the official schemas, and element paths for messages.
 
-Every SSP file (.ssd, .ssv, .ssm) is parsed without entity expansion, without
-network access, without DTD loading and with lxml's size limits on, then
-checked against the official SSP schemas shipped in ``schema/`` (see its
-README).  Problems name the file, the element path (``/ssd:SystemStructure
+Every SSP file (.ssd, .ssv, .ssm) is read up to ``COSIM_SSP_FILE_MB`` (a
+bigger file is refused before it is parsed: lxml's tree takes about 13 times
+the file's size), parsed without entity expansion, without network access,
+without DTD loading and with lxml's size limits on, then checked against the
+official SSP schemas shipped in ``schema/`` (see its README).  An entity
+reference (``&name;``) left in the text is refused: it is never expanded, and
+lxml's schema check cannot walk it.  Problems name the file, the element path (``/ssd:SystemStructure
 Description/ssd:System[@name='root']/...``) and the fix.
 """
 
@@ -16,6 +19,7 @@ from pathlib import Path
 from lxml import etree
 
 from cosim.errors import Problem
+from cosim.util.limits import limit, raise_hint
 
 NS = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -91,20 +95,61 @@ def _readable(message: str) -> str:
 def parse_file(path: Path, label: str, kind: str) -> tuple[etree._Element | None, list[Problem]]:
     """Parse and schema-check one SSP file; ``label`` is how problems name it.
 
-    Returns the root element (None when the file cannot be parsed) and the
-    problems found; a file that parses but breaks the schema still returns its
-    root so that later checks can add their own problems.
+    Returns the root element (None when the file cannot be parsed: missing,
+    above ``COSIM_SSP_FILE_MB``, malformed, or holding an entity reference)
+    and the problems found; a file that parses but breaks the schema still
+    returns its root so that later checks can add their own problems.
     """
+    data, problems = read_bounded(path, label)
+    if data is None:
+        return None, problems
     try:
-        tree = etree.parse(str(path), hardened_parser())
-    except OSError as exc:
-        return None, [Problem(label, "/", f"cannot read the file: {exc}", "check that the file exists")]
+        root = etree.fromstring(data, hardened_parser(), base_url=str(path))
     except etree.XMLSyntaxError as exc:
         line = exc.lineno if exc.lineno is not None else "?"
+        if "XML_PARSE_HUGE" in (exc.msg or ""):  # lxml's own bounds, which cosim keeps on
+            return None, [Problem(label, f"line {line}", "the file exceeds the XML parser's safety limits: "
+                                  + _readable(exc.msg).replace(", try XML_PARSE_HUGE", "").replace(
+                                      ", use XML_PARSE_HUGE option", "").replace("\n", ""),
+                                  "shorten the element there (a text or attribute is limited to 10 MB, nesting "
+                                  "to 256 levels); cosim does not lift these limits")]
         return None, [Problem(label, f"line {line}", f"malformed XML: {_readable(exc.msg)}",
                               "fix the XML syntax there (an unclosed tag or quote is the usual cause)")]
-    root = tree.getroot()
+    entities = entity_problems(root, label)
+    if entities:
+        return None, entities
     return root, schema_problems(root, label, kind)
+
+
+def read_bounded(path: Path, label: str) -> tuple[bytes | None, list[Problem]]:
+    """The bytes of an SSP file, or None and a problem when it cannot be read or is larger than
+    ``COSIM_SSP_FILE_MB``; at most one byte beyond the limit is read (a file's stated size may lie: /proc)."""
+    megabytes = limit("ssp_file_mb")
+    most = int(megabytes * 1024 * 1024)
+    try:
+        with open(path, "rb") as stream:
+            data = stream.read(most + 1)
+            size = max(path.stat().st_size, len(data))
+    except OSError as exc:
+        return None, [Problem(label, "/", f"cannot read the file: {exc}", "check that the file exists")]
+    if len(data) > most:
+        return None, [Problem(label, "/", f"the file holds {size / 1024 / 1024:,.1f} MB ({size:,} bytes), above "
+                              f"the limit of {megabytes:g} MB for one SSP file (.ssd, .ssv, .ssm)",
+                              "split the parameter values into several files, or " + raise_hint("ssp_file_mb"))]
+    return data, []
+
+
+def entity_problems(root: etree._Element, label: str) -> list[Problem]:
+    """One problem per entity reference left in the text (``&name;``, which the hardened parser keeps
+    unexpanded); an SSP writes characters or the five predefined entities, which are no such reference."""
+    problems = []
+    for entity in root.iter(etree.Entity):
+        parent = entity.getparent()
+        where = element_path(parent) if parent is not None else "/"
+        problems.append(Problem(label, where, f"the entity reference {entity.text} (line {entity.sourceline}) is "
+                                "not expanded: cosim reads no DTD entities (they may read other files or grow "
+                                "without bound)", f"write the text itself in place of {entity.text}"))
+    return problems
 
 
 def schema_problems(root: etree._Element, label: str, kind: str) -> list[Problem]:
@@ -116,8 +161,12 @@ def schema_problems(root: etree._Element, label: str, kind: str) -> list[Problem
                         f"{short_name(expected)}", f"use an SSP {kind.upper()} file in the namespace {NS[kind]}")]
     schema = _schema(kind)
     document = etree.ElementTree(root) if root.getparent() is None else etree.ElementTree(_detached(root))
-    if schema.validate(document):
-        return []
+    try:
+        if schema.validate(document):
+            return []
+    except etree.XMLSchemaValidateError as exc:  # lxml gives up on a node it cannot walk: the file's, not ours
+        return [Problem(label, element_path(root), f"the SSP schema check cannot read the file: {exc}",
+                        "write the file as plain SSP XML (elements, attributes and text only)")]
     by_line: dict[int, list] = {}
     for node in root.iter():
         if isinstance(node.tag, str):
