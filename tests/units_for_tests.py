@@ -284,3 +284,41 @@ class Sleeper(PythonUnit):
 
         time.sleep(self.delay)
         self.y = self.gain * (t + h)
+
+
+class TunableLinearOde(RestorableLinearOde):
+    """RestorableLinearOde whose a and b may change between steps (variability tunable, as a warm start needs);
+    every instance's do_step calls are counted in ``calls`` (class-wide), so a test measures the work done."""
+
+    variables = (
+        Variable("a", "parameter", start=-1.0, variability="tunable"),
+        Variable("b", "parameter", start=1.0, variability="tunable"),
+        Variable("x0", "parameter", start=1.0),
+        Variable("u", "input", start=0.0),
+        Variable("y", "output", start=1.0),
+    )
+    calls = 0
+
+    def do_step(self, t, h):
+        super().do_step(t, h)
+        TunableLinearOde.calls += 1
+
+
+class UnpicklableState(RestorableLinearOde):
+    """A restorable unit whose saved state cannot be pickled (a lambda): it cannot be serialized for a warm start."""
+
+    def get_state(self):
+        return lambda: self.steps_kept
+
+    def set_state(self, state):
+        self.steps_kept = state()
+
+
+class RestorableEndsAtHalf(EndsAtHalf):
+    """EndsAtHalf with a restorable state (all of it in its variables)."""
+
+    def get_state(self):
+        return None
+
+    def set_state(self, state):
+        pass

@@ -154,10 +154,13 @@ def has_twin(system: System) -> bool:
 
 def can_run_in_lockstep(system: System) -> bool:
     """Whether points of ``system`` may run in lock-step (module docstring): a twin, a batchable master
-    algorithm, no loops, Real connections, numeric probes."""
+    algorithm, no loops, no warm start, Real connections, numeric probes."""
     # algebraic loops are solved point by point; a group of model-exchange units steps as one
     if not has_twin(system) or system.coupling.loops or system.model_exchange.groups:
         return False
+    if system.spec.experiment.warm_start is not None:
+        return False  # each point starts from the saved warm-up (cosim.execution.warm_start), one by one
+
     if not getattr(ALGORITHMS.get(system.spec.experiment.algorithm), "batchable", False):
         return False  # e.g. adaptive: its steps differ from point to point, no common grid to step together
     # connections carry Real values only (batches hand values on as float arrays; an Integer or Boolean

@@ -10,13 +10,16 @@ is checked and applied the same way everywhere.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any, Mapping, Sequence
 
 from cosim.errors import Problem, SpecError
 from cosim.execution.run import Execution, RunResult
+from cosim.execution.warm_start import warm_up
 from cosim.master.observers import Observer
 from cosim.system.builder import Assignment, System
 from cosim.system.study_checks import converted
+from cosim.system.warm_start_checks import warm_start_problems
 from cosim.units.protocol import Unit
 
 
@@ -47,8 +50,17 @@ def run_point(system: System, values: Mapping[str, Any] | None = None, *, record
 
     ``record`` keeps full traces of the recorded signals; ``units`` are live
     instances to reuse (fresh or reset; the caller owns them); ``observers``
-    watch the run.  Raises SpecError when a value does not fit; a failing run
-    is reported in the result instead (see :class:`~cosim.execution.run.RunResult`).
+    watch the run.  Raises SpecError when a value does not fit (under ``experiment.warm_start``: names anything
+    but an input or a tunable parameter); a failing run (or warm-up) is reported in the result instead (see :class:`~cosim.execution.run.RunResult`).
     """
-    return Execution(system, assignments_for(system, values), record=record, units=units,
-                     observers=observers).run()
+    assignments = assignments_for(system, values)
+    problems = warm_start_problems(system.spec, system.units, [(target, "$") for target in values or {}])
+    if problems:
+        raise SpecError(problems)
+    if system.spec.experiment.warm_start is not None and system.warm_start is None:
+        state, result = warm_up(system)  # a study makes it once (make_payload); a single run makes its own
+        if state is None:
+            result.message = f"the warm-up to t={system.spec.experiment.warm_start:g} failed: {result.message}"
+            return result
+        system = replace(system, warm_start=state)
+    return Execution(system, assignments, record=record, units=units, observers=observers).run()

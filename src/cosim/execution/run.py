@@ -18,6 +18,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from cosim.errors import UnitError, UserError
+from cosim.execution.warm_start import WarmSamples, WarmState, refuse_unsaveable, restore_warm, warm_steps
 from cosim.master.algorithms import group_transfers, make_algorithm
 from cosim.master.coupled_me import integrate_together
 from cosim.master.observers import ExactColumns, ObjectiveReducer, Observer, TraceRecorder, flatten_objectives
@@ -140,12 +141,20 @@ class Execution:
     """
 
     def __init__(self, system: System, overrides: Sequence[Assignment] = (), record: bool = False,
-                 units: Mapping[str, Unit] | None = None, observers: Sequence[Observer] = ()):
+                 units: Mapping[str, Unit] | None = None, observers: Sequence[Observer] = (),
+                 warm: WarmState | None = None, save_warm: bool = False):
+        """``warm``: start from this saved warm-up (:mod:`cosim.execution.warm_start`; default: the system's
+        ``warm_start``, made by :func:`cosim.execution.warm_start.warmed`) instead of initializing anew: the units restored to its states, ``overrides`` set there (inputs and tunable parameters only), its
+        samples replayed to the observers, then the steps from its time on.  ``save_warm``: run only to the
+        spec's ``experiment.warm_start`` and keep the units' serialized states and the samples in :attr:`saved`."""
         self.system = system
         self.overrides = tuple(overrides)
         self.record = record
         self._given_units = units
         self.extra_observers = list(observers)
+        self.warm = None if save_warm else warm if warm is not None else system.warm_start
+        self.save_warm = save_warm
+        self.saved: WarmState | None = None
 
     def run(self) -> RunResult:
         """Run to the stop time (or until ``stop_when`` is true); never raises for a unit's failure."""
@@ -161,11 +170,19 @@ class Execution:
                 for name, system_unit in self.system.units.items():
                     units[name] = system_unit.unit_type.instantiate(name)
             n_steps = step_count(exp.start, exp.stop, exp.step)
+            first, end = 0, n_steps  # the steps this run takes: k = first .. end - 1
+            if self.save_warm:
+                end = warm_steps(exp)
+                refuse_unsaveable(self.system, units)
             # groups of model-exchange units: joined before initialization; the master steps each as one unit
             groups = self.system.model_exchange
             stepped = integrate_together(units, groups.groups, self.system.connections, self.system.coupling)
             order = groups.order if groups.groups else self.system.order
-            self._initialize(units)
+            if self.warm is not None:
+                self._initialize(units, ())  # as the warm-up did; the run's own values are set at its time
+                t, first = restore_warm(self.warm, units, self.overrides, self.system.init_order), self.warm.steps
+            else:
+                self._initialize(units)
             probe = Probe(self.system, units)
             exact = ExactColumns(probe.exact_columns, probe.read_exact) if probe.exact_columns else None
             recorder = TraceRecorder(probe.columns, self.system.recorded, n_steps + 1, exact,
@@ -173,6 +190,9 @@ class Execution:
             reducer = ObjectiveReducer(probe.columns, [(o.name, o.reduce, self._columns_of(o.signal)) for o in
                                                        self.system.spec.objectives if o.signal])
             observers = [o for o in (recorder, reducer) if o is not None] + self.extra_observers
+            keeper = WarmSamples(probe, exact) if self.save_warm else None
+            if keeper is not None:
+                observers.append(keeper)
             stop_column = probe.columns.index(exp.stop_when) if exp.stop_when else None
 
             algorithm = make_algorithm(exp.algorithm)
@@ -184,14 +204,17 @@ class Execution:
             else:
                 algorithm.bind(stepped.units, order, stepped.links)
             algorithm.start(t)  # e.g. algebraic loops solved at the start time
-            values = probe.read()
-            for observer in observers:
-                observer.initialized(t, values)
+            if self.warm is not None:  # the observers see the warm-up's samples, as if this run had taken its steps
+                self.warm.replay(observers, exact)
+            else:
+                values = probe.read()
+                for observer in observers:
+                    observer.initialized(t, values)
             start, h, last = exp.start, exp.step, n_steps - 1
             step, read = algorithm.step, probe.read
             hooks = [observer.step for observer in observers]
             ended: SimulationEnded | None = None
-            for k in range(0 if variable else n_steps):
+            for k in range(first, first if variable else end):
                 t = start + k * h  # whole steps counted, never summed: no drift
                 t_next = exp.stop if k == last else start + (k + 1) * h
                 try:
@@ -216,6 +239,9 @@ class Execution:
                     hook(t, values)
                 if stop_column is not None and values[stop_column]:
                     break
+            if keeper is not None:  # the warm-up: keep the states at the warm-start time, and the samples to it
+                self.saved = keeper.saved(self.system, units, t, end, ended, steps)
+                return RunResult(OK, "", elapsed=time.perf_counter() - started, steps=steps, end_time=t)
             stats = algorithm.stats.as_dict() if variable else None  # type: ignore[attr-defined]
             for observer in observers:
                 observer.finished(t)
@@ -240,6 +266,8 @@ class Execution:
             return RunResult(FAILED, exc.with_traceback_text(), elapsed=time.perf_counter() - started, steps=steps, end_time=t,
                              failure=UNIT_FAILURE)
         except UserError as exc:  # e.g. an FMU archive found unsafe when it is extracted
+            if self.save_warm:
+                raise  # a warm-up that cannot be made (a unit without saved states): the study's error, not a row
             return RunResult(FAILED, str(exc).replace("\n", " "), elapsed=time.perf_counter() - started,
                              steps=steps, end_time=t, failure=USER_FAILURE)
         except Exception as exc:  # an orchestrator bug must still become a row, not a lost point
@@ -265,11 +293,11 @@ class Execution:
                 return list(s.columns)
         raise KeyError(signal)
 
-    def _initialize(self, units: Mapping[str, Unit]) -> None:
+    def _initialize(self, units: Mapping[str, Unit], overrides: Sequence[Assignment] | None = None) -> None:
         exp = self.system.spec.experiment
         for unit in units.values():
             unit.setup(exp.start, exp.stop)
-        for assignment in self.system.assignments + self.overrides:
+        for assignment in self.system.assignments + tuple(self.overrides if overrides is None else overrides):
             unit = units[assignment.unit]
             unit.set(unit.select(assignment.refs), list(assignment.values))
         for unit in units.values():

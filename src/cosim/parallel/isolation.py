@@ -66,9 +66,13 @@ def make_payload(system: Any) -> dict[str, Any]:
     Keys: ``key`` (a digest of the whole payload), ``system`` (pickled System),
     ``files`` (unit name -> [(file name, bytes), ...]): the files each unit
     type reads (:meth:`~cosim.units.protocol.UnitType.files`: FMUs, ``file.py``
-    units, played tables, a plug-in kind's files).  Raises OSError when a
-    unit's file cannot be read.
+    units, played tables, a plug-in kind's files).  A spec with ``experiment.warm_start`` is warmed up here,
+    once (:func:`cosim.execution.warm_start.warmed`): the pickled System carries the units' serialized states.
+    Raises OSError when a unit's file cannot be read, UserError when the warm-up cannot be made.
     """
+    from cosim.execution.warm_start import warmed
+
+    system = warmed(system)  # a spec with experiment.warm_start: the warm-up runs once, here; its states travel
     files: dict[str, list[tuple[str, bytes]]] = {}
     for name, system_unit in system.units.items():
         paths = system_unit.unit_type.files()

@@ -61,6 +61,7 @@ class ExperimentSpec:
     # the adaptive algorithm's options (rtol, atol, min_step, max_step, base, restore), see cosim.master.adaptive
     adaptive: tuple[tuple[str, Any], ...] = ()
     coupled_model_exchange: bool = True  # connected model-exchange units integrated together (system/coupled_me)
+    warm_start: float | None = None  # run once to this time, save, start every point there (execution/warm_start)
 
 
 @dataclass(frozen=True)
@@ -286,6 +287,7 @@ def _value_problems(raw: dict, file: str, seen: set[tuple[str, str]]) -> list[Pr
                                         f"{limits.limit('steps'):.3g} for one run",
                                         f"use a larger step or a shorter time span; {limits.raise_hint('steps')}"))
         problems.extend(_adaptive_problems(experiment, file))
+        problems.extend(_warm_start_problems(experiment, numbers, file))
     return [p for p in problems if (p.path, p.message) not in seen]
 
 
@@ -302,6 +304,27 @@ def _adaptive_problems(experiment: dict, file: str) -> list[Problem]:
                         "set \"algorithm\": \"adaptive\", or remove 'adaptive'")]
     return [Problem(file, json_path(["experiment", "adaptive", key] if key else ["experiment", "adaptive"]),
                     message, fix) for key, message, fix in option_problems(options)]
+
+
+def _warm_start_problems(experiment: dict, numbers: dict, file: str) -> list[Problem]:
+    """``experiment.warm_start``: inside (start, stop), on the step grid, with a fixed-step algorithm."""
+    warm = experiment.get("warm_start")
+    if not isinstance(warm, (int, float)) or isinstance(warm, bool) or len(numbers) < 3 or not math.isfinite(warm):
+        return []  # a wrong type is the schema's to report; no span to check it against
+    start, stop, step = numbers["start"], numbers["stop"], numbers["step"]
+    path = "$.experiment.warm_start"
+    if experiment.get("algorithm") == "adaptive":
+        return [Problem(file, path, "a warm start needs a fixed communication step; 'algorithm' is 'adaptive'",
+                        "use gauss-seidel or jacobi with warm_start, or remove warm_start")]
+    if not start < warm < stop:
+        return [Problem(file, path, f"{warm:g} is not between start ({start:g}) and stop ({stop:g})",
+                        "choose a time after the start and before the stop")]
+    ratio = (warm - start) / step if step > 0 else 0.0
+    if step > 0 and abs(ratio - round(ratio)) > 1e-9 * max(1.0, abs(ratio)):
+        below = start + math.floor(ratio) * step
+        return [Problem(file, path, f"{warm:g} is not a communication point (start + k * step, step {step:g})",
+                        f"use a multiple of the step, e.g. {below:g} or {below + step:g}")]
+    return []
 
 
 _ONE_OF_HINTS = {  # the unit's hint names the registered kinds (cosim.units.registry.one_kind_hint)
@@ -406,7 +429,8 @@ def build_spec(raw: dict, path: Path) -> Spec:
                                 algorithm=e.get("algorithm", DEFAULT_ALGORITHM), stop_when=e.get("stop_when"),
                                 early_stop=e.get("early_stop", "ok"), loop_solver=_loop_settings(e.get("loop_solver", {})),
                                 adaptive=tuple(sorted((e.get("adaptive") or {}).items())),
-                                coupled_model_exchange=e.get("coupled_model_exchange", True))
+                                coupled_model_exchange=e.get("coupled_model_exchange", True),
+                                warm_start=float(e["warm_start"]) if e.get("warm_start") is not None else None)
     objectives = tuple(
         ObjectiveSpec(name=n, signal=o.get("signal"), reduce=o.get("reduce"), expr=o.get("expr"),
                       unit=o.get("unit"), sense=o.get("sense"), description=o.get("description", ""))

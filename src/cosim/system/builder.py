@@ -23,6 +23,7 @@ from cosim.system.signals import add_recorded, resolve_signal, split_unit_name
 from cosim.master.loops import Coupling
 from cosim.system.stepping import check_algebraic_loops, feedthrough_coupling, stepping_order
 from cosim.system.study_checks import check_design, check_objective_expressions
+from cosim.system.warm_start_checks import check_warm_start_design
 from cosim.system.value_checks import SETTABLE_AS_PARAMETER, SETTABLE_AS_START, assignment  # noqa: F401  (their old place)
 from cosim.units.fmu.description import FmuProblems
 from cosim.units.protocol import NUMERIC_TYPES, UnitDescription, UnitType
@@ -48,6 +49,8 @@ class System:
     model_exchange: ModelExchangeCoupling = ModelExchangeCoupling()
     # design parameter -> (factor, offset) from its design `unit` to its port's unit (identities left out)
     design_conversions: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    # the saved warm-up of a spec with experiment.warm_start (cosim.execution.warm_start.WarmState), once made
+    warm_start: Any = None
 
     def signal(self, text: str) -> Signal:
         """Resolve a 'unit.port' text against this system; raises SpecError if it does not fit."""
@@ -158,6 +161,7 @@ def build_system(spec: Spec, broken_units: frozenset[str] = frozenset()) -> Syst
             probes.setdefault(s.text, s)
     check_objective_expressions(spec, problems)
     design_conversions = check_design(spec, units, problems)
+    check_warm_start_design(spec, units, problems)
     if problems:
         raise SpecError(problems)
     system = System(spec=spec, units=dict(units), connections=tuple(connections), order=tuple(order),

@@ -317,6 +317,30 @@ class Unit(abc.ABC):
         """Tell the unit a saved state may be restored after later steps (FMI: ``noSetFMUStatePriorToCurrentPoint``
         becomes false), so it keeps what a restore needs."""
 
+    # Serialized states: a saved state as bytes, to restore in another instance (another process): a study's
+    # warm start runs once to a time, saves every unit's state and starts each point there (cosim.execution.warm_start)
+
+    @property
+    def can_serialize_state(self) -> bool:
+        """Whether :meth:`serialize_state` and :meth:`deserialize_state` work (FMI ``canSerializeFMUstate``, a
+        :class:`~cosim.units.python.unit.PythonUnit` whose saved state pickles)."""
+        return False
+
+    def serialize_state(self, state: Any) -> bytes:
+        """The bytes of a snapshot :meth:`save_state` made; raises UnitError when the unit cannot serialize it."""
+        raise UnitError(self.name, "cannot serialize its state (FMI canSerializeFMUstate is not set)", None)
+
+    def deserialize_state(self, data: bytes) -> Any:
+        """A snapshot of this unit from the bytes :meth:`serialize_state` gave (in any instance of the same unit
+        type, in any process), for :meth:`restore_state`; raises UnitError for bytes it cannot take."""
+        raise UnitError(self.name, "cannot deserialize a state (FMI canSerializeFMUstate is not set)", None)
+
+    def can_tune(self, variable: str) -> bool:
+        """Whether ``variable`` may be set after initialization, between steps: an input, or a parameter whose
+        variability is ``tunable`` (FMI); a fixed parameter is part of what a saved state holds and stays."""
+        var = self.description.variable(variable)
+        return var.causality == "input" or (var.causality == "parameter" and var.variability == "tunable")
+
     # Conveniences built on the primitives -------------------------------
 
     def set_values(self, values: Mapping[str, Any]) -> None:

@@ -243,8 +243,13 @@ Status framework_check_set(ModelInstance *comp, size_t index, VariableType type)
     const VariableInfo *v;
     if (framework_check_type(comp, index, type, "set") > Warning) return Error;
     v = &VARIABLES[index];
-    if (v->causality == CAUS_PARAMETER && comp->state != STATE_INSTANTIATED && comp->state != STATE_INITIALIZATION) {
-        logError(comp, "parameter '%s' can only be set before exitInitializationMode", v->name);
+    /* A fixed parameter only before exitInitializationMode; a tunable one also between steps (co-simulation
+     * Step Mode) and in Model Exchange Event Mode, as FMI 2.0 and 3.0 allow. */
+    if (v->causality == CAUS_PARAMETER && comp->state != STATE_INSTANTIATED && comp->state != STATE_INITIALIZATION &&
+        !(v->tunable && (comp->state == STATE_STEP || comp->state == STATE_EVENT))) {
+        logError(comp, v->tunable ? "tunable parameter '%s' can only be set in initialization, step or event mode"
+                                  : "parameter '%s' can only be set before exitInitializationMode (it is not tunable)",
+                 v->name);
         return Error;
     }
     if (v->causality != CAUS_PARAMETER && v->causality != CAUS_INPUT) {

@@ -43,6 +43,7 @@ typedef struct {
     size_t size;   /* number of elements, 1 for scalars */
     size_t offset; /* offsetof(ModelData, <name>) */
     uint32_t vr2;  /* FMI 2.0 value reference of the first element */
+    bool tunable;  /* a parameter that may be set after initialization (FMI variability "tunable") */
 } VariableInfo;
 
 extern const VariableInfo VARIABLES[N_VARIABLES];

@@ -37,6 +37,8 @@ class Fmi2Unit(FmiInstance):
     _slave_class: Any = with_cached_signatures(FMU2Slave)
     _interface = "coSimulation"  # the attribute of fmpy's ModelDescription naming the interface used
     _state_calls = ("fmi2GetFMUstate", "fmi2SetFMUstate", "fmi2FreeFMUstate")
+    _serialize_calls = ("fmi2SerializeFMUstate", "fmi2DeSerializeFMUstate")
+    _fmpy_serialize = ("serializeFMUstate", "deSerializeFMUstate")
 
     def __init__(self, name: str, unit_type: Any):
         super().__init__(name, unit_type)

@@ -33,6 +33,8 @@ class Fmi3Unit(FmiInstance):
     _slave_class: Any = with_cached_signatures(FMU3Slave)
     _interface = "coSimulation"  # the attribute of fmpy's ModelDescription naming the interface used
     _state_calls = ("fmi3GetFMUState", "fmi3SetFMUState", "fmi3FreeFMUState")
+    _serialize_calls = ("fmi3SerializeFMUState", "fmi3DeserializeFMUState")
+    _fmpy_serialize = ("serializeFMUState", "deserializeFMUState")
 
     def __init__(self, name: str, unit_type: Any):
         super().__init__(name, unit_type)

@@ -288,6 +288,9 @@ class FmiInstance(Unit):
 
     # Names of the version's state calls (get, set, free); set by Fmi2Unit / Fmi3Unit.
     _state_calls: tuple[str, str, str] = ("", "", "")
+    # Names of the version's (serialize, deserialize) calls, and of fmpy's wrappers of them (they size the buffer)
+    _serialize_calls: tuple[str, str] = ("", "")
+    _fmpy_serialize: tuple[str, str] = ("", "")
 
     @property
     def can_save_state(self) -> bool:
@@ -313,7 +316,8 @@ class FmiInstance(Unit):
         status = self._state_function(1)(self._component, state.pointer)
         if status > 1:
             raise self.fail_status(self._state_calls[1], status)
-        self.time = state.time
+        if state.time is not None:  # a deserialized state does not know it; the caller does
+            self.time = state.time
 
     def free_state(self, state: Any) -> None:
         if state is None or not state.pointer or not self._alive:
@@ -321,6 +325,26 @@ class FmiInstance(Unit):
         status = self._state_function(2)(self._component, ctypes.byref(state.pointer))
         if status > 1:
             raise self.fail_status(self._state_calls[2], status)
+
+    @property
+    def can_serialize_state(self) -> bool:
+        md = self.unit_type.model_description()
+        interface = getattr(md, getattr(self, "_interface", "coSimulation"), None)
+        return self.can_save_state and bool(getattr(interface, "canSerializeFMUstate", False))
+
+    def serialize_state(self, state: Any) -> bytes:
+        if not self.can_serialize_state:
+            return super().serialize_state(state)
+        call = self._serialize_calls[0]
+        return bytes(self._guard(call, lambda: getattr(self._slave, self._fmpy_serialize[0])(state.pointer)))
+
+    def deserialize_state(self, data: bytes) -> Any:
+        if not self.can_serialize_state:
+            return super().deserialize_state(data)
+        state = FmuState()
+        self._guard(self._serialize_calls[1],
+                    lambda: getattr(self._slave, self._fmpy_serialize[1])(bytes(data), state.pointer))
+        return state
 
     def allow_restore(self) -> None:
         # doStep's noSetFMUStatePriorToCurrentPoint is true (do_step's default) until a master may restore:

@@ -29,6 +29,7 @@ from __future__ import annotations
 import importlib
 import importlib.util
 import os
+import pickle
 import sys
 from pathlib import Path
 from typing import Any, ClassVar, Mapping, Sequence
@@ -245,6 +246,28 @@ class PythonUnit(Unit):
             self.set_state(own)
         except Exception as exc:
             raise UnitError.raised(self.name, "set_state", exc, None) from exc
+
+    @property
+    def can_serialize_state(self) -> bool:
+        return self.can_save_state  # pickled; a state that does not pickle is reported by serialize_state
+
+    def serialize_state(self, state: Any) -> bytes:
+        if not self.can_serialize_state:
+            return super().serialize_state(state)
+        try:
+            return pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL)
+        except Exception as exc:
+            raise UnitError(self.name, f"its saved state (get_state) cannot be pickled: {type(exc).__name__}: {exc}; "
+                            "return plain data (numbers, lists, dicts, numpy arrays) from get_state", None) from exc
+
+    def deserialize_state(self, data: bytes) -> Any:
+        if not self.can_serialize_state:
+            return super().deserialize_state(data)
+        try:
+            return pickle.loads(data)
+        except Exception as exc:
+            raise UnitError(self.name, f"a serialized state cannot be read back: {type(exc).__name__}: {exc}",
+                            None) from exc
 
     def _call(self, hook: str, t: float | None) -> None:
         try:
