@@ -108,3 +108,13 @@ def test_report_front_of_objectives_chosen_on_the_command_line(tmp_path, capsys)
     assert front.sum() != pareto_naive(np.column_stack([table.values("energy"), table.values("t_exec")])).sum()
     assert main(["report", str(path), "-o", str(out), "--min", "nonsense"]) == 2
     assert "nonsense" in capsys.readouterr().err
+
+
+def test_report_shows_paths_relative_or_by_their_last_two_names(tmp_path):
+    """Issue 28.12: the page is mailed; an absolute path says where its author's home is, nothing a reader opens."""
+    from cosim.analysis.report import shown_path
+
+    assert shown_path(tmp_path / "a" / "spec.json", here=tmp_path) == "a/spec.json"
+    assert shown_path("/home/someone/studies/arm/spec.json", here=tmp_path) == "arm/spec.json"
+    assert shown_path("examples/arm/spec.json", here=tmp_path) == "examples/arm/spec.json"  # as the user typed it
+    assert shown_path("/spec.json", here=tmp_path) == "spec.json"

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import numpy as np
 import pandas as pd
@@ -62,6 +63,12 @@ def test_ishigami_sobol_indices_lie_within_their_confidence_intervals(write_spec
     assert main(["report", str(tmp_path / "out"), "-o", str(tmp_path / "r.html")]) == 0
     page = (tmp_path / "r.html").read_text()
     assert "Sensitivity indices" in page and "b.x3" in page and "data:image/png;base64" in page
+    # issue 28.12: the indices come right after the overview, before the status and the (for the Panda: 70-row)
+    # objective tables; the page names the spec without the author's absolute path
+    headings = re.findall(r"<h2>([^<(]+)", page)
+    assert headings[:4] == ["Table", "Sensitivity indices ", "Status", "Objectives"], headings
+    assert str(spec) not in page and str(tmp_path) not in page
+    assert f"<td class='l'>spec_path</td><td class='l'>{spec.parent.name}/spec.json</td>" in page
 
 
 def test_morris_elementary_effects_of_a_linear_function(write_spec, tmp_path, local_cluster, capsys):

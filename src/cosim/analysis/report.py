@@ -97,9 +97,11 @@ def build_report(table: ResultsTable) -> str:
     parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>cosim report: {html.escape(_name(table))}"
              f"</title><style>{CSS}</style></head><body>",
              f"<h1>{_kind_title(table)}: {html.escape(_name(table))}</h1>", _overview(table, parameters, objectives),
+             # what the study was run for comes first: its indices or its optimisation, before the long tables
+             # of every objective (70 rows for the Panda's)
+             _sobol_section(table), _optimization_section(table),
              _status_section(table), _objective_section(table, parameters, objectives, ok),
-             _pareto_section(table, parameters, ok & table.feasible_mask()), _optimization_section(table),
-             _sobol_section(table),
+             _pareto_section(table, parameters, ok & table.feasible_mask()),
              _sensitivity_section(table, parameters, objectives, ok),
              _figure_section(table, parameters, objectives, ok), "</body></html>"]
     return "\n".join(parts)
@@ -117,14 +119,30 @@ def _name(table: ResultsTable) -> str:
     return str((table.spec or {}).get("name") or table.path.parent.name or table.path.stem)
 
 
+def shown_path(path: str | Path, here: str | Path | None = None) -> str:
+    """A file's path as the page shows it: relative to ``here`` (default: the working directory, where the
+    user typed it) when the file lies under it, else its folder's and its own name.
+
+    The page is mailed and archived: an absolute path says where the author's home is and nothing a reader
+    can open (the spec's digest beside it says which spec it was).
+    """
+    path = Path(path)
+    if not path.is_absolute():
+        return str(path)
+    try:
+        return str(path.relative_to(Path(here or Path.cwd()).resolve()))
+    except ValueError:
+        return str(Path(*path.parts[-2:])) if len(path.parts) > 2 else path.name
+
+
 def _overview(table: ResultsTable, parameters: list[str], objectives: list[str]) -> str:
     meta = table.metadata or {}
-    rows = [("table", str(table.path)), ("rows", len(table.df)),
+    rows = [("table", shown_path(table.path)), ("rows", len(table.df)),
             ("parameters", ", ".join(parameters) or "(unknown: no sweep metadata)"),
             ("objectives", ", ".join(objectives))]
     for key in ("spec_path", "spec_digest", "design_method", "started", "ended"):
         if meta.get(key):
-            rows.append((key, str(meta[key])))
+            rows.append((key, shown_path(meta[key]) if key == "spec_path" else str(meta[key])))
     return "<h2>Table</h2>" + _table(["of the table", "value"], rows, left=2)
 
 
