@@ -599,21 +599,42 @@ def test_two_ssds_of_one_name_keep_systemstructure_with_a_note(tmp_path):
            f"is {path}:SystemStructure.ssd" in system.notes
 
 
-# --- item 7 (in part): an SSP with values on system connectors only -----------------------------------------
+# --- item 7: an SSP with values on system connectors only ---------------------------------------------------
 
 
-def test_an_ssp_without_components_is_one_clear_problem(tmp_path, capsys):
-    ssd = oms3_ssd()
-    ssd = ssd[:ssd.index("    <ssd:Elements>")] + ssd[ssd.index("    <ssd:Annotations>\n      <ssc:Annotation"):]
-    path = write_folder(tmp_path / "values_only", oms3_files(ssd))
+def _values_only(ssd_text=None):
+    """The OMSimulator-3-form SSD without its elements and connections: the root's connectors k (bound to -0.5)
+    and out (fed by nothing) are all there is."""
+    ssd = ssd_text if ssd_text is not None else oms3_ssd()
+    return ssd[:ssd.index("    <ssd:Elements>")] + ssd[ssd.index("    <ssd:Annotations>\n      <ssc:Annotation"):]
+
+
+def test_an_ssp_without_components_runs_its_system_connectors_constants(tmp_path, capsys):
+    path = write_folder(tmp_path / "values_only", oms3_files(_values_only()))
+    result = _run(path)
+    assert list(result.traces.columns) == ["time", "default.k"]
+    assert result.traces["time"].tolist() == pytest.approx([i / 10 for i in range(11)], abs=1e-12)
+    assert result.traces["default.k"].tolist() == [-0.5] * 11  # the bound value, at every communication point
+    assert main(["run", str(path), "--step", "0.5"]) == 0
+    assert main(["inspect", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "unit default: connectors default" in out and "-0.5 *" in out and "system connector default.k" in out
+
+
+def test_an_ssp_without_components_and_without_a_value_is_one_clear_problem(tmp_path, capsys):
+    ssd = _values_only()
+    ssd = ssd[:ssd.index("    <ssd:ParameterBindings>")] + ssd[ssd.index("    </ssd:ParameterBindings>\n") +
+                                                                  len("    </ssd:ParameterBindings>\n"):]
+    path = write_folder(tmp_path / "nothing", oms3_files(ssd))
     [problem] = _problems(path)
     assert problem.file == f"{path}:SystemStructure.ssd"
-    assert problem.message == ("the SSP has no component (FMU or CSV table) to run; its values live on system "
-                               "connectors only (default.k, default.out)")
+    assert problem.message == ("the SSP has no component (FMU or CSV table) and no system connector holding a "
+                               "value: nothing to run (its system connectors default.k, default.out are fed by "
+                               "nothing)")
     assert "ssd:Component" in problem.fix
-    assert main(["inspect", str(path)]) == 2
+    assert main(["run", str(path)]) == 2
     err = capsys.readouterr().err
-    assert "no component" in err and "must not be empty" not in err and "Traceback" not in err
+    assert "nothing to run" in err and "must not be empty" not in err and "Traceback" not in err
 
 
 @pytest.mark.parametrize("old, new, attribute", [
@@ -653,21 +674,81 @@ def test_a_spec_names_system_connectors_and_root_prefixed_ports_as_tool_users_wr
     assert result.objectives["res_min"] == pytest.approx(oms3_expected(1.0)["sub.B.y"], rel=1e-12)  # y = -t
 
 
-def test_a_system_connector_that_is_no_unit_port_as_it_is_is_a_problem_in_the_spec(tmp_path):
+_SCALED_OUT = ('<ssd:Connection startElement="sub" startConnector="res" endElement="" endConnector="out">'
+               '<ssc:LinearTransformation factor="2.0" offset="1.0"/></ssd:Connection>')
+
+
+def test_scaled_and_constant_system_connectors_are_signals_of_their_own(tmp_path):
+    # default.out = 2 x sub.res + 1 (a LinearTransformation), sub.res = sub.B.y; default.k holds -0.5 and reaches
+    # sub.gain through a parameter connection (and from there B.b); sub.speed carries A.y unchanged
+    import json
+
+    import cosim
+
+    ssd = oms3_ssd().replace('<ssd:Connection startElement="sub" startConnector="res" endElement="" '
+                             'endConnector="out"/>', _SCALED_OUT)
+    write_archive(tmp_path / "scaled.ssp", oms3_files(ssd))
+    spec = {"system": "scaled.ssp", "experiment": {"step": 0.1, "algorithm": "jacobi"},
+            "record": ["default.out", "default.k", "sub.gain", "default.sub.speed", "sub.res"],
+            "objectives": {"out_final": {"signal": "default.out", "reduce": "final"},
+                           "out_max": {"signal": "out", "reduce": "max"},  # the root's connector, as OMS names it
+                           "gain": {"signal": "default.sub.gain", "reduce": "mean"}}}
+    (tmp_path / "spec.json").write_text(json.dumps(spec))
+    system = check_spec(tmp_path / "spec.json")
+    assert system.spec.record == ("default.out", "default.k", "default.sub.gain", "A.y", "sub.B.y")
+    result = Execution(system, record=True).run()
+    assert result.ok, result.message
+    traces = result.traces
+    for t, out, y in zip(traces["time"], traces["default.out"], traces["sub.B.y"]):
+        assert y == pytest.approx(oms3_expected(t)["sub.B.y"], rel=1e-12, abs=1e-12)
+        assert out == pytest.approx(2 * oms3_expected(t)["sub.B.y"] + 1, rel=1e-12, abs=1e-12)
+    assert traces["default.k"].tolist() == traces["default.sub.gain"].tolist() == [-0.5] * 11
+    assert traces["A.y"].tolist() == [2.0] * 11
+    objectives = cosim.run(tmp_path / "spec.json").objectives
+    assert objectives["out_final"] == pytest.approx(2 * oms3_expected(1.0)["sub.B.y"] + 1, rel=1e-12)  # -1
+    assert objectives["out_max"] == pytest.approx(1.0, rel=1e-12)  # at t = 0, y = 0
+    assert objectives["gain"] == -0.5
+
+
+def test_a_system_connector_converting_units_carries_the_converted_value(tmp_path):
+    # sub.res declares rpm, B.y (no unit on B's connector, none in the FMU) passes rad/s through sub.speed...:
+    # here the root's 'out' is declared in rpm and sub.res in rad/s, so default.out = 60 / (2 pi) x sub.B.y
+    import json
+    import math
+
+    ssd = oms3_ssd().replace('<ssd:Connector name="out" kind="output">\n        <ssc:Real/>',
+                             '<ssd:Connector name="out" kind="output">\n        <ssc:Real unit="rpm"/>')
+    ssd = ssd.replace('<ssd:Connector name="res" kind="output">\n            <ssc:Real/>',
+                      '<ssd:Connector name="res" kind="output">\n            <ssc:Real unit="rad/s"/>')
+    assert ssd.count('unit="rpm"') == 1 and ssd.count('unit="rad/s"') == 1
+    write_archive(tmp_path / "rpm.ssp", oms3_files(ssd))
+    spec = {"system": "rpm.ssp", "experiment": {"step": 0.1, "algorithm": "jacobi"},
+            "record": ["default.out", "sub.B.y"]}
+    (tmp_path / "spec.json").write_text(json.dumps(spec))
+    system = check_spec(tmp_path / "spec.json")
+    assert system.units["default"].description.by_name["out"].unit == "rpm"
+    result = Execution(system, record=True).run()
+    assert result.ok, result.message
+    expected = [60 / (2 * math.pi) * y for y in result.traces["sub.B.y"]]
+    assert result.traces["default.out"].tolist() == pytest.approx(expected, rel=1e-12)
+    assert result.traces["sub.B.y"].iloc[-1] == pytest.approx(oms3_expected(1.0)["sub.B.y"], rel=1e-12)
+
+
+def test_a_system_connector_named_like_a_spec_unit_is_a_problem(tmp_path):
     import json
 
     ssd = oms3_ssd().replace('<ssd:Connection startElement="sub" startConnector="res" endElement="" '
-                             'endConnector="out"/>',
-                             '<ssd:Connection startElement="sub" startConnector="res" endElement="" endConnector="out">'
-                             '<ssc:LinearTransformation factor="2.0" offset="1.0"/></ssd:Connection>')
+                             'endConnector="out"/>', _SCALED_OUT)
     write_archive(tmp_path / "scaled.ssp", oms3_files(ssd))
-    spec = {"system": "scaled.ssp", "experiment": {"step": 0.1}, "record": ["default.out", "default.k"]}
+    # 'default.out' names the spec's own unit 'default' (the spec's names win); 'out' the root's connector
+    spec = {"system": "scaled.ssp", "experiment": {"step": 0.1}, "record": ["out"],
+            "units": {"default": {"fmu": "builtin:linear_ode_fmi2"}}}
     (tmp_path / "spec.json").write_text(json.dumps(spec))
-    problems = _problems(tmp_path / "spec.json", None)
-    assert [(p.path, p.message) for p in problems] == [
-        ("$.record[0]", "'default.out' is the SSP's system connector carrying 2 x sub.B.y + 1, no unit port"),
-        ("$.record[1]", "'default.k' is the SSP's system connector holding the constant -0.5, no signal of a unit")]
-    assert problems[0].fix.startswith("name 'sub.B.y'")
+    [problem] = _problems(tmp_path / "spec.json", None)
+    assert (problem.path, problem.message) == (
+        "$.record[0]", "'out' is the SSP's system connector default.out, but the spec has a unit named "
+                       "'default' as the system is")
+    assert problem.fix == "rename the unit 'default'"
 
 
 # --- no traceback for any input file --------------------------------------------------------------------------

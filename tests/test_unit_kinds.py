@@ -104,7 +104,7 @@ def test_an_explicitly_registered_kind_is_named_in_messages(tmp_path, capsys, si
                                 "experiment": {"stop": 1, "step": 0.1}}))
     assert main(["validate", str(spec)]) == EXIT_USAGE
     err = capsys.readouterr().err
-    assert "$.units.a: a unit needs exactly one of 'fmu', 'python', 'player' or 'signal'" in err
+    assert "$.units.a: a unit needs exactly one of 'fmu', 'python', 'player', 'connectors' or 'signal'" in err
     assert '"signal": "sine"' in err
     assert "$.units.b.signal: 'triangle' is not allowed" in err and "use one of: sawtooth, sine, square" in err
 

@@ -129,7 +129,7 @@ def test_unit_needs_one_kind(tmp_path, capsys):
     path = tmp_path / "spec.json"
     path.write_text(json.dumps({"units": {"a": {"parameters": {}}}, "experiment": {"stop": 1, "step": 1}}))
     code, text = validate(capsys, path)
-    assert code == 2 and "$.units.a: a unit needs exactly one of 'fmu', 'python' or 'player'" in text
+    assert code == 2 and "$.units.a: a unit needs exactly one of 'fmu', 'python', 'player' or 'connectors'" in text
 
 
 def test_fmu_escaping_its_folder_is_refused(tmp_path, capsys, built_fmu):

@@ -75,6 +75,11 @@ def export_ssp(system: System, out: str | Path, spec_copy: bool = True) -> Path:
     problems = [Problem(spec.path, f"$.units.{u.name}", f"a {u.kind} unit cannot be exported to an SSP",
                         "only FMU and Python units go into an SSP: make it one of those (e.g. an FMU), or export "
                         "the system without it")
+                if u.kind != "connectors" else
+                Problem(spec.path, f"$.units.{u.name}", f"the system connectors of '{u.source}' (a connectors unit: "
+                        "connectors that scale a value or hold a constant, named in record or objectives) cannot be "
+                        "exported: cosim export writes one flat system",
+                        "name the unit ports those connectors carry instead, or export the SSP's spec without them")
                 for u in spec.units if u.kind not in ("fmu", "python")]
     if problems:
         raise SpecError(problems)

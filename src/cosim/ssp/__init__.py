@@ -17,6 +17,7 @@ from typing import Any, Mapping
 from cosim.errors import Problem, SpecError
 from cosim.ssp.archive import is_ssp
 from cosim.ssp.reader import SspSystem, read_ssp
+from cosim.ssp.system_connectors import ConnectorSignal, connector_units
 from cosim.units.registry import unit_kinds
 
 __all__ = ["is_ssp", "merge_system", "read_ssp", "ssp_raw_spec", "SspSystem"]
@@ -32,15 +33,12 @@ def ssp_raw_spec(path: str | Path, experiment: Mapping[str, Any] | None = None, 
     """
     system = read_ssp(path, variant)
     raw = system.raw
-    if not raw["units"]:  # values on system connectors or parameter sets only: nothing cosim can step
-        connectors = system.system_connectors
-        raise SpecError([Problem(system.files.label(system.files.ssd), "/ssd:SystemStructureDescription/ssd:System",
-                                 "the SSP has no component (FMU or CSV table) to run"
-                                 + (f"; its values live on system connectors only ({', '.join(connectors[:6])})"
-                                    if connectors else ""),
-                                 "add the components (ssd:Component with an FMU or a CSV table) the values are "
-                                 "for; cosim runs components, and a value on a system connector reaches only "
-                                 "the component variables it is connected to")])
+    if not raw["units"]:  # values on system connectors or parameter sets only: the constants are what runs
+        constants = _constants(system)
+        if not constants:
+            raise SpecError([_nothing_to_run(system)])
+        raw["units"], _ = connector_units(constants)
+        raw["record"] = [c.name for c in constants]
     raw["experiment"].update(experiment or {})
     missing = [k for k in ("stop", "step") if k not in raw["experiment"]]
     if missing:
@@ -53,6 +51,23 @@ def ssp_raw_spec(path: str | Path, experiment: Mapping[str, Any] | None = None, 
                                  f"(\"system\": \"{Path(path).name}\") with \"experiment\": {{\"{k}\": ...}}")
                          for k in missing])
     return raw
+
+
+def _constants(system: SspSystem) -> list[ConnectorSignal]:
+    """The system connectors holding a constant, each once, in document order."""
+    root = system.root_system
+    return [c for name, c in system.connector_signals.items() if c.port is None and name == c.name
+            and (name.startswith(root + ".") or not root)]
+
+
+def _nothing_to_run(system: SspSystem) -> Problem:
+    connectors = system.system_connectors
+    return Problem(system.files.label(system.files.ssd), "/ssd:SystemStructureDescription/ssd:System",
+                   "the SSP has no component (FMU or CSV table) and no system connector holding a value: nothing "
+                   "to run" + (f" (its system connectors {', '.join(connectors[:6])} are fed by nothing)"
+                               if connectors else ""),
+                   "add the components (ssd:Component with an FMU or a CSV table) the values are for, or name the "
+                   "SSP as \"system\" in a spec.json that adds units")
 
 
 def merge_system(spec: dict, spec_path: Path) -> dict:
@@ -118,11 +133,14 @@ def merge_system(spec: dict, spec_path: Path) -> dict:
 def _name_connectors(spec: dict, system: SspSystem, file: str) -> list[Problem]:
     """Signals in ``record``, objectives and ``stop_when`` that name the SSP's system connectors
     (``Root.SuT.speed``, as a tool's users write them) or a unit with the root system's name in front
-    (``Root.SuT.motor.y``), rewritten to the unit ports they mean; a problem for a connector whose value is no
-    unit port as it is (scaled on its way, or a constant)."""
+    (``Root.SuT.motor.y``), rewritten to what they mean: a connector carrying a unit port unchanged is that port;
+    one scaling it or holding a constant is a port of the ``connectors`` unit of its system (added to the spec
+    with the connections feeding it, see :func:`~cosim.ssp.system_connectors.connector_units`); a spec without
+    any unit runs the SSP's constants.  A problem for a ``connectors`` unit whose name a spec unit has."""
     units = [u for u in spec.get("units") or {} if isinstance(u, str)]
     signals, root = system.connector_signals, system.root_system
     problems: list[Problem] = []
+    named: dict[str, ConnectorSignal] = {}
 
     def names_unit(text: str) -> bool:
         return any(text.startswith(u + ".") for u in units)
@@ -132,18 +150,17 @@ def _name_connectors(spec: dict, system: SspSystem, file: str) -> list[Problem]:
             return text
         if text in signals:
             carried = signals[text]
-            if carried[0] == "port" and carried[2] == 1.0 and carried[3] == 0.0:
+            if carried.unchanged:
                 log.warning("%s: %s '%s' is the SSP's system connector carrying '%s': recorded as '%s'",
-                            file, where, text, carried[1], carried[1])
-                return carried[1]
-            if carried[0] == "port":
-                problems.append(Problem(file, where, f"'{text}' is the SSP's system connector carrying "
-                                        f"{carried[2]:.17g} x {carried[1]} + {carried[3]:.17g}, no unit port",
-                                        f"name '{carried[1]}' (for an objective, an expression of it scales it)"))
-            else:
-                problems.append(Problem(file, where, f"'{text}' is the SSP's system connector holding the constant "
-                                        f"{carried[1]!r}, no signal of a unit", "name a unit port"))
-            return text
+                            file, where, text, carried.port, carried.port)
+                return carried.port
+            if carried.system in units:
+                problems.append(Problem(file, where, f"'{text}' is the SSP's system connector {carried.name}, but "
+                                        f"the spec has a unit named '{carried.system}' as the system is",
+                                        f"rename the unit '{carried.system}'"))
+                return text
+            named.setdefault(carried.name, carried)
+            return carried.name
         if root and text.startswith(root + ".") and names_unit(text[len(root) + 1:]):
             return text[len(root) + 1:]  # OMSimulator's result names carry the root system's name
         return text
@@ -157,4 +174,14 @@ def _name_connectors(spec: dict, system: SspSystem, file: str) -> list[Problem]:
     experiment = spec.get("experiment")
     if isinstance(experiment, dict) and "stop_when" in experiment:
         experiment["stop_when"] = resolve(experiment["stop_when"], "$.experiment.stop_when")
+    if not units and not named:  # the SSP has no component and the spec adds none: its constants run
+        named = {c.name: c for c in _constants(system)}
+        if not named:
+            problems.append(_nothing_to_run(system))
+        if "record" not in spec or not spec.get("record"):
+            spec["record"] = list(named)
+    if named and not problems:
+        added, connections = connector_units(list(named.values()))
+        spec["units"] = {**(spec.get("units") or {}), **added}
+        spec["connections"] = [*(spec.get("connections") or []), *connections]
     return problems

@@ -98,6 +98,15 @@ class Flow:
                 unit = end_unit  # after a suppressed conversion only a declared unit is known
         return factor, offset
 
+    def unit_after(self, chain: list[Edge], unit: tuple) -> tuple[str | None, dict]:
+        """The unit of measure of the value leaving ``chain`` when ``unit`` enters it (as :meth:`compose` tracks
+        it: a connector declaring no unit passes the unit through)."""
+        for edge in chain:
+            end_unit = self.unit_of(edge.end)
+            if end_unit[0] or edge.suppress:
+                unit = end_unit
+        return unit
+
     def connections(self, unit_names: dict[tuple[str, ...], str]) -> list[dict]:
         """The spec's connections: every FMU or table input fed through a chain from a component output."""
         nodes = self.reading.nodes

@@ -35,7 +35,7 @@ from cosim.ssp.experiment import note_unread, read_experiment
 from cosim.ssp.measures import read_unit_definitions
 from cosim.ssp.model import FMU_TYPES, TABLE_TYPES, Node
 from cosim.ssp.reading import Reading
-from cosim.ssp.system_connectors import connector_signals
+from cosim.ssp.system_connectors import ConnectorSignal, connector_signals
 from cosim.ssp.xml import tag
 
 __all__ = ["FMU_TYPES", "TABLE_TYPES", "SspSystem", "read_ssp"]
@@ -49,9 +49,8 @@ class SspSystem:
     raw: dict
     notes: list[str]
     system_connectors: list[str] = field(default_factory=list)  # 'Root.sub.connector', for messages
-    # 'Root.sub.connector' (and 'sub.connector') -> what it carries: ("port", 'unit.port', factor, offset) for a
-    # connector fed by a component output, ("value", v) for one holding a bound value (see connector_signals)
-    connector_signals: dict[str, tuple] = field(default_factory=dict)
+    # 'Root.sub.connector' (and 'sub.connector') -> what it carries (see system_connectors.connector_signals)
+    connector_signals: dict[str, ConnectorSignal] = field(default_factory=dict)
     root_system: str = ""
 
 
@@ -91,7 +90,7 @@ def _read(reading: Reading) -> SspSystem:
     root_name = system.get("name", "")
     connectors = [".".join((root_name, *n.path, c)) for n in reading.nodes.values() if n.kind == "system"
                   for c in n.connectors]
-    signals = connector_signals(reading, flow, bindings.system_values, names, root_name)
+    signals = connector_signals(reading, flow, bindings, names, root_name)
     return SspSystem(reading.files, raw, reading.notes, connectors, signals, root_name)
 
 

@@ -1,41 +1,113 @@
-"""What every system connector of an SSP carries, for naming connectors in a spec (``Root.sub.connector``)."""
+"""What every system connector of an SSP carries, and the units that make those connectors signals of their own.
+
+A spec naming the SSP (or the SSP run alone) may name a system connector as its tool's users do:
+``Root.sub.connector`` (with the root system's name) or ``sub.connector``.  A connector carrying a component
+output unchanged stands for that output; one that scales it (unit conversions, ``LinearTransformation``) or
+holds a bound constant becomes a port of a ``connectors`` unit named by its system (``Root.sub``, see
+:mod:`cosim.units.connectors`): an input fed by the component output with the chain's factor and offset, or a
+parameter holding the constant.
+"""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any
+
+from cosim.ssp.bindings import Bindings
 from cosim.ssp.connections import Flow
 from cosim.ssp.reading import Reading
 
 
-def connector_signals(reading: Reading, flow: Flow, system_values: dict, unit_names: dict,
-                      root_name: str) -> dict[str, tuple]:
+@dataclass(frozen=True)
+class ConnectorSignal:
+    """What one system connector carries: ``factor`` x ``port`` + ``offset`` (``port`` a unit's 'unit.port'),
+    or the constant ``value`` (``port`` None)."""
+
+    system: str  # the system's name with the root system's: 'default.sub' ('default' for the root's own)
+    connector: str
+    port: str | None = None
+    factor: float = 1.0
+    offset: float = 0.0
+    value: Any = None
+    unit: str | None = None  # of measure, of a scaled port's value as the connector carries it
+
+    @property
+    def name(self) -> str:
+        return f"{self.system}.{self.connector}"
+
+    @property
+    def unchanged(self) -> bool:
+        """True for a connector carrying a unit port as it is: it stands for that port."""
+        return self.port is not None and self.factor == 1.0 and self.offset == 0.0
+
+
+def connector_signals(reading: Reading, flow: Flow, bindings: Bindings, unit_names: dict,
+                      root_name: str) -> dict[str, ConnectorSignal]:
     """What every system connector carries, by its name with and without the root system's name.
 
     A connector fed (through a chain) by a component output carries factor x that output + offset (the
-    chain's conversions and transformations): ("port", 'unit.port', factor, offset); one holding a bound value
-    carries that value: ("value", v).  A connector whose chain cannot be followed (a loop, units that do not
-    convert) carries nothing known and is left out: this is for naming connectors in a spec, the SSP was
-    checked already.
+    chain's conversions and transformations); one holding a bound value (or fed by a connector that holds one)
+    carries that value.  A connector whose chain cannot be followed (a loop, units that do not convert) carries
+    nothing known and is left out: this is for naming connectors in a spec, the SSP was checked already.
     """
-    signals: dict[str, tuple] = {}
+    signals: dict[str, ConnectorSignal] = {}
     problems = list(reading.problems)
+    system_values = bindings.system_values
+
+    def constant(start: tuple, chain: list | None = None) -> Any:
+        """The value bound to the connector ``start``, in its unit, then along ``chain`` (as a parameter
+        connection carries it)."""
+        depth, order, value, unit, extra, label = system_values[start]
+        if isinstance(value, float):
+            value = bindings.converted(value, unit, extra, label, flow.unit_of(start))
+            if chain:
+                factor, offset = flow.compose(chain, flow.unit_of(start))
+                value = factor * value + offset
+        return value
+
     for node in reading.nodes.values():
         if node.kind != "system":
             continue
+        system = ".".join((root_name, *node.path))
         for name in node.connectors:
             end = (node.path, name)
-            carried: tuple | None = None
+            carried: ConnectorSignal | None = None
             if end in flow.into:
                 chain = flow.chain(end)
                 start = chain[0].start
                 if reading.nodes[start[0]].kind == "component" and start[0] in unit_names:
                     factor, offset = flow.compose(chain, flow.unit_of(start))
-                    carried = ("port", f"{unit_names[start[0]]}.{start[1]}", factor, offset)
+                    carried = ConnectorSignal(system, name, f"{unit_names[start[0]]}.{start[1]}", factor, offset,
+                                              unit=flow.unit_after(chain, flow.unit_of(start))[0])
                 elif start in system_values:
-                    carried = ("value", system_values[start][2])
+                    carried = ConnectorSignal(system, name, value=constant(start, chain))
             elif end in system_values:
-                carried = ("value", system_values[end][2])
+                carried = ConnectorSignal(system, name, value=constant(end))
             if carried is not None:
                 signals[".".join((root_name, *node.path, name))] = carried
                 signals.setdefault(".".join((*node.path, name)), carried)
     reading.problems[:] = problems  # a chain only named here (no FMU input at its end) reports nothing new
     return signals
+
+
+def connector_units(signals: list[ConnectorSignal]) -> tuple[dict[str, dict], list[dict]]:
+    """The ``connectors`` units (one per system, named by it) and the connections feeding them that make
+    ``signals`` ports of their own: a scaled connector an input fed with its factor and offset, a constant a
+    parameter."""
+    units: dict[str, dict] = {}
+    connections: list[dict] = []
+    for signal in signals:
+        unit = units.setdefault(signal.system, {"connectors": signal.system})
+        if signal.port is None:
+            unit.setdefault("parameters", {})[signal.connector] = signal.value
+            continue
+        inputs = unit.setdefault("inputs", {})
+        if signal.connector in inputs:
+            continue
+        inputs[signal.connector] = signal.unit or ""
+        # the SSP's conversions are all in factor and offset: cosim must not convert again
+        connection: dict[str, Any] = {"from": signal.port, "to": signal.name, "convert": False}
+        if not signal.unchanged:
+            connection.update(factor=signal.factor, offset=signal.offset)
+        connections.append(connection)
+    return units, connections

@@ -309,6 +309,12 @@ def _create_player(spec: UnitSpec, folder: str) -> "UnitType":
                           all_real=o.get("all_real", False))
 
 
+def _create_connectors(spec: UnitSpec, folder: str) -> "UnitType":
+    from cosim.units.connectors import SystemConnectorsType
+
+    return SystemConnectorsType(spec.source, spec.options.get("inputs"), spec.parameters)
+
+
 FMU = UnitKind("fmu", {
     "fmu": {"type": "string", "description": "Path to an .fmu (relative to the spec's folder) or "
                                              "'builtin:NAME_fmi3' / 'builtin:NAME_fmi2'."},
@@ -351,5 +357,16 @@ PLAYER = UnitKind("player", {
                                 "is played so."},
 }, _create_player, example='"player": "traces.parquet"', description="recorded signals played back", replays=True)
 
-BUILTIN_KINDS = {kind.name: kind for kind in (FMU, PYTHON, PLAYER)}
+CONNECTORS = UnitKind("connectors", {
+    "connectors": {"type": "string", "description": "The system whose connectors the unit holds (an SSP's "
+                                                   "system, e.g. 'default.sub'): its inputs hold what is connected "
+                                                   "to them, its parameters constants; it computes nothing. Written "
+                                                   "by cosim for an SSP's system connectors."},
+    "inputs": {"type": "object", "additionalProperties": {"type": "string"},
+               "description": "connectors only: the connectors fed by a connection, each with its unit of measure "
+                              "('' for none)."},
+}, _create_connectors, example='"connectors": "default.sub"',
+    description="the connectors of an SSP's system, as signals of their own")
+
+BUILTIN_KINDS = {kind.name: kind for kind in (FMU, PYTHON, PLAYER, CONNECTORS)}
 _REGISTRY.kinds.update(BUILTIN_KINDS)
