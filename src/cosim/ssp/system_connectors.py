@@ -57,7 +57,7 @@ def connector_signals(reading: Reading, flow: Flow, bindings: Bindings, unit_nam
     def constant(start: tuple, chain: list | None = None) -> Any:
         """The value bound to the connector ``start``, in its unit, then along ``chain`` (as a parameter
         connection carries it)."""
-        depth, order, value, unit, extra, label = system_values[start]
+        _depth, _order, value, unit, extra, label = system_values[start]
         if isinstance(value, float):
             value = bindings.converted(value, unit, extra, label, flow.unit_of(start))
             if chain:
