@@ -12,6 +12,7 @@ from lxml import etree
 
 from cosim.cli.main import main
 from cosim.errors import SpecError
+from cosim.execution.point import run_point
 from cosim.execution.run import Execution
 from cosim.export.ssp import export_ssp
 from cosim.ssp.xml import NS
@@ -219,3 +220,26 @@ def test_implementation_and_solver_settings_survive_the_export(tmp_path, experim
     assert np.array_equal(first.traces.to_numpy(), second.traces.to_numpy())
     # me: der(x) = -x + 2 from x = 0: x(1) = 2 (1 - e^-1), integrated by CVode at rtol 1e-8
     assert second.traces["me.y"].iloc[-1] == pytest.approx(2 * (1 - np.exp(-1.0)), rel=1e-6)
+
+
+def test_a_warm_start_survives_the_export_and_runs_the_same_from_the_ssp(tmp_path):
+    # issue 26 item 5: experiment.warm_start travels in the org.cosim annotation; the SSP, read back alone, warms up
+    # the same way, and a run with another tunable value from it equals the same run from the spec
+    spec = {"name": "warm",
+            "units": {"src": {"fmu": "builtin:linear_ode_fmi2", "parameters": {"a": 0.0, "b": 0.0, "x0": 2.0}},
+                      "lag": {"fmu": "builtin:linear_ode_fmi3", "parameters": {"a": -1.0, "b": 1.0, "x0": 0.0}}},
+            "connections": [{"from": "src.y", "to": "lag.u"}],
+            "experiment": {"stop": 1.0, "step": 0.01, "warm_start": 0.5, "algorithm": "jacobi"},
+            "record": ["src.*", "lag.*"]}
+    (tmp_path / "spec.json").write_text(json.dumps(spec))
+    original = check_spec(tmp_path / "spec.json")
+    archive = export_ssp(original, tmp_path / "warm.ssp", spec_copy=False)
+    again = check_spec(archive)
+    assert again.spec.experiment == original.spec.experiment and again.spec.experiment.warm_start == 0.5
+    first, second = (run_point(s, {"lag.b": 3.0}, record=True) for s in (original, again))
+    assert first.ok and second.ok, (first.message, second.message)
+    assert (first.steps, second.steps) == (50, 50)
+    assert np.array_equal(first.traces.to_numpy(), second.traces.to_numpy())
+    # lag: x' = -x + 2 b, b = 1 to t = 0.5, then b = 3: x(1) = 6 + (x(0.5) - 6) e^-0.5, x(0.5) = 2 (1 - e^-0.5)
+    x_half = 2 * (1 - np.exp(-0.5))
+    assert second.traces["lag.y"].iloc[-1] == pytest.approx(6 + (x_half - 6) * np.exp(-0.5), abs=1e-12)

@@ -259,7 +259,7 @@ def _implementation(unit: Any) -> str:
 
 def _cosim_experiment(annotation: Any, spec: Any) -> None:
     """cosim's own experiment settings an SSP has no place for: the master algorithm and its options (adaptive
-    steps, the loop solver, coupled model exchange, early stop), as ``cosim:Experiment`` with one child per
+    steps, the loop solver, coupled model exchange, early stop, warm start), as ``cosim:Experiment`` with one child per
     option group; :func:`cosim.ssp.experiment.read_experiment` reads them back."""
     raw = spec.raw.get("experiment") or {}
     experiment = _e(annotation, "cosim", "Experiment", algorithm=spec.experiment.algorithm,

@@ -15,7 +15,7 @@ from cosim.ssp.xml import tag
 
 # cosim's experiment settings an SSP has no place for, in its org.cosim annotation (cosim.export.ssp writes them):
 # flags as attributes of cosim:Experiment, option groups as its children
-COSIM_EXPERIMENT_FLAGS = ("coupled_model_exchange", "early_stop")
+COSIM_EXPERIMENT_FLAGS = ("coupled_model_exchange", "early_stop", "warm_start")
 COSIM_EXPERIMENT_GROUPS = ("adaptive", "loop_solver")
 
 
