@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any, Sequence
 import numpy as np
 
 from cosim.errors import Problem, UserError
-from cosim.master.observers import ExactColumns, Observer
+from cosim.master.observers import ExactColumns, ObjectiveReducer, Observer, TraceRecorder
 from cosim.master.transfers import group_transfers
 from cosim.system.builder import Assignment, System
 from cosim.units.protocol import SimulationEnded, Unit
@@ -64,10 +64,16 @@ class WarmState:
         if exact is not None:
             rows = iter(self.exact)
             exact.read = lambda: next(rows)  # type: ignore[method-assign]
+        one_by_one = []
+        for observer in observers:  # the recorder and the reducer take all samples at once (the same rows)
+            if isinstance(observer, (TraceRecorder, ObjectiveReducer)) and not getattr(observer, "_exact", None):
+                observer.load(self.times, self.samples)
+            else:
+                one_by_one.append(observer)
         try:
-            for observer in observers:
+            for observer in one_by_one:
                 observer.initialized(float(self.times[0]), self.samples[0])
-            hooks = [observer.step for observer in observers]
+            hooks = [observer.step for observer in one_by_one]
             for t, values in zip(self.times[1:].tolist(), self.samples[1:]):
                 for hook in hooks:
                     hook(t, values)
