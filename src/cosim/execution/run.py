@@ -109,17 +109,29 @@ class Probe:
         self._exact_reads = [(units[name].select(refs), units[name]) for name, refs in exact.items()]
         self.values = np.zeros(len(self.columns))
         self._reads = []
+        self._reads_of: dict[str, tuple] = {}  # unit name -> its read, for read_units
         for name, refs in per_unit.items():
             where = np.array(positions[name], dtype=int)
             contiguous = bool(np.all(np.diff(where) == 1))
             # a contiguous run is written through a slice, cheaper than fancy indexing
             target = slice(int(where[0]), int(where[-1]) + 1) if contiguous else where
             self._reads.append((units[name].reader(units[name].select(refs)), target))
+            self._reads_of[name] = self._reads[-1]
 
     def read(self) -> np.ndarray:
         values = self.values
         for read, where in self._reads:
             values[where] = read()
+        return values
+
+    def read_units(self, names: Sequence[str]) -> np.ndarray:
+        """The vector with only the columns of the units ``names`` read anew; the others keep the values of the
+        last read (an event row: one unit is inside its step, the others are not to be read there)."""
+        values = self.values
+        for name in names:
+            if name in self._reads_of:
+                read, where = self._reads_of[name]
+                values[where] = read()
         return values
 
     def read_exact(self) -> list[Any]:
@@ -128,6 +140,24 @@ class Probe:
         for selection, unit in self._exact_reads:
             out.extend(unit.get(selection))
         return out
+
+
+def _record_events(system: System, stepped: Mapping[str, Any], probe: Probe, recorder: TraceRecorder) -> list[Any]:
+    """Hook the model-exchange units whose spec says ``record_events`` (or the group integrating them) so that
+    every event they handle inside a step adds two rows to the traces: their recorded columns just before the
+    event and just after it, the other columns as at the last row.  Returns what was hooked."""
+    wanted = [name for name, unit in system.units.items() if unit.spec.options.get("record_events")]
+    by_stepping: dict[int, tuple[Any, list[str]]] = {}
+    for name in wanted:
+        stepping = stepped.get(name) or next((g for g in stepped.values() if name in getattr(g, "members", {})),
+                                             None)
+        if stepping is not None and hasattr(stepping, "on_event"):  # checked by the system: model exchange
+            by_stepping.setdefault(id(stepping), (stepping, []))[1].append(name)
+    for stepping, names in by_stepping.values():
+        def on_event(t: float, phase: str, names: tuple[str, ...] = tuple(names)) -> None:
+            recorder.event(t, probe.read_units(names))
+        stepping.on_event = on_event
+    return [stepping for stepping, _ in by_stepping.values()]
 
 
 class Execution:
@@ -165,6 +195,7 @@ class Execution:
         t = exp.start
         steps = 0
         algorithm = None
+        hooked: list[Any] = []
         try:
             if owned:
                 for name, system_unit in self.system.units.items():
@@ -190,6 +221,8 @@ class Execution:
             reducer = ObjectiveReducer(probe.columns, [(o.name, o.reduce, self._columns_of(o.signal)) for o in
                                                        self.system.spec.objectives if o.signal])
             observers = [o for o in (recorder, reducer) if o is not None] + self.extra_observers
+            if recorder is not None:
+                hooked = _record_events(self.system, stepped.units, probe, recorder)
             keeper = WarmSamples(probe, exact) if self.save_warm else None
             if keeper is not None:
                 observers.append(keeper)
@@ -275,6 +308,8 @@ class Execution:
                              elapsed=time.perf_counter() - started, steps=steps, end_time=t,
                              failure=INTERNAL_FAILURE)
         finally:
+            for stepping in hooked:
+                stepping.on_event = None  # units given by the caller outlive this run
             if algorithm is not None and algorithm.variable_step:
                 try:
                     algorithm.free()  # type: ignore[attr-defined]  # its saved states, before the units go

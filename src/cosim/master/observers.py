@@ -61,7 +61,7 @@ class Observer:
 
 
 class TraceRecorder(Observer):
-    """Records the chosen columns at every communication point.
+    """Records the chosen columns at every communication point (and at events, :meth:`event`).
 
     ``capacity`` is the expected number of samples; storage grows if needed.
     """
@@ -99,6 +99,11 @@ class TraceRecorder(Observer):
         self._append(t, values)
 
     def step(self, t: float, values: np.ndarray) -> None:
+        self._append(t, values)
+
+    def event(self, t: float, values: np.ndarray) -> None:
+        """An extra row at an event inside a step (see a model-exchange unit's ``record_events``): rows stay in
+        time order, so ``time`` is non-decreasing, with equal times at an event (before it, after it)."""
         self._append(t, values)
 
     def load(self, times: np.ndarray, values: np.ndarray) -> None:

@@ -120,6 +120,7 @@ def build_system(spec: Spec, broken_units: frozenset[str] = frozenset()) -> Syst
         else:
             units.failed.add(u.name)
 
+    _check_record_events(spec, units, problems)
     assignments = []
     replaying = replaying_units(spec.units)
     for u in spec.units:
@@ -170,6 +171,24 @@ def build_system(spec: Spec, broken_units: frozenset[str] = frozenset()) -> Syst
                     design_conversions=design_conversions)
     attach_data_files(system)  # files named by a unit's data-file parameters: read from the spec's folder, shipped
     return system
+
+
+def _check_record_events(spec: Spec, units: Mapping[str, SystemUnit], problems: list[Problem]) -> None:
+    """``record_events`` asks a model-exchange unit for event rows: refused for a unit that steps itself (its
+    events are its own) and under the adaptive algorithm (which repeats steps it rejects)."""
+    for u in spec.units:
+        if not u.options.get("record_events") or u.name not in units:
+            continue
+        where = json_path(["units", u.name, "record_events"])
+        if not units[u.name].unit_type.offers_equations():
+            problems.append(Problem(spec.path, where, f"'{u.name}' runs as co-simulation: its events happen inside "
+                                    "the FMU, where cosim does not see them",
+                                    "add \"interface\": \"model-exchange\" (if the FMU offers it), or remove "
+                                    "\"record_events\""))
+        elif spec.experiment.algorithm == "adaptive":
+            problems.append(Problem(spec.path, where, "the adaptive algorithm repeats the steps it rejects, so "
+                                    "events would be recorded more than once",
+                                    "use a fixed-step algorithm (gauss-seidel, jacobi) with \"record_events\""))
 
 
 def _load_unit(u: UnitSpec, folder: str, file: str, problems: list[Problem]) -> SystemUnit | None:

@@ -327,6 +327,12 @@ FMU = UnitKind("fmu", {
     "max_step": {"type": "number", "exclusiveMinimum": 0,
                  "description": "fmu, model exchange only: largest internal solver step in seconds. Default: the "
                                 "communication step."},
+    "record_events": {"type": "boolean",
+                      "description": "fmu, model exchange only: the traces get two extra rows at every event the "
+                                     "solver handles inside a step (time, state and step events): the unit's "
+                                     "recorded signals just before the event and just after it, the other "
+                                     "signals as at the last row (default false). Traces only; objectives reduce "
+                                     "the communication points."},
     "coupled_model_exchange": {"type": "boolean",
                                "description": "fmu, model exchange only: false integrates this unit alone inside "
                                               "each communication step even when it is connected to other "

@@ -123,6 +123,10 @@ class EventLoop:
 
     name: str
     time: float | None
+    # called at every time, state and step event handled inside do_step, with (t, "before") just before the
+    # event is handled (the left limit) and (t, "after") right after it (the right limit): the run records
+    # event rows so (a unit's "record_events"); not for an input change at a communication point
+    on_event: Callable[[float, str], None] | None = None
 
     def _init_loop(self, settings: SolverSettings, nz: int) -> None:
         self._settings = settings
@@ -166,7 +170,11 @@ class EventLoop:
                 self.events["time"] += time_event
                 self.events["state"] += state_event
                 self.events["step"] += step_event
+                if self.on_event is not None:
+                    self.on_event(self._now, "before")
                 self._handle_event()
+                if self.on_event is not None:
+                    self.on_event(self._now, "after")
         self._now = max(self._now, end)
 
     def _cap_internal_step(self, h: float) -> None:
