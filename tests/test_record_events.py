@@ -112,6 +112,13 @@ def test_record_events_is_refused_for_a_co_simulation_unit_and_under_the_adaptiv
         check_spec(tmp_path / "adaptive.json")
     [problem] = caught.value.problems
     assert problem.path == "$.units.ball.record_events" and "repeats the steps it rejects" in problem.message
+    spec = _spec(3)
+    spec["experiment"]["warm_start"] = 0.5
+    (tmp_path / "warm.json").write_text(json.dumps(spec))
+    with pytest.raises(SpecError) as caught:
+        check_spec(tmp_path / "warm.json")
+    assert [p.path for p in caught.value.problems] == ["$.units.ball.record_events"]
+    assert "warm-up's samples" in caught.value.problems[0].message
 
 
 def test_a_unit_integrated_in_a_group_records_its_events_too(tmp_path):

@@ -175,7 +175,8 @@ def build_system(spec: Spec, broken_units: frozenset[str] = frozenset()) -> Syst
 
 def _check_record_events(spec: Spec, units: Mapping[str, SystemUnit], problems: list[Problem]) -> None:
     """``record_events`` asks a model-exchange unit for event rows: refused for a unit that steps itself (its
-    events are its own) and under the adaptive algorithm (which repeats steps it rejects)."""
+    events are its own), under the adaptive algorithm (which repeats steps it rejects) and with a warm start
+    (whose replayed samples hold no event rows)."""
     for u in spec.units:
         if not u.options.get("record_events") or u.name not in units:
             continue
@@ -189,6 +190,11 @@ def _check_record_events(spec: Spec, units: Mapping[str, SystemUnit], problems: 
             problems.append(Problem(spec.path, where, "the adaptive algorithm repeats the steps it rejects, so "
                                     "events would be recorded more than once",
                                     "use a fixed-step algorithm (gauss-seidel, jacobi) with \"record_events\""))
+        elif spec.experiment.warm_start is not None:
+            problems.append(Problem(spec.path, where, "under experiment.warm_start the warm-up's samples are "
+                                    "replayed from the communication points only, so events before the warm-start "
+                                    "time would be missing from the traces",
+                                    "remove \"warm_start\" from the experiment, or \"record_events\" from the unit"))
 
 
 def _load_unit(u: UnitSpec, folder: str, file: str, problems: list[Problem]) -> SystemUnit | None:
