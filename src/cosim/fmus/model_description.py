@@ -35,7 +35,9 @@ Model Exchange keys (see ``fmus/common/model_exchange.h``): ``interfaces``
 (``["CoSimulation"]`` by default; ``"ModelExchange"`` needs the model's
 ``model_event_update`` and ``model_step_event``, ``"CoSimulation"`` its
 ``model_do_step``), ``eventIndicators`` (names of Real scalars whose sign
-changes are state events), ``needsCompletedIntegratorStep`` (bool).  A build
+changes are state events), ``needsCompletedIntegratorStep`` (bool).
+``directionalDerivatives`` (bool): the model supplies ``model_partial`` (framework.h), so the FMUs offer
+``fmi2GetDirectionalDerivative`` / ``fmi3GetDirectionalDerivative`` (``providesDirectionalDerivative(s)``).  A build
 may offer fewer interfaces than the model supports (the ``interfaces``
 argument of the generators).
 """
@@ -123,6 +125,7 @@ class Model:
     interfaces: tuple[str, ...] = ("CoSimulation",)
     event_indicators: tuple[str, ...] = ()
     needs_completed_integrator_step: bool = False
+    directional_derivatives: bool = False  # model.c supplies model_partial: the FMUs offer directional derivatives
 
     def states(self) -> list[tuple[ModelVariable, ModelVariable]]:
         """(continuous state, its derivative) pairs, in the order of the derivatives."""
@@ -204,6 +207,7 @@ def load_model(path: Path, digest: str = "") -> Model:
         variables=tuple(variables), digest=digest or hashlib.sha256(Path(path).read_bytes()).hexdigest(),
         interfaces=interfaces, event_indicators=indicators,
         needs_completed_integrator_step=bool(raw.get("needsCompletedIntegratorStep", False)),
+        directional_derivatives=bool(raw.get("directionalDerivatives", False)),
     )
 
 
@@ -288,11 +292,11 @@ def fmi3_model_description(model: Model, interfaces: tuple[str, ...] | None = No
     if "ModelExchange" in offered:
         out.append(f'  <ModelExchange{_attrs(modelIdentifier=model.name)} canGetAndSetFMUState="false"'
                    ' canSerializeFMUState="false" canBeInstantiatedOnlyOncePerProcess="false" needsExecutionTool="false"'
-                   f' needsCompletedIntegratorStep="{_needs_step(model)}"/>')
+                   f' needsCompletedIntegratorStep="{_needs_step(model)}"{_derivatives(model, 3)}/>')
     if "CoSimulation" in offered:
         out.append(f'  <CoSimulation{_attrs(modelIdentifier=model.name)} canHandleVariableCommunicationStepSize="true"'
                    ' canGetAndSetFMUState="true" canSerializeFMUState="true" canBeInstantiatedOnlyOncePerProcess="false"'
-                   ' needsExecutionTool="false" providesIntermediateUpdate="false" hasEventMode="false"/>')
+                   f' needsExecutionTool="false" providesIntermediateUpdate="false" hasEventMode="false"{_derivatives(model, 3)}/>')
     out += _unit_definitions(model)
     out += LOG_CATEGORIES
     out.append(_default_experiment(model))
@@ -337,6 +341,13 @@ def fmi3_model_description(model: Model, interfaces: tuple[str, ...] | None = No
     return "\n".join(out) + "\n"
 
 
+def _derivatives(model: Model, version: int) -> str:
+    """The interface attribute saying the FMU gives directional derivatives (FMI 2.0 and 3.0 spell it apart)."""
+    if not model.directional_derivatives:
+        return ""
+    return ' providesDirectionalDerivative="true"' if version == 2 else ' providesDirectionalDerivatives="true"'
+
+
 def fmi2_model_description(model: Model, interfaces: tuple[str, ...] | None = None) -> str:
     """The FMI 2.0 modelDescription.xml text for ``model`` (arrays as scalars) offering ``interfaces``."""
     offered = model.offers(interfaces)
@@ -348,11 +359,11 @@ def fmi2_model_description(model: Model, interfaces: tuple[str, ...] | None = No
         not_needed = "false" if model.needs_completed_integrator_step else "true"
         out.append(f'  <ModelExchange{_attrs(modelIdentifier=model.name)} completedIntegratorStepNotNeeded="{not_needed}"'
                    ' canGetAndSetFMUstate="false" canSerializeFMUstate="false" canBeInstantiatedOnlyOncePerProcess="false"'
-                   ' needsExecutionTool="false" canNotUseMemoryManagementFunctions="true"/>')
+                   f' needsExecutionTool="false" canNotUseMemoryManagementFunctions="true"{_derivatives(model, 2)}/>')
     if "CoSimulation" in offered:
         out.append(f'  <CoSimulation{_attrs(modelIdentifier=model.name)} canHandleVariableCommunicationStepSize="true"'
                    ' canGetAndSetFMUstate="true" canSerializeFMUstate="true" canBeInstantiatedOnlyOncePerProcess="false"'
-                   ' needsExecutionTool="false" canNotUseMemoryManagementFunctions="true"/>')
+                   f' needsExecutionTool="false" canNotUseMemoryManagementFunctions="true"{_derivatives(model, 2)}/>')
     out += _unit_definitions(model)
     out += LOG_CATEGORIES
     out.append(_default_experiment(model))
@@ -438,7 +449,8 @@ def generated_header(model: Model, interfaces: tuple[str, ...] | None = None) ->
              f"#define N_STATES {len(model.states())}  /* Model Exchange: continuous states */",
              f"#define N_EVENT_INDICATORS {len(model.event_indicators)}",
              f"#define HAS_CO_SIMULATION {int('CoSimulation' in offered)}  /* interfaces this build offers */",
-             f"#define HAS_MODEL_EXCHANGE {int('ModelExchange' in offered)}", ""]
+             f"#define HAS_MODEL_EXCHANGE {int('ModelExchange' in offered)}",
+             f"#define PROVIDES_DIRECTIONAL_DERIVATIVE {int(model.directional_derivatives)}  /* model_partial */", ""]
     for v in model.variables:
         lines.append(f"#define VR_{up(v)} {v.vr3}  /* FMI 3.0 */")
         lines.append(f"#define VR2_{up(v)} {v.vr2}  /* FMI 2.0: {v.element_names()[0]}; element i (1-based) is VR2_{up(v)} + i - 1 */")

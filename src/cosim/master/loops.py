@@ -10,8 +10,10 @@ output -> input, a unit's declared feed-through an edge input -> output.  :func:
   given values x there, running the loop's other links in order and reading the cut links' sources gives
   G(x), and the loop holds when the residual G(x) - x is zero.
 
-:class:`LoopSolver` solves it with Newton's method on the residual (finite-difference Jacobian, kept from one
-communication point to the next while it still contracts, backtracking steps), falling back to fixed-point
+:class:`LoopSolver` solves it with Newton's method on the residual (its Jacobian from the units' directional
+derivatives where every unit on the loop gives them (FMI getDirectionalDerivative, :class:`LoopDerivatives`), else
+by finite differences; kept from one communication point to the next while it still contracts, backtracking
+steps), falling back to fixed-point
 iteration x <- G(x); ``"fixed-point"`` uses only the latter.  Each solve starts from the last two solutions
 extrapolated to the time (Newton is local: it follows the solution branch it starts on).  A loop that does not converge within the
 iteration limit raises :class:`LoopError` (a UnitError: the run becomes a failed row naming the loop and its
@@ -35,21 +37,25 @@ import numpy as np
 
 from cosim.errors import LoopError
 from cosim.master.transfers import Link, Transfer, TransferFactory, group_transfers
-from cosim.units.protocol import Unit
+from cosim.units.protocol import ElementRef, Unit
 
 Node = tuple[str, str]  # (unit, variable)
 METHODS = ("newton", "fixed-point")  # the spec's experiment.loop_solver.method
+JACOBIANS = ("auto", "finite-differences")  # the spec's experiment.loop_solver.jacobian
 
 
 @dataclass(frozen=True)
 class LoopSettings:
     """How loops are solved: ``method`` (``newton``, with a fixed-point fallback, or ``fixed-point``),
     ``tolerance`` (every residual element within ``tolerance * (1 + |x|)``) and ``max_iterations`` (per
-    method and communication point)."""
+    method and communication point), ``jacobian`` (``auto`` or ``finite-differences``)."""
 
     method: str = "newton"
     tolerance: float = 1e-10
     max_iterations: int = 50
+    # Newton's Jacobian: "auto" (the units' directional derivatives where every unit on the loop gives them,
+    # finite differences otherwise) or "finite-differences" (always)
+    jacobian: str = "auto"
 
 
 @dataclass(frozen=True)
@@ -289,7 +295,12 @@ class LoopSolver:
         self._inner = _in_order(units, [links[i] for i in loop.links])
         self._jacobian: np.ndarray | None = None  # of the residual, kept while Newton steps still contract
         self._solutions: deque[tuple[float, np.ndarray]] = deque(maxlen=2)  # (t, x) of the last two solves
+        # the Jacobian from the units' directional derivatives, when every unit on the loop gives them
+        self.derivatives = (LoopDerivatives.of(loop, units, links) if settings.jacobian == "auto" and
+                            settings.method == "newton" else None)
+        self._at: np.ndarray | None = None  # the x of the last evaluation (where the units' inputs are now)
         self.evaluations = 0
+        self.jacobians = 0  # Jacobians made (by derivatives or finite differences)
         self.iterations = 0
         self.newton_stop = ""  # why the last Newton iteration stopped short, for the message
 
@@ -304,6 +315,7 @@ class LoopSolver:
         for transfer in self._inner:
             transfer.run()
         self.evaluations += 1
+        self._at = x
         return self._read()
 
     def _converged(self, r: np.ndarray, x: np.ndarray) -> bool:
@@ -357,7 +369,7 @@ class LoopSolver:
         iterations, self.newton_stop = 0, "iteration limit"
         while iterations < self.settings.max_iterations:
             if jacobian is None:
-                jacobian, fresh = self._finite_differences(x, g), True
+                jacobian, fresh = self.jacobian_at(x, g), True
             dx = _newton_step(jacobian, r)
             if dx is None or not all(map(math.isfinite, dx.tolist())):
                 if fresh:  # singular at this x: leave it to the fixed-point iteration
@@ -392,6 +404,17 @@ class LoopSolver:
             fresh = False
         self._jacobian = None
         return False, x, r, iterations, best
+
+    def jacobian_at(self, x: np.ndarray, g: np.ndarray) -> np.ndarray:
+        """The residual's Jacobian dG/dx - I at ``x`` (``g`` = G(x)): from the units' directional derivatives when
+        they give them (the units are put at ``x`` first if the last evaluation was elsewhere), else by finite
+        differences."""
+        self.jacobians += 1
+        if self.derivatives is None:
+            return self._finite_differences(x, g)
+        if self._at is not x and not np.array_equal(self._at, x):
+            self._evaluate(x)
+        return self.derivatives.jacobian(len(x)) - np.eye(len(x))
 
     def _finite_differences(self, x: np.ndarray, g: np.ndarray) -> np.ndarray:
         """The residual's Jacobian dG/dx - I by forward differences (one evaluation of G per tearing value)."""
@@ -435,6 +458,85 @@ def _size(r: np.ndarray) -> float:
     values = [abs(v) for v in r.tolist()]
     largest = max(values, default=0.0)
     return largest if math.isfinite(largest) and all(v == v for v in values) else math.inf
+
+
+class LoopDerivatives:
+    """dG/dx of a loop from its units' directional derivatives (the chain rule along the loop's links).
+
+    Each unit on the loop gives the derivatives of its loop outputs with respect to its loop inputs
+    (:meth:`~cosim.units.protocol.Unit.differentiator`: FMI ``getDirectionalDerivative``), one call per loop input
+    (a column of its local Jacobian).  Seeding the tearing variables with the identity, the loop's links are
+    followed in their evaluation order: an input gets ``factor`` times its source output's row, an output the
+    unit's local Jacobian times its inputs' rows; the cut links' sources give dG/dx.  ``calls`` counts the
+    units' derivative calls (a finite-difference Jacobian costs one evaluation of G, a set and a get per link,
+    per tearing value instead).
+    """
+
+    def __init__(self, loop: Loop, links: Sequence[Link], functions: dict[str, Any],
+                 inputs: dict[str, list[ElementRef]], outputs: dict[str, list[ElementRef]]):
+        self._links = links
+        self._loop = loop
+        self._functions = functions
+        self._inputs = inputs
+        self._outputs = {u: {r: i for i, r in enumerate(refs)} for u, refs in outputs.items()}
+        self.calls = 0
+
+    @classmethod
+    def of(cls, loop: Loop, units: Mapping[str, Unit], links: Sequence[Link]) -> "LoopDerivatives | None":
+        """The derivatives of ``loop``, or None when a unit on it gives none for its loop ports."""
+        inputs: dict[str, list[ElementRef]] = {}
+        outputs: dict[str, list[ElementRef]] = {}
+        for i in (*loop.links, *loop.torn):
+            link = links[i]
+            for ref in link.source.refs:
+                if ref not in outputs.setdefault(link.source.unit, []):
+                    outputs[link.source.unit].append(ref)
+            for ref in link.target.refs:
+                if ref not in inputs.setdefault(link.target.unit, []):
+                    inputs[link.target.unit].append(ref)
+        functions = {}
+        for unit in outputs:
+            function = units[unit].differentiator(outputs[unit], inputs.get(unit, []))
+            if function is None:
+                return None
+            functions[unit] = function
+        return cls(loop, links, functions, inputs, outputs)
+
+    def _local(self, unit: str) -> np.ndarray:
+        """The unit's d(loop outputs)/d(loop inputs) now: one derivative call per input."""
+        n = len(self._inputs.get(unit, []))
+        columns = []
+        for j in range(n):
+            seed = [0.0] * n
+            seed[j] = 1.0
+            columns.append(self._functions[unit](seed))
+            self.calls += 1
+        return np.column_stack(columns) if columns else np.zeros((len(self._outputs[unit]), 0))
+
+    def jacobian(self, n: int) -> np.ndarray:
+        """dG/dx (n by n) at the units' current inputs (the point of the last evaluation of G)."""
+        rows: dict[tuple[str, ElementRef], np.ndarray] = {}
+        k = 0
+        for i in self._loop.torn:  # the tearing variables, in the order of x
+            for ref in self._links[i].target.refs:
+                rows[(self._links[i].target.unit, ref)] = np.eye(n)[k]
+                k += 1
+        local: dict[str, np.ndarray] = {}
+        zero = np.zeros(n)
+
+        def output_row(unit: str, ref: ElementRef) -> np.ndarray:
+            if unit not in local:
+                local[unit] = self._local(unit)
+            inputs = self._inputs.get(unit, [])
+            below = np.array([rows.get((unit, r), zero) for r in inputs]).reshape(len(inputs), n)
+            return local[unit][self._outputs[unit][ref]] @ below
+
+        for i in self._loop.links:  # evaluation order: an input's row is set before its unit's outputs are used
+            link = self._links[i]
+            for source, target in zip(link.source.refs, link.target.refs):
+                rows[(link.target.unit, target)] = link.factor * output_row(link.source.unit, source)
+        return np.array([self._links[i].factor * output_row(self._links[i].source.unit, ref)
+                         for i in self._loop.torn for ref in self._links[i].source.refs]).reshape(n, n)
 
 
 class CouplingRuntime:

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any, Mapping
 from cosim.errors import Problem, SpecError, did_you_mean, json_path
 from cosim.master.algorithms import ALGORITHMS as MASTER_ALGORITHMS
 from cosim.master.algorithms import DEFAULT_ALGORITHM
+from cosim.master.loops import JACOBIANS as LOOP_JACOBIANS
 from cosim.master.loops import METHODS as LOOP_METHODS
 from cosim.master.loops import LoopSettings
 from cosim.master.observers import REDUCERS
@@ -184,6 +185,8 @@ def spec_schema() -> dict:
     algorithm.update(enum=list(ALGORITHMS), default=DEFAULT_ALGORITHM)  # the file repeats them for editors
     method = schema["$defs"]["experiment"]["properties"]["loop_solver"]["properties"]["method"]
     method.update(enum=list(LOOP_METHODS), default=LoopSettings().method)
+    jacobian = schema["$defs"]["experiment"]["properties"]["loop_solver"]["properties"]["jacobian"]
+    jacobian.update(enum=list(LOOP_JACOBIANS), default=LoopSettings().jacobian)
     return schema
 
 
@@ -402,7 +405,8 @@ def _loop_settings(raw: dict) -> LoopSettings:
     default = LoopSettings()
     return LoopSettings(method=raw.get("method", default.method),
                         tolerance=float(raw.get("tolerance", default.tolerance)),
-                        max_iterations=int(raw.get("max_iterations", default.max_iterations)))
+                        max_iterations=int(raw.get("max_iterations", default.max_iterations)),
+                        jacobian=raw.get("jacobian", default.jacobian))
 
 
 def build_spec(raw: dict, path: Path) -> Spec:

@@ -335,6 +335,16 @@ class Unit(abc.ABC):
         type, in any process), for :meth:`restore_state`; raises UnitError for bytes it cannot take."""
         raise UnitError(self.name, "cannot deserialize a state (FMI canSerializeFMUstate is not set)", None)
 
+    # Directional derivatives: an optional capability (FMI getDirectionalDerivative); the loop solver's Newton uses
+    # them for its Jacobian where every unit on a loop gives them, finite differences otherwise
+
+    def differentiator(self, outputs: Sequence[ElementRef], inputs: Sequence[ElementRef]
+                       ) -> Callable[[Sequence[float]], Any] | None:
+        """A function of a seed on ``inputs`` (one float per element) giving the directional derivative of
+        ``outputs`` (a float array, one per element) at the unit's current inputs and states; each call raises
+        UnitError when the unit fails.  None (the default) when the unit cannot give it for these elements."""
+        return None
+
     def can_tune(self, variable: str) -> bool:
         """Whether ``variable`` may be set after initialization, between steps: an input, or a parameter whose
         variability is ``tunable`` (FMI); a fixed parameter is part of what a saved state holds and stays."""

@@ -3,6 +3,8 @@
  * The output follows the input at once (direct feed-through): it is recomputed whenever
  * it is read after an input was set (model_calculate), also between steps, which is what
  * a master solving a loop does (set the input, get the output, no step).
+ * It gives directional derivatives (model_partial): dy/du = c1 + 3 c3 u^2 - a sin(u), dy/dw = 1,
+ * which a master's loop Newton uses instead of finite differences.
  */
 #include <math.h>
 
@@ -29,4 +31,16 @@ Status model_do_step(ModelInstance *comp, double t, double h) {
     (void)t;
     (void)h;
     return model_calculate(comp);  /* no state: the output follows the input */
+}
+
+Status model_partial(ModelInstance *comp, size_t unknown, size_t unknownElement, size_t known, size_t knownElement,
+                     double *value) {
+    const ModelData *d = &comp->d;
+    (void)unknownElement;
+    (void)knownElement;  /* scalars only */
+    *value = 0.0;
+    if (unknown != VR_Y) return OK;  /* y is the only variable that depends on anything */
+    if (known == VR_U) *value = d->c1 + 3.0 * d->c3 * d->u * d->u - d->a * sin(d->u);
+    else if (known == VR_W) *value = 1.0;
+    return OK;
 }

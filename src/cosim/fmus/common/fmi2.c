@@ -178,10 +178,27 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t n
     *s = NULL;
     return (fmi2Status)framework_deserialize_state(COMP, b, n, s);
 }
-fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference u[], size_t nu,
-                                        const fmi2ValueReference z[], size_t nz, const fmi2Real du[], fmi2Real dz[]) {
-    (void)u; (void)nu; (void)z; (void)nz; (void)du; (void)dz;
-    NOT_SUPPORTED("fmi2GetDirectionalDerivative");
+/* FMI 2.0 argument order: the unknowns z (vUnknown_ref) first, then the knowns u (vKnown_ref) and their seed. */
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference z[], size_t nz,
+                                        const fmi2ValueReference u[], size_t nu, const fmi2Real du[], fmi2Real dz[]) {
+    size_t *index, *element, i;
+    Status status = OK;
+    if (!PROVIDES_DIRECTIONAL_DERIVATIVE) NOT_SUPPORTED("fmi2GetDirectionalDerivative");
+    index = malloc((nz + nu + 1) * sizeof(size_t));
+    element = malloc((nz + nu + 1) * sizeof(size_t));
+    if (!index || !element) {
+        free(index);
+        free(element);
+        logError(COMP, "fmi2GetDirectionalDerivative: out of memory");
+        return fmi2Error;
+    }
+    for (i = 0; i < nz + nu && status <= Warning; i++)
+        status = lookup(COMP, i < nz ? z[i] : u[i - nz], VT_REAL, "fmi2GetDirectionalDerivative", &index[i], &element[i]);
+    if (status <= Warning)
+        status = framework_directional_derivative(COMP, index, element, nz, index + nz, element + nz, nu, du, dz);
+    free(index);
+    free(element);
+    return (fmi2Status)status;
 }
 
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,

@@ -227,12 +227,48 @@ fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte b[], si
     return (fmi3Status)framework_deserialize_state(COMP, (const char *)b, n, s);
 }
 
+/* Array variables contribute one seed / sensitivity entry per element, in order. */
 fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[], size_t nUnknowns,
                                         const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[],
                                         size_t nSeed, fmi3Float64 sensitivity[], size_t nSensitivity) {
-    (void)unknowns; (void)nUnknowns; (void)knowns; (void)nKnowns; (void)seed; (void)nSeed; (void)sensitivity;
-    (void)nSensitivity;
-    NOT_SUPPORTED("fmi3GetDirectionalDerivative");
+    size_t *index, *element, i, j, n = 0, nz = 0;
+    Status status = OK;
+    if (!PROVIDES_DIRECTIONAL_DERIVATIVE) NOT_SUPPORTED("fmi3GetDirectionalDerivative");
+    for (i = 0; i < nUnknowns + nKnowns; i++) {
+        fmi3ValueReference vr = i < nUnknowns ? unknowns[i] : knowns[i - nUnknowns];
+        if (vr >= N_VARIABLES || vr == 0) {
+            logError(COMP, "fmi3GetDirectionalDerivative: value reference %u is not a variable of this model", (unsigned)vr);
+            return fmi3Error;
+        }
+        n += VARIABLES[vr].size;
+        if (i < nUnknowns) nz = n;
+    }
+    if (nz != nSensitivity || n - nz != nSeed) {
+        logError(COMP, "fmi3GetDirectionalDerivative: %zu seed and %zu sensitivity values given, the variables have %zu "
+                 "and %zu elements", nSeed, nSensitivity, n - nz, nz);
+        return fmi3Error;
+    }
+    index = malloc((n + 1) * sizeof(size_t));
+    element = malloc((n + 1) * sizeof(size_t));
+    if (!index || !element) {
+        free(index);
+        free(element);
+        logError(COMP, "fmi3GetDirectionalDerivative: out of memory");
+        return fmi3Error;
+    }
+    n = 0;
+    for (i = 0; i < nUnknowns + nKnowns; i++) {
+        fmi3ValueReference vr = i < nUnknowns ? unknowns[i] : knowns[i - nUnknowns];
+        for (j = 0; j < VARIABLES[vr].size; j++, n++) {
+            index[n] = vr;
+            element[n] = j;
+        }
+    }
+    status = framework_directional_derivative(COMP, index, element, nz, index + nz, element + nz, n - nz, seed,
+                                              sensitivity);
+    free(index);
+    free(element);
+    return (fmi3Status)status;
 }
 fmi3Status fmi3GetAdjointDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[], size_t nUnknowns,
                                     const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[],

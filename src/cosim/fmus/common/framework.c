@@ -267,3 +267,46 @@ Status check_finite(ModelInstance *comp, const char *name, size_t element, doubl
         logError(comp, "%s[%zu] = %g at t=%g is not a finite number", name, element + 1, value, comp->time);
     return Error;
 }
+
+Status framework_directional_derivative(ModelInstance *comp, const size_t unknowns[], const size_t unknownElements[],
+                                        size_t nUnknowns, const size_t knowns[], const size_t knownElements[],
+                                        size_t nKnowns, const double seed[], double sensitivity[]) {
+#if PROVIDES_DIRECTIONAL_DERIVATIVE
+    size_t i, j;
+    Status status;
+    if (comp->state != STATE_INITIALIZATION && comp->state != STATE_STEP && comp->state != STATE_EVENT &&
+        comp->state != STATE_CONTINUOUS) {
+        logError(comp, "getDirectionalDerivative is only allowed after enterInitializationMode (and not after an error)");
+        return Error;
+    }
+    for (i = 0; i < nUnknowns; i++)
+        if (VARIABLES[unknowns[i]].type != VT_REAL) {
+            logError(comp, "getDirectionalDerivative: '%s' is not a Real variable", VARIABLES[unknowns[i]].name);
+            return Error;
+        }
+    for (j = 0; j < nKnowns; j++)
+        if (VARIABLES[knowns[j]].type != VT_REAL) {
+            logError(comp, "getDirectionalDerivative: '%s' is not a Real variable", VARIABLES[knowns[j]].name);
+            return Error;
+        }
+    status = framework_update(comp);  /* partials at the current inputs, as the outputs a get would give */
+    if (status > Warning) return status;
+    for (i = 0; i < nUnknowns; i++) {
+        double sum = 0.0;
+        for (j = 0; j < nKnowns; j++) {
+            double partial = 0.0;
+            if (seed[j] == 0.0) continue;
+            status = model_partial(comp, unknowns[i], unknownElements[i], knowns[j], knownElements[j], &partial);
+            if (status > Warning) return status;
+            sum += partial * seed[j];
+        }
+        sensitivity[i] = sum;
+    }
+    return OK;
+#else
+    (void)unknowns; (void)unknownElements; (void)nUnknowns; (void)knowns; (void)knownElements; (void)nKnowns;
+    (void)seed; (void)sensitivity;
+    logError(comp, "getDirectionalDerivative is not supported by this FMU");
+    return Error;
+#endif
+}

@@ -122,6 +122,19 @@ void framework_free_state(void **state);
 size_t framework_serialized_size(void);
 Status framework_serialize_state(ModelInstance *comp, const void *state, char *bytes, size_t size);
 Status framework_deserialize_state(ModelInstance *comp, const char *bytes, size_t size, void **state);
+/* Directional derivatives (model.json "directionalDerivatives": true; PROVIDES_DIRECTIONAL_DERIVATIVE):
+ *   Status model_partial(ModelInstance *comp, size_t unknown, size_t unknownElement, size_t known,
+ *                        size_t knownElement, double *value)
+ * gives d(unknown[unknownElement]) / d(known[knownElement]) at the current inputs and states (indices into
+ * VARIABLES, 0-based elements; 0 where the unknown does not depend on the known).  The framework composes
+ * fmi2GetDirectionalDerivative / fmi3GetDirectionalDerivative from it: dz_i = sum_j partial(z_i, v_j) dv_j. */
+Status model_partial(ModelInstance *comp, size_t unknown, size_t unknownElement, size_t known, size_t knownElement,
+                     double *value);
+/* sensitivity[i] = sum_j d(unknown i)/d(known j) * seed[j] over scalar elements given as (index, element) pairs;
+ * Error when the model supplies no partials or a variable is not Real. */
+Status framework_directional_derivative(ModelInstance *comp, const size_t unknowns[], const size_t unknownElements[],
+                                        size_t nUnknowns, const size_t knowns[], const size_t knownElements[],
+                                        size_t nKnowns, const double seed[], double sensitivity[]);
 /* Make outputs current (calls model_calculate when inputs changed). */
 Status framework_update(ModelInstance *comp);
 /* Where element `element` of variable `index` lives; NULL for time. */

@@ -176,6 +176,27 @@ class FmuUnitType(UnitType):
             self._digest = file_digest(self.path)
         return self._digest
 
+    def provides_directional_derivatives(self) -> bool:
+        """Whether the FMU gives directional derivatives for the interface it runs as (FMI 2.0
+        ``providesDirectionalDerivative``; FMI 3.0 ``providesDirectionalDerivatives``, which fmpy does not read:
+        taken from modelDescription.xml here, once)."""
+        if getattr(self, "_derivatives", None) is None:
+            md = self.model_description()
+            interface = md.coSimulation if self.interface == CO_SIMULATION else md.modelExchange
+            if md.fmiVersion.startswith("2"):
+                self._derivatives = bool(getattr(interface, "providesDirectionalDerivative", False))
+            else:
+                from lxml import etree
+
+                with zipfile.ZipFile(self.path) as zf:
+                    data = zf.read("modelDescription.xml")  # already parsed by fmpy: a checked, bounded file
+                parser = etree.XMLParser(resolve_entities=False, no_network=True, huge_tree=False)
+                element = etree.fromstring(data, parser).find(
+                    "CoSimulation" if self.interface == CO_SIMULATION else "ModelExchange")
+                self._derivatives = element is not None and \
+                    element.get("providesDirectionalDerivatives") in ("true", "1")
+        return self._derivatives
+
     def model_description(self) -> Any:
         """fmpy's ModelDescription, after checking the FMU can run here.
 

@@ -75,6 +75,12 @@ class Fmi2Unit(FmiInstance):
         args = (self._component, group.vrs, group.n_vrs, group.values)
         return partial(get, *args), partial(put, *args)
 
+    _derivative_call_name = "fmi2GetDirectionalDerivative"
+
+    def _derivative_call(self, unknowns: Any, knowns: Any, seed: Any, sensitivity: Any) -> Callable[[], int]:
+        return partial(library(self._slave).fmi2GetDirectionalDerivative, self._component, unknowns, len(unknowns),
+                       knowns, len(knowns), seed, sensitivity)
+
     def setup(self, start_time: float, stop_time: float | None) -> None:
         self.time = start_time
         self._guard("fmi2SetupExperiment",

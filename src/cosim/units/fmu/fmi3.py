@@ -93,6 +93,12 @@ class Fmi3Unit(FmiInstance):
             raise
         self._guard("fmi3ExitConfigurationMode", self._slave.exitConfigurationMode)
 
+    _derivative_call_name = "fmi3GetDirectionalDerivative"
+
+    def _derivative_call(self, unknowns: Any, knowns: Any, seed: Any, sensitivity: Any) -> Callable[[], int]:
+        return partial(library(self._slave).fmi3GetDirectionalDerivative, self._component, unknowns, len(unknowns),
+                       knowns, len(knowns), seed, len(seed), sensitivity, len(sensitivity))
+
     def setup(self, start_time: float, stop_time: float | None) -> None:
         self.time = start_time
         self._start_time = start_time

@@ -346,6 +346,37 @@ class FmiInstance(Unit):
                     lambda: getattr(self._slave, self._fmpy_serialize[1])(bytes(data), state.pointer))
         return state
 
+    # Directional derivatives (FMI getDirectionalDerivative) -------------------
+
+    _derivative_call_name = ""  # fmi2GetDirectionalDerivative / fmi3GetDirectionalDerivative
+
+    def differentiator(self, outputs: Sequence[ElementRef], inputs: Sequence[ElementRef]
+                       ) -> Callable[[Sequence[float]], np.ndarray] | None:
+        # Co-simulation FMUs declaring them, on Real scalars (an FMI 3.0 array element would need the whole array)
+        if not self._plain_calls or not self.unit_type.provides_directional_derivatives():
+            return None
+        elements = [self.elements[r.variable][r.offset] for r in (*outputs, *inputs)]
+        if any(e.size != 1 or e.fmi_type not in ("Real", "Float64") for e in elements):
+            return None
+        unknowns = (self._vr_type * len(outputs))(*[e.value_reference for e in elements[:len(outputs)]])
+        knowns = (self._vr_type * len(inputs))(*[e.value_reference for e in elements[len(outputs):]])
+        seed, sensitivity = (ctypes.c_double * len(inputs))(), (ctypes.c_double * len(outputs))()
+        call = self._derivative_call(unknowns, knowns, seed, sensitivity)
+        view = np.frombuffer(sensitivity, dtype=float)
+
+        def derivative(values: Sequence[float]) -> np.ndarray:
+            seed[:] = list(values)
+            status = call()
+            if status > 1:
+                raise self.fail_status(self._derivative_call_name, status)
+            return view.copy()
+
+        return derivative
+
+    def _derivative_call(self, unknowns: Any, knowns: Any, seed: Any, sensitivity: Any) -> Callable[[], int]:
+        """The version's getDirectionalDerivative call on these buffers, returning the FMI status."""
+        raise NotImplementedError
+
     def allow_restore(self) -> None:
         # doStep's noSetFMUStatePriorToCurrentPoint is true (do_step's default) until a master may restore:
         # then this instance's do_step passes false.  The fixed-step path keeps the plain method.
