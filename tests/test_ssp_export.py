@@ -185,9 +185,10 @@ def test_implementation_and_solver_settings_survive_the_export(tmp_path, experim
         "name": "solvers",
         "units": {"src": {"fmu": "builtin:linear_ode_fmi2", "parameters": {"a": 0.0, "b": 0.0, "x0": 2.0}},
                   "me": {"fmu": "builtin:linear_ode_fmi2", "interface": "model-exchange", "tolerance": 1e-8,
-                         "max_step": 0.01, "parameters": {"a": -1.0, "b": 1.0, "x0": 0.0}},
+                         "max_step": 0.01, "parameters": {"a": -1.0, "b": 1.0, "x0": 0.0},
+                         **({"record_events": True} if experiment["algorithm"] != "adaptive" else {})},
                   "me_default": {"fmu": "builtin:linear_ode_fmi3", "interface": "model-exchange",
-                                 "parameters": {"a": -2.0, "b": 1.0, "x0": 0.0}}},
+                                 "coupled_model_exchange": False, "parameters": {"a": -2.0, "b": 1.0, "x0": 0.0}}},
         "connections": [{"from": "src.y", "to": "me.u"}, {"from": "src.y", "to": "me_default.u"}],
         "experiment": {"stop": 1.0, "step": 0.1, **experiment},
         "record": ["src.*", "me.*", "me_default.*"],  # as the SSP records: every unit's ports
@@ -215,6 +216,8 @@ def test_implementation_and_solver_settings_survive_the_export(tmp_path, experim
         twin = again.units[name]
         assert (twin.unit_type.interface, twin.unit_type.solver_settings) == \
             (unit.unit_type.interface, unit.unit_type.solver_settings), name
+        options = ("record_events", "coupled_model_exchange")  # cosim's own, in the component's org.cosim annotation
+        assert {k: twin.spec.options.get(k) for k in options} == {k: unit.spec.options.get(k) for k in options}
     first, second = (Execution(s, record=True).run() for s in (original, again))
     assert first.ok and second.ok, (first.message, second.message)
     assert np.array_equal(first.traces.to_numpy(), second.traces.to_numpy())

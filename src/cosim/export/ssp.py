@@ -12,8 +12,9 @@ not convert), ``DefaultExperiment`` and the fixed step size as OMSimulator
 2's ``FixedStepMaster``, OMSimulator 3's ``oms_ma`` solver and OSP's
 ``FixedStepAlgorithm`` annotation, a model-exchange unit's ``tolerance`` and
 ``max_step`` as an OMSimulator 3 ``cvode`` solver assigned to its component,
-and cosim's own master algorithm and experiment options as a ``org.cosim``
-annotation: reading the archive back gives the same experiment.
+and cosim's own master algorithm and experiment options (and a unit's
+``record_events`` and ``coupled_model_exchange``) as ``org.cosim``
+annotations: reading the archive back gives the same experiment.
 Array ports are connected element by element (``x[1]`` .. ``x[n]``: the
 scalar variables of an FMI 2.0 FMU, as tools reading FMI 2.0 expect; the
 elements of an FMI 3.0 array).  Next to the
@@ -35,6 +36,7 @@ from typing import Any
 from lxml import etree
 
 from cosim.errors import Problem, SpecError
+from cosim.ssp.annotations import COSIM_UNIT_OPTIONS
 from cosim.ssp.experiment import COSIM_EXPERIMENT_FLAGS, COSIM_EXPERIMENT_GROUPS
 from cosim.ssp.xml import NS, schema_problems
 from cosim.system.builder import System
@@ -197,9 +199,14 @@ def _ssd(system: System, fmus: dict[str, tuple[str, str]], resources: Path) -> A
                 etree.tostring(ssv.getroottree(), xml_declaration=True, encoding="UTF-8", pretty_print=True))
             bindings = _e(component, "ssd", "ParameterBindings")
             _e(bindings, "ssd", "ParameterBinding", source=f"resources/{name}.ssv")
+        options = {k: unit.spec.options[k] for k in COSIM_UNIT_OPTIONS if unit.spec.options.get(k) is not None}
+        if name in solvers.assigned or options:
+            component_annotations = _e(component, "ssd", "Annotations")
         if name in solvers.assigned:  # OMSimulator 3's form: the component names the solver the system defines
-            _e(_e(_e(_e(component, "ssd", "Annotations"), "ssc", "Annotation", type="org.openmodelica"),
-                  "oms", "Annotations"), "oms", "SimulationInformation", name=solvers.assigned[name])
+            _e(_e(_e(component_annotations, "ssc", "Annotation", type="org.openmodelica"), "oms", "Annotations"),
+               "oms", "SimulationInformation", name=solvers.assigned[name])
+        if options:  # cosim's own options of the unit, read back by cosim.ssp.annotations.cosim_unit_options
+            _e(_e(component_annotations, "ssc", "Annotation", type="org.cosim"), "cosim", "Unit", **options)
     connections = _e(top, "ssd", "Connections")
     for c in system.connections:
         for start, end in zip(_element_names(c.source), _element_names(c.target), strict=True):

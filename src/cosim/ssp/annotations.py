@@ -22,6 +22,7 @@ the tools' own elements vary between versions, so elements are matched by local 
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -29,6 +30,8 @@ from cosim.errors import AnnotationNumberError
 from cosim.ssp.xml import tag
 
 READ_TYPES = ("org.openmodelica", "com.opensimulationplatform", "org.cosim")
+# a unit's cosim options an SSP has no place for, on its component's org.cosim annotation (cosim.export.ssp)
+COSIM_UNIT_OPTIONS = ("record_events", "coupled_model_exchange")
 _ME_METHODS = ("cvode", "euler")
 _VARIABLE_MASTERS = ("oms_mav", "oms_mav2")
 _UNREAD_KEYS = ("initialStepSize", "minimumStepSize", "absoluteTolerance")
@@ -151,6 +154,30 @@ def step_size_hint(component: Any) -> float | None:
             if _local(child) == "StepSizeHint" and child.get("value"):
                 return number(child, "value")
     return None
+
+
+def json_scalar(text: str) -> Any:
+    """An attribute's text as the JSON value it was written from: Boolean, integer, number or string."""
+    if text in ("true", "false"):
+        return text == "true"
+    if re.fullmatch(r"[+-]?\d+", text):
+        return int(text)
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def cosim_unit_options(component: Any) -> dict[str, Any]:
+    """A unit's own cosim options (:data:`COSIM_UNIT_OPTIONS`) from its component's ``org.cosim`` annotation,
+    ``<cosim:Unit record_events="true"/>`` as :mod:`cosim.export.ssp` writes it; their form is the spec's,
+    checked with it."""
+    options: dict[str, Any] = {}
+    for annotation in own_annotations(component, "org.cosim"):
+        for child in annotation:
+            if _local(child) == "Unit":
+                options.update({k: json_scalar(v) for k, v in child.attrib.items() if k in COSIM_UNIT_OPTIONS})
+    return options
 
 
 def cvode_settings(attributes: dict[str, str]) -> dict[str, float]:

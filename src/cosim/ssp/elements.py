@@ -11,6 +11,7 @@ from typing import Any
 from cosim.errors import AnnotationNumberError, did_you_mean
 from cosim.ssp.annotations import (
     component_solver,
+    cosim_unit_options,
     cvode_settings,
     read_system_solvers,
     step_size_hint,
@@ -132,6 +133,7 @@ def _read_component(reading: Reading, element: Any, path: tuple[str, ...]) -> No
     node.fmu = fmu
     if not _choose_interface(reading, node):
         return node
+    node.options = cosim_unit_options(element)
     from cosim.units.fmu.description import FmuProblems, FmuUnitType
 
     try:

@@ -4,12 +4,11 @@ experiment options (its ``org.cosim`` annotation); and one note per kind of tool
 
 from __future__ import annotations
 
-import re
 from typing import Any
 
 from cosim.errors import AnnotationNumberError
 from cosim.master.algorithms import ALGORITHMS
-from cosim.ssp.annotations import number, unread_annotation_types
+from cosim.ssp.annotations import json_scalar, number, unread_annotation_types
 from cosim.ssp.reading import Reading
 from cosim.ssp.xml import tag
 
@@ -69,24 +68,12 @@ def _cosim_experiment(element: Any) -> dict:
     experiment: dict[str, Any] = {"algorithm": element.get("algorithm")}
     for flag in COSIM_EXPERIMENT_FLAGS:
         if element.get(flag) is not None:
-            experiment[flag] = _scalar(element.get(flag))
+            experiment[flag] = json_scalar(element.get(flag))
     for child in element:
         local = child.tag.split("}")[-1] if isinstance(child.tag, str) else ""
         if local in COSIM_EXPERIMENT_GROUPS:
-            experiment[local] = {key: _scalar(value) for key, value in child.attrib.items()}
+            experiment[local] = {key: json_scalar(value) for key, value in child.attrib.items()}
     return experiment
-
-
-def _scalar(text: str) -> Any:
-    """An attribute's text as the JSON value it was written from: Boolean, integer, number or string."""
-    if text in ("true", "false"):
-        return text == "true"
-    if re.fullmatch(r"[+-]?\d+", text):
-        return int(text)
-    try:
-        return float(text)
-    except ValueError:
-        return text
 
 
 def note_unread(reading: Reading, root: Any) -> None:

@@ -40,6 +40,7 @@ class Node:
     unit_definitions: dict[str, Any] = field(default_factory=dict)  # component: the FMU's <UnitDefinitions>
     interface: str | None = None  # component: "model-exchange" | "co-simulation" (implementation, solver)
     settings: dict[str, float] = field(default_factory=dict)  # component: tolerance, max_step (from a solver)
+    options: dict[str, Any] = field(default_factory=dict)  # component: cosim's own unit options (org.cosim)
 
 
 @dataclass

@@ -109,4 +109,4 @@ def _raw_unit(reading: Reading, node: Node) -> dict:
             unit["columns"] = list(node.connectors)
         return unit
     return {"fmu": files.reference(node.fmu), **({"interface": node.interface} if node.interface else {}),
-            **node.settings}
+            **node.settings, **node.options}
