@@ -205,3 +205,21 @@ def test_pareto_without_senses_asks_for_objectives(tmp_path, capsys):
     path = make_sweep_table(tmp_path / "bare", metadata=False)
     assert main(["pareto", str(path)]) == 2
     assert "--min OBJ" in capsys.readouterr().err
+
+
+def test_pareto_of_a_large_table_with_its_pivot_prefilter(monkeypatch):
+    """Above PREFILTER_ABOVE rows the rows a few pivots dominate are dropped first: the front is the same as the
+    pairwise reference's, ties, infinities, NaN and mixed senses included (the threshold lowered so the reference
+    stays fast)."""
+    from cosim.analysis import pareto
+
+    monkeypatch.setattr(pareto, "PREFILTER_ABOVE", 50)
+    rng = np.random.default_rng(4)
+    for k, senses in ((2, ["min", "max"]), (3, ["min", "min", "max"])):
+        v = rng.integers(0, 6, (400, k)).astype(float)
+        v[::17, 0] = np.inf
+        v[::23, -1] = np.nan
+        v[5] = v[6]  # a tie
+        expected = pareto_naive(v, senses)
+        assert 0 < expected.sum() < len(v)
+        assert np.array_equal(pareto_mask(v, senses), expected)

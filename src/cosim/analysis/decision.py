@@ -112,25 +112,30 @@ class Decision:
             out[rows] = scores(self.objective_values()[rows], [s for _, s in self.objectives], weights, self.method)
         return out
 
-    def ranking(self, top: int | None = None) -> np.ndarray:
-        """Row positions of the scored candidates, best first (at most ``top``)."""
-        score = self.scores()
-        order = rank_order(score)
-        order = order[np.isfinite(score[order])]
+    def ranking(self, top: int | None = None, score: np.ndarray | None = None) -> np.ndarray:
+        """Row positions of the scored candidates, best first, ties in row order (at most ``top``); ``score`` is
+        :meth:`scores` when the caller has it already."""
+        score = self.scores() if score is None else score
+        rows = np.flatnonzero(np.isfinite(score))
+        if top is not None and top < rows.size:  # sort only the rows that can be among the top (ties kept)
+            key = -score[rows]
+            rows = rows[key <= np.partition(key, top - 1)[top - 1]]
+        order = rows[rank_order(score[rows])]
         return order if top is None else order[:top]
 
     def profile(self, rows: Sequence[int]) -> np.ndarray:
         """Utilities in [0, 1] (1 best, scaled over the candidates) of ``rows`` for each objective, for a radar
         chart: a row that is not a candidate (filtered out, failed) gets NaN."""
         out = np.full((len(rows), len(self.objectives)), np.nan)
-        if not self.objectives:
+        if not self.objectives or not len(rows):
             return out
         candidates = np.flatnonzero(self.candidates())
         if candidates.size:
             u = utilities(self.objective_values()[candidates], [s for _, s in self.objectives])
-            where = {int(r): k for k, r in enumerate(candidates)}
+            where = np.full(len(self.table.df), -1)
+            where[candidates] = np.arange(candidates.size)
             for i, r in enumerate(rows):
-                if int(r) in where:
+                if where[int(r)] >= 0:
                     out[i] = u[where[int(r)]]
         return out
 

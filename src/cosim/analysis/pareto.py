@@ -11,7 +11,9 @@ Rules:
 
 Two objectives use an O(n log n) sweep over the lexicographically sorted
 unique rows; more objectives use a cull that removes, vectorized, every row
-dominated by the next front member (O(n * front size)).
+dominated by the next front member (O(n * front size)).  Above 10 000 rows, the rows dominated by a few
+pivots (each objective's best row, the best by the scaled sum) are dropped first: 10^6 random rows leave
+a few thousand.
 """
 
 from __future__ import annotations
@@ -22,6 +24,9 @@ import numpy as np
 
 if TYPE_CHECKING:
     from cosim.analysis.table import ResultsTable
+
+
+PREFILTER_ABOVE = 10_000  # rows from which the rows a few pivots dominate are dropped first
 
 
 def pareto_mask(values: np.ndarray, senses: Sequence[str] | None = None) -> np.ndarray:
@@ -45,11 +50,48 @@ def pareto_mask(values: np.ndarray, senses: Sequence[str] | None = None) -> np.n
     rows = values[finite] * signs  # every objective is now minimized
     if len(rows) == 0:
         return mask
-    unique, inverse = np.unique(rows, axis=0, return_inverse=True)
-    inverse = np.asarray(inverse).reshape(-1)
+    where = np.flatnonzero(finite)
+    if len(rows) > PREFILTER_ABOVE:  # most rows of a large table are dominated by one of a few good ones
+        keep = ~_dominated_by_pivots(rows)
+        rows, where = rows[keep], where[keep]
+    unique, inverse = _unique_rows(rows)
     front_unique = _front_2d(unique) if k == 2 else (_front_1d(unique) if k == 1 else _front_cull(unique))
-    mask[np.flatnonzero(finite)] = front_unique[inverse]
+    mask[where] = front_unique[inverse]
     return mask
+
+
+def _dominated_by_pivots(rows: np.ndarray) -> np.ndarray:
+    """Rows (all objectives minimised) dominated by one of a few pivot rows: the best of each column and the
+    best by the sum of the columns scaled to [0, 1].  Dropping them changes no other row's fate: whatever one of
+    them dominates, its pivot dominates too."""
+    columns = np.ascontiguousarray(rows.T)  # column by column: numpy's row-wise all/any are slow on n x 2
+    score = np.zeros(len(rows))
+    for c in columns:
+        lo, hi = c.min(), c.max()
+        with np.errstate(invalid="ignore"):
+            score += np.nan_to_num((c - lo) / (hi - lo) if hi > lo else 0.0 * c, nan=0.0, posinf=1.0, neginf=0.0)
+    pivots = {int(c.argmin()) for c in columns} | {int(score.argmin())}
+    out = np.zeros(len(rows), dtype=bool)
+    for i in pivots:
+        no_worse, better = np.ones(len(rows), dtype=bool), np.zeros(len(rows), dtype=bool)
+        for c, p in zip(columns, rows[i]):
+            no_worse &= c >= p
+            better |= c > p
+        out |= no_worse & better
+    return out
+
+
+def _unique_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(the distinct rows sorted lexicographically, the index of each row's distinct row): what
+    ``np.unique(rows, axis=0, return_inverse=True)`` gives, by one lexsort of the columns (np.unique sorts the rows
+    as opaque byte strings: 7 s for 10^6 rows against 0.2 s here; it also told -0.0 from 0.0)."""
+    order = np.lexsort(rows.T[::-1])  # the last key is the primary one: column 0 first
+    ordered = rows[order]
+    new = np.ones(len(rows), dtype=bool)
+    new[1:] = np.any(ordered[1:] != ordered[:-1], axis=1)
+    inverse = np.empty(len(rows), dtype=np.int64)
+    inverse[order] = np.cumsum(new) - 1
+    return ordered[new], inverse
 
 
 def _sign(sense: str) -> float:

@@ -29,7 +29,6 @@ import threading
 from functools import partial
 from typing import Any
 
-import numpy as np
 from bokeh.core.property.validation import without_property_validation
 from bokeh.layouts import column, row
 from bokeh.models import MultiChoice, Select, TabPanel, Tabs
@@ -39,18 +38,20 @@ from cosim.analysis.ranking import METHODS
 from cosim.analysis.rerun import port_groups, rerun_rows
 from cosim.analysis.room import data as D
 from cosim.analysis.room import views as V
+from cosim.analysis.room.clouds import BinnedCloud, PointCloud
 
 TOP = 20  # designs in the ranking table
 MAX_RERUN = 8  # designs re-run at once (one colour each)
 MAX_FAILURES_LISTED = 500  # rows of the table of designs not ok (the count says how many there are)
 WEBGL_ABOVE = 50_000  # rows from which the cloud is drawn through WebGL rather than canvas
+AGGREGATE_ABOVE = 200_000  # rows from which the cloud is an image of bins made on the server (clouds.BinnedCloud)
 
 
 class Room:
     """The models and callbacks of one document (module docstring)."""
 
-    @without_property_validation  # see refresh
-    def __init__(self, doc: Any, study: D.Study, webgl: bool | None = None):
+    @without_property_validation  # the cloud's masks: bokeh would check their n booleans one by one
+    def __init__(self, doc: Any, study: D.Study, webgl: bool | None = None, aggregate_above: int | None = None):
         self.doc, self.study = doc, study
         self.decision = Decision(study.table)
         table = study.table
@@ -61,15 +62,20 @@ class Room:
         self._weight_sliders: dict[str, Any] = {}
         self.ranking = self.radar = None  # the Decide tab's, built when it is first shown
         columns = self.decision.filters.columns
+        if aggregate_above is None:
+            aggregate_above = AGGREGATE_ABOVE
         if webgl is None:  # canvas draws a few ten thousand points faster than software WebGL (benchmarks)
             webgl = len(study.ids) > WEBGL_ABOVE
 
         # -- Points
         self.choosers = V.axis_choosers(columns, self.x, self.y, self.colour)
-        self.cloud = V.cloud(D.points(study, self.decision, self.x, self.y, self.colour, None),
-                             D.status_palette(study.status),
-                             table.label(self.x), table.label(self.y),
-                             table.label(self.colour) if self.colour else None, webgl)
+        axes = (self.x, self.y, self.colour)
+        self.cloud: PointCloud | BinnedCloud = \
+            BinnedCloud(study, self.decision, axes, self._on_cloud_selection, doc) \
+            if len(study.ids) > aggregate_above else PointCloud(study, self.decision, axes, self._on_cloud_selection,
+                                                                webgl)
+        if isinstance(self.cloud, BinnedCloud):
+            self.choosers["size"].disabled = True  # a bin has no size
         self.count = V.text("", "count")
         first = (table.parameter_columns() + columns)[0]
         self.filter_column = Select(title="filter by", value=first, options=list(columns), name="filter-column",
@@ -104,7 +110,7 @@ class Room:
         self._rebuild_weights()
         self.refresh()
         self.doc.title = f"cosim: {study.name}"
-        points = row(column(row(*self.choosers.values()), self.cloud["figure"], self.count,
+        points = row(column(row(*self.choosers.values()), self.cloud.figure, self.count,
                             row(self.histogram_column), self.histogram["figure"],
                             *self._failures()),
                      column(self.filter_column, self.filter, self.reset, self.narrowed))
@@ -151,28 +157,14 @@ class Room:
         self.filter_column.on_change("value", self._on_filter_column)
         self.reset.on_click(self._on_reset)
         self.histogram_column.on_change("value", lambda attr, old, new: self._refresh_histogram())
-        self.cloud["source"].selected.on_change("indices", self._on_cloud_selection)
         self.minimise.on_change("value", self._on_objectives)
         self.maximise.on_change("value", self._on_objectives)
         self.method.on_change("value", self._on_method)
         self.rerun_button.on_click(self._on_rerun)
 
-    @without_property_validation
     def _on_axis(self, which: str, attr: str, old: Any, new: Any) -> None:
-        value = None if new == V.NONE else new
-        setattr(self, which, value)
-        self.cloud["source"].data.update(self._point_columns(which))
-        if which in ("x", "y"):
-            axis = self.cloud["figure"].xaxis if which == "x" else self.cloud["figure"].yaxis
-            axis.axis_label = self.study.table.label(value)
-        if which == "colour":
-            V.colour_by(self.cloud["mapper"], self.cloud["colour_bar"], self.cloud["source"].data["c"],
-                        self.study.table.label(value) if value else None)
-
-    def _point_columns(self, which: str) -> dict[str, Any]:
-        columns = D.points(self.study, self.decision, self.x, self.y, self.colour, self.size)
-        keys = {"x": ["x"], "y": ["y"], "colour": ["c"], "size": ["s"]}[which]
-        return {k: columns[k] for k in keys}
+        setattr(self, which, None if new == V.NONE else new)
+        self.cloud.set_axes(self.x, self.y, self.colour, self.size)
 
     def _filter_state(self, name: str) -> dict[str, Any]:
         """The range filter's properties showing column ``name``: its bounds and its current range."""
@@ -206,8 +198,8 @@ class Room:
         self.filter.update(**self._filter_state(self.filter.tags[0]))
         self.refresh()
 
-    def _on_cloud_selection(self, attr: str, old: Any, new: Any) -> None:
-        self.decision.select(list(new))
+    def _on_cloud_selection(self, rows: list[int]) -> None:
+        self.decision.select(rows)
         self._refresh_selection()
 
     def _on_ranking_selection(self, attr: str, old: Any, new: Any) -> None:
@@ -215,7 +207,7 @@ class Room:
         rows = self.ranking.source.data["row"]
         chosen = [int(rows[i]) for i in new]
         if chosen:
-            self.cloud["source"].selected.indices = chosen  # fires _on_cloud_selection
+            self.cloud.select(chosen)
 
     def _on_objectives(self, attr: str, old: Any, new: Any) -> None:
         objectives = [(c, "min") for c in self.minimise.value] + \
@@ -245,12 +237,10 @@ class Room:
         self.weights.children = [self._weight_sliders[name] for name in self.decision.weights]
 
     # -- refreshing ------------------------------------------------------------------------------------------
-    @without_property_validation  # bokeh would check each of the 5 masks' n booleans one by one (seconds at 10^5)
     def refresh(self) -> None:
         """Everything that depends on the filters and the objectives."""
         masks = D.masks(self.study, self.decision)
-        for layer, mask in masks.items():
-            self.cloud["filters"][layer].booleans = mask
+        self.cloud.show(masks)
         active = int((~masks["greyed"]).sum())
         front = int(masks["front"].sum())
         self._refresh_narrowed()
@@ -294,12 +284,9 @@ class Room:
         self.radar["spokes"].data = {"x": data["spoke_x"], "y": data["spoke_y"], "label": data["labels"]}
         self.radar["designs"].data = V.radar_columns(data, [self.study.ids[r] for r in data["rows"]])
 
-    @without_property_validation
     def _refresh_selection(self) -> None:
         rows = self.decision.selection
-        mask = np.zeros(len(self.study.ids), dtype=bool)
-        mask[rows] = True
-        self.cloud["filters"]["selected"].booleans = mask
+        self.cloud.show_selection(rows)
         self._refresh_radar()
         if not rows:
             self.selected.text = "<p>No design selected: click points of the cloud or rows of the ranking.</p>"
@@ -371,6 +358,7 @@ class Room:
             + (f" ({html.escape(run.result.message)})" if run.result.message else "") for run in outcome)
 
 
-def make_document(doc: Any, study: D.Study, webgl: bool | None = None) -> Room:
+def make_document(doc: Any, study: D.Study, webgl: bool | None = None, aggregate_above: int | None = None
+                  ) -> Room:
     """Fill ``doc`` (a new browser tab) with the room of ``study``."""
-    return Room(doc, study, webgl)
+    return Room(doc, study, webgl, aggregate_above)

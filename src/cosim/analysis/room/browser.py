@@ -118,7 +118,8 @@ def set_filter(browser: Any, column: str, lo: float, hi: float, watch: str = COU
     """Narrow ``column`` to [lo, hi] with the page's range filter: choose the column (the server sets the slider
     to it), then set the range; (the new value of ``watch``, seconds from setting the range until drawn)."""
     browser.execute_script("Bokeh.documents[0].get_model_by_name('filter-column').value = arguments[0];", column)
-    wait_for(browser, f"const f = doc.get_model_by_name('filter'); return doc.is_idle && f.tags[0] === {json.dumps(column)};")
+    wait_for(browser, "const f = doc.get_model_by_name('filter'); "
+                      f"return doc.is_idle && f.tags[0] === {json.dumps(column)};")
     return set_and_wait(browser, "filter", "value", [float(lo), float(hi)], watch)
 
 
@@ -157,6 +158,20 @@ def count_true(browser: Any, name: str) -> int:
     """How many rows the BooleanFilter ``name`` keeps (``show-ok``, ``show-greyed``, ``show-front``, ...)."""
     return browser.execute_script(f"return Array.from(Bokeh.documents[0].get_model_by_name('{name}').booleans)"
                                   ".filter(Boolean).length;")
+
+
+def binned_image(browser: Any) -> dict[str, Any]:
+    """The binned cloud's image (a large table's): x, y (its lower left corner), dw, dh and ``image``, a list of
+    rows of RGBA uint32 pixels, bottom row first."""
+    got = browser.execute_script("""
+        const d = Bokeh.documents[0].get_model_by_name('cloud-image').data;
+        const img = d.image[0];
+        return {x: d.x[0], y: d.y[0], dw: d.dw[0], dh: d.dh[0], shape: Array.from(img.shape),
+                pixels: Array.from(img)};""")
+    height, width = got["shape"]
+    got["image"] = [got["pixels"][r * width:(r + 1) * width] for r in range(height)]
+    del got["pixels"]
+    return got
 
 
 def ranking_ids(browser: Any) -> list[str]:

@@ -89,9 +89,12 @@ def free_port(host: str) -> int:
 
 
 def make_server(study: Study, host: str = LOOPBACK, port: int = 0, token: str | None = None,
-                webgl: bool | None = None, io_loop: Any = None) -> tuple[Any, str]:
+                webgl: bool | None = None, io_loop: Any = None, aggregate_above: int | None = None
+                ) -> tuple[Any, str]:
     """(a started-to-be bokeh Server of the room on ``host:port``, its link).  A token is made when ``host`` is
-    not loopback and none is given; ``webgl`` None lets the room choose by the table's size.  Raises AnalysisError when the address cannot be bound."""
+    not loopback and none is given; ``webgl`` None lets the room choose by the table's size, and
+    ``aggregate_above`` (rows) overrides the size from which the cloud is an image of bins.  Raises
+    AnalysisError when the address cannot be bound."""
     from bokeh.application import Application
     from bokeh.application.handlers.function import FunctionHandler
     from bokeh.server.server import Server
@@ -100,7 +103,8 @@ def make_server(study: Study, host: str = LOOPBACK, port: int = 0, token: str | 
 
     if token is None and not is_loopback(host):
         token = secrets.token_urlsafe(32)
-    application = Application(FunctionHandler(partial(make_document, study=study, webgl=webgl)))
+    application = Application(FunctionHandler(partial(make_document, study=study, webgl=webgl,
+                                                         aggregate_above=aggregate_above)))
     options: dict[str, Any] = {"address": host, "websocket_max_message_size": 512 * 1024 * 1024}
     if io_loop is not None:
         options["io_loop"] = io_loop
@@ -147,23 +151,25 @@ class RoomServer:
     """The room served from a daemon thread with its own event loop: ``link``, ``stop()``."""
 
     def __init__(self, study: Study, host: str = LOOPBACK, port: int = 0, token: str | None = None,
-                 webgl: bool | None = None):
+                 webgl: bool | None = None, aggregate_above: int | None = None):
         self._ready = threading.Event()
         self._error: BaseException | None = None
         self.link = ""
-        self.thread = threading.Thread(target=self._run, args=(study, host, port, token, webgl), daemon=True,
-                                       name="cosim-room-server")
+        self.thread = threading.Thread(target=self._run, args=(study, host, port, token, webgl, aggregate_above),
+                                       daemon=True, name="cosim-room-server")
         self.thread.start()
         self._ready.wait(60)
         if self._error is not None:
             raise self._error
 
-    def _run(self, study: Study, host: str, port: int, token: str | None, webgl: bool | None) -> None:
+    def _run(self, study: Study, host: str, port: int, token: str | None, webgl: bool | None,
+             aggregate_above: int | None) -> None:
         from tornado.ioloop import IOLoop
 
         asyncio.set_event_loop(asyncio.new_event_loop())
         try:
-            self.server, self.link = make_server(study, host, port, token, webgl, io_loop=IOLoop.current())
+            self.server, self.link = make_server(study, host, port, token, webgl, io_loop=IOLoop.current(),
+                                                    aggregate_above=aggregate_above)
             self.server.start()
         except BaseException as exc:
             self._error = exc

@@ -11,9 +11,9 @@ from __future__ import annotations
 from typing import Any, Sequence
 
 import numpy as np
-from bokeh.models import (BooleanFilter, Button, CategoricalColorMapper, CDSView, ColorBar, ColumnDataSource, DataTable, Div,
-                          HoverTool, LinearColorMapper, NumberFormatter, RangeSlider, Select, Slider, TableColumn,
-                          Whisker)
+from bokeh.models import (BooleanFilter, Button, CategoricalColorMapper, CDSView, ColorBar, ColumnDataSource,
+                          DataTable, Div, HoverTool, LinearColorMapper, NumberFormatter, Range1d, RangeSlider, Select,
+                          Slider, TableColumn, Whisker)
 from bokeh.palettes import Category10_10, Viridis256
 from bokeh.plotting import figure
 
@@ -64,6 +64,34 @@ def cloud(data: dict[str, Any], statuses: tuple[list[str], list[str]], x_label: 
     bar = ColorBar(color_mapper=mapper, title=colour_label or "", width=10)
     fig.add_layout(bar, "right")
     return {"figure": fig, "source": source, "filters": filters, "mapper": mapper, "colour_bar": bar}
+
+
+def cloud_image(x_range: tuple[float, float], y_range: tuple[float, float], x_label: str, y_label: str,
+                colour_label: str | None) -> dict[str, Any]:
+    """The cloud of a large table (:mod:`.aggregate`): an image of bins (``cloud-image``), re-binned by the app
+    when the ranges change (``cloud-x``, ``cloud-y``), with the Pareto front (``cloud-front-points``) and the
+    selection (``cloud-selected-points``) drawn as points over it.  A tap selects the design nearest to it (the
+    app's Tap handler)."""
+    image = ColumnDataSource({"image": [], "x": [], "y": [], "dw": [], "dh": []}, name="cloud-image")
+    front = ColumnDataSource({"x": [], "y": [], "point_id": []}, name="cloud-front-points")
+    selected = ColumnDataSource({"x": [], "y": [], "point_id": []}, name="cloud-selected-points")
+    fig = figure(name="cloud", width=WIDTH, height=520, x_axis_label=x_label, y_axis_label=y_label,
+                 x_range=Range1d(*x_range, name="cloud-x"), y_range=Range1d(*y_range, name="cloud-y"),
+                 tools="pan,wheel_zoom,box_zoom,tap,reset,save", active_scroll="wheel_zoom")
+    fig.image_rgba(image="image", x="x", y="y", dw="dw", dh="dh", source=image, name="cloud-bins")
+    fig.scatter("x", "y", source=front, size=PLAIN_SIZE + 6, fill_color=None, line_color=FRONT, line_width=1.5,
+                legend_label="Pareto front", name="cloud-front")
+    fig.scatter("x", "y", source=selected, size=PLAIN_SIZE + 12, fill_color=None, line_color=SELECTED,
+                line_width=3, legend_label="selected", name="cloud-selected")
+    fig.legend.location = "top_right"
+    fig.legend.click_policy = "hide"
+    fig.add_tools(HoverTool(renderers=[r for r in fig.renderers if r.name == "cloud-front"],
+                            tooltips=[("design", "@point_id"), ("x", "@x"), ("y", "@y")]))
+    mapper = LinearColorMapper(palette=Viridis256, nan_color=PLAIN)
+    bar = ColorBar(color_mapper=mapper, title=colour_label or "", width=10)
+    fig.add_layout(bar, "right")
+    return {"figure": fig, "image": image, "front": front, "selected": selected, "mapper": mapper,
+            "colour_bar": bar}
 
 
 def colour_by(mapper: LinearColorMapper, bar: ColorBar, values: np.ndarray, label: str | None) -> None:
