@@ -8,7 +8,9 @@ browser draws it), then a range filter on the first design parameter is narrowed
 recomputes the filters, the Pareto front, the ranking and the histogram and the page redraws) and a weight is
 set to 0 (the ranking is recomputed and redrawn; the study is ranked by e_total and duration, its spec giving
 e_total alone a sense).  Times are from the browser's request (or the property set
-in the page) until the page has the server's answer and has drawn two frames after it.
+in the page) until the page has the server's answer and has drawn two frames after it; ``load_cpu_s`` is the CPU
+time a load took in this process (the server) and in chromium's processes, what it costs on a machine however
+loaded.
 
 Tables: 17061 is the committed pick-and-place study (examples/pick_and_place/study); any other number is a
 synthetic table of that many rows (two parameters, two objectives, 2 % failed rows with a message, seed 0),
@@ -52,6 +54,22 @@ def synthetic(rows: int, folder: Path) -> Path:
     return folder
 
 
+def cpu_seconds(browser) -> float:
+    """CPU seconds used so far by this process (the server and selenium) and by chromium's processes: what a
+    load costs whatever else the machine runs."""
+    import psutil
+
+    def used(proc: psutil.Process) -> float:
+        try:
+            t = proc.cpu_times()
+            return t.user + t.system + t.children_user + t.children_system
+        except psutil.NoSuchProcess:
+            return 0.0
+
+    driver = psutil.Process(browser.service.process.pid)
+    return used(psutil.Process()) + sum(used(p) for p in [driver, *driver.children(recursive=True)])
+
+
 def measure(folder: Path, repeat: int) -> dict:
     from cosim.analysis.room import browser as B
     from cosim.analysis.room.data import Study
@@ -66,12 +84,14 @@ def measure(folder: Path, repeat: int) -> dict:
     values = table.values(column)
     lo, hi = float(np.nanmin(values)), float(np.nanmax(values))
     out: dict = {"rows": len(table.df), "table_read_s": round(read_s, 3), "load_s": [], "filter_s": [],
-                 "decide_tab_s": [], "reweight_s": []}
+                 "decide_tab_s": [], "reweight_s": [], "load_cpu_s": []}
     browser = B.chromium()
     try:
         for _ in range(repeat):
+            cpu = cpu_seconds(browser)
             _, seconds = B.load(browser, server.link)
             out["load_s"].append(round(seconds, 3))
+            out["load_cpu_s"].append(round(cpu_seconds(browser) - cpu, 3))
             _, seconds = B.set_filter(browser, column, (lo + hi) / 2, hi)
             out["filter_s"].append(round(seconds, 3))
             start = time.perf_counter()
@@ -88,7 +108,7 @@ def measure(folder: Path, repeat: int) -> dict:
     finally:
         browser.quit()
         server.stop()
-    for key in ("load_s", "filter_s", "decide_tab_s", "reweight_s"):
+    for key in ("load_s", "load_cpu_s", "filter_s", "decide_tab_s", "reweight_s"):
         out[key.replace("_s", "_median_s")] = round(statistics.median(out[key]), 3)
     return out
 
