@@ -58,6 +58,7 @@ class RunResult:
 
     @property
     def ok(self) -> bool:
+        """Whether the run reached its stop time without a failure (status "ok")."""
         return self.status == OK
 
 

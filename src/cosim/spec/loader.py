@@ -118,6 +118,7 @@ class Spec:
     raw: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     def unit(self, name: str) -> UnitSpec:
+        """The unit the spec declares as ``name``; raises KeyError when it declares none of that name."""
         for u in self.units:
             if u.name == name:
                 return u

@@ -80,6 +80,7 @@ class Variable:
 
     @property
     def is_array(self) -> bool:
+        """Whether the variable is an array (it has a shape), addressed by elements ``name[i]``."""
         return bool(self.shape)
 
     def element_names(self) -> list[str]:
