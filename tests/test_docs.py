@@ -54,13 +54,28 @@ def run_command(command: str, cwd: Path, timeout: float = 600) -> subprocess.Com
     return subprocess.run(argv, cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
 
 
-@pytest.fixture(scope="module")
-def scratch(tmp_path_factory) -> Path:
-    """A folder laid out like the repository: its own copy of examples/, nothing else."""
-    root = tmp_path_factory.mktemp("docs")
+def tracked_copy_of_examples(root: Path) -> Path:
+    """``root`` laid out like the repository, as git holds it: examples/ and .gitignore, committed."""
     shutil.copytree(REPO / "examples", root / "examples",
                     ignore=shutil.ignore_patterns("sweep_full", "__pycache__"))
+    shutil.copy(REPO / ".gitignore", root / ".gitignore")
+    git = ["git", "-C", str(root), "-c", "user.name=cosim tests", "-c", "user.email=tests@cosim.invalid"]
+    for command in (["init", "-q"], ["add", "-A"], ["commit", "-q", "-m", "the examples as committed"]):
+        subprocess.run(git + command, check=True, capture_output=True)
     return root
+
+
+def changes_to_the_tracked_tree(root: Path) -> list[str]:
+    """``git status`` of ``root``: files changed, deleted or left untracked (not ignored) since the commit."""
+    done = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=all"],
+                          capture_output=True, text=True, check=True)
+    return done.stdout.splitlines()
+
+
+@pytest.fixture(scope="module")
+def scratch(tmp_path_factory) -> Path:
+    """A git checkout laid out like the repository: its own copy of examples/ and .gitignore, nothing else."""
+    return tracked_copy_of_examples(tmp_path_factory.mktemp("docs"))
 
 
 # -- README.md ---------------------------------------------------------------------------------------------
@@ -165,6 +180,8 @@ def test_every_example_command_is_either_quick_or_long():
 def test_example_readme_command_runs_as_written(scratch, example, command):
     done = run_command(command, scratch)
     assert done.returncode == 0, (command, done.stdout[-1000:], done.stderr[-2000:])
+    # issue 28.10: following a README overwrites no committed table or figure and leaves no untracked file
+    assert changes_to_the_tracked_tree(scratch) == [], command
 
 
 @pytest.mark.slow
@@ -174,6 +191,7 @@ def test_example_readme_long_command_runs_as_written(scratch, example, command):
         pytest.skip("the interactive window is run by tests/test_analysis_explorer.py under Xvfb")
     done = run_command(command, scratch, timeout=3600)
     assert done.returncode == 0, (command, done.stdout[-1000:], done.stderr[-2000:])
+    assert changes_to_the_tracked_tree(scratch) == [], command
 
 
 def shell_blocks() -> list[tuple[str, list[str]]]:
@@ -222,21 +240,23 @@ def test_every_example_shell_block_has_commands():
 
 @pytest.mark.parametrize("example, lines", shell_blocks(), ids=lambda v: v if isinstance(v, str) else "")
 def test_example_shell_block_runs_as_written(tmp_path, example, lines):
-    """The block's quick commands, in order, in a fresh copy of the examples (its long ones: the slow test)."""
-    shutil.copytree(REPO / "examples", tmp_path / "examples",
-                    ignore=shutil.ignore_patterns("sweep_full", "__pycache__"))
-    run_shell_block([line for line in lines if not any(long in line for long in LONG)], tmp_path, tmp_path / "venv")
+    """The block's quick commands, in order, in a fresh copy of the examples (its long ones: the slow test);
+    they leave the copy's tracked tree as it was."""
+    root = tracked_copy_of_examples(tmp_path / "repo")
+    run_shell_block([line for line in lines if not any(long in line for long in LONG)], root, tmp_path / "venv")
+    assert changes_to_the_tracked_tree(root) == []
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("example, lines", shell_blocks(), ids=lambda v: v if isinstance(v, str) else "")
 def test_example_shell_block_runs_whole_as_written(tmp_path, example, lines):
-    shutil.copytree(REPO / "examples", tmp_path / "examples",
-                    ignore=shutil.ignore_patterns("sweep_full", "__pycache__"))
-    run_shell_block(lines, tmp_path, tmp_path / "venv")
+    root = tracked_copy_of_examples(tmp_path / "repo")
+    run_shell_block(lines, root, tmp_path / "venv")
+    assert changes_to_the_tracked_tree(root) == []
 
 
 OUTPUT_OPTIONS = ("--out", "-o", "--csv", "--plot")
+SCRIPT_OUTPUT_OPTIONS = ("--out", "--table")  # of the examples' scripts (run_study.py: --out is the sweep folder)
 
 
 def cosim_outputs(lines: list[str]) -> list[tuple[str, Path]]:
@@ -251,6 +271,10 @@ def cosim_outputs(lines: list[str]) -> list[tuple[str, Path]]:
             for i, arg in enumerate(argv[:-1]):
                 if arg in OUTPUT_OPTIONS and not (argv[1] == "sweep" and arg == "--csv"):  # sweep --csv is a flag
                     found.append((line, Path(os.path.normpath(cwd / argv[i + 1]))))
+        elif argv[0] == "python":
+            for i, arg in enumerate(argv[:-1]):
+                if arg in SCRIPT_OUTPUT_OPTIONS:
+                    found.append((line, Path(os.path.normpath(cwd / argv[i + 1]))))
     return found
 
 
@@ -261,10 +285,36 @@ def test_example_readme_cosim_commands_write_under_results_or_tmp():
     assert "/results/" in ignored
     outputs = [o for path in EXAMPLE_READMES for o in cosim_outputs(indented_commands(path))]
     outputs += [o for _, lines in shell_blocks() for o in cosim_outputs(lines)]
-    assert len(outputs) >= 6
+    assert len(outputs) >= 12
     for command, written in outputs:
         assert written.parts[0] in ("results", "/") and (written.parts[0] == "results" or written.parts[1] == "tmp"), \
             (command, written)
+
+
+# the scripts that write the committed specs from their master (a maintainer's tool: byte for byte the same
+# unless its source changed, which the quick test above checks with git status)
+SPEC_WRITERS = ("make_specs.py",)
+WRITES = re.compile(r"\.savefig\(|\.write_text\(|\.to_parquet\(|\.to_csv\(|imsave\(|\bsave\(fig")
+
+
+def test_example_scripts_write_under_results_by_default():
+    """Issue 28.10, the scripts: each example script that writes a file does so under results/<example>/ (git-
+    ignored) unless told otherwise; none writes beside itself by default.  Checked in the source: every write
+    goes to a path made from an option, and the options' defaults are OUT = <repository>/results/<example>."""
+    scripts = sorted(p for p in (REPO / "examples").glob("*/*.py") if p.name not in SPEC_WRITERS)
+    writers = [p for p in scripts if WRITES.search(p.read_text(encoding="utf-8"))]
+    assert {p.name for p in writers} >= {"run_study.py", "analyze.py", "analyze_full.py", "figures.py", "compare.py",
+                                         "datasheet_table.py", "explorer_screenshot.py"}
+    for path in writers:
+        text = path.read_text(encoding="utf-8")
+        assert 'OUT = HERE.parents[1] / "results" / HERE.name' in text or "from analyze import" in text, path
+        for line in text.splitlines():
+            if WRITES.search(line):  # e.g. savefig(HERE / "x.png"): beside the script, into the tracked tree
+                assert "HERE" not in line, (path.name, line.strip())
+    documented = {Path(shlex.split(c)[1]).name for path in EXAMPLE_READMES for c in indented_commands(path)
+                  if c.startswith("python ")}
+    documented |= {Path(shlex.split(c)[1]).name for _, lines in shell_blocks() for c in lines if c.startswith("python ")}
+    assert documented <= {p.name for p in scripts} | set(SPEC_WRITERS), documented
 
 
 def test_the_project_cites_no_document_outside_it():

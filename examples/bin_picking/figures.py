@@ -5,11 +5,13 @@ Usage (from the repository root)::
     python examples/bin_picking/figures.py                      # plant.png only
     python examples/bin_picking/figures.py results.parquet      # plus the result figures
 
-Writes PNG files beside this script (matplotlib, Agg backend).
+Writes PNG files into ``--out`` (default ``results/bin_picking/`` at the repository's root, which git ignores;
+``--out examples/bin_picking`` refreshes the committed figures), with matplotlib's Agg backend.
 """
 
 from __future__ import annotations
 
+import argparse
 import itertools
 import sys
 from pathlib import Path
@@ -22,6 +24,7 @@ import numpy as np  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parents[1]))
+OUT = HERE.parents[1] / "results" / HERE.name  # git-ignored: running the example leaves the tracked tree as it was
 
 from cosim.models.collision import CellCollision  # noqa: E402
 from cosim.models.planner import CartesianPlanner  # noqa: E402
@@ -76,7 +79,7 @@ def plant_figure(out: Path) -> None:
     plt.close(fig)
 
 
-def result_figures(table: Path) -> None:
+def result_figures(table: Path, out: Path) -> None:
     import pandas as pd
 
     df = pd.read_parquet(table)
@@ -93,7 +96,7 @@ def result_figures(table: Path) -> None:
         ax.set_xlabel("x_pos (toward conveyor) [m]"), ax.set_ylabel("z_pos (toward box) [m]"), ax.set_zlabel("y_pos (up) [m]")
         ax.set_title(f"{variant} box: {len(valid)} of {len(d)} placements valid ({100 * len(valid) / max(len(d), 1):.2f} %)")
         ax.legend(fontsize=8)
-        fig.tight_layout(), fig.savefig(HERE / f"valid_{variant}.png", dpi=110), plt.close(fig)
+        fig.tight_layout(), fig.savefig(out / f"valid_{variant}.png", dpi=110), plt.close(fig)
         if valid.empty:
             continue
         # fig. 8-10: execution time over the valid placements
@@ -105,7 +108,7 @@ def result_figures(table: Path) -> None:
         best = valid.loc[valid["duration"].idxmin()]
         ax.set_title(f"{variant}: t_min = {best['duration']:.2f} s at "
                      f"({best[OFFSETS[0]]:.2f}, {best[OFFSETS[1]]:.2f}, {best[OFFSETS[2]]:.2f})")
-        fig.tight_layout(), fig.savefig(HERE / f"time_{variant}.png", dpi=110), plt.close(fig)
+        fig.tight_layout(), fig.savefig(out / f"time_{variant}.png", dpi=110), plt.close(fig)
         # fig. 8-11 / 8-12: time against joint distance, colour Cartesian distance
         fig, ax = plt.subplots(figsize=(6.5, 4.5))
         sc = ax.scatter(valid["joint_distance"], valid["duration"], c=valid["cartesian_distance"], cmap="plasma", s=18)
@@ -113,10 +116,16 @@ def result_figures(table: Path) -> None:
         ax.set_xlabel("total joint distance [deg]"), ax.set_ylabel("execution time [s]")
         ax.set_title(f"{variant} box, valid placements")
         ax.grid(alpha=0.3)
-        fig.tight_layout(), fig.savefig(HERE / f"time_vs_distance_{variant}.png", dpi=110), plt.close(fig)
+        fig.tight_layout(), fig.savefig(out / f"time_vs_distance_{variant}.png", dpi=110), plt.close(fig)
 
 
 if __name__ == "__main__":
-    plant_figure(HERE / "plant.png")
-    if len(sys.argv) > 1:
-        result_figures(Path(sys.argv[1]))
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("table", nargs="?", help="the sweep's results.parquet: also draw the result figures")
+    parser.add_argument("--out", type=Path, default=OUT, help=f"folder of the figures (default: {OUT})")
+    args = parser.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    plant_figure(args.out / "plant.png")
+    if args.table:
+        result_figures(Path(args.table), args.out)
+    print(f"figures written to {args.out}")

@@ -11,11 +11,16 @@ same 273 designs), and writes
 - ``figures/tradeoff.png``            energy over duration of 9 designs, both timings
 - ``results_table.md``                the numbers quoted in the README
 
+into ``--out`` (default ``results/optimal_timing/`` at the repository's root, which git ignores).  The tables
+are the committed ones beside this file, or those of ``--tables DIR`` (where run_study.py wrote them).
+
     python examples/optimal_timing/analyze.py
+    python examples/optimal_timing/analyze.py --tables results/optimal_timing    # after run_study.py
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -27,6 +32,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
+OUT = HERE.parents[1] / "results" / HERE.name  # git-ignored: running the example leaves the tracked tree as it was
 Q22, Q24 = "traj.waypoints[9]", "traj.waypoints[11]"
 FACTOR, OPT = "traj.max_duration_factor", "traj.optimize"
 
@@ -90,11 +96,12 @@ def summary_table(pairs: pd.DataFrame) -> list[str]:
 
 
 def main() -> None:
-    main_df = pd.read_parquet(HERE / "results.parquet")
-    trade = pd.read_parquet(HERE / "results_tradeoff.parquet")
+    args = arguments()
+    main_df = pd.read_parquet(args.tables / "results.parquet")
+    trade = pd.read_parquet(args.tables / "results_tradeoff.parquet")
     blend = pd.read_parquet(HERE.parent / "pick_and_place" / "results_coarse.parquet")
-    figures = HERE / "figures"
-    figures.mkdir(exist_ok=True)
+    figures = args.out / "figures"
+    figures.mkdir(parents=True, exist_ok=True)
     failed = main_df[main_df["status"] != "ok"]
     pairs = paired(main_df[main_df["status"] == "ok"])
     pairs = time_at_reference_energy(pairs, blend)
@@ -165,8 +172,20 @@ def main() -> None:
             s = d[d[OPT].astype(bool) == optimize]
             cells = " | ".join(f"{e:.2f} ({t:.2f} s)" for e, t in zip(s["e_total"], s["duration"]))
             lines.append(f"| ({a:g}, {b:g}) | {name} | {cells} |")
-    (HERE / "results_table.md").write_text("\n".join(lines) + "\n")
+    (args.out / "results_table.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
+
+
+def arguments() -> argparse.Namespace:
+    """--tables (where run_study.py wrote; default: the committed tables beside this file), --out."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--tables", type=Path, default=HERE,
+                        help=f"folder of the study's tables (default: the committed ones, {HERE}; give "
+                             f"{OUT} after run_study.py)")
+    parser.add_argument("--out", type=Path, default=OUT,
+                        help=f"folder of the figures and the table (default: {OUT}, which git ignores; --out "
+                             "examples/optimal_timing refreshes the committed ones)")
+    return parser.parse_args()
 
 
 if __name__ == "__main__":

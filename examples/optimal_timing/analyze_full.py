@@ -9,8 +9,11 @@ designs), and writes
 - ``figures/time_saved_full.png``     time it saves at the slowed blend's energy (lower bound)
 - ``results_table_full.md``           the numbers quoted in the README
 
-    python examples/optimal_timing/run_study.py spec_full.json    # the sweep -> results_full.parquet
-    python examples/optimal_timing/analyze_full.py
+into ``--out`` (default ``results/optimal_timing/``, which git ignores); ``--tables DIR`` reads the table
+run_study.py wrote instead of the committed one.
+
+    python examples/optimal_timing/run_study.py spec_full.json    # the sweep -> results/optimal_timing/results_full.parquet
+    python examples/optimal_timing/analyze_full.py --tables results/optimal_timing
 
 ``results_full.parquet`` is committed with the columns listed in ``COLUMNS`` only (the sweep's whole table
 has 79 columns, ~16 MB): this script drops the others the first time it reads a fresh sweep's table.
@@ -30,29 +33,31 @@ import pandas as pd  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from analyze import FACTOR, OPT, Q22, Q24, grid_plot, paired, summary_table, time_at_reference_energy, where  # noqa: E402
+from analyze import FACTOR, OPT, Q22, Q24, arguments, grid_plot, paired, summary_table, time_at_reference_energy, where  # noqa: E402
 
-TABLE = HERE / "results_full.parquet"
+TABLE = "results_full.parquet"
 COLUMNS = ["point_id", Q22, Q24, FACTOR, OPT, "e_total", "duration", "blend_duration", "planned_energy", "solve_time",
            "peak_tau_ratio[1]", "peak_tau_ratio[2]", "peak_tau_ratio[4]", "status", "message", "run_time"]
 
 
-def read_table() -> pd.DataFrame:
-    """``results_full.parquet`` with :data:`COLUMNS`; a fresh sweep's whole table is cut down to them in place."""
-    df = pd.read_parquet(TABLE)
+def read_table(folder: Path) -> pd.DataFrame:
+    """``results_full.parquet`` of ``folder`` with :data:`COLUMNS`; a fresh sweep's whole table is cut down to
+    them in place (the committed one has only them)."""
+    df = pd.read_parquet(folder / TABLE)
     if list(df.columns) != COLUMNS:
         df = df[COLUMNS]
-        df.to_parquet(TABLE, index=False, compression="zstd")
+        df.to_parquet(folder / TABLE, index=False, compression="zstd")
     return df
 
 
 def main() -> None:
-    df = read_table()
+    args = arguments()
+    df = read_table(args.tables)
     blend = pd.read_parquet(HERE.parent / "pick_and_place" / "study" / "results.parquet")
     failed = df[df["status"] != "ok"]
     pairs = time_at_reference_energy(paired(df[df["status"] == "ok"]), blend[blend["status"] == "ok"])
-    figures = HERE / "figures"
-    figures.mkdir(exist_ok=True)
+    figures = args.out / "figures"
+    figures.mkdir(parents=True, exist_ok=True)
     for name, panels, cmap in (
             ("energy_saved_full.png", (("saved_pct", "energy saved (%)"), ("saved_J", "energy saved (J)")), "viridis"),
             ("time_saved_full.png", (("time_saved_pct", "time saved (%)"), ("time_saved_s", "time saved (s)")), "magma")):
@@ -88,7 +93,7 @@ def main() -> None:
               f"{pairs[['peak_tau_ratio[1]_opt', 'peak_tau_ratio[2]_opt', 'peak_tau_ratio[4]_opt']].to_numpy().max():.3f} "
               f"(slowed blend {pairs[['peak_tau_ratio[1]_ref', 'peak_tau_ratio[2]_ref', 'peak_tau_ratio[4]_ref']].to_numpy().max():.3f}).",
               ""]
-    (HERE / "results_table_full.md").write_text("\n".join(lines) + "\n")
+    (args.out / "results_table_full.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
 

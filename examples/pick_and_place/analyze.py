@@ -10,7 +10,12 @@ Reads ``study/results.parquet`` (the full study, written by run_study.py) and wr
 - ``figures/peak_torque_and_limits.png``  what the thesis did not show: peak torque ratio, position limits
 - ``results_table.md``                   our minima and maxima, where they occur, and table 8-1
 
-    python examples/pick_and_place/analyze.py [study/results.parquet]
+    python examples/pick_and_place/analyze.py [TABLE] [--out DIR]
+
+TABLE is the committed ``study/results.parquet`` unless given (run_study.py writes
+``results/pick_and_place/study/results.parquet``); the figures and the table go to ``--out`` (default
+``results/pick_and_place/`` at the repository's root, which git ignores; ``--out examples/pick_and_place``
+refreshes the committed ones).
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ import pandas as pd  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parents[1]))
+OUT = HERE.parents[1] / "results" / HERE.name  # git-ignored: running the example leaves the tracked tree as it was
 from cosim.models.panda_model import FRANKA_DOC_LIMITS  # noqa: E402
 
 Q22, Q24 = "traj.waypoints[9]", "traj.waypoints[11]"
@@ -117,11 +123,17 @@ def table(df: pd.DataFrame) -> str:
 
 
 def main() -> None:
-    path = Path(sys.argv[1]) if len(sys.argv) > 1 else HERE / "study" / "results.parquet"
-    df = pd.read_parquet(path)
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("table", nargs="?", type=Path, default=HERE / "study" / "results.parquet",
+                        help="the study's table (default: the committed study/results.parquet)")
+    parser.add_argument("--out", type=Path, default=OUT, help=f"folder of figures/ and results_table.md (default: {OUT})")
+    args = parser.parse_args()
+    df = pd.read_parquet(args.table)
     df = df[df["status"] == "ok"].reset_index(drop=True)
-    out = HERE / "figures"
-    out.mkdir(exist_ok=True)
+    out = args.out / "figures"
+    out.mkdir(parents=True, exist_ok=True)
 
     fig, ax = plt.subplots(figsize=(7, 5))
     grid_plot(ax, df, "e_total", "total electric energy E_el (J)")
@@ -175,7 +187,7 @@ def main() -> None:
     plt.close(fig)
 
     text = table(df)
-    (HERE / "results_table.md").write_text(text)
+    (args.out / "results_table.md").write_text(text)
     print(text)
 
 

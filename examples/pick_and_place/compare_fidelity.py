@@ -1,13 +1,15 @@
 """Do the two robot fidelity levels rank the designs alike?  (coarse grid, 273 points)
 
 Reads ``results_coarse.parquet`` (inverse dynamics) and ``results_coarse_exudyn.parquet``
-(Exudyn with the joint servo), both written by run_study.py, and prints
+(Exudyn with the joint servo), both written by run_study.py (the committed ones beside this file, or those in
+``--tables DIR``), and prints
 
 - the Spearman rank correlation of total energy, and whether argmin and argmax match;
 - the energy the servo adds (Exudyn - inverse dynamics), total and per joint, and where it is largest;
 - the same without the points where joint 2 stands still under load (q2[2] = 0), see the README.
 
     python examples/pick_and_place/compare_fidelity.py
+    python examples/pick_and_place/compare_fidelity.py --tables results/pick_and_place
 """
 
 from __future__ import annotations
@@ -22,10 +24,10 @@ HERE = Path(__file__).resolve().parent
 Q22, Q24 = "traj.waypoints[9]", "traj.waypoints[11]"
 
 
-def load() -> pd.DataFrame:
-    """Both tables joined on the design point; columns suffixed _id and _ex."""
-    fast = pd.read_parquet(HERE / "results_coarse.parquet")
-    servo = pd.read_parquet(HERE / "results_coarse_exudyn.parquet")
+def load(folder: Path) -> pd.DataFrame:
+    """Both tables of ``folder`` joined on the design point; columns suffixed _id and _ex."""
+    fast = pd.read_parquet(folder / "results_coarse.parquet")
+    servo = pd.read_parquet(folder / "results_coarse_exudyn.parquet")
     assert (fast["status"] == "ok").all() and (servo["status"] == "ok").all()
     return fast.merge(servo, on=[Q22, Q24], suffixes=("_id", "_ex"))
 
@@ -52,7 +54,11 @@ def report(df: pd.DataFrame, label: str) -> str:
 
 
 def main() -> None:
-    df = load()
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--tables", type=Path, default=HERE, help=f"folder of both tables (default: {HERE})")
+    df = load(parser.parse_args().tables)
     print(report(df, "all coarse points"))
     print(report(df[df[Q22] != 0], "without q2[2] = 0 (joint 2 at standstill under load)"))
 

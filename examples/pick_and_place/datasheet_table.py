@@ -6,8 +6,11 @@ columns of its sweep) and ``study/results.parquet`` (spec.json: the same grid wi
 limits), and writes ``results_datasheet_table.md``: every row of table 8-1, min and max with where they
 occur, for the thesis and both runs of ours; and what the shortest execution time needs.
 
-    python examples/pick_and_place/run_study.py spec_datasheet.json --out /tmp/ds --table results_datasheet.parquet
-    python examples/pick_and_place/datasheet_table.py
+    python examples/pick_and_place/run_study.py spec_datasheet.json --out /tmp/ds --table results/pick_and_place/results_datasheet.parquet
+    python examples/pick_and_place/datasheet_table.py --tables results/pick_and_place
+
+The tables are the committed ones beside this file unless ``--tables DIR`` is given; the Markdown table goes to
+``--out`` (default ``results/pick_and_place/`` at the repository's root, which git ignores).
 
 ``results_datasheet.parquet`` is committed with the table-8-1 columns only (the sweep's whole table has 74
 columns, ~6 MB): this script drops the others the first time it reads a fresh sweep's table.
@@ -26,20 +29,21 @@ sys.path.insert(0, str(HERE))
 from analyze import Q22, Q24, THESIS, fmt_loc, where  # noqa: E402
 
 sys.path.insert(0, str(HERE.parents[1]))
+OUT = HERE.parents[1] / "results" / HERE.name  # git-ignored: running the example leaves the tracked tree as it was
 from cosim.models.panda_model import DATASHEET_VELOCITY, FRANKA_DOC_LIMITS  # noqa: E402
 
-TABLE = HERE / "results_datasheet.parquet"
+TABLE = "results_datasheet.parquet"
 THESIS_SHORTEST = 1.28  # s, table 8-1
 
 
-def read_table() -> pd.DataFrame:
+def read_table(folder: Path) -> pd.DataFrame:
     """``results_datasheet.parquet`` with the parameters, table-8-1 objectives, status and run time; a fresh
     sweep's whole table is cut down to them in place."""
     columns = ["point_id", Q22, Q24, *THESIS, "status", "run_time"]
-    df = pd.read_parquet(TABLE)
+    df = pd.read_parquet(folder / TABLE)
     if list(df.columns) != columns:
         df = df[columns]
-        df.to_parquet(TABLE, index=False, compression="zstd")
+        df.to_parquet(folder / TABLE, index=False, compression="zstd")
     return df
 
 
@@ -54,7 +58,15 @@ def speed_for(duration: float, acceleration: float, angle: float = math.pi) -> f
 
 
 def main() -> None:
-    runs = {"datasheet speeds": read_table(), "documentation limits": pd.read_parquet(HERE / "study" / "results.parquet")}
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--tables", type=Path, default=HERE,
+                        help=f"folder of results_datasheet.parquet and study/results.parquet (default: {HERE})")
+    parser.add_argument("--out", type=Path, default=OUT, help=f"folder of results_datasheet_table.md (default: {OUT})")
+    args = parser.parse_args()
+    runs = {"datasheet speeds": read_table(args.tables),
+            "documentation limits": pd.read_parquet(args.tables / "study" / "results.parquet")}
     runs = {k: df[df["status"] == "ok"].reset_index(drop=True) for k, df in runs.items()}
     head = "| table 8-1 row | unit | thesis min | " + " | ".join(f"ours, {k}: min at (q2[2], q2[4])" for k in runs) \
         + " | thesis max | " + " | ".join(f"ours, {k}: max at" for k in runs) + " |"
@@ -81,7 +93,8 @@ def main() -> None:
     v128 = speed_for(THESIS_SHORTEST, a1)
     text += (f"| needed for the thesis's {THESIS_SHORTEST} s | {v128:.3f} rad/s = {math.degrees(v128):.1f} deg/s | "
              f"(with infinite acceleration at 150 deg/s: {math.pi / float(DATASHEET_VELOCITY[0]):.3f} s) |\n")
-    (HERE / "results_datasheet_table.md").write_text(text)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "results_datasheet_table.md").write_text(text)
     print(text)
 
 

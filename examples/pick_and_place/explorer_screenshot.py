@@ -4,7 +4,8 @@ Starts a private Xvfb screen, opens the explorer on study/ (the full study) with
 x = q2[2], y = q2[4], colour = total energy, narrows the execution-time slider
 to the faster half (the slower designs turn grey), selects the least-energy
 design, re-runs it and lets the arm animation run; then saves the screen as
-figures/explorer.png.  Needs Debian's xvfb package.
+explorer.png in ``--out`` (default ``results/pick_and_place/`` at the repository's root, which git ignores;
+``--out examples/pick_and_place/figures`` refreshes the README's picture).  Needs Debian's xvfb package.
 
     python examples/pick_and_place/explorer_screenshot.py
 """
@@ -22,6 +23,7 @@ import matplotlib.image
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
+OUT = HERE.parents[1] / "results" / HERE.name  # git-ignored: running the example leaves the tracked tree as it was
 
 
 def start_xvfb(fbdir: Path) -> tuple[subprocess.Popen, str]:
@@ -42,6 +44,12 @@ def pump(root, seconds: float) -> None:
 
 
 def main() -> None:
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--out", type=Path, default=OUT, help=f"folder of explorer.png (default: {OUT})")
+    folder = parser.parse_args().out
+    folder.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as fbdir:
         xvfb, display = start_xvfb(Path(fbdir))
         os.environ["DISPLAY"] = display
@@ -72,7 +80,7 @@ def main() -> None:
                 trace_window.geometry("+1010+0")
             pump(root, 6.0)  # the arm animation runs
             image = xwd_to_rgb(Path(fbdir) / "Xvfb_screen0")
-            out = HERE / "figures" / "explorer.png"
+            out = folder / "explorer.png"
             height, width = image.shape[:2]
             right = max(int(np.flatnonzero(image.reshape(height, width, 3).any(axis=2).any(axis=0))[-1]) + 1, 1000)
             matplotlib.image.imsave(out, image[:, :right])

@@ -2,10 +2,12 @@
 
 Uses the engine's sweep (``cosim.sweep``: Dask worker processes, units
 reused per worker, rows streamed to a results folder), then writes the table
-as ``study/results.parquet`` (zstd) with the sweep's ``metadata.json`` and prints the wall time.
+as ``results/pick_and_place/study/results.parquet`` (zstd; results/ at the repository's root, which git
+ignores) with the sweep's ``metadata.json`` and prints the wall time.  ``--table
+examples/pick_and_place/study/results.parquet`` refreshes the committed table.
 
     python examples/pick_and_place/run_study.py                  # spec.json, 2 workers
-    python examples/pick_and_place/run_study.py spec_coarse.json --out /tmp/coarse --table results_coarse.parquet
+    python examples/pick_and_place/run_study.py spec_coarse.json --out /tmp/coarse --table results/pick_and_place/results_coarse.parquet
 
 An interrupted run continues with ``--resume`` (same ``--out``).
 """
@@ -19,16 +21,18 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
+OUT = HERE.parents[1] / "results" / HERE.name  # git-ignored: running the example leaves the tracked tree as it was
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("spec", nargs="?", default="spec.json", help="spec file in this folder (default spec.json)")
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--out", default=str(HERE / "sweep_full"), help="sweep results folder (not committed)")
-    parser.add_argument("--table", default="study/results.parquet",
-                        help="table written under this folder; named results.parquet, it gets the sweep's "
-                             "metadata.json beside it (a sweep folder that report, pareto and explore open alone)")
+    parser.add_argument("--out", default=str(OUT / "sweep_full"), help=f"sweep results folder (default: {OUT}/sweep_full)")
+    parser.add_argument("--table", type=Path, default=OUT / "study" / "results.parquet",
+                        help="the table to write; named results.parquet, it gets the sweep's metadata.json beside it "
+                             f"(a sweep folder that report, pareto and explore open alone) (default: {OUT}/study/"
+                             "results.parquet)")
     parser.add_argument("--resume", action="store_true")
     args = parser.parse_args()
 
@@ -37,7 +41,7 @@ def main() -> None:
     started = time.perf_counter()
     df = cosim.sweep(HERE / args.spec, workers=args.workers, out=args.out, resume=args.resume)
     wall = time.perf_counter() - started
-    table = HERE / args.table
+    table = args.table
     table.parent.mkdir(parents=True, exist_ok=True)
     df.to_parquet(table, index=False, compression="zstd")
     if table.name == "results.parquet":  # its own folder: keep the sweep's metadata with it

@@ -1,13 +1,18 @@
 """The optimiser's front against the Latin hypercube's, and what the front's designs look like.
 
 Reads results_optimize/ (`cosim optimize spec.json`) and results_lhs/ (`cosim sweep spec.json`, the Latin
-hypercube of the same budget), writes front_vs_lhs.png, hypervolume.png and results_summary.md.
+hypercube of the same budget): the committed folders beside this file, or those given by ``--optimize`` and
+``--lhs``; writes front_vs_lhs.png, hypervolume.png and results_summary.md into ``--out`` (default
+``results/pick_and_place_free_pose/`` at the repository's root, which git ignores; ``--out
+examples/pick_and_place_free_pose`` refreshes the committed ones).
 
     python examples/pick_and_place_free_pose/compare.py
+    python examples/pick_and_place_free_pose/compare.py --optimize results/pick_and_place_free_pose/optimize --lhs results/pick_and_place_free_pose/lhs
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -16,6 +21,7 @@ import pandas as pd
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parents[1]))
+OUT = HERE.parents[1] / "results" / HERE.name  # git-ignored: running the example leaves the tracked tree as it was
 
 from cosim.analysis.hypervolume import hypervolume, normalised_losses  # noqa: E402
 from cosim.analysis.pareto import pareto_mask  # noqa: E402
@@ -50,8 +56,16 @@ def hv_history(df: pd.DataFrame, ideal: np.ndarray, nadir: np.ndarray) -> np.nda
 
 
 def main() -> None:
-    opt = pd.read_parquet(HERE / "results_optimize" / "results.parquet").sort_values("trial")
-    lhs = pd.read_parquet(HERE / "results_lhs" / "results.parquet")
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--optimize", type=Path, default=HERE / "results_optimize",
+                        help="folder of the optimisation (default: the committed results_optimize/)")
+    parser.add_argument("--lhs", type=Path, default=HERE / "results_lhs",
+                        help="folder of the Latin hypercube sweep (default: the committed results_lhs/)")
+    parser.add_argument("--out", type=Path, default=OUT, help=f"folder of the figures and the summary (default: {OUT})")
+    args = parser.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    opt = pd.read_parquet(args.optimize / "results.parquet").sort_values("trial")
+    lhs = pd.read_parquet(args.lhs / "results.parquet")
     f_opt, f_lhs = front(opt), front(lhs)
     both = pd.concat([f_opt, f_lhs])
     ideal, nadir = both[OBJ].min().to_numpy(float), both[OBJ].max().to_numpy(float)
@@ -72,7 +86,7 @@ def main() -> None:
     ax.grid(alpha=0.3)
     ax.legend()
     ax.set_title("feasible designs (peak torque within limits) and their fronts")
-    save(fig, HERE / "front_vs_lhs.png")
+    save(fig, args.out / "front_vs_lhs.png")
 
     fig = new_figure(6.5, 4.0)
     ax = fig.add_subplot(111)
@@ -82,7 +96,7 @@ def main() -> None:
     ax.set_ylabel("hypervolume (scaled to the two fronts)")
     ax.grid(alpha=0.3)
     ax.legend()
-    save(fig, HERE / "hypervolume.png")
+    save(fig, args.out / "hypervolume.png")
 
     def at(history: np.ndarray, share: float) -> str:
         hit = np.flatnonzero(history >= share * h_lhs[-1])
@@ -107,7 +121,7 @@ def main() -> None:
         peak = max(row[f"peak_tau_ratio[{j}]"] for j in range(1, 8))
         lines.append(f"| {row['duration']:.3f} | {row['e_total']:.2f} | "
                      + " | ".join(f"{row[c]:.0f}" for c in JOINTS) + f" | {row[SCALE]:.2f} | {peak:.2f} |")
-    (HERE / "results_summary.md").write_text("\n".join(lines) + "\n")
+    (args.out / "results_summary.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines[:14]))
 
 
