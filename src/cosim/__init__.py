@@ -98,8 +98,9 @@ def optimize(spec_path: str | Path, out: str | Path, **options: Any) -> pd.DataF
     """Search the spec's design space for the Pareto front of its objectives; returns one row per evaluation.
 
     Options as ``cosim optimize``: ``objectives`` ({name: 'min'|'max'}), ``budget``, ``sampler``, ``batch``,
-    ``seed``, ``resume``, ``workers``, ``scheduler``, ``cluster``, ``timeout``, ``progress``, ``quiet``
-    (see :class:`cosim.studies.optimize.Optimization`).  Raises SpecError for a bad spec, OptimizeError when
+    ``seed``, ``resume``, ``workers``, ``scheduler``, ``cluster``, ``timeout``, ``progress``, ``quiet``, and
+    ``storage`` (an Optuna storage URL such as ``sqlite:///study.db`` that also receives the trials, for
+    optuna-dashboard and Optuna's plots) with ``study_name`` (see :class:`cosim.studies.optimize.Optimization`).  Raises SpecError for a bad spec, OptimizeError when
     ``out`` or the cluster cannot be used.
     """
     from cosim.studies.optimize import optimize as run_optimization

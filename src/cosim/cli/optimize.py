@@ -42,6 +42,11 @@ def add_optimize_parser(sub: Any) -> None:
     p.add_argument("--workers", type=int, metavar="N", help="local workers, each running points in a child process (default: one per core)")
     add_cluster_options(p)
     p.add_argument("--timeout", type=float, metavar="S", help="seconds an evaluation may run before it is stopped")
+    p.add_argument("--storage", metavar="URL",
+                   help="also keep the trials in this Optuna storage, e.g. sqlite:///study.db, for optuna-dashboard "
+                        "and Optuna's plots (the results folder stays the study; --resume replays into it)")
+    p.add_argument("--study-name", metavar="NAME",
+                   help="the study's name in --storage (default: the results folder's absolute path)")
     p.set_defaults(handler=cmd_optimize)
 
 
@@ -59,7 +64,8 @@ def cmd_optimize(args: argparse.Namespace) -> int:
     objectives = {name: f"{sense}imize" for name, sense in args.objectives} if args.objectives else None
     run = Optimization(args.spec, out, objectives=objectives, budget=args.budget, sampler=args.sampler, batch=args.batch,
                        seed=args.seed, resume=args.resume, workers=args.workers, scheduler=args.scheduler,
-                       cluster=args.cluster, timeout=args.timeout, quiet=getattr(args, "quiet", False))
+                       cluster=args.cluster, timeout=args.timeout, quiet=getattr(args, "quiet", False),
+                       storage=args.storage, study_name=args.study_name)
     counts = run.run()
     total = sum(counts.values())
     summary = ", ".join(f"{n} {s}" for s, n in sorted(counts.items()) if n)

@@ -71,6 +71,7 @@ from cosim.results.checksums import data_file_checksums, unit_checksums
 from cosim.results.lock import FolderLock
 from cosim.studies.driver import (check_results_folder, finish_metadata, now_utc, package_versions, resume_differences,
                                   results_writes, run_metadata, say, study_identity)
+from cosim.studies.optuna_storage import default_study_name, open_storage_study, shown_url
 from cosim.studies.progress import StatusLine
 
 SAMPLERS = ("tpe", "nsga2", "gp", "random", "qmc")
@@ -337,7 +338,8 @@ class Optimization:
                  budget: int | None = None, sampler: str | None = None,
                  batch: int | None = None, seed: int | None = None, resume: bool = False, workers: int | None = None,
                  scheduler: str | None = None, timeout: float | None = None, progress: TextIO | None = None,
-                 quiet: bool = False, cluster: str | Path | None = None):
+                 quiet: bool = False, cluster: str | Path | None = None, storage: str | None = None,
+                 study_name: str | None = None):
         import os
 
         from cosim.parallel.cluster import read_cluster_file
@@ -389,6 +391,8 @@ class Optimization:
         self.constraints = output_constraints(self.spec, self.space, self.settings.constraints)
         self.workers, self.scheduler, self.timeout = workers or os.cpu_count() or 1, scheduler, timeout
         self.quiet, self.progress_stream = quiet, progress
+        # the trials also in an Optuna storage, for Optuna's tools (see cosim.studies.optuna_storage)
+        self.storage, self.study_name = storage, study_name or default_study_name(self.out)
         self.payload = make_payload(self.system)
         self._outcomes: dict[tuple, tuple] = {}  # (point id, status) -> _outcome: each row is read once
         self._sampler_label = self.settings.sampler  # "random" once the search switched (see _switch)
@@ -430,6 +434,9 @@ class Optimization:
         from optuna.trial import TrialState
 
         values, violations = self._outcome(row) if row is not None else (None, None)
+        if row is not None:  # which row of the table the trial is, in an Optuna storage's tools
+            trial.set_user_attr("point_id", row.get("point_id"))
+            trial.set_user_attr("status", row.get("status"))
         if values is None:
             study.tell(trial, state=TrialState.FAIL)
             return
@@ -467,9 +474,12 @@ class Optimization:
         if self.resume:
             stored = {r["point_id"]: r for r in self.store.read().to_dict("records")}
         s = self.settings
-        study = optuna.create_study(
-            directions=list(s.objectives.values()),
-            sampler=make_sampler(s.sampler, s.seed, s.batch))
+        sampler = make_sampler(s.sampler, s.seed, s.batch)
+        if self.storage:
+            study = open_storage_study(self.storage, self.study_name, list(s.objectives.values()), list(s.objectives),
+                                       sampler, self.resume, self.out)
+        else:
+            study = optuna.create_study(directions=list(s.objectives.values()), sampler=sampler)
         dists = distributions(self.space)
         if evaluator is not None:
             with results_writes(self.out):
@@ -652,6 +662,8 @@ class Optimization:
     def _metadata(self, started: str, scheduler: str, n_workers: int) -> dict[str, Any]:
         info = {"started": started, "scheduler": scheduler, "workers": n_workers, "timeout": self.timeout,
                 "budget": self.settings.budget}
+        if self.storage:
+            info["optuna_storage"] = {"url": shown_url(self.storage), "study_name": self.study_name}
         return run_metadata(self.store, self.system, info, kind="optimization", optimize=asdict(self.settings),
                             packages=package_versions("optuna"), points=self.settings.budget,
                             unit_checksums=self.checksums, data_file_checksums=self.data_checksums,

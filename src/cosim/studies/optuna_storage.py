@@ -1,0 +1,66 @@
+"""An optimisation's trials also in an Optuna storage (``cosim optimize --storage sqlite:///study.db``).
+
+The results folder stays what a study *is* (its rows, metadata and resume); the storage is a mirror of it in
+Optuna's own form, for Optuna's tools: ``optuna-dashboard sqlite:///study.db``, ``optuna.load_study(...)`` and
+``optuna.visualization``.  Each trial carries the objective values (named as in the spec), the constraint
+violations, and as user attributes the row's ``point_id`` and ``status``; the study carries the results
+folder.  A resume replays the stored run into a new study of the same name, so the storage then holds the
+whole run once, as the folder does.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+from typing import Any, Sequence
+
+from cosim.errors import OptimizeError
+
+STORAGE_FIX = ("give a database URL Optuna can open, e.g. sqlite:///study.db (a file beside you) or "
+               "postgresql://user@host/db, and check that its folder exists")
+
+
+def default_study_name(out: str | Path) -> str:
+    """The study's name in the storage: the results folder's absolute path (one storage may hold many)."""
+    return str(Path(out).resolve())
+
+
+def shown_url(url: str) -> str:
+    """``url`` with any password replaced by ``***`` (it goes into metadata.json and onto the terminal)."""
+    try:
+        from sqlalchemy.engine import make_url
+
+        return make_url(url).render_as_string(hide_password=True)
+    except Exception:  # noqa: BLE001 - not a URL sqlalchemy parses: shown as given (it is refused later)
+        return url
+
+
+def open_storage_study(url: str, name: str, directions: Sequence[str], metric_names: Sequence[str],
+                       sampler: Any, resume: bool, out: str | Path) -> Any:
+    """A new Optuna study ``name`` in the storage at ``url``, with ``sampler``.
+
+    On ``resume`` a study of that name is replaced: the run is replayed into it from the results folder.
+    Raises OptimizeError (exit 2) when the storage cannot be opened, or when a fresh run finds a study of
+    that name already there (another run's trials, which a fresh run must not mix with its own).
+    """
+    import optuna
+
+    try:
+        storage = optuna.storages.RDBStorage(url)
+    except Exception as exc:  # noqa: BLE001 - sqlalchemy's and optuna's errors: a bad URL, a missing folder
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise OptimizeError(f"--storage {shown_url(url)}: cannot open it ({first}); {STORAGE_FIX}") from None
+    existing = {s.study_name for s in storage.get_all_studies()}
+    if name in existing:
+        if not resume:
+            raise OptimizeError(f"--storage {shown_url(url)} already holds a study named {name!r} (an earlier "
+                                f"optimisation into {out}); resume it with --resume, give another --study-name, "
+                                f"or delete it: optuna delete-study --storage {shown_url(url)} --study-name "
+                                f"'{name}'")
+        optuna.delete_study(study_name=name, storage=storage)
+    study = optuna.create_study(storage=storage, study_name=name, directions=list(directions), sampler=sampler)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+        study.set_metric_names(list(metric_names))  # optuna-dashboard and the plots name the objectives
+    study.set_user_attr("cosim_results", str(Path(out).resolve()))
+    return study
