@@ -4,7 +4,7 @@
 :func:`ssp_raw_spec`, which flattens its system into the content of a
 spec.json (see :mod:`.reader`); a spec.json with ``"system": "file.ssp"``
 gets that content merged under its own (:func:`merge_system`).
-:mod:`.writer` exports a spec as an SSP 2.0 archive.
+:mod:`cosim.export.ssp` exports a spec as an SSP 2.0 archive.
 """
 
 from __future__ import annotations
@@ -28,8 +28,10 @@ def ssp_raw_spec(path: str | Path, experiment: Mapping[str, Any] | None = None, 
     """The spec content of the SSP at ``path`` (its ``variant``, if given), with ``experiment`` fields (command
     line) on top.
 
-    Raises SpecError for every problem of the SSP, and when it gives no stop
-    time or step size and ``experiment`` does not either.
+    An SSP with no component runs the constants its system connectors hold (a ``connectors`` unit per system,
+    see :mod:`.system_connectors`), recording them.  Raises SpecError for every problem of the SSP, when it has
+    neither a component nor a constant, and when it gives no stop time or step size and ``experiment`` does not
+    either.
     """
     system = read_ssp(path, variant)
     raw = system.raw
