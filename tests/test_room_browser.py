@@ -361,3 +361,88 @@ def test_a_large_table_is_drawn_as_bins_made_on_the_server(browser, studies, roo
     assert got
     image, want = expected(B.binned_image(browser), kept)
     assert (image != 0).sum() == 4 and np.array_equal(image, want)
+
+
+def test_dimensions_matrix_parallel_coordinates_brushing_and_3d(browser, studies, room):
+    """The Dimensions tab on the sweep: the scatter matrix's panels and source, the parallel coordinates' lines
+    (each column scaled over its range, computed here), a real mouse box over the first axis narrowing its
+    filter (brushing), a selection in the matrix shown in the lines, and the 3-D view turned by its sliders and
+    by a drag, against the projection computed here."""
+    folder = studies["sweep"]
+    link, _ = room(folder)
+    table = load_results(folder)
+    df = table.df
+    n = len(df)
+    B.load(browser, link)
+    B.show_tab(browser, 4)
+    columns = ["ode.a", "ode.x0", "f.fail_at", "y_end"]  # the parameters, then the first objective
+    assert browser.execute_script("return Bokeh.documents[0].get_model_by_name('dimensions').value;") == columns
+    names = browser.execute_script(
+        "const out = []; for (const m of Bokeh.documents[0]._all_models.values()) "
+        "{ if (m.name && m.name.startsWith('matrix:')) out.push(m.name); } return out.sort();")
+    assert names == sorted(["matrix:1:0", "matrix:2:0", "matrix:2:1", "matrix:3:0", "matrix:3:1",
+                                               "matrix:3:2"])
+    source = browser.execute_script("const d = Bokeh.documents[0].get_model_by_name('matrix-source').data;"
+                                    "return [0, 1, 2, 3].map((k) => Array.from(d['c' + k]));")
+    for k, c in enumerate(columns):
+        assert np.allclose(np.array(source[k], dtype=float), table.values(c), equal_nan=True)
+
+    def lines(layer):
+        got = browser.execute_script(f"const d = Bokeh.documents[0].get_model_by_name('parallel-{layer}').data;"
+                                     "return [Array.from(d.x), Array.from(d.y)];")
+        return np.array(got[0], dtype=float), np.array(got[1], dtype=float)
+
+    def expected_lines(rows):
+        y = np.full((len(rows), 5), np.nan)
+        for k, c in enumerate(columns):
+            v = table.values(c)
+            lo, hi = np.nanmin(v), np.nanmax(v)
+            y[:, k] = (v[rows] - lo) / (hi - lo)
+        return np.tile([0, 1, 2, 3, np.nan], len(rows)), y.reshape(-1)
+
+    x, y = lines("kept")
+    ex, ey = expected_lines(np.arange(n))
+    assert np.allclose(x, ex, equal_nan=True) and np.allclose(y, ey, equal_nan=True)
+
+    # brushing: a box from above the top of axis 0 down to its middle keeps a >= -1.25 (a in -2 .. -0.5)
+    B.drag(browser, (-0.2, 1.04), (0.2, 0.5), "parallel")
+    text = B.wait_for(browser, "const t = doc.get_model_by_name('count').text; "
+                               "return t.startsWith('<b>24<') ? null : t;")
+    a = table.values("ode.a")
+    kept = a >= -1.25
+    assert text.startswith(f"<b>{int(kept.sum())}</b> of {n}")
+    narrowed = browser.execute_script("return Bokeh.documents[0].get_model_by_name('narrowed').text;")
+    low = float(narrowed.split("ode.a: ")[1].split(" …")[0])
+    assert low == pytest.approx(-1.25, abs=0.02)  # a pixel of the 320 px plot is 0.005 of the range
+    x, y = lines("kept")
+    ex, ey = expected_lines(np.flatnonzero(kept))
+    assert np.allclose(y, ey, equal_nan=True)
+    assert len(lines("greyed")[0]) == 5 * int((~kept).sum())
+
+    # a selection in the matrix (as its box tool sets it) selects the design everywhere
+    browser.execute_script("Bokeh.documents[0].get_model_by_name('matrix-source').selected.indices = [5];")
+    sx, sy = B.wait_for(browser, "const d = doc.get_model_by_name('parallel-selected').data; "
+                                 "return d.x.length ? [Array.from(d.x), Array.from(d.y)] : null;")
+    assert np.allclose(np.array(sy, dtype=float), expected_lines(np.array([5]))[1], equal_nan=True)
+    assert B.count_true(browser, "show-selected") == 1
+
+    # the 3-D view: the first three columns scaled to [-1, 1], projected from the sliders' angles
+    def projected():
+        got = browser.execute_script("const d = Bokeh.documents[0].get_model_by_name('scatter3d-source').data;"
+                                     "return [Array.from(d.px), Array.from(d.py)];")
+        return np.array(got[0], dtype=float), np.array(got[1], dtype=float)
+
+    u, v, w = (2 * (table.values(c) - np.nanmin(table.values(c))) / np.ptp(table.values(c)) - 1 for c in columns[:3])
+    for azimuth, elevation in ((1.0, -0.3), (-2.5, 1.2)):
+        browser.execute_script(f"const d = Bokeh.documents[0]; d.get_model_by_name('azimuth').value = {azimuth};"
+                               f"d.get_model_by_name('elevation').value = {elevation};")
+        px, py = projected()
+        ca, sa, ce, se = np.cos(azimuth), np.sin(azimuth), np.cos(elevation), np.sin(elevation)
+        assert np.allclose(px, u * ca - v * sa) and np.allclose(py, w * ce + (u * sa + v * ca) * se)
+    before = browser.execute_script("return Bokeh.documents[0].get_model_by_name('azimuth').value;")
+    B.drag(browser, (-1.0, 0.0), (0.5, 0.0), "scatter3d")
+    after = browser.execute_script("return Bokeh.documents[0].get_model_by_name('azimuth').value;")
+    assert after != before
+    px, py = projected()
+    ca, sa = np.cos(after), np.sin(after)
+    assert np.allclose(px, u * ca - v * sa)

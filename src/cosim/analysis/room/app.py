@@ -39,6 +39,7 @@ from cosim.analysis.rerun import port_groups, rerun_rows
 from cosim.analysis.room import data as D
 from cosim.analysis.room import views as V
 from cosim.analysis.room.clouds import BinnedCloud, PointCloud
+from cosim.analysis.room.dimensions import Dimensions
 
 TOP = 20  # designs in the ranking table
 MAX_RERUN = 8  # designs re-run at once (one colour each)
@@ -61,6 +62,7 @@ class Room:
         self._pending = False
         self._weight_sliders: dict[str, Any] = {}
         self.ranking = self.radar = None  # the Decide tab's, built when it is first shown
+        self.dimensions: Dimensions | None = None  # the Dimensions tab's
         columns = self.decision.filters.columns
         if aggregate_above is None:
             aggregate_above = AGGREGATE_ABOVE
@@ -114,10 +116,11 @@ class Room:
                             row(self.histogram_column), self.histogram["figure"],
                             *self._failures()),
                      column(self.filter_column, self.filter, self.reset, self.narrowed))
-        self._builders = {1: self._build_decide, 2: self._build_selection, 3: self._build_study}
+        self._builders = {1: self._build_decide, 2: self._build_selection, 3: self._build_study,
+                          4: self._build_dimensions}
         self.tabs = Tabs(tabs=[TabPanel(child=points, title="Points")] +
                          [TabPanel(child=column(name=f"tab:{name}"), title=name.capitalize())
-                          for name in ("decide", "selection", "study")], name="tabs")
+                          for name in ("decide", "selection", "study", "dimensions")], name="tabs")
         self.tabs.on_change("active", self._on_tab)
         doc.add_root(self.tabs)
 
@@ -138,6 +141,24 @@ class Room:
 
     def _build_selection(self) -> list:
         return [self.selected, row(self.rerun_button, self.rerun_status), self.traces, self.export]
+
+    def _build_dimensions(self) -> list:
+        table = self.study.table
+        columns = self.decision.filters.columns
+        chosen = list(dict.fromkeys(c for c in [*table.parameter_columns(), *[c for c, _ in self.decision.objectives],
+                                                *table.objective_columns(), *columns] if c in columns))[:4]
+        self.dimensions = Dimensions(self.study, self.decision, chosen, self.colour, self._on_cloud_selection,
+                                     self._on_brush)
+        self.dimensions.show(D.masks(self.study, self.decision))
+        self.dimensions.show_selection(self.decision.selection)
+        return [self.dimensions.layout]
+
+    def _on_brush(self, name: str, lo: float, hi: float) -> None:
+        """A box over an axis of the parallel coordinates: that column's range filter narrowed to it."""
+        self.decision.filters.set_range(name, lo, hi)
+        if self.filter.tags[0] == name:
+            self.filter.update(**self._filter_state(name))
+        self._refresh_soon()
 
     def _build_study(self) -> list:
         views: list = [V.text(self._summary(), "summary")]
@@ -241,6 +262,8 @@ class Room:
         """Everything that depends on the filters and the objectives."""
         masks = D.masks(self.study, self.decision)
         self.cloud.show(masks)
+        if self.dimensions is not None:
+            self.dimensions.show(masks)
         active = int((~masks["greyed"]).sum())
         front = int(masks["front"].sum())
         self._refresh_narrowed()
@@ -287,6 +310,8 @@ class Room:
     def _refresh_selection(self) -> None:
         rows = self.decision.selection
         self.cloud.show_selection(rows)
+        if self.dimensions is not None:
+            self.dimensions.show_selection(rows)
         self._refresh_radar()
         if not rows:
             self.selected.text = "<p>No design selected: click points of the cloud or rows of the ranking.</p>"

@@ -57,11 +57,15 @@ COUNT_TEXT = "return doc.get_model_by_name('count').text;"
 RANKING_SCORES = "const s = doc.get_model_by_name('ranking').source.data.score; return s.length ? s.join() : null;"
 RANKING_IDS = "const ids = doc.get_model_by_name('ranking').source.data.point_id; return ids.length ? ids.join() : null;"
 
-# the viewport position of data point (x, y) of the cloud
+# the viewport position of data point (x, y) of a figure (by name), scrolled into view when outside it
 POINT_ON_SCREEN = """
-const [x, y] = arguments;
-const view = Bokeh.index.find_one(Bokeh.documents[0].get_model_by_name('cloud'));
-const rect = view.canvas_view.el.getBoundingClientRect();
+const [x, y, name] = arguments;
+const view = Bokeh.index.find_one(Bokeh.documents[0].get_model_by_name(name));
+let rect = view.canvas_view.el.getBoundingClientRect();
+if (rect.top < 0 || rect.bottom > window.innerHeight) {  // scrolled into the viewport first
+  view.canvas_view.el.scrollIntoView({block: 'center'});
+  rect = view.canvas_view.el.getBoundingClientRect();
+}
 return [rect.left + view.frame.x_scale.compute(x), rect.top + view.frame.y_scale.compute(y)];
 """
 
@@ -137,9 +141,29 @@ def click_at(browser: Any, x: float, y: float) -> None:
     actions.perform()
 
 
-def click_point(browser: Any, x: float, y: float) -> None:
-    """Click data point (x, y) of the cloud."""
-    click_at(browser, *browser.execute_script(POINT_ON_SCREEN, float(x), float(y)))
+def on_screen(browser: Any, x: float, y: float, figure: str = "cloud") -> tuple[float, float]:
+    """The viewport position of data point (x, y) of ``figure``."""
+    return tuple(browser.execute_script(POINT_ON_SCREEN, float(x), float(y), figure))
+
+
+def click_point(browser: Any, x: float, y: float, figure: str = "cloud") -> None:
+    """Click data point (x, y) of the cloud (or another figure)."""
+    click_at(browser, *on_screen(browser, x, y, figure))
+
+
+def drag(browser: Any, start: tuple[float, float], end: tuple[float, float], figure: str) -> None:
+    """A real mouse drag in ``figure`` from data point ``start`` to ``end`` (in steps, as a hand moves)."""
+    from selenium.webdriver.common.actions.action_builder import ActionBuilder
+
+    (x0, y0), (x1, y1) = on_screen(browser, *start, figure), on_screen(browser, *end, figure)
+    actions = ActionBuilder(browser)
+    actions.pointer_action.move_to_location(int(round(x0)), int(round(y0)))
+    actions.pointer_action.pointer_down()
+    for k in range(1, 11):
+        actions.pointer_action.move_to_location(int(round(x0 + (x1 - x0) * k / 10)),
+                                                int(round(y0 + (y1 - y0) * k / 10)))
+    actions.pointer_action.pointer_up()
+    actions.perform()
 
 
 def click_widget(browser: Any, name: str) -> None:
@@ -147,7 +171,7 @@ def click_widget(browser: Any, name: str) -> None:
 
 
 def show_tab(browser: Any, index: int) -> None:
-    """Switch to tab ``index`` (0 Points, 1 Decide, 2 Selection, 3 Study) and wait until it is built (the
+    """Switch to tab ``index`` (0 Points, 1 Decide, 2 Selection, 3 Study, 4 Dimensions) and wait until it is built (the
     server builds a tab the first time it is shown) and drawn."""
     browser.execute_script(f"Bokeh.documents[0].get_model_by_name('tabs').active = {index};")
     wait_for(browser, f"const c = doc.get_model_by_name('tabs').tabs[{index}].child; "
