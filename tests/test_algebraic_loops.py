@@ -429,3 +429,28 @@ def test_a_loop_whose_units_give_no_derivatives_keeps_finite_differences(write_s
     assert solver.derivatives is None
     for unit in units.values():
         unit.terminate()
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_a_loop_through_a_model_exchange_unit_is_solved_at_every_communication_point(write_spec, version):
+    """A mass on springs (`mass_spring`, Model Exchange, integrated by CVode inside each step) whose coupling
+    force F_c = kc (x - x_in) feeds a gain (`algebraic`, y = u/2) back into x_in: a loop of direct feed-through
+    through the ME unit.  At every communication point x_in = F_c / 2 = x - x_in, so x_in = x/2 (to the loop
+    tolerance); between points x_in is held, so the mass follows x'' = -k x - kc (x - x_in) = -2x (x = cos(√2 t))
+    with an error of first order in the step (it halves with the step)."""
+    errors = []
+    for step in (0.01, 0.005):
+        spec = {"units": {"mass": {"fmu": f"builtin:mass_spring_fmi{version}",
+                                   "parameters": {"m": 1.0, "k": 1.0, "kc": 2.0, "x0": 1.0}, "tolerance": 1e-10},
+                          "gain": {"fmu": "builtin:algebraic_fmi2", "parameters": {"c1": 0.5}}},
+                "connections": [{"from": "mass.F_c", "to": "gain.u"}, {"from": "gain.y", "to": "mass.x_in"}],
+                "experiment": {"stop": 2.0, "step": step}, "record": ["mass.x", "mass.x_in", "mass.F_c"]}
+        system, result = _run(write_spec, spec, f"me_{step}.json")
+        assert result.ok, result.message
+        (loop,) = system.coupling.loops
+        assert loop.units == ("mass", "gain") and system.model_exchange.groups == ()
+        t, x = result.traces["time"].to_numpy(), result.traces["mass.x"].to_numpy()
+        x_in, force = result.traces["mass.x_in"].to_numpy(), result.traces["mass.F_c"].to_numpy()
+        assert np.max(np.abs(x_in - x / 2)) < 1e-10 and np.max(np.abs(force - 2 * (x - x_in))) < 1e-10
+        errors.append(np.max(np.abs(x - np.cos(math.sqrt(2) * t))))
+    assert errors[0] < 1e-2 and 1.7 < errors[0] / errors[1] < 2.3
