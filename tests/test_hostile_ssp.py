@@ -240,3 +240,66 @@ def test_an_unusable_component_fmu_is_a_problem_at_each_component(tmp_path, caps
         assert main([command, str(path)]) == 2, command
         err = capsys.readouterr().err
         assert "Traceback" not in err and "internal error" not in err and expected in err
+
+
+# --- many connections (issue 29, item 7): each problem at its own element; linear (times: benchmarks/) -------------
+
+def _system_of_connections(connectors: int, connections: list[str]) -> str:
+    """An SSD whose root system declares ``connectors`` outputs c0.. and holds ``connections`` (start connector
+    names), each into input u of component b (linear_ode)."""
+    declared = "\n".join(f'<ssd:Connector name="c{i}" kind="output"><ssc:Real/></ssd:Connector>'
+                         for i in range(connectors))
+    wired = "\n".join(f'<ssd:Connection startConnector="{name}" endElement="b" endConnector="u"/>'
+                      for name in connections)
+    return f'''<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
+    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon" name="many" version="2.0">
+  <ssd:System name="Root">
+    <ssd:Connectors>{declared}</ssd:Connectors>
+    <ssd:Elements>
+      <ssd:Component name="b" type="application/x-fmu-sharedlibrary" source="resources/linear_ode.fmu"/>
+    </ssd:Elements>
+    <ssd:Connections>{wired}</ssd:Connections>
+  </ssd:System>
+  <ssd:DefaultExperiment startTime="0" stopTime="0.1"/>
+</ssd:SystemStructureDescription>
+'''
+
+
+def test_thousands_of_wrong_connections_are_each_reported_at_their_own_element(tmp_path):
+    # 6000 declared connectors and 6000 connections from names none has (was 112 s of CPU: a suggestion
+    # compared with every connector, and the siblings counted again, per problem)
+    members = {"SystemStructure.ssd": _system_of_connections(6000, [f"x{i}" for i in range(6000)]).encode(),
+               "resources/linear_ode.fmu": nested_files()["resources/linear_ode.fmu"]}
+    problems = _problems(write_archive(tmp_path / "wrong.ssp", members))
+    assert len(problems) == 6000
+    for i in (0, 1, 2999, 5999):
+        assert problems[i].path.endswith(f"/ssd:Connections/ssd:Connection[{i + 1}]")
+        assert problems[i].message == f"startConnector 'x{i}' is not a connector of system 'the root system'."
+        assert problems[i].fix == "use one of: " + ", ".join(f"c{k}" for k in range(12))
+    assert len({p.path for p in problems}) == 6000
+
+
+def test_a_wrong_connection_among_few_connectors_still_gets_a_suggestion(tmp_path):
+    members = {"SystemStructure.ssd": _system_of_connections(70, ["c1", "c69", "c7O"]).encode(),
+               "resources/linear_ode.fmu": nested_files()["resources/linear_ode.fmu"]}
+    [problem] = _problems(write_archive(tmp_path / "typo.ssp", members))
+    assert problem.path.endswith("/ssd:Connections/ssd:Connection[3]")  # 3 of 3: positions among 70+ siblings
+    assert "startConnector 'c7O' is not a connector" in problem.message and " Did you mean 'c7" in problem.message
+
+
+def test_element_paths_count_positions_among_many_siblings_of_mixed_tags():
+    from lxml import etree
+
+    from cosim.ssp.xml import element_path, forget_positions
+
+    root = etree.fromstring("<r>" + "".join("<a/><b/><b/>" for _ in range(50)) + "<a name='n'/></r>")
+    children = list(root)
+    try:
+        assert element_path(children[0]) == "/r/a[1]"
+        assert element_path(children[149]) == "/r/b[100]"
+        assert element_path(children[147]) == "/r/a[50]"
+        assert element_path(children[150]) == "/r/a[@name='n']"
+        assert [element_path(c) for c in children[:4]] == ["/r/a[1]", "/r/b[1]", "/r/b[2]", "/r/a[2]"]
+    finally:
+        forget_positions()

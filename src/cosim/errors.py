@@ -22,6 +22,8 @@ plug-ins outside the package) can raise these errors without import cycles.
 from __future__ import annotations
 
 import difflib
+from collections.abc import Iterator, Sized
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Sequence
@@ -87,9 +89,46 @@ class SpecError(UserError):
     """A spec cannot be used; ``problems`` lists every reason found."""
 
 
+SUGGESTION_POOL = 5000  # candidates above which did_you_mean suggests nothing
+SUGGESTION_BUDGET = 1_000_000  # comparisons did_you_mean may make within one suggestions_bounded() block
+_budget = {"depth": 0, "left": float("inf")}
+
+
+@contextmanager
+def suggestions_bounded() -> Iterator[None]:
+    """Bound the comparisons :func:`did_you_mean` makes in the block to SUGGESTION_BUDGET (about 4 s), so
+    that thousands of wrong names among thousands of candidates are reported in linear time; beyond it the
+    problems come without a suggestion.  The outermost block sets the budget; outside any, it is unbounded."""
+    if _budget["depth"] == 0:
+        _budget["left"] = SUGGESTION_BUDGET
+    _budget["depth"] += 1
+    try:
+        yield
+    finally:
+        _budget["depth"] -= 1
+        if _budget["depth"] == 0:
+            _budget["left"] = float("inf")
+
+
+def can_suggest(candidates: int) -> bool:
+    """Whether :func:`did_you_mean` would still look among ``candidates`` names (to skip building them)."""
+    return candidates <= SUGGESTION_POOL and candidates <= _budget["left"]
+
+
 def did_you_mean(name: str, candidates: Iterable[str]) -> str:
-    """' Did you mean 'x'?' for the closest candidate, or '' when none is close."""
-    close = difflib.get_close_matches(name, list(candidates), n=1, cutoff=0.6)
+    """' Did you mean 'x'?' for the closest candidate, or '' when none is close.
+
+    Also '' for more than SUGGESTION_POOL candidates, and once the block's budget is spent (see
+    :func:`suggestions_bounded`): difflib compares the name with each candidate, so 10^5 wrong names among
+    10^5 variables (a generated SSP) took hours to report, 6000 among 6000 two minutes.
+    """
+    if isinstance(candidates, Sized) and not can_suggest(len(candidates)):
+        return ""
+    pool = list(candidates)
+    if not can_suggest(len(pool)):
+        return ""
+    _budget["left"] -= len(pool)
+    close = difflib.get_close_matches(name, pool, n=1, cutoff=0.6)
     return f" Did you mean '{close[0]}'?" if close else ""
 
 

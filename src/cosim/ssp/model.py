@@ -3,6 +3,7 @@ and the connections between them (:class:`Edge`); the SSP's value types and how 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -56,15 +57,20 @@ class Edge:
 
 
 def variable_of(node: Node, name: str) -> Any:
-    """The FMU variable a connector or parameter name means: ``x`` or an element ``x[i]`` of an array."""
-    if name in node.variables:
-        return node.variables[name]
-    base, _, rest = name.partition("[")
-    variable = node.variables.get(base)
-    if variable is not None and variable.is_array and rest.endswith("]") and rest[:-1].isdigit() \
-            and 1 <= int(rest[:-1]) <= variable.size:
+    """The FMU variable a connector or parameter name means: ``x`` or an element ``x[i]`` of an array.
+
+    Called several times per connection (10^5 element connections): plain lookups, no properties.
+    """
+    variables = node.variables
+    variable = variables.get(name)
+    if variable is not None:
         return variable
-    return None
+    base, bracket, rest = name.partition("[")
+    variable = variables.get(base) if bracket else None
+    if variable is None or not variable.shape or not rest.endswith("]"):
+        return None
+    index = rest[:-1]
+    return variable if index.isdigit() and 1 <= int(index) <= math.prod(variable.shape) else None
 
 
 def unit_of(nodes: dict[tuple[str, ...], Node], path: tuple[str, ...], connector: str) -> tuple[str | None, dict]:

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from cosim.errors import SpecError
+from cosim.errors import SpecError, suggestions_bounded
 from cosim.ssp.archive import SspFiles, open_ssp
 from cosim.ssp.bindings import Bindings
 from cosim.ssp.connections import Flow
@@ -36,7 +36,7 @@ from cosim.ssp.measures import read_unit_definitions
 from cosim.ssp.model import FMU_TYPES, TABLE_TYPES, Node
 from cosim.ssp.reading import Reading
 from cosim.ssp.system_connectors import ConnectorSignal, connector_signals
-from cosim.ssp.xml import tag
+from cosim.ssp.xml import forget_positions, tag
 
 __all__ = ["FMU_TYPES", "TABLE_TYPES", "SspSystem", "read_ssp"]
 
@@ -59,9 +59,11 @@ def read_ssp(path: str | Path, variant: str | None = None) -> SspSystem:
     :func:`~cosim.ssp.archive.open_ssp`); raises SpecError."""
     reading = Reading(open_ssp(path, variant))
     try:
-        return _read(reading)
+        with suggestions_bounded():  # a problem per connection of 10^5 stays linear
+            return _read(reading)
     finally:  # also when problems are raised: the notes say what was read as what
         reading.flush_alike()
+        forget_positions()
 
 
 def _read(reading: Reading) -> SspSystem:

@@ -13,6 +13,8 @@ Description/ssd:System[@name='root']/...``) and the fix.
 from __future__ import annotations
 
 import re
+from itertools import islice
+from typing import Any
 from functools import lru_cache
 from pathlib import Path
 
@@ -78,12 +80,47 @@ def element_path(element: etree._Element) -> str:
         if name is not None:
             step += f"[@name='{name}']"
         elif parent is not None:
-            same = [c for c in parent if c.tag == node.tag]
-            if len(same) > 1:
-                step += f"[{same.index(node) + 1}]"
+            position, alike = _position(parent, node)
+            if alike > 1:
+                step += f"[{position}]"
         parts.append(step)
         node = parent
     return "/" + "/".join(reversed(parts))
+
+
+_POSITIONS: dict[Any, tuple[dict, dict]] = {}  # parent -> (child -> position among its tag, tag -> count)
+_MANY = 64  # children above which a parent's positions are kept, not counted again per path
+
+
+def _position(parent: etree._Element, node: etree._Element) -> tuple[int, int]:
+    """(1-based position of ``node`` among its parent's children of its tag, how many there are).
+
+    A problem per connection of 10^5 ``ssd:Connection`` siblings counted the siblings once per problem
+    (quadratic; lxml's ``len`` walks the children too); a parent of many children has its positions counted
+    once and kept (the last few parents; the cache holds them, so their proxies, and so the identity of their
+    children, stay the same; documents are not changed once their paths are taken).
+    """
+    kept = _POSITIONS.get(parent)
+    if kept is not None and node in kept[0]:
+        return kept[0][node], kept[1][node.tag]
+    first = list(islice(parent, _MANY + 1))
+    if len(first) <= _MANY:
+        same = [c for c in first if c.tag == node.tag]
+        return same.index(node) + 1, len(same)
+    positions: dict = {}
+    counts: dict = {}
+    for child in parent:
+        if isinstance(child.tag, str):
+            counts[child.tag] = positions[child] = counts.get(child.tag, 0) + 1
+    if len(_POSITIONS) >= 8:
+        _POSITIONS.pop(next(iter(_POSITIONS)))
+    _POSITIONS[parent] = (positions, counts)
+    return positions[node], counts[node.tag]
+
+
+def forget_positions() -> None:
+    """Drop the kept positions (and so the documents they hold): at the end of a reading."""
+    _POSITIONS.clear()
 
 
 def _readable(message: str) -> str:

@@ -20,45 +20,46 @@ def check_connections(spec: Spec, units: Mapping[str, SystemUnit], problems: lis
     fed: dict[tuple[str, str, int], int] = {}
     players = replaying_units(spec.units)
     for c in spec.connections:
-        if split_unit_name(str(c.target), units)[0] in players:
+        if players and split_unit_name(str(c.target), units)[0] in players:
             continue  # the input of a unit now replayed by a player: the recording already has what it caused
         base = ["connections", c.index]
-        source = resolve_signal(c.source, units, problems, file, json_path([*base, "from"]))
-        target = resolve_signal(c.target, units, problems, file, json_path([*base, "to"]))
+        where = json_path(base)  # f-strings below: json_path per end cost a tenth of the time of 10^5 connections
+        source = resolve_signal(c.source, units, problems, file, f"{where}.from")
+        target = resolve_signal(c.target, units, problems, file, f"{where}.to")
         if source is None or target is None:
             continue
         ok = True
         if source.variable.causality != "output":
-            problems.append(Problem(file, json_path([*base, "from"]),
+            problems.append(Problem(file, f"{where}.from",
                                     f"'{c.source}' is {article(source.variable.causality)}, not an output",
                                     "a connection goes from an output to an input"))
             ok = False
         if target.variable.causality != "input":
-            problems.append(Problem(file, json_path([*base, "to"]),
+            problems.append(Problem(file, f"{where}.to",
                                     f"'{c.target}' is {article(target.variable.causality)}, not an input",
                                     "a connection goes from an output to an input; swap 'from' and 'to' if "
                                     "they are reversed"))
             ok = False
         if "Clock" in (source.variable.type, target.variable.type):
-            problems.append(Problem(file, json_path(base), f"'{c.source}' -> '{c.target}' connects an FMI 3.0 "
+            problems.append(Problem(file, where, f"'{c.source}' -> '{c.target}' connects an FMI 3.0 "
                                     "Clock; cosim does not run clocked partitions or events",
                                     "remove the connection; connect value variables only"))
             ok = False
         elif not types_fit(source.variable.type, target.variable.type):
-            problems.append(Problem(file, json_path(base), f"type mismatch: '{c.source}' is "
+            problems.append(Problem(file, where, f"type mismatch: '{c.source}' is "
                                     f"{source.variable.type}, '{c.target}' is {target.variable.type}",
                                     "connect variables of the same type (Integer may feed Real; Binary "
                                     "connects only to Binary)"))
             ok = False
         if len(source.refs) != len(target.refs):
-            problems.append(Problem(file, json_path(base), f"size mismatch: '{c.source}' has {len(source.refs)} "
+            problems.append(Problem(file, where, f"size mismatch: '{c.source}' has {len(source.refs)} "
                                     f"element(s), '{c.target}' has {len(target.refs)}",
                                     "connect arrays of the same size, or single elements like 'x[2]'"))
             ok = False
         for ref in target.refs:
             key = (target.unit, ref.variable, ref.offset)
             if key in fed:
-                problems.append(Problem(file, json_path([*base, "to"]),
+                problems.append(Problem(file, f"{where}.to",
                                         f"input '{c.target}' is already fed by connection {fed[key]}",
                                         "an input takes exactly one source; remove one of the connections"))
                 ok = False
@@ -66,12 +67,12 @@ def check_connections(spec: Spec, units: Mapping[str, SystemUnit], problems: lis
             fed[key] = c.index
         (factor, offset), unit_problem = connection_conversion(
             c.source, source.variable, units[source.unit].description, c.target, target.variable,
-            units[target.unit].description, c.convert, file, json_path(base))
+            units[target.unit].description, c.convert, file, where)
         if unit_problem is not None:
             problems.append(unit_problem)
             ok = False
         if (c.factor != 1.0 or c.offset != 0.0) and target.variable.type != "Real":
-            problems.append(Problem(file, json_path(base), f"'{c.target}' is {target.variable.type}: only Real "
+            problems.append(Problem(file, where, f"'{c.target}' is {target.variable.type}: only Real "
                                     "connections take a factor or offset", "remove 'factor' and 'offset'"))
             ok = False
         if ok:  # the connection's own transformation after the unit conversion

@@ -7,27 +7,31 @@ report every mistake at once.
 
 from __future__ import annotations
 
-from typing import Any, Mapping, Sequence
+from typing import Any, Collection, Mapping, Sequence
 
-from cosim.errors import Problem, did_you_mean
+from cosim.errors import Problem, can_suggest, did_you_mean
 from cosim.system.parts import Signal, SystemUnit
 from cosim.units.protocol import parse_port, resolve_port
 
 
-def split_unit_name(text: str, unit_names: Any) -> tuple[str, str, str]:
-    """``('unit', '.', 'port')`` from ``'unit.port'``.
+def split_unit_name(text: str, *unit_names: Collection[str]) -> tuple[str, str, str]:
+    """``('unit', '.', 'port')`` from ``'unit.port'``; ``unit_names``: the known names (one or more mappings or
+    sets, e.g. the units and the units that failed to load).
 
     Units flattened from an SSP are named by their path (``SuT.motor``), so a
     unit name may contain dots: the longest known unit name followed by a dot
-    wins; without one, the text splits at its first dot.
+    wins; without one, the text splits at its first dot.  The text's prefixes
+    are looked up (from its last dot back), so the cost does not grow with the
+    number of units: 10^5 connections among 10^4 units stay linear.
     """
-    best = ""
-    for name in unit_names:
-        if len(name) > len(best) and text.startswith(name) and text[len(name):len(name) + 1] == ".":
-            best = name
-    if not best:
-        return text.partition(".")
-    return best, ".", text[len(best) + 1:]
+    end = text.rfind(".")
+    while end > 0:
+        prefix = text[:end]
+        for names in unit_names:
+            if prefix in names:
+                return prefix, ".", text[end + 1:]
+        end = text.rfind(".", 0, end)
+    return text.partition(".")
 
 
 def port_names(unit: SystemUnit) -> list[str]:
@@ -39,7 +43,7 @@ def port_names(unit: SystemUnit) -> list[str]:
 def resolve_signal(text: str, units: Mapping[str, SystemUnit], problems: list[Problem], file: str,
                     path: str) -> Signal | None:
     """The Signal 'unit.port' or 'unit.port[i]' names, or None after adding a Problem at ``path``."""
-    unit_name, dot, port = split_unit_name(text, [*units, *getattr(units, "failed", ())])
+    unit_name, dot, port = split_unit_name(text, units, getattr(units, "failed", ()))
     if not dot or not port:
         problems.append(Problem(file, path, f"'{text}' is not 'unit.port'", "write 'unit.port' or 'unit.port[i]'"))
         return None
@@ -54,8 +58,8 @@ def resolve_signal(text: str, units: Mapping[str, SystemUnit], problems: list[Pr
     actual = unit.variable_name(port) if index is None else f"{unit.variable_name(base)}[{index}]"
     try:
         var, refs = resolve_port(unit.description, actual)
-    except KeyError:
-        names = port_names(unit)
+    except KeyError:  # the names only for a suggestion, which a huge unit does not get (per problem: quadratic)
+        names = port_names(unit) if can_suggest(len(unit.description.variables)) else ()
         problems.append(Problem(file, path, f"unit '{unit_name}' has no variable '{port}'."
                                             f"{did_you_mean(base, names)}",
                                 f"run 'cosim inspect' on the spec to list the variables of '{unit_name}'"))

@@ -87,7 +87,7 @@ def check_design(spec: Spec, units: LoadedUnits, problems: list[Problem]) -> dic
     players = replaying_units(spec.units)
     for p in spec.design.parameters:
         path = json_path(["design", "parameters", p.target])
-        unit_name, _, port = split_unit_name(p.target, [*units, *units.failed])
+        unit_name, _, port = split_unit_name(p.target, units, units.failed)
         if unit_name in players:
             continue  # a replayed unit: `cosim run` needs no design; a sweep refuses it (cosim.studies.sweep)
         if unit_name not in units:

@@ -12,9 +12,10 @@ import copy
 from pathlib import Path
 from typing import Any
 
-from cosim.errors import Problem, SpecError
+from cosim.errors import Problem, SpecError, suggestions_bounded
 from cosim.spec.loader import build_spec, load_spec, read_raw, schema_problems, spec_schema
 from cosim.system.builder import System, build_system
+from cosim.util.collector import collector_paused
 
 # Where an error's JSON path points into one of these, the whole entry is set
 # aside: (top-level key, depth of the entry).
@@ -27,6 +28,12 @@ def check_spec(path: str | Path, experiment: dict | None = None, variant: str | 
     ``experiment`` fields override the file's (see :func:`load_spec`); ``variant`` chooses an SSP's variant.
     Raises SpecError with every problem of form and fit found.
     """
+    # millions of small acyclic objects for 10^5 connections (see cosim.util.collector); as many problems
+    with collector_paused(), suggestions_bounded():
+        return _check_spec(path, experiment, variant)
+
+
+def _check_spec(path: str | Path, experiment: dict | None, variant: str | None) -> System:
     try:
         return build_system(load_spec(path, experiment, variant))
     except SpecError as first:

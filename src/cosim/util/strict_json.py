@@ -100,7 +100,8 @@ def _walk(raw: Any, file: str) -> list[Problem]:
                     problems.append(Problem(file, json_path([*parts, key]), f"key '{key}' is given more than once; "
                                             "cosim does not guess which one you meant", "keep one of them"))
             items = value.items() if isinstance(value, dict) else enumerate(value)
-            stack.extend((v, (*parts, k), depth + 1) for k, v in items)
+            # only what can hold a problem: 10^5 connections hold 3 x 10^5 plain strings
+            stack.extend((v, (*parts, k), depth + 1) for k, v in items if isinstance(v, (dict, list, _NotJson)))
     return sorted(problems, key=lambda p: p.path)
 
 
