@@ -186,3 +186,17 @@ def test_a_run_ending_before_the_warm_start_is_refused(tmp_path):
     spec["units"]["clock"] = {"python": python_unit("RestorableEndsAtHalf")}
     with pytest.raises(UserError, match=r"ended at t=0\.5, before warm_start 1"):
         warmed(system_of(spec, tmp_path))
+
+
+def test_cosim_run_says_where_the_run_started_and_refuses_a_fixed_parameter(write_spec, capsys):
+    from cosim.cli.main import main
+
+    path = str(write_spec(lag_spec(SOURCES["fmi2"]())))
+    assert main(["run", path, "--set", "lag.b=3"]) == 0
+    out = capsys.readouterr().out
+    assert "100 steps from the warm start at t=1 s" in out and "to t=2 s" in out
+    y_end = float(next(line.split()[1] for line in out.splitlines() if line.startswith("y_end")))
+    assert y_end == pytest.approx(exact(np.array([STOP]), A0, 3.0)[0], rel=1e-5)  # printed to 6 digits
+    assert main(["run", path, "--set", "lag.x0=3"]) == 2
+    err = capsys.readouterr()
+    assert "'lag.x0' is a fixed parameter" in err.err + err.out and "remove experiment.warm_start" in err.err + err.out

@@ -123,7 +123,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"{'objective':<{width}}  {'value':>14}  unit")
         for name, value in result.objectives.items():
             print(f"{name:<{width}}  {value:>14.6g}  {units.get(name.split('[')[0], '')}")
-    print(f"status: {result.status}; {result.steps} steps to t={result.end_time:g} s in {result.elapsed:.3f} s")
+    warm = system.spec.experiment.warm_start
+    since = f" from the warm start at t={warm:g} s (made first, with the spec's values)" if warm is not None else ""
+    print(f"status: {result.status}; {result.steps} steps{since} to t={result.end_time:g} s in {result.elapsed:.3f} s")
     if result.step_stats:
         from cosim.master.adaptive import describe_statistics
         print(describe_statistics(result.step_stats))
