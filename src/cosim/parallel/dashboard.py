@@ -15,7 +15,8 @@
   web server (tornado, bokeh) logs an uncaught exception of a page handler
   with a full traceback on the terminal (e.g. ``GET /sitemap.json`` raises in
   distributed 2026.8).  While a study runs such records are logged as one
-  line with the exception's type and message instead.
+  line with the exception's type and message instead, and bokeh's error about a browser tab closed while
+  its page loaded (:func:`tab_closed_while_loading`) not at all.
 """
 
 from __future__ import annotations
@@ -49,12 +50,40 @@ def task_key(kind: str, study: str, indices: Sequence[int], total: int, run: str
     return f"cosim {kind} {name}-{which} of {total}-{unique}"
 
 
+def tab_closed_while_loading(exc: BaseException) -> bool:
+    """Whether ``exc`` is the web server's reaction to a browser tab that went away while its page loaded.
+
+    A dashboard tab closed (or reloaded) while its page loads ends the websocket before or while bokeh attaches
+    a session to it.  Bokeh then trips over the missing session (``bokeh/server/connection.py``: ``assert
+    self._session is not None``, from its ``on_close`` or from a message still being handled), or the work of
+    the destroyed session is cancelled (``asyncio.CancelledError``); tornado and bokeh log either as an error,
+    with a traceback, in the middle of the study's progress.  Nothing went wrong that the user could act on:
+    the tab is simply gone.
+    """
+    import asyncio
+
+    if isinstance(exc, asyncio.CancelledError):
+        return True
+    if not isinstance(exc, AssertionError):
+        return False
+    tb, innermost = exc.__traceback__, None
+    while tb is not None:
+        innermost, tb = tb, tb.tb_next
+    if innermost is None:
+        return False
+    code = innermost.tb_frame.f_code
+    return code.co_name == "session" and code.co_filename.replace("\\", "/").endswith("bokeh/server/connection.py")
+
+
 class _OneLine(logging.Filter):
-    """Replace a record's traceback by one line naming the exception."""
+    """Replace a record's traceback by one line naming the exception; drop the report of a tab closed while its
+    page loaded (:func:`tab_closed_while_loading`)."""
 
     def filter(self, record: logging.LogRecord) -> bool:
         if record.exc_info and record.exc_info[1] is not None:
             exc = record.exc_info[1]
+            if tab_closed_while_loading(exc):
+                return False
             first = record.getMessage().splitlines()[0] if record.getMessage() else ""
             record.msg, record.args = f"{first} ({type(exc).__name__}: {exc})", None
             record.exc_info, record.exc_text, record.stack_info = None, None, None
