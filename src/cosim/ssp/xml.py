@@ -164,12 +164,15 @@ def read_bounded(path: Path, label: str) -> tuple[bytes | None, list[Problem]]:
     megabytes = limit("ssp_file_mb")
     most = int(megabytes * 1024 * 1024)
     try:
-        with open(path, "rb") as stream:
-            data = stream.read(most + 1)
-            size = max(path.stat().st_size, len(data))
+        size = path.stat().st_size
+        data = b""
+        if size <= most:  # a bigger file is refused unread; one whose stated size lies, after most + 1 bytes
+            with open(path, "rb") as stream:
+                data = stream.read(most + 1)
+            size = max(size, len(data))
     except OSError as exc:
         return None, [Problem(label, "/", f"cannot read the file: {exc}", "check that the file exists")]
-    if len(data) > most:
+    if size > most:
         return None, [Problem(label, "/", f"the file holds {size / 1024 / 1024:,.1f} MB ({size:,} bytes), above "
                               f"the limit of {megabytes:g} MB for one SSP file (.ssd, .ssv, .ssm)",
                               "split the parameter values into several files, or " + raise_hint("ssp_file_mb"))]
