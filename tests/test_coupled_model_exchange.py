@@ -338,3 +338,52 @@ def test_an_input_from_outside_reaches_the_member_through_the_group(write_spec, 
     expected = np.array([expm(forced * t) @ np.append(X0, force) for t in times[::10]])[:, :4]
     got = traces[COLUMNS].to_numpy()[::10]
     assert np.max(np.abs(got - expected)) < 1000 * RTOL * np.max(np.abs(expected))
+
+
+# -- an algebraic loop among the members, solved inside the group (issue 26 item 4) ----------------------------------
+
+LA, LB = 0.5, 0.8  # coupling stiffnesses: F_c of each mass is the other's x_in, so the two forces form a loop
+
+
+def looped(version: int, step: float = 1e-2) -> dict:
+    """Two masses on wall springs; each one's coupling force F_c = kc (x - x_in) is the other's x_in (direct
+    feed-through both ways: an algebraic loop among two Model Exchange units)."""
+    return {"units": {"a": {"fmu": f"builtin:mass_spring_fmi{version}", "tolerance": RTOL,
+                            "parameters": {"m": 1.0, "k": 4.0, "kc": LA, "x0": 1.0}},
+                      "b": {"fmu": f"builtin:mass_spring_fmi{version}", "tolerance": RTOL,
+                            "parameters": {"m": 2.0, "k": 9.0, "kc": LB, "v0": 0.5}}},
+            # a force taken as a position (values passed as they are): no physics, but a loop with a closed form
+            "connections": [{"from": "a.F_c", "to": "b.x_in", "convert": False},
+                            {"from": "b.F_c", "to": "a.x_in", "convert": False}],
+            "experiment": {"stop": 2.0, "step": step},
+            "record": ["a.x", "a.v", "b.x", "b.v", "a.x_in", "b.x_in"]}
+
+
+def looped_exact(times: np.ndarray) -> np.ndarray:
+    """[xa, va, xb, vb] by the matrix exponential: the loop x_in_a = LB (xb - x_in_b), x_in_b = LA (xa - x_in_a)
+    solved by hand, x_in_a = LB (xb - LA xa) / (1 - LA LB), then m v' = -k x - kc (x - x_in) for each mass."""
+    in_a = np.array([-LA * LB, LB]) / (1 - LA * LB)  # x_in_a as a row over [xa, xb]
+    in_b = LA * (np.array([1.0, 0.0]) - in_a)
+    force_a = LA * (np.array([1.0, 0.0]) - in_a)
+    force_b = LB * (np.array([0.0, 1.0]) - in_b)
+    system = np.zeros((4, 4))
+    system[0, 1] = system[2, 3] = 1.0
+    system[1, [0, 2]] = (-4.0 * np.array([1.0, 0.0]) - force_a) / 1.0
+    system[3, [0, 2]] = (-9.0 * np.array([0.0, 1.0]) - force_b) / 2.0
+    return np.array([expm(system * t) @ np.array([1.0, 0.0, 0.0, 0.5]) for t in times])
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_a_loop_among_the_members_is_solved_inside_the_group(write_spec, version):
+    system, traces = run(write_spec, looped(version), f"looped{version}.json")
+    assert [g.members for g in system.model_exchange.groups] == [("a", "b")]
+    assert system.model_exchange.groups[0].coupling.loops  # solved by the group, at every right-hand side
+    t = traces["time"].to_numpy()
+    got = traces[["a.x", "a.v", "b.x", "b.v"]].to_numpy()
+    reference = looped_exact(t)
+    # integrated together: the solver's accuracy (rtol 1e-8), not a coupling error of the 10 ms step
+    assert np.max(np.abs(got - reference)) < 1000 * RTOL * np.max(np.abs(reference))
+    x_in_a, x_in_b = traces["a.x_in"].to_numpy(), traces["b.x_in"].to_numpy()
+    xa, xb = got[:, 0], got[:, 2]
+    # the loop holds at every recorded point, the start time included
+    assert np.max(np.abs(x_in_a - LB * (xb - x_in_b))) < 1e-9 and np.max(np.abs(x_in_b - LA * (xa - x_in_a))) < 1e-9

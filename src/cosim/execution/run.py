@@ -20,7 +20,7 @@ import numpy as np
 from cosim.errors import UnitError, UserError
 from cosim.execution.warm_start import WarmSamples, WarmState, refuse_unsaveable, restore_warm, warm_steps
 from cosim.master.algorithms import group_transfers, make_algorithm
-from cosim.master.coupled_me import integrate_together
+from cosim.master.coupled_me import integrate_together, settle_groups
 from cosim.master.observers import ExactColumns, ObjectiveReducer, Observer, TraceRecorder, flatten_objectives
 from cosim.spec.expressions import evaluate_expressions
 from cosim.system.builder import Assignment, System
@@ -238,6 +238,8 @@ class Execution:
             else:
                 algorithm.bind(stepped.units, order, stepped.links)
             algorithm.start(t)  # e.g. algebraic loops solved at the start time
+            if groups.groups:
+                settle_groups(stepped, t)  # loops among a group's members, solved at the start time too
             if self.warm is not None:  # the observers see the warm-up's samples, as if this run had taken its steps
                 self.warm.replay(observers, exact)
             else:

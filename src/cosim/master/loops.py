@@ -284,15 +284,24 @@ class LoopSolver:
     and ``iterations`` the iterations of the last solve, for tests and benchmarks.
     """
 
-    def __init__(self, loop: Loop, units: Mapping[str, Unit], links: Sequence[Link], settings: LoopSettings):
+    def __init__(self, loop: Loop, units: Mapping[str, Unit], links: Sequence[Link], settings: LoopSettings,
+                 transfers: TransferFactory | None = None):
+        """``transfers``: how the loop's values are carried (``transfers(units, [link])``: objects with
+        ``read()``, ``write(values)``, ``run()``), e.g. inside a group integrated by one solver; default: the
+        units' own get and set (:class:`~cosim.master.transfers.Transfer`)."""
         self.loop = loop
         self.settings = settings
-        self._entries = group_transfers(units, [links[i] for i in loop.entries])
-        self._torn = [Transfer(units[links[i].source.unit], units[links[i].target.unit], [links[i]])
-                      for i in loop.torn]
+        if transfers is None:
+            self._entries = group_transfers(units, [links[i] for i in loop.entries])
+            self._torn = [Transfer(units[links[i].source.unit], units[links[i].target.unit], [links[i]])
+                          for i in loop.torn]
+            self._inner = _in_order(units, [links[i] for i in loop.links])
+        else:
+            self._entries = [t for i in loop.entries for t in transfers(units, [links[i]])]
+            self._torn = [transfers(units, [links[i]])[0] for i in loop.torn]
+            self._inner = [t for i in loop.links for t in transfers(units, [links[i]])]
         bounds = np.cumsum([0] + [len(links[i].target.refs) for i in loop.torn])
         self._slices = [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:])]
-        self._inner = _in_order(units, [links[i] for i in loop.links])
         self._jacobian: np.ndarray | None = None  # of the residual, kept while Newton steps still contract
         self._solutions: deque[tuple[float, np.ndarray]] = deque(maxlen=2)  # (t, x) of the last two solves
         # the Jacobian from the units' directional derivatives, when every unit on the loop gives them
@@ -351,6 +360,11 @@ class LoopSolver:
         raise LoopError(self.loop.name, f"did not converge: largest residual {best[0]:.3g} (tolerance "
                                         f"{self.settings.tolerance:g}) after {tried}{fixed_iterations} fixed-point "
                                         "iteration(s)", t)
+
+    @property
+    def solution(self) -> np.ndarray | None:
+        """The tearing values of the last solve (None before the first)."""
+        return self._solutions[-1][1] if self._solutions else None
 
     def _guess(self, t: float) -> np.ndarray:
         """Where to start at ``t``: the last two solutions extrapolated linearly (the last one alone after the

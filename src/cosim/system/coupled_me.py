@@ -11,10 +11,13 @@ unit with ``"coupled_model_exchange": false`` on it (that unit is then integrate
 alone, inside each communication step, and exchanges values at communication
 points only).
 
-Units whose connections are part of an algebraic loop (a cycle of direct
-feed-through, :mod:`cosim.master.loops`) are not grouped: a group's equations are
-evaluated in dependency order, and the loop solver sets and reads the loop's units
-between steps; they run one by one, like units that opted out.
+An algebraic loop (a cycle of direct feed-through, :mod:`cosim.master.loops`)
+whose units are all Model Exchange units of one group is solved *inside* the
+group: at every evaluation of the group's equations (the solver's right-hand
+side, event iterations), by the loop solver on the members (``CoupledGroup.coupling``).
+Units on a loop that also passes through other units are not grouped: the loop
+solver sets and reads them between steps; they run one by one, like units that
+opted out.
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ from cosim.errors import Problem, json_path
 from cosim.master.loops import Coupling
 from cosim.spec.loader import Spec
 from cosim.system.parts import Connection, SystemUnit
-from cosim.system.stepping import stepping_order, strongly_connected
+from cosim.system.stepping import feedthrough_coupling, stepping_order, strongly_connected
 
 OPT_OUT = "coupled_model_exchange"  # the field, in "experiment" and on a unit
 
@@ -39,6 +42,9 @@ class CoupledGroup:
     name: str
     members: tuple[str, ...]
     links: tuple[Connection, ...]
+    # the members' direct feed-through and the algebraic loops among them, as indices into ``links``, when the
+    # links cannot be carried in one order (a loop inside the group); empty otherwise (``links`` in carrying order)
+    coupling: Coupling = Coupling()
 
 
 @dataclass(frozen=True)
@@ -69,8 +75,16 @@ def model_exchange_coupling(spec: Spec, units: Mapping[str, SystemUnit], connect
         return ModelExchangeCoupling((), tuple(order))
     candidates = {name for name, unit in units.items()
                   if unit.unit_type.offers_equations() and unit.spec.options.get(OPT_OUT, True)}
-    on_loops = {i for loop in feedthrough.loops for i in (*loop.links, *loop.torn, *loop.entries)}
-    candidates -= {u for i in on_loops for u in (connections[i].source.unit, connections[i].target.unit)}
+    outer_loops = list(feedthrough.loops)
+    while True:  # a loop through units that are not all candidates takes its units out (which may free others)
+        inner = [loop for loop in outer_loops if set(loop.units) <= candidates]
+        outer_loops = [loop for loop in outer_loops if loop not in inner]
+        on_loops = {i for loop in outer_loops for i in (*loop.links, *loop.torn, *loop.entries)}
+        leaving = {u for i in on_loops for u in (connections[i].source.unit, connections[i].target.unit)}
+        if not leaving & candidates:
+            break
+        candidates -= leaving
+        outer_loops = list(feedthrough.loops)
     inside = [c for c in connections if c.source.unit in candidates and c.target.unit in candidates]
     edges: dict[str, set[str]] = {name: set() for name in candidates}
     for c in inside:
@@ -85,11 +99,13 @@ def model_exchange_coupling(spec: Spec, units: Mapping[str, SystemUnit], connect
         if not links:
             continue  # a Model Exchange unit connected to no other: it integrates alone, as always
         ordered = _carrying_order(links, units)
-        if ordered is None:
-            continue  # an algebraic loop inside: not evaluable in dependency order (module docstring)
+        coupling = Coupling()
+        if ordered is None:  # an algebraic loop among the members: solved inside the group (module docstring)
+            member_units = {m: units[m] for m in members}
+            ordered, coupling = links, feedthrough_coupling(list(members), member_units, links, feedthrough.settings)
         name = _free_name("+".join(members), taken)
         taken.add(name)
-        groups.append(CoupledGroup(name, members, tuple(ordered)))
+        groups.append(CoupledGroup(name, members, tuple(ordered), coupling))
     if not groups:
         return ModelExchangeCoupling((), tuple(order))
     group_of = {m: g.name for g in groups for m in g.members}

@@ -76,6 +76,9 @@ class _Propagation:
         return changed
 
 
+Propagation = _Propagation  # public: the master's plans for loops among members carry plain links with it
+
+
 class _GroupSelection(Selection):
     """Elements of the group's ports: per member, its own selection and where its values go in the flat list."""
 
@@ -95,8 +98,15 @@ class CoupledModelExchange(EventLoop, Unit):
     cannot be integrated by a group.
     """
 
-    def __init__(self, name: str, members: Mapping[str, Any], links: Sequence[InternalLink]):
+    def __init__(self, name: str, members: Mapping[str, Any], links: Sequence[InternalLink],
+                 carry: Callable[[Mapping[str, Any], Callable[[], float]], list[Any]] | None = None):
+        """``carry``: when the links cannot be carried one after the other (an algebraic loop among the members),
+        makes what carries them instead, from the initialized members and a function giving the time of the
+        evaluation: objects whose ``run()`` carries values and says whether an input changed (the master's loop
+        solver, :func:`cosim.master.coupled_me.integrate_together`)."""
         self.name = name
+        self._carry = carry
+        self._rhs_time = 0.0
         self.time: float | None = None
         self.members = dict(members)
         for member_name, member in self.members.items():
@@ -189,8 +199,8 @@ class CoupledModelExchange(EventLoop, Unit):
 
     def do_step(self, t: float, h: float) -> None:
         if self._solver is None:  # the first step: every member is initialized now
-            self._now = t
-            self._propagations = [_Propagation(self.members, link) for link in self._links]
+            self._now = self._rhs_time = t
+            self._propagations = self._carriers()
             self._set_time(t)
             self._start_solver()
         changed = [m for m in self.members.values() if m._inputs_changed]
@@ -200,6 +210,22 @@ class CoupledModelExchange(EventLoop, Unit):
             self._propagate()
             self._inputs_changed = True
         super().do_step(t, h)
+
+    def _carriers(self) -> list[Any]:
+        """What carries the internal connections' values, in order (module docstring)."""
+        if self._carry is not None:
+            return self._carry(self.members, lambda: self._rhs_time)
+        return [_Propagation(self.members, link) for link in self._links]
+
+    def settle(self, t: float) -> None:
+        """Carry the internal connections' values at ``t`` (after initialization, before the first step): with a
+        loop among the members, the loop solved, so the values read at the start time satisfy it."""
+        if self._carry is None:
+            return
+        self._now = self._rhs_time = t
+        if self._propagations is None:
+            self._propagations = self._carriers()
+        self._propagate()
 
     def _propagate(self) -> bool:
         """Carry outputs to inputs along every internal connection; True when an input changed."""
@@ -233,6 +259,7 @@ class CoupledModelExchange(EventLoop, Unit):
             self._propagate()  # outputs follow the states, so do the inputs they feed
 
         def set_time(t: float) -> None:
+            self._rhs_time = t  # a loop among the members is solved at this time (its guess extrapolates to it)
             for member in self.members.values():
                 member._guard("setTime", partial(member._slave.setTime, t))
 
@@ -244,7 +271,7 @@ class CoupledModelExchange(EventLoop, Unit):
                     set_time=self._caught(set_time))
 
     def _set_time(self, time: float) -> None:
-        self._now = time
+        self._now = self._rhs_time = time
         for member in self.members.values():
             member._set_time(time)
         self._propagate()  # outputs may depend on time
