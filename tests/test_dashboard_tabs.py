@@ -1,4 +1,5 @@
-"""Issue 28.15: closing a dashboard tab while a study runs prints nothing on the study's terminal.
+"""Issue 28.15: closing a dashboard tab while a study runs prints nothing on the study's terminal, and the end of
+a study says that the dashboard link printed at its start is gone with the cluster.
 
 A tab closed while its page loads made bokeh assert that its (not yet made) session exists, or cancelled its
 session's work; tornado and bokeh logged that at ERROR in the middle of the progress line.  Here a real sweep
@@ -22,6 +23,7 @@ import pytest
 from cosim.parallel.dashboard import tab_closed_while_loading, web_server_tracebacks_as_lines
 
 from .test_hostile_files import _spec
+from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
 from .test_room_browser import browser  # noqa: F401  (fixture)
 
 SRC = Path(__file__).resolve().parent.parent / "src"
@@ -58,7 +60,7 @@ def test_the_errors_of_a_tab_gone_are_dropped_and_other_errors_kept_as_one_line(
 
 
 def test_closing_dashboard_tabs_during_a_sweep_prints_no_error(tmp_path, browser):  # noqa: F811
-    spec = _spec(tmp_path, 40, pause=1.0)  # 20 s on 2 workers: time for a dozen tabs
+    spec = _spec(tmp_path, 60, pause=1.0)  # 30 s on 2 workers: time for a dozen tabs
     proc = subprocess.Popen([sys.executable, "-m", "cosim.cli.main", "sweep", str(spec), "--out", str(tmp_path / "o"),
                              "--workers", "2", "--batch-size", "1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=dict(os.environ, PYTHONPATH=str(SRC)), start_new_session=True)
@@ -72,7 +74,13 @@ def test_closing_dashboard_tabs_during_a_sweep_prints_no_error(tmp_path, browser
         if proc.poll() is not None:
             break
         browser.switch_to.new_window("tab")
-        browser.get(link.group(1))
+        try:
+            browser.get(link.group(1))
+        except Exception:  # noqa: BLE001 - selenium's WebDriverException: refused once the sweep has ended
+            browser.close()
+            browser.switch_to.window(home)
+            assert proc.wait(timeout=60) is not None
+            break
         time.sleep(0.5 + (i % 3) * 0.7)  # closed while loading, just loaded, or after its first updates
         browser.close()
         browser.switch_to.window(home)
@@ -81,4 +89,35 @@ def test_closing_dashboard_tabs_during_a_sweep_prints_no_error(tmp_path, browser
     assert proc.returncode == 0, err
     assert closed >= 6, closed  # the tabs were opened and closed while the sweep ran
     lines = [line for line in err.splitlines() if not line.startswith("[")]  # the progress line's updates
-    assert lines == [], lines
+    assert lines == [f"cosim: the dashboard closed with the cluster this study started; the results: cosim explore "
+                     f"{tmp_path / 'o'} (or cosim report {tmp_path / 'o'})"], lines
+
+
+def _sweep(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "cosim.cli.main", "sweep", *args], capture_output=True, text=True,
+                          timeout=300, env=dict(os.environ, PYTHONPATH=str(SRC)))
+
+
+def test_the_end_of_a_study_says_its_dashboard_is_gone_and_where_the_results_are(tmp_path, local_cluster):
+    """The link printed at the start of a study of a few seconds was dead before it could be clicked, and
+    nothing said why (issue 28.15): the cluster cosim started for the study, and its dashboard, end with it."""
+    import urllib.error
+    import urllib.request
+
+    spec = _spec(tmp_path, 4)
+    done = _sweep(str(spec), "--out", str(tmp_path / "o"), "--workers", "1")
+    assert done.returncode == 0, done.stderr
+    link = re.search(r"dashboard: (http://\S+/status)", done.stderr).group(1)
+    last = done.stderr.strip().splitlines()[-1]
+    assert last == (f"cosim: the dashboard closed with the cluster this study started; the results: cosim explore "
+                    f"{tmp_path / 'o'} (or cosim report {tmp_path / 'o'})"), done.stderr
+    with pytest.raises(urllib.error.URLError):  # what the line says: nothing answers there any more
+        urllib.request.urlopen(link, timeout=10)
+    # nothing to say when no cluster was started (every point already in the folder) ...
+    again = _sweep(str(spec), "--out", str(tmp_path / "o"), "--workers", "1", "--resume")
+    assert again.returncode == 0 and "dashboard" not in again.stderr, again.stderr
+    # ... on a running scheduler, whose dashboard stays, or under -q
+    elsewhere = _sweep(str(spec), "--out", str(tmp_path / "p"), "--scheduler", local_cluster)
+    assert elsewhere.returncode == 0 and "closed with the cluster" not in elsewhere.stderr, elsewhere.stderr
+    quiet = _sweep(str(spec), "--out", str(tmp_path / "q"), "--workers", "1", "-q")
+    assert quiet.returncode == 0 and quiet.stderr == "", quiet.stderr

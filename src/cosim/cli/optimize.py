@@ -52,7 +52,7 @@ def add_optimize_parser(sub: Any) -> None:
 
 def cmd_optimize(args: argparse.Namespace) -> int:
     """Run an optimisation; returns the exit code. SpecError, OptimizeError and UsageError reach cli.main."""
-    from cosim.cli.sweep import print_not_ok
+    from cosim.cli.sweep import print_not_ok, runs_recorded, say_the_dashboard_is_gone
     from cosim.results.store import default_folder
     from cosim.studies.optimize import Optimization
 
@@ -66,11 +66,13 @@ def cmd_optimize(args: argparse.Namespace) -> int:
                        seed=args.seed, resume=args.resume, workers=args.workers, scheduler=args.scheduler,
                        cluster=args.cluster, timeout=args.timeout, quiet=getattr(args, "quiet", False),
                        storage=args.storage, study_name=args.study_name)
+    runs_before = runs_recorded(run.store)
     counts = run.run()
     total = sum(counts.values())
     summary = ", ".join(f"{n} {s}" for s, n in sorted(counts.items()) if n)
     print(f"{total} evaluations: {summary or 'none'}; table: {run.store.table_path}")
     print(f"front: cosim pareto {run.store.table_path}; report: cosim report {out} -o report.html")
+    say_the_dashboard_is_gone(args, run.store, runs_before, out)
     not_ok = total - counts.get("ok", 0)
     if not_ok:
         print_not_ok(run.store.table_path, 5)

@@ -49,6 +49,9 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
                              objectives=args.objective, workers=args.workers, scheduler=args.scheduler,
                              cluster=args.cluster,
                              timeout=args.timeout, resume=args.resume, quiet=getattr(args, "quiet", False))
+    from cosim.cli.sweep import runs_recorded, say_the_dashboard_is_gone
+
+    runs_before = runs_recorded(study.sweep.store)
     counts, indices = study.run()
     total = sum(counts.values())
     wide = indices.pivot_table(index=["objective", "parameter"], columns="index", values=["value", "conf"],
@@ -57,6 +60,7 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
     print(wide.to_string(float_format=lambda v: f"{v:.4f}"))
     print(f"{total} designs: " + ", ".join(f"{n} {s}" for s, n in sorted(counts.items()) if n)
           + f"; indices: {out / TABLE_NAME}, figure: {out / FIGURE_NAME}")
+    say_the_dashboard_is_gone(args, study.sweep.store, runs_before, out)
     warning = unreliable_indices(indices, args.method, study.n)
     if warning:
         print(f"cosim: warning: {warning}", file=sys.stderr)

@@ -72,16 +72,40 @@ def cmd_sweep(args: argparse.Namespace) -> int:
                   resume=args.resume, batch_size=args.batch_size, csv=args.csv, experiment=experiment_overrides(args),
                   recompute=args.recompute, quiet=getattr(args, "quiet", False),
                   start_early=True)  # the local cluster starts while the results folder and payload are prepared
+    runs_before = runs_recorded(sweep.store)
     counts = sweep.run_to_disk()  # a huge sweep's table never sits in memory
     total = sum(counts.values())
     summary = ", ".join(f"{n} {s}" for s, n in sorted(counts.items()) if n)
     print(f"{total} points: {summary or 'none'}; table: {sweep.store.table_path}")
+    say_the_dashboard_is_gone(args, sweep.store, runs_before, out)
     not_ok = total - counts.get("ok", 0)
     if not_ok:
         print_not_ok(sweep.store.table_path, 5)
         if not_ok > 5:
             print(f"  ... and {not_ok - 5} more (see the 'message' column)", file=sys.stderr)
     return EXIT_OK if not_ok == 0 else EXIT_RUN_FAILED
+
+
+def runs_recorded(store: Any) -> int:
+    """How many runs the results folder's metadata.json records (0 for a new folder)."""
+    return len((store.metadata() or {}).get("runs", []))
+
+
+def say_the_dashboard_is_gone(args: argparse.Namespace, store: Any, runs_before: int, out: Path) -> None:
+    """After a study on a cluster cosim started (and closed), say on stderr that the dashboard link printed at its
+    start is gone with it, and how to look at the results instead (also for ``optimize`` and ``sensitivity``).
+
+    The dashboard lives as long as its cluster: the link of a study of a few seconds (the README's first
+    sweep) was dead before it could be clicked, with nothing saying why.  Nothing is said under ``-q``, on a
+    running scheduler (``--scheduler`` or ``$DASK_SCHEDULER_ADDRESS``: its dashboard stays), or when no
+    cluster was started (every point was already in the folder: no run was recorded).
+    """
+    if getattr(args, "quiet", False) or args.scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS"):
+        return
+    if runs_recorded(store) <= runs_before:
+        return
+    print(f"cosim: the dashboard closed with the cluster this study started; the results: cosim explore {out} "
+          f"(or cosim report {out})", file=sys.stderr)
 
 
 def print_not_ok(table: Path, n: int) -> None:
