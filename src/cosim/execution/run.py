@@ -42,7 +42,8 @@ class RunResult:
     objective), ``"user"`` (a user's file found unusable only while running,
     e.g. an FMU archive that escapes its folder) or ``"internal"`` (a bug).
     ``steps`` counts the communication steps taken (the accepted ones under
-    the adaptive algorithm, whose ``step_stats`` say what else it did).
+    the adaptive algorithm, whose ``step_stats`` say what else it did; under
+    ``experiment.warm_start`` those after the warm start).
     """
 
     status: str
