@@ -387,3 +387,14 @@ def test_a_loop_among_the_members_is_solved_inside_the_group(write_spec, version
     xa, xb = got[:, 0], got[:, 2]
     # the loop holds at every recorded point, the start time included
     assert np.max(np.abs(x_in_a - LB * (xb - x_in_b))) < 1e-9 and np.max(np.abs(x_in_b - LA * (xa - x_in_a))) < 1e-9
+
+
+def test_a_loop_inside_a_group_without_solution_fails_the_run_naming_the_loop(write_spec):
+    # kc = 1 on both masses: x_in_a + x_in_b = x_b and = x_a, which no value meets while x_a != x_b
+    spec = looped(2)
+    spec["units"]["a"]["parameters"]["kc"] = spec["units"]["b"]["parameters"]["kc"] = 1.0
+    system = build_system(load_spec(write_spec(spec, "singular.json")))
+    assert system.model_exchange.groups[0].coupling.loops
+    result = Execution(system).run()
+    assert not result.ok and result.failure == "unit"
+    assert "loop through units a, b" in result.message and "did not converge" in result.message
