@@ -166,7 +166,7 @@ def _dry_run(args: argparse.Namespace) -> int:
             print("note: the sample runs differ more than 3x: the points' cost depends on the design, and the "
                   "estimate is only as good as the few samples are typical of the space")
         if args.timeout is None:
-            from cosim.studies.sweep import TIMEOUT_FACTOR, default_timeout
+            from cosim.parallel.point_stream import TIMEOUT_FACTOR, default_timeout
 
             print(f"timeout: {default_timeout(steady * 3):.0f} s per point by default ({TIMEOUT_FACTOR} x the "
                   "measured point time, within COSIM_TIMEOUT_FLOOR .. COSIM_TIMEOUT_FIRST); --timeout S sets it")

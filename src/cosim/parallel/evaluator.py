@@ -1,23 +1,21 @@
-"""Design points in, one row per point out, on Dask: what every study shares.
+"""Design points in, one row per point out, on Dask: the pieces every study shares.
 
 ``cosim sweep``, ``cosim optimize`` and ``cosim sensitivity`` differ only in
 *which* points they ask for and when; they share the cluster set-up, the
 payload (system + unit files, scattered once), the task function
-(:func:`cosim.parallel.tasks.run_batch`) and the per-worker child processes of
-:mod:`cosim.parallel.isolation` with their timeouts, the re-runs of lost tasks
-and the rule that a fault is a row, never an exception.  An optimisation asks
-:class:`Evaluator` for batches; a sweep (and a sensitivity study, which is a
-sweep of its sample) streams its points through the same pieces itself
-(:meth:`cosim.studies.sweep.Sweep.run`), sizing its tasks as point times become
-known:
+(:func:`cosim.parallel.tasks.run_batch`), the per-worker child processes of
+:mod:`cosim.parallel.isolation` with their timeouts, the re-runs of lost tasks,
+the rule that a fault is a row, never an exception, and one evaluate loop,
+:class:`cosim.parallel.point_stream.PointStream`, which hands each point's row
+back as soon as that point finishes.  This module holds:
 
 - :func:`dask_client` starts the cluster of a cluster file, connects to a
   running scheduler (given, or from Dask's configuration) or starts a local
   cluster whose workers run in this process (one thread each, 127.0.0.1; each
   runs its points in a child process), and closes what it started (see
   :mod:`cosim.parallel.cluster`).
-- :class:`Evaluator` runs a list of points on that client in parallel and
-  returns one row per point in the order given (``evaluate``).
+- :class:`ScatteredPayload`: the payload on the workers, scattered anew when
+  the workers holding it all died.
 - A task lost with its worker process is run again by the scheduler on
   another worker; the points of a task lost again then run in small groups,
   each alone on the cluster, and the points of a group lost alone one at a
@@ -255,7 +253,7 @@ class Reruns:
     other suspect gets its true row.
 
     Why groups: a sweep's task may hold thousands of cheap points
-    (:class:`cosim.studies.sweep.BatchSizer`); rerun one per task, one task at
+    (:class:`cosim.parallel.point_stream.BatchSizer`); rerun one per task, one task at
     a time, they would cost a scheduler round trip each (a minute or more
     for a lost worker), where a group costs one.  The group holding the
     killer costs one more round of worker deaths.
@@ -362,77 +360,3 @@ def lost_rows(point_ids: Sequence[str], exc: BaseException, alone: bool = False)
     else:
         message = f"the task running this point failed: {type(exc).__name__}: {exc}"
     return [PointRow(pid, "crashed", message) for pid in point_ids]  # run time unknown (NaN), no worker
-
-
-class Evaluator:
-    """Evaluates batches of points on ``client`` (see the module docstring).
-
-    ``payload`` is :func:`cosim.parallel.isolation.make_payload` of the system;
-    it is scattered to the workers once.  ``timeout`` is the seconds one point
-    may run before its child process is killed (row status ``timeout``).
-    ``study`` names the tasks on the Dask dashboard (:func:`cosim.parallel.dashboard.task_key`);
-    ``board`` (:func:`cosim.parallel.dashboard_points.open_board`) counts their points on its page.
-    """
-
-    def __init__(self, client: Any, payload: dict[str, Any], n_workers: int, timeout: float | None = None,
-                 study: str = "", board: Any = None):
-        self.client, self.n_workers, self.timeout, self.study = client, max(1, n_workers), timeout, study
-        self.board = board
-        self._payload = ScatteredPayload(client, payload)
-
-    def evaluate(self, points: Sequence[tuple[str, dict[str, Any]]]) -> list[PointRow]:
-        """One row per ``(point_id, values)``, in the order given; never raises for a failing point.
-
-        The points are split into one task per worker, so a batch of K runs
-        K / workers points per process (rows: :class:`~cosim.execution.point_row.PointRow`).  Points of a task lost
-        with its workers are run again (:class:`Reruns`).
-        """
-        if not points:
-            return []
-        size = math.ceil(len(points) / self.n_workers)
-        rows: list[PointRow | None] = [None] * len(points)
-        reruns = Reruns()
-        chunks = [list(range(i, min(i + size, len(points)))) for i in range(0, len(points), size)]
-        in_flight = [(chunk, False, self._submit(points, chunk)) for chunk in chunks]  # (indices, alone, future)
-        try:
-            self._collect(points, rows, in_flight, reruns)
-        finally:  # an interruption or an error leaves futures in flight: released while the client lives
-            release_futures(future for _, _, future in in_flight)
-        return rows  # type: ignore[return-value]  (every index was filled)
-
-    def _collect(self, points: Sequence[tuple[str, dict[str, Any]]], rows: list[PointRow | None],
-                 in_flight: list[tuple[list[int], bool, Any]], reruns: Reruns) -> None:
-        """Fill ``rows`` from the tasks ``in_flight`` (emptied as they finish), running suspects alone after."""
-        while in_flight or reruns.suspects:
-            if not in_flight:  # every other task is done: the next suspect runs alone
-                suspect = reruns.suspects.popleft()
-                in_flight.append((suspect, True, self._submit(points, suspect)))
-            for indices, alone, future in in_flight:
-                try:
-                    done = future.result()  # waits; the others run meanwhile
-                except Exception as exc:  # the worker process itself died, or the task could not run
-                    if reruns.after_failure(indices, exc, alone):
-                        continue
-                    done = lost_rows([points[i][0] for i in indices], exc, alone)
-                    if self.board is not None:
-                        self.board.rows_made_here(future.key, done)
-                finally:
-                    future.release()
-                for i, row in zip(indices, done):
-                    rows[i] = row
-            in_flight.clear()
-
-    def close(self) -> None:
-        """Release the payload scattered to the workers; call it before the client closes."""
-        self._payload.release()
-
-    def _submit(self, points: Sequence[tuple[str, dict[str, Any]]], indices: list[int]) -> Any:
-        """The task future for the points at ``indices``."""
-        from cosim.parallel.dashboard import task_key
-        from cosim.parallel.tasks import run_batch
-
-        chunk = [points[i] for i in indices]
-        key = task_key("optimize", self.study, indices, len(points),  # the dashboard's names: points of this batch
-                       run=self.board.run if self.board is not None else "")
-        return self.client.submit(run_batch, self._payload.future(), chunk, self.timeout, pure=False, retries=0,
-                                  key=key)

@@ -254,6 +254,10 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
                 outbox.send(("row", (row, reason)))
                 if reason:
                     return
+    except (BrokenPipeError, ConnectionResetError):
+        # the parent is gone (a kill -9 of the sweep) or stopped listening: nobody waits for this row, and a
+        # traceback here would land on the terminal of a client that no longer runs
+        return
     finally:
         if grouped is not None:
             grouped.close()
@@ -446,6 +450,7 @@ class IsolatedRunner:
         self._channel: _Channel | None = None
         self._limits: dict[str, str] = {}  # the limits the child was started with
         self._loading: str | None = None  # a spare child's: the key of the payload sent to it ahead of its runner
+        self.cut_by_stop: set[str] = set()  # points of the last run() ended by a stop (see run)
 
     def _start(self) -> str | None:
         """Start a child (or take a spare one) and load the payload; None when ready, else why it failed."""
@@ -536,13 +541,21 @@ class IsolatedRunner:
 
         Without ``timeout`` a point may run for the ``timeout_first_seconds``
         limit (COSIM_TIMEOUT_FIRST): no read of a child waits forever.
-        ``on_row`` is called with each row as soon as its point is done.
+        ``on_row`` is called with each row as soon as its point is done.  Once a stop began
+        (:func:`kill_point_children_now`), the rows this runner makes up for points it could not finish
+        (``timeout``, ``crashed``, ``failed`` not run) are not passed to ``on_row``, and their ids are in
+        :attr:`cut_by_stop` after the call: the stop, not the point, ended them.
         """
         deadline = timeout if timeout is not None else float(limit("timeout_first_seconds"))
         rows: list[PointRow] = []
+        self.cut_by_stop = set()
 
-        def keep(*new: PointRow) -> None:
+        def keep(*new: PointRow, made_here: bool = False) -> None:
+            """Rows of points that finished, or (``made_here``) that this runner gave up on."""
             rows.extend(new)
+            if made_here and _STOPPING.is_set():  # a stop killed the child or ended the batch: not finished
+                self.cut_by_stop.update(row.point_id for row in new)
+                return
             for row in new if on_row is not None else ():
                 on_row(row)
 
@@ -551,14 +564,14 @@ class IsolatedRunner:
         while remaining:
             if _STOPPING.is_set():  # the study is being stopped: the rest of the batch does not run
                 keep(*(_row(pid, "failed", "not run: the study was stopped", time.perf_counter())
-                       for pid, _ in remaining))
+                       for pid, _ in remaining), made_here=True)
                 break
             if self._proc is None or self._proc.poll() is not None:
                 self.close()
                 problem = self._start()
                 if problem is not None:
                     self.close()
-                    keep(*(_row(pid, "failed", problem, time.perf_counter()) for pid, _ in remaining))
+                    keep(*(_row(pid, "failed", problem, time.perf_counter()) for pid, _ in remaining), made_here=True)
                     break
             try:
                 self._outbox.send((mode, remaining))
@@ -576,7 +589,7 @@ class IsolatedRunner:
                     if grouped:  # not this point's fault for sure: the group's points run again one by one
                         break
                     keep(_row(point_id, "timeout", f"no result within the timeout of {deadline:g} s; "
-                                                   "the run was stopped", started))
+                                                   "the run was stopped", started), made_here=True)
                     done += 1
                     break
                 kind, body = received
@@ -586,7 +599,7 @@ class IsolatedRunner:
                         self.close()
                         break
                     keep(_row(point_id, "crashed", f"the process running this point died "
-                                                   f"({self._exit_text()})", started))
+                                                   f"({self._exit_text()})", started), made_here=True)
                     self.close()
                     done += 1
                     break
@@ -601,7 +614,7 @@ class IsolatedRunner:
                         break
                     keep(_row(point_id, "crashed", "the process running this point wrote something "
                                                    f"other than a result on its channel ({why}); it was "
-                                                   "replaced", started))
+                                                   "replaced", started), made_here=True)
                     done += 1
                     break
                 row, recycle = body

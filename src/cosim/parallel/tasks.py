@@ -59,17 +59,28 @@ def _point_batch(pickled: bytes) -> PointBatch:
 
 
 def run_batch(payload: dict[str, Any], points: PointBatch | Sequence[tuple[str, dict[str, Any]]],
-              timeout: float | None) -> list[PointRow]:
+              timeout: float | None, rows_topic: str | None = None) -> list[PointRow]:
     """Run ``points`` on this worker; one row per point (see IsolatedRunner.run), with the worker named.
 
     Runs on a Dask worker (or anywhere): the child process holding the system
-    is kept for the next batch of the same payload.
+    is kept for the next batch of the same payload.  ``rows_topic``: the rows
+    of finished points are also sent to the client on that Dask event topic
+    while the batch runs (:class:`RowSender`; :mod:`cosim.parallel.point_stream`).
+    Once a stop of this process began (:func:`cosim.parallel.isolation.kill_point_children_now`)
+    the rows of points the stop cut short are left out: the result holds only finished points.
     """
     from cosim.parallel.dashboard_points import BatchProgress
 
     if isinstance(points, PointBatch):
         points = points.points
+    name = _worker_name()
     progress = BatchProgress()  # the points page of the dashboard counts points as they finish
+    sender = RowSender(rows_topic, name)
+
+    def finished(row: PointRow) -> None:
+        progress.row(row)
+        sender.row(row)
+
     with _IDLE_LOCK:
         idle = _IDLE.pop(payload["key"], [])
         runner = idle.pop() if idle else IsolatedRunner(payload)
@@ -78,13 +89,73 @@ def run_batch(payload: dict[str, Any], points: PointBatch | Sequence[tuple[str, 
             for old in _IDLE.pop(next(iter(_IDLE))):
                 old.close()
     try:
-        rows = runner.run(points, timeout, on_row=progress.row)
+        rows = runner.run(points, timeout, on_row=finished)
+        cut = runner.cut_by_stop  # read before the runner goes back: another task may take it at once
     finally:
         with _IDLE_LOCK:
             _IDLE.setdefault(payload["key"], []).append(runner)
+        sender.close()
         progress.close()
-    name = _worker_name()
-    return [row.on_worker(name) for row in rows]
+    return [row.on_worker(name) for row in rows if row.point_id not in cut]
+
+
+ROWS_EVERY = 0.25  # seconds a finished point's row may wait on the worker, to go with the rows after it
+
+
+class RowSender:
+    """Sends the rows of a running task's finished points to the client as Dask events (``Worker.log_event``).
+
+    The first row after a quiet spell is sent ROWS_EVERY seconds later, with
+    every row finished meanwhile, in one event ``{"key": task key, "rows":
+    pickled rows}``: a task of cheap points sends few events, a slow point's
+    row is on its way within ROWS_EVERY seconds.  Rows still waiting when the
+    task ends are not sent: its result brings every row.  Without a topic, or
+    outside a Dask worker, it does nothing.
+    """
+
+    def __init__(self, topic: str | None, worker_name: str):
+        self._worker = self._key = None
+        if topic:
+            try:
+                from distributed import get_worker
+
+                self._worker = get_worker()
+                self._key = self._worker.get_current_task()
+            except (ImportError, ValueError):  # not on a worker
+                self._worker = None
+        self.topic, self.worker_name = topic, worker_name
+        self._pending: list[PointRow] = []
+        self._lock = threading.Lock()
+        self._closed = False
+
+    def row(self, row: PointRow) -> None:
+        """A point finished with ``row`` (called from the task's thread)."""
+        if self._worker is None:
+            return
+        with self._lock:
+            if self._closed:
+                return
+            first = not self._pending
+            self._pending.append(row.on_worker(self.worker_name))
+        if first:  # from the worker's event loop, which goes on while the task's thread runs the next point
+            loop = self._worker.loop
+            loop.add_callback(loop.call_later, ROWS_EVERY, self._flush)
+
+    def _flush(self) -> None:
+        with self._lock:
+            rows, self._pending = self._pending, []
+            if self._closed or not rows:
+                return
+        try:
+            self._worker.log_event(self.topic, {"key": self._key, "rows": pickle.dumps(rows, protocol=5)})
+        except Exception:  # a closing worker: the task's result, or its rerun, brings the rows
+            pass
+
+    def close(self) -> None:
+        """The task ends: rows not yet sent stay for its result."""
+        with self._lock:
+            self._closed = True
+            self._pending = []
 
 
 def _worker_name() -> str:

@@ -19,7 +19,7 @@ Optuna's ask-and-tell drives the search; cosim only translates:
   infeasible rows stay in the table and are never on a Pareto front
   (``cosim pareto``, ``cosim report``).
 - **Batches**: K designs are asked, evaluated in parallel through
-  :class:`~cosim.parallel.evaluator.Evaluator` (isolation, timeouts, fault rows,
+  :class:`~cosim.parallel.point_stream.Evaluator` (isolation, timeouts, fault rows,
   as ``cosim sweep``), appended to the table as one part file, then told.
   A row not ``ok`` (failed, timeout, crashed) is told as a failed trial.
 - **Table**: one row per evaluation in ``DIR/results.parquet``, with
@@ -466,7 +466,8 @@ class Optimization:
         import optuna
 
         from cosim.parallel.dashboard_points import open_board
-        from cosim.parallel.evaluator import ClusterError, Evaluator, dask_client
+        from cosim.parallel.evaluator import ClusterError, dask_client
+        from cosim.parallel.point_stream import Evaluator
 
         optuna.logging.set_verbosity(optuna.logging.WARNING)
         started = now_utc()
@@ -494,13 +495,9 @@ class Optimization:
                 self._say(f"cosim optimize {self.spec.name}: {s.sampler}, budget {s.budget}, batch {s.batch}, "
                           f"seed {s.seed}, {len(stored)} evaluations stored; {n_workers} worker(s); dashboard: "
                           f"{link} ({board.describe()}); results: {self.out}")
-                evaluator = Evaluator(client, self.payload, n_workers, self.timeout, study=self.spec.name,
-                                      board=board)
-                try:
-                    with board.running():
-                        self._loop(study, dists, evaluator, stored)
-                finally:
-                    evaluator.close()
+                with Evaluator(client, self.payload, n_workers, self.timeout, study=self.spec.name,
+                               board=board) as evaluator, board.running():
+                    self._loop(study, dists, evaluator, stored)
         except ClusterError as exc:
             raise OptimizeError(str(exc)) from None
         except KeyboardInterrupt:

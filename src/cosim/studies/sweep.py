@@ -14,48 +14,49 @@ evaluates the points on Dask:
   played-table bytes travel inside it, and the source of a Python unit named
   ``module:Class`` from the spec's folder (zipped), so workers need no shared
   filesystem (installed modules must be installed where the workers run too).
-- Points go in batches.  On a worker, :class:`~cosim.parallel.isolation.IsolatedRunner`
-  runs a batch in a child process that keeps the loaded system and live unit
-  instances between batches, with a per-point watchdog: a point that hangs
-  (``timeout``) or kills its process (``crashed``) gets a row and the other
-  points go on.  A batch lost with its whole worker process (killed, out of
-  memory, a lost node) is run again on another worker by the scheduler; lost
-  a second time (KilledWorker) its points run again in small groups, each
+- Points go in batches, through the one evaluate loop of every study
+  (:class:`~cosim.parallel.point_stream.PointStream`).  On a worker,
+  :class:`~cosim.parallel.isolation.IsolatedRunner` runs a batch in a child
+  process that keeps the loaded system and live unit instances between
+  batches, with a per-point watchdog: a point that hangs (``timeout``) or
+  kills its process (``crashed``) gets a row and the other points go on.  A
+  batch lost with its whole worker process (killed, out of memory, a lost
+  node) is run again on another worker by the scheduler; lost a second time
+  (KilledWorker) its points without a row run again in small groups, each
   alone on the cluster, then those of a group lost again one at a time, so
   only a point that kills its workers while alone gets ``crashed``
   (:class:`~cosim.parallel.evaluator.Reruns`).  Rows out = points in.
-- The client streams: a bounded number of batches in flight, each completed
-  batch appended to the :class:`~cosim.results.store.ResultsStore` at once,
-  so its memory does not grow with the number of points, and a kill -9 loses
-  at most the points in flight.  ``resume=True`` skips points already stored.
+- The client streams: a bounded number of batches in flight, and each
+  point's row comes back and is appended to the
+  :class:`~cosim.results.store.ResultsStore` as soon as that point finishes
+  (a task sends its rows while it runs), so the client's memory does not
+  grow with the number of points, a stop (Ctrl-C, SIGTERM, SIGHUP) keeps
+  every point finished before it, and a kill -9 loses at most the points of
+  the last fraction of a second.  ``resume=True`` skips points already stored.
 """
 
 from __future__ import annotations
 
-import collections
-import itertools
 import math
 import os
 import shutil
-import statistics
 import sys
 import tempfile
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Iterator, Sequence, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 from cosim.errors import OutputError, SweepError  # noqa: F401  (OutputError: imported from here too)
 from cosim.execution.point_row import PointRow
 from cosim.parallel.early_cluster import EarlyCluster
-from cosim.parallel.evaluator import Reruns, ScatteredPayload, check_timeout, lost_rows, release_futures
+from cosim.parallel.evaluator import check_timeout
 from cosim.parallel.isolation import IsolatedRunner, make_payload, preload_spare_children, stop_spare_children
-from cosim.parallel.tasks import PointBatch, run_batch
+from cosim.parallel.point_stream import BatchSizer, PointStream
 from cosim.results.checksums import changed_files, data_file_checksums, unit_checksums
 from cosim.results.lock import FolderLock
 from cosim.spec.design import DesignSpace, Point
 from cosim.studies.driver import (check_results_folder, finish_metadata, now_utc, results_writes,  # noqa: F401
                                   resume_differences, run_metadata, say, study_identity)
 from cosim.studies.progress import StatusLine, duration
-from cosim.util import limits
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -88,75 +89,6 @@ class Progress:
 
     def close(self) -> None:
         self._line.close()
-
-
-class BatchSizer:
-    """How many points go into the next Dask task.
-
-    The first tasks are small, so the first points spread over every worker
-    at once.  Once point times are known, a task gets enough points to last
-    about TASK_SECONDS (at most MAX_BATCH): each task costs the scheduler,
-    the worker and the client a few milliseconds whatever it holds, so tasks
-    of trivial points must hold many.  Near the end tasks shrink again, so
-    the workers finish together.  A fixed ``size`` (``--batch-size``) is kept.
-    """
-
-    TASK_SECONDS = 0.5
-    MAX_BATCH = 2048
-
-    def __init__(self, todo: int, n_workers: int, size: int | None = None):
-        self.fixed = size
-        self.n_workers = n_workers
-        # a quarter of each worker's share at most: the first tasks still spread over every worker, and a task
-        # of cheap points stays big enough for the lock-step groups of its child (cosim.execution.lockstep)
-        self.first = size or max(1, min(64, math.ceil(todo / (n_workers * 4))))
-        self.remaining = todo  # points not yet handed to a task
-        self._seconds, self._count = 0.0, 0  # run time of the ok points so far, and how many
-
-    @property
-    def point_seconds(self) -> float | None:
-        """The mean run time of an ok point so far (None before the first)."""
-        return max(self._seconds / self._count, 1e-5) if self._count else None
-
-    def observe(self, rows: Sequence[PointRow]) -> None:
-        """Learn the time a point takes from the rows of a completed task."""
-        for row in rows:
-            if row.ok and row.run_time > 0:
-                self._seconds += row.run_time
-                self._count += 1
-
-    def next(self) -> int:
-        """The size of the next task."""
-        if self.fixed is not None or self.point_seconds is None:
-            size = self.first
-        else:
-            size = min(self.MAX_BATCH, max(self.first, round(self.TASK_SECONDS / self.point_seconds)))
-            size = min(size, max(self.first, math.ceil(self.remaining / (4 * self.n_workers))))
-        return max(1, size)
-
-    def take(self, points: Iterator[Point]) -> list[Point]:
-        """The next task's points from ``points`` (an empty list at the end)."""
-        batch = list(itertools.islice(points, self.next()))
-        self.remaining -= len(batch)
-        return batch
-
-
-TIMEOUT_FACTOR = 50  # a point may take this many times the median measured point time (default timeout)
-
-
-def default_timeout(point_times: Sequence[float]) -> float:
-    """The per-point timeout when none is given, from the run times of points measured so far.
-
-    ``TIMEOUT_FACTOR`` times their median, but at least the
-    ``timeout_floor_seconds`` limit and at most ``timeout_first_seconds``,
-    which is also the timeout until three points have been measured.  So a
-    hanging point never hangs a sweep, and a slow model is not cut short.
-    """
-    first = float(limits.limit("timeout_first_seconds"))
-    if len(point_times) < 3:
-        return first
-    floor = float(limits.limit("timeout_floor_seconds"))
-    return min(first, max(floor, TIMEOUT_FACTOR * statistics.median(point_times)))
 
 
 class Sweep:
@@ -366,66 +298,19 @@ class Sweep:
         return counts
 
     def _evaluate(self, client: Any, done: set[str], todo: int, n_workers: int, board: Any = None) -> None:
-        from distributed import as_completed
-
-        from cosim.parallel.dashboard import task_key
-
-        sizer = BatchSizer(todo, n_workers, self.batch_size)
-        total = len(self.space)
-        unsubmitted = (p for p in self.space if p.id not in done)  # never rebound (a rerun once rebound 'points')
-        payload = ScatteredPayload(client, self.payload)
+        """Run the points not in ``done`` through the one evaluate loop; each row is stored as its point finishes."""
         progress = Progress(todo, self.progress_stream) if not self.quiet else None
-        in_flight: dict[str, tuple[list[Point], bool, Any]] = {}  # task key -> points, alone (Reruns), future
-        pending = as_completed()
-        reruns = Reruns()
 
-        times: collections.deque[float] = collections.deque(maxlen=1000)  # recent ok point times
+        def store(pairs: list[tuple[Point, PointRow]]) -> None:
+            with results_writes(self.out):
+                self.store.append([self._row(p, r) for p, r in pairs])
+            if progress is not None:
+                progress.update(len(pairs), sum(not r.ok for _, r in pairs))
 
-        def submit() -> bool:
-            alone = bool(reruns.suspects) or any(a for _, a, _ in in_flight.values())
-            if alone and in_flight:
-                return False  # no new work until the suspects have run, each group alone on the cluster
-            batch = reruns.suspects.popleft() if alone else sizer.take(unsubmitted)
-            if not batch:
-                return False
-            timeout = self.timeout if self.timeout is not None else default_timeout(times)
-            key = task_key("sweep", self.spec.name, [p.index for p in batch], total,  # the dashboard's names
-                           run=board.run if board is not None else "")
-            future = client.submit(run_batch, payload.future(), PointBatch([(p.id, p.values) for p in batch]),
-                                   timeout, pure=False, retries=0, key=key)
-            in_flight[future.key] = batch, alone, future
-            pending.add(future)
-            return True
-
-        def fill() -> None:  # enough to keep every worker busy, few enough to stay small
-            while len(in_flight) < 2 * n_workers + 1 and submit():
-                pass
-
-        try:
-            fill()
-            for future in pending:
-                batch, alone, _ = in_flight.pop(future.key)
-                try:
-                    rows = future.result()
-                except Exception as exc:  # the worker process itself died (KilledWorker) or the task broke
-                    if reruns.after_failure(batch, exc, alone):  # innocent points are never crashed
-                        future.release()
-                        fill()
-                        continue
-                    rows = lost_rows([p.id for p in batch], exc, alone)
-                    if board is not None:
-                        board.rows_made_here(future.key, rows)
-                future.release()
-                sizer.observe(rows)
-                with results_writes(self.out):
-                    self.store.append([self._row(p, r) for p, r in zip(batch, rows)])
-                times.extend(r.run_time for r in rows if r.ok)
-                if progress is not None:
-                    progress.update(len(rows), sum(not r.ok for r in rows))
-                fill()
-        finally:  # an interruption or an error leaves futures: released while the client lives
-            release_futures(future for _, _, future in in_flight.values())
-            payload.release()
+        with PointStream(client, self.payload, n_workers, "sweep", self.spec.name, timeout=self.timeout,
+                         adaptive_timeout=True, board=board) as stream:
+            stream.run((p for p in self.space if p.id not in done), BatchSizer(todo, n_workers, self.batch_size),
+                       store, total=len(self.space))
         if progress is not None:
             progress.close()
 
