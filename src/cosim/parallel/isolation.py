@@ -509,6 +509,17 @@ class IsolatedRunner:
         if not _kill_children_registered:
             _register_exit_hook()
         _LIVE.add(self)
+        self._kill_if_stopping()
+
+    def _kill_if_stopping(self) -> None:
+        """Kill this runner's child when a stop began: one started (or taken) while kill_point_children_now went
+        through _LIVE was not in it yet, and would run its point to the end (the flag is set before that pass,
+        the runner is in _LIVE before this check: one of the two sees the other)."""
+        if _STOPPING.is_set() and self._proc is not None and self._proc.poll() is None:
+            try:
+                self._proc.kill()
+            except OSError:
+                pass
 
     def _adopt_spare(self, limits: dict[str, str]) -> bool | None:
         """Take over a live spare child started with the same ``limits`` and loading nothing or this payload.
@@ -533,6 +544,7 @@ class IsolatedRunner:
         spare._proc = spare._inbox = spare._outbox = spare._folder = spare._channel = None
         _LIVE.discard(spare)
         _LIVE.add(self)
+        self._kill_if_stopping()
         return spare._loading == self.key
 
     def run(self, points: Sequence[tuple[str, dict[str, Any]]], timeout: float | None = None,

@@ -134,7 +134,7 @@ class _Task:
     future: Any
     points: list[Point]
     alone: bool
-    handed: set[str] = field(default_factory=set)  # ids of its points whose row went to the caller
+    handed: dict[str, PointRow] = field(default_factory=dict)  # rows of its points given to the caller, by id
 
 
 OnRows = Callable[[list[tuple[Point, PointRow]]], None]
@@ -238,11 +238,12 @@ class PointStream:
                 rows = body.result()
             except Exception as exc:  # the worker process itself died (KilledWorker) or the task broke
                 left = [p for p in task.points if p.id not in task.handed]
+                lost = []
                 if left and not reruns.after_failure(left, exc, task.alone):  # innocent points are never crashed
                     lost = lost_rows([p.id for p in left], exc, task.alone)
-                    if self.board is not None:
-                        self.board.rows_made_here(body.key, lost)
-                    self._hand(list(zip(left, lost)), sizer, task)
+                if self.board is not None and (task.handed or lost):  # the page dropped this task's counts
+                    self.board.rows_made_here(body.key, [*task.handed.values(), *lost])
+                self._hand(list(zip(left, lost)), sizer, task)
             else:
                 self._hand(self._unhanded(task, rows), sizer, task)
             del in_flight[body.key]
@@ -291,7 +292,7 @@ class PointStream:
         self._times.extend(r.run_time for r in rows if r.ok)
         self._on_rows(pairs)
         if task is not None:
-            task.handed.update(p.id for p, _ in pairs)
+            task.handed.update((p.id, r) for p, r in pairs)
         self._handing = []
 
     def _rows_in_transit(self) -> None:
