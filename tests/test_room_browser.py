@@ -446,3 +446,58 @@ def test_dimensions_matrix_parallel_coordinates_brushing_and_3d(browser, studies
     px, py = projected()
     ca, sa = np.cos(after), np.sin(after)
     assert np.allclose(px, u * ca - v * sa)
+
+
+def test_the_room_of_a_running_sweep_draws_points_as_they_arrive(browser, tmp_path, local_cluster):
+    """``sweep(explore=True)`` serves the room of its folder while it runs, linked from the dashboard's Cosim
+    page; the page (opened before the first rows) draws new points as rows are written, without a reload,
+    with counts by status; every point it showed is a row of the finished table with its values."""
+    import io
+    import re
+    import threading
+    import time
+
+    import cosim
+
+    spec = write(tmp_path / "live", {
+        "name": "sleepy", "units": {"s": {"python": python_unit("Sleeper"), "parameters": {"delay": 0.15}}},
+        "experiment": {"stop": 1.0, "step": 0.1},
+        "objectives": {"y_end": {"signal": "s.y", "reduce": "final", "sense": "maximize"}},
+        "design": {"parameters": {"s.gain": {"values": [float(g) for g in range(1, 13)]}}}})
+    out = tmp_path / "live" / "out"
+    said = io.StringIO()
+    done: dict = {}
+    thread = threading.Thread(target=lambda: done.update(df=cosim.sweep(
+        spec, out=out, scheduler=local_cluster, explore=True, progress=said, batch_size=2)), daemon=True)
+    thread.start()
+    deadline = time.monotonic() + 120
+    while not re.search(r"decision room: (http://\S+)", said.getvalue()) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    link = re.search(r"decision room: (http://\S+)", said.getvalue()).group(1)
+    points_page = re.search(r"points: (http://\S+)\)", said.getvalue()).group(1)
+    assert f"href='{link}'" in urllib.request.urlopen(points_page, timeout=30).read().decode()
+    browser.get(link)
+    seen = []
+    while thread.is_alive():
+        try:
+            seen.append(browser.execute_script(
+                "const d = Bokeh.documents[0], s = d.get_model_by_name('cloud-source');"
+                "return s ? [d.get_model_by_name('count').text, Array.from(s.data.point_id), Array.from(s.data.x),"
+                " Array.from(s.data.y)] : null;"))
+        except Exception:  # between the waiting page and the room, or the room stopping with the sweep
+            pass
+        time.sleep(0.3)
+    thread.join()
+    final = load_results(out).df
+    assert len(final) == 12 and (final["status"] == "ok").all()
+    by_id = final.set_index("point_id")
+    shown = [s for s in seen if s is not None]
+    sizes = [len(ids) for _, ids, _, _ in shown]
+    assert any(0 < k < 12 for k in sizes) and len(set(sizes)) >= 2, sizes  # it grew while the page was open
+    assert sizes == sorted(sizes)
+    for text, ids, x, y in shown:
+        assert f"live: {len(ids)} rows ({len(ids)} ok)" in text
+        assert "the study is running" in text or len(ids) == 12
+        # the cloud's axes are the design parameter and the objective: y_end = gain (y = gain t at t = 1)
+        assert np.allclose(x, by_id.loc[ids, "s.gain"].to_numpy(float))
+        assert np.allclose(y, by_id.loc[ids, "y_end"].to_numpy(float)) and np.allclose(y, x)

@@ -187,11 +187,15 @@ def cmd_explore(args: argparse.Namespace) -> int:
     _say_note(table)
     if not args.tk:
         from cosim.analysis.room.data import Study
+        from cosim.analysis.room.live import LiveStudy
         from cosim.analysis.room.server import serve
 
         if not 0 <= args.port <= 65535:
             raise AnalysisError(f"--port {args.port}: use a port between 1 and 65535, or 0 for a free one")
-        serve(Study(table, spec_path=args.spec), host=args.host, port=args.port)
+        # a folder is watched: the rows a running (or resumed) study writes appear in the page as they arrive
+        study = LiveStudy(args.table, spec_path=args.spec) if Path(args.table).is_dir() else \
+            Study(table, spec_path=args.spec)
+        serve(study, host=args.host, port=args.port)
         return EXIT_OK
     try:
         from cosim.analysis.explorer import run_explorer

@@ -31,6 +31,9 @@ def add_sweep_parser(sub: Any) -> None:
                         "every point again (without it such a resume is refused)")
     p.add_argument("--csv", action="store_true", help="also write DIR/results.csv")
     p.add_argument("--batch-size", type=int, metavar="N", help="points per Dask task (default: automatic)")
+    p.add_argument("--explore", action="store_true",
+                   help="serve the decision room of the results folder while the sweep runs (new points appear as "
+                        "they are written; linked from the Dask dashboard's Cosim page); on loopback")
     from cosim.cli.options import add_experiment_options
     add_experiment_options(p)
     p.add_argument("--dry-run", action="store_true",
@@ -70,7 +73,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     sweep = Sweep(args.spec, workers=args.workers, out=out, scheduler=args.scheduler, cluster=args.cluster,
                   timeout=args.timeout,
                   resume=args.resume, batch_size=args.batch_size, csv=args.csv, experiment=experiment_overrides(args),
-                  recompute=args.recompute, quiet=getattr(args, "quiet", False),
+                  recompute=args.recompute, quiet=getattr(args, "quiet", False), explore=args.explore,
                   start_early=True)  # the local cluster starts while the results folder and payload are prepared
     runs_before = runs_recorded(sweep.store)
     counts = sweep.run_to_disk()  # a huge sweep's table never sits in memory

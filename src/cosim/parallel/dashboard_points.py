@@ -15,8 +15,9 @@ page to the dashboard that can:
   page, refreshed every 2 s) and ``/cosim/points.json`` on the dashboard's
   web server.  It adds "Cosim" to the dashboard's navigation bar.
 - Client: :func:`open_board` registers the plugin and announces the study
-  (its total and the points already stored when resuming); the returned
-  :class:`Board` says where the page is, or why there is none.
+  (its total and the points already stored when resuming, and the link of
+  its decision room when it runs with ``--explore``: the page links it); the
+  returned :class:`Board` says where the page is, or why there is none.
 
 The plugin is sent to the scheduler *by value* (cloudpickle), so the page
 does not depend on the cosim version installed where the scheduler runs (it
@@ -160,7 +161,7 @@ class PointsPlugin(SchedulerPlugin):
         study = str(msg.get("study"))
         self.studies[study] = {"study": study, "name": str(msg.get("name", "")), "kind": str(msg.get("kind", "")),
                                "total": int(msg.get("total", 0)), "before": int(msg.get("before", 0)),
-                               "client": msg.get("client"),
+                               "client": msg.get("client"), "room": msg.get("room"),
                                "state": "running", "started": time.time(), "ended": None}
         self.tasks[study], self.running[study] = {}, set()
         for old in list(self.studies)[:-KEPT_STUDIES]:
@@ -191,7 +192,8 @@ class PointsPlugin(SchedulerPlugin):
             failed = sum(f for _, f in counts)  # of this run (a resume's stored rows are not read)
             out.append({"study": sid, "name": study["name"], "kind": study["kind"], "total": study["total"],
                         "done": done, "failed": failed, "running_tasks": len(self.running.get(sid, ())),
-                        "state": study["state"], "started": study["started"], "ended": study["ended"]})
+                        "state": study["state"], "started": study["started"], "ended": study["ended"],
+                        "room": study.get("room")})
         return out
 
 
@@ -235,8 +237,9 @@ class PageHandler(JsonHandler):
         rows = []
         for s in self.plugin.summary():
             share = s["done"] / s["total"] if s["total"] else 1.0
+            room = f" <a class='room' href='{html.escape(s['room'])}'>explore</a>" if s.get("room") else ""
             rows.append(
-                f"<tr><td>{html.escape(s['kind'])} {html.escape(s['name'])}</td>"
+                f"<tr><td>{html.escape(s['kind'])} {html.escape(s['name'])}{room}</td>"
                 f"<td><progress max='{s['total']}' value='{s['done']}'></progress></td>"
                 f"<td class='points'>{s['done']} / {s['total']}</td><td class='failed'>{s['failed']}</td>"
                 f"<td>{s['running_tasks']}</td><td>{html.escape(s['state'])}</td><td>{100 * share:.0f} %</td></tr>")
@@ -254,7 +257,8 @@ progress {{width: 20em}}</style></head>
 <table><tr><th>study</th><th></th><th>points done</th><th>not ok (this run)</th><th>tasks running</th><th>state</th><th></th></tr>
 {rows}</table>
 <p>Points done counts every point with a row (ok or not); a task lost with its worker is counted again when it
-runs again. Data: <a href="cosim/points.json">cosim/points.json</a>.</p></body></html>
+runs again. <i>explore</i> opens a study's decision room (<code>--explore</code>): its points as they arrive.
+Data: <a href="cosim/points.json">cosim/points.json</a>.</p></body></html>
 """
 
 
@@ -309,13 +313,14 @@ class Board:
 
 
 def open_board(client: Any, kind: str, name: str, total: int, before: int = 0,
-               dashboard: str | None = None) -> Board:
+               dashboard: str | None = None, room: str | None = None) -> Board:
     """Register the plugin on ``client``'s scheduler and announce a study; never raises.
 
     ``before``: the points already stored (a resume), counted as done.
     ``dashboard`` is the dashboard's link (its ``status`` page); the returned
     Board's ``link`` is the points page beside it, None when the plugin could
-    not be registered or there is no dashboard.
+    not be registered or there is no dashboard.  ``room``: the link of the study's decision room
+    (``--explore``), shown on the page.
     """
     import uuid
     from urllib.parse import urljoin
@@ -329,7 +334,7 @@ def open_board(client: Any, kind: str, name: str, total: int, before: int = 0,
         cloudpickle.register_pickle_by_value(sys.modules[__name__])  # whatever cosim version the scheduler has
         client.register_plugin(PointsPlugin(), name=PLUGIN_NAME)
         client.log_event(TOPIC, {"op": "start", "study": study, "kind": kind, "name": name, "total": total,
-                                 "before": before, "client": client.id})
+                                 "before": before, "client": client.id, "room": room})
     except Exception as exc:
         reason = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
         return Board(client, study, None, f"the scheduler did not take cosim's plugin: {reason[:200]}")

@@ -112,7 +112,8 @@ class Sweep:
                  scheduler: str | None = None, timeout: float | None = None, resume: bool = False,
                  batch_size: int | None = None, csv: bool = False, progress: TextIO | None = None,
                  quiet: bool = False, experiment: dict | None = None, space_of: Any = None,
-                 cluster: str | Path | None = None, recompute: bool = False, start_early: bool = False):
+                 cluster: str | Path | None = None, recompute: bool = False, start_early: bool = False,
+                 explore: bool = False):
         from cosim.parallel.cluster import read_cluster_file
         from cosim.system.validate import check_spec
 
@@ -135,6 +136,9 @@ class Sweep:
         self.batch_size, self.csv, self.quiet = batch_size, csv, quiet
         self.progress_stream = progress
         self._temporary = out is None
+        self.explore = explore
+        if explore and out is None:
+            raise SweepError("explore serves the results folder while the sweep writes it: give one (--out DIR)")
         if resume and out is None:
             raise SweepError("resume needs the results folder of the interrupted sweep (--out DIR)")
         if start_early and self._runs_on_a_local_cluster():
@@ -267,11 +271,18 @@ class Sweep:
                         "timeout": self.timeout}
                 with results_writes(self.out):
                     self.store.write_metadata(self._metadata(info))
-                board = open_board(client, "sweep", self.spec.name, total, before=total - todo, dashboard=link)
+                room = open_room(self.out) if self.explore else None
+                board = open_board(client, "sweep", self.spec.name, total, before=total - todo, dashboard=link,
+                                   room=room.link if room else None)
                 self._say(f"cosim sweep {self.spec.name}: {total} points ({todo} to run) on {n_workers} "
-                          f"worker(s); dashboard: {link} ({board.describe()}); results: {self.out}")
-                with board.running():
-                    self._evaluate(client, done, todo, n_workers, board)
+                          f"worker(s); dashboard: {link} ({board.describe()}); results: {self.out}"
+                          + (f"; decision room: {room.link}" if room else ""))
+                try:
+                    with board.running():
+                        self._evaluate(client, done, todo, n_workers, board)
+                finally:
+                    if room is not None:
+                        room.stop()
         except ClusterError as exc:
             raise SweepError(str(exc)) from None
         except KeyboardInterrupt:
@@ -359,6 +370,16 @@ def check_scheduler_address(address: str) -> None:
                          "tcp://HOST:PORT, as `dask scheduler` prints it, e.g. tcp://127.0.0.1:8786") from None
 
 
+def open_room(folder: Path) -> Any:
+    """The decision room of ``folder`` served on loopback from a thread while the study writes it (``--explore``):
+    a :class:`cosim.analysis.room.server.RoomServer` with its ``link``; stopped by the caller.  Raises
+    AnalysisError when no port can be bound."""
+    from cosim.analysis.room.live import LiveStudy
+    from cosim.analysis.room.server import RoomServer
+
+    return RoomServer(LiveStudy(folder))
+
+
 def sweep(spec_path: str | Path, workers: int | None = None, out: str | Path | None = None,
           scheduler: str | None = None,
           timeout: float | None = None, resume: bool = False, **options: Any) -> pd.DataFrame:
@@ -371,7 +392,8 @@ def sweep(spec_path: str | Path, workers: int | None = None, out: str | Path | N
     (default: a local cluster of ``workers`` processes, one per core like
     ``cosim sweep``).  ``timeout``: seconds
     a point may run.  ``resume`` runs only the points missing in ``out``.
-    Further options: ``batch_size``, ``csv``, ``progress`` (a stream), ``quiet``.
+    Further options: ``batch_size``, ``csv``, ``progress`` (a stream), ``quiet``, ``explore`` (serve the
+    decision room of ``out`` while the sweep runs, linked from the dashboard's Cosim page).
 
     Raises SpecError for a bad spec or design space, SweepError when ``out``
     or the scheduler cannot be used.

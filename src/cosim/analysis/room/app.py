@@ -34,12 +34,14 @@ from bokeh.layouts import column, row
 from bokeh.models import MultiChoice, Select, TabPanel, Tabs
 
 from cosim.analysis.decision import Decision
+from cosim.analysis.table import AnalysisError
 from cosim.analysis.ranking import METHODS
 from cosim.analysis.rerun import port_groups, rerun_rows
 from cosim.analysis.room import data as D
 from cosim.analysis.room import views as V
 from cosim.analysis.room.clouds import BinnedCloud, PointCloud
 from cosim.analysis.room.dimensions import Dimensions
+from cosim.analysis.room.live import LiveStudy
 
 TOP = 20  # designs in the ranking table
 MAX_RERUN = 8  # designs re-run at once (one colour each)
@@ -52,8 +54,9 @@ class Room:
     """The models and callbacks of one document (module docstring)."""
 
     @without_property_validation  # the cloud's masks: bokeh would check their n booleans one by one
-    def __init__(self, doc: Any, study: D.Study, webgl: bool | None = None, aggregate_above: int | None = None):
-        self.doc, self.study = doc, study
+    def __init__(self, doc: Any, study: D.Study, webgl: bool | None = None, aggregate_above: int | None = None,
+                 live: LiveStudy | None = None):
+        self.doc, self.study, self.live = doc, study, live
         self.decision = Decision(study.table)
         table = study.table
         self.x, self.y, self.colour = study.default_axes(self.decision)
@@ -89,6 +92,7 @@ class Room:
                                        name="choose-histogram", width=220)
         self.histogram = V.histogram(D.histogram(self.decision.filters.values(self.histogram_column.value),
                                                  self.decision.active()), table.label(self.histogram_column.value))
+        self.failures = column(*self._failures(), name="failures-box")
 
         # -- Decide: the choosers are cheap; the table and the radar are built with the tab
         senses = dict(self.decision.objectives)
@@ -114,7 +118,7 @@ class Room:
         self.doc.title = f"cosim: {study.name}"
         points = row(column(row(*self.choosers.values()), self.cloud.figure, self.count,
                             row(self.histogram_column), self.histogram["figure"],
-                            *self._failures()),
+                            self.failures),
                      column(self.filter_column, self.filter, self.reset, self.narrowed))
         self._builders = {1: self._build_decide, 2: self._build_selection, 3: self._build_study,
                           4: self._build_dimensions}
@@ -123,6 +127,47 @@ class Room:
                           for name in ("decide", "selection", "study", "dimensions")], name="tabs")
         self.tabs.on_change("active", self._on_tab)
         doc.add_root(self.tabs)
+        if live is not None:  # a folder watched while its study runs: new rows are drawn as they arrive
+            doc.add_periodic_callback(self._look, int(live.every * 1000))
+
+    # -- a running study's new rows -------------------------------------------------------------------------------
+    def _look(self) -> None:
+        assert self.live is not None  # the callback exists only then
+        study = self.live.current()
+        if study is not None and study is not self.study:
+            self.reload(study)
+
+    @without_property_validation
+    def reload(self, study: D.Study) -> None:
+        """Show ``study`` (the same folder with more rows) keeping this tab's filters, objectives, weights,
+        ranking method and selection (by design id)."""
+        old, ids = self.decision, self.study.ids
+        self.study = study
+        self.decision = decision = Decision(study.table)
+        try:
+            decision.set_objectives(old.objectives)
+        except AnalysisError:  # an objective column not in the new table: the table's own objectives stay
+            pass
+        for name, weight in old.weights.items():
+            if name in decision.weights:
+                decision.set_weight(name, weight)
+        decision.set_method(old.method)
+        for name in old.filters.narrowed():
+            if name in decision.filters.bounds:
+                decision.filters.set_range(name, old.filters.ranges[name].lo, old.filters.ranges[name].hi)
+        where = {i: r for r, i in enumerate(study.ids)}
+        selected = [where[i] for i in (ids[r] for r in old.selection) if i in where]
+        columns = list(decision.filters.columns)
+        for which, select in self.choosers.items():
+            select.options = columns if which in ("x", "y") else [V.NONE, *columns]
+        self.filter_column.options = self.histogram_column.options = columns
+        self.cloud.reload(study, decision)
+        if self.dimensions is not None:
+            self.dimensions.reload(study, decision)
+        decision.select(selected)  # after the views let go of the old rows' selection
+        self.filter.update(**self._filter_state(self.filter.tags[0]))
+        self.failures.children = self._failures()
+        self.refresh()
 
     # -- the tabs built when first shown --------------------------------------------------------------------------
     def _on_tab(self, attr: str, old: Any, new: Any) -> None:
@@ -272,7 +317,16 @@ class Room:
         self._refresh_selection()
         self.count.text = (f"<b>{active}</b> of {len(self.study.ids)} designs kept by the filters; "
                            f"{front} on the Pareto front of "
-                           + (", ".join(f"{s} {c}" for c, s in self.decision.objectives) or "no objective"))
+                           + (", ".join(f"{s} {c}" for c, s in self.decision.objectives) or "no objective")
+                           + self._live_note())
+
+    def _live_note(self) -> str:
+        """For a watched folder: its rows so far by status, and whether its study still runs."""
+        if self.live is None:
+            return ""
+        counts = ", ".join(f"{v} {html.escape(k)}" for k, v in self.decision.status_counts().items())
+        state = "running (or interrupted): new rows appear as they are written" if self.live.running else "complete"
+        return f"<br><span class='live'>live: {len(self.study.ids)} rows ({counts}); the study is {state}</span>"
 
     def _refresh_narrowed(self) -> None:
         f, label = self.decision.filters, self.study.table.label
@@ -383,7 +437,27 @@ class Room:
             + (f" ({html.escape(run.result.message)})" if run.result.message else "") for run in outcome)
 
 
-def make_document(doc: Any, study: D.Study, webgl: bool | None = None, aggregate_above: int | None = None
-                  ) -> Room:
-    """Fill ``doc`` (a new browser tab) with the room of ``study``."""
-    return Room(doc, study, webgl, aggregate_above)
+def make_document(doc: Any, study: D.Study | LiveStudy, webgl: bool | None = None,
+                  aggregate_above: int | None = None) -> None:
+    """Fill ``doc`` (a new browser tab) with the room of ``study``; of a watched folder (LiveStudy), a page that
+    waits for its first rows when it has none yet."""
+    if isinstance(study, D.Study):
+        Room(doc, study, webgl, aggregate_above)
+        return
+    live = study
+    first = live.current()
+    if first is not None:
+        Room(doc, first, webgl, aggregate_above, live)
+        return
+    doc.title = f"cosim: {live.folder.name}"
+    doc.add_root(V.text(f"<p>Waiting for the first rows of <code>{html.escape(str(live.folder))}</code> …</p>",
+                        "waiting"))  # not 'count': the page keeps a removed model's name for a while
+
+    def look() -> None:
+        ready = live.current()
+        if ready is not None:
+            doc.remove_periodic_callback(waiting)
+            doc.clear()
+            Room(doc, ready, webgl, aggregate_above, live)
+
+    waiting = doc.add_periodic_callback(look, int(live.every * 1000))

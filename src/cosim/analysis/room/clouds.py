@@ -71,6 +71,18 @@ class PointCloud:
     def select(self, rows: list[int]) -> None:
         self.parts["source"].selected.indices = rows  # fires on_select like a click
 
+    @without_property_validation
+    def reload(self, study: D.Study, decision: Decision) -> None:
+        """The same folder with more rows (a running study): every column anew; the app then shows the masks."""
+        self.study, self.decision = study, decision
+        self.parts["source"].selected.indices = []  # row positions of the old table; the app re-selects by id
+        self.parts["source"].data = D.points(study, decision, self.x, self.y, self.colour, self.size)
+        factors, colours = D.status_palette(study.status)
+        self.parts["status_mapper"].update(factors=factors or ["failed"], palette=colours or [V.GREY])
+        if self.colour:
+            V.colour_by(self.parts["mapper"], self.parts["colour_bar"], self.parts["source"].data["c"],
+                        study.table.label(self.colour))
+
 
 class BinnedCloud:
     """An image of bins made on the server (module docstring)."""
@@ -147,6 +159,14 @@ class BinnedCloud:
 
     def select(self, rows: list[int]) -> None:
         self.on_select(rows)
+
+    def reload(self, study: D.Study, decision: Decision) -> None:
+        """The same folder with more rows (a running study); the app then shows the masks."""
+        self.study, self.decision = study, decision
+        self.factors, self.status_colours = D.status_palette(study.status)
+        self.status_codes = D.status_codes(study.status, self.factors)
+        self.masks = None
+        self._colour_map()
 
     def _on_range(self, attr: str, old: Any, new: Any) -> None:
         if not self._pending:  # one re-binning after a burst of range changes (a drag reports every step)

@@ -65,14 +65,37 @@ class Dimensions:
         self.chooser = MultiChoice(title=f"columns (2 to {MAX_COLUMNS}; the first three are the 3-D view's axes)",
                                    value=columns[:MAX_COLUMNS], options=list(decision.filters.columns),
                                    name="dimensions", width=760)
-        drawn = len(self.rows)
-        note = f"{drawn} designs drawn" if drawn == len(study.ids) else \
-            f"a random sample of {drawn} of the {len(study.ids)} designs drawn (the filters use every design)"
-        self.note = Div(text=f"<i>{note}; a box over part of an axis of the parallel coordinates narrows its "
-                             "column's range filter</i>", name="dimensions-note", width=760)
+        self.note = Div(text=self._note(), name="dimensions-note", width=760)
         self.layout = column(self.chooser, self.note, name="dimensions-tab")
         self.chooser.on_change("value", lambda attr, old, new: self._build())
         self._build()
+
+    def _note(self) -> str:
+        drawn, n = len(self.rows), len(self.study.ids)
+        note = f"{drawn} designs drawn" if drawn == n else \
+            f"a random sample of {drawn} of the {n} designs drawn (the filters use every design)"
+        return (f"<i>{note}; a box over part of an axis of the parallel coordinates narrows its column's range "
+                "filter</i>")
+
+    def reload(self, study: D.Study, decision: Decision) -> None:
+        """The same folder with more rows (a running study): the sources anew, the views kept (angles too)."""
+        self.study, self.decision = study, decision
+        self.rows = P.sample(len(study.ids))
+        self.kept = np.ones(len(self.rows), dtype=bool)
+        self.selection = []
+        self.chooser.options = list(decision.filters.columns)
+        self.note.text = self._note()
+        if len(self.columns) >= 2:
+            self.matrix_source.selected.indices = []
+            self.matrix_source.data = {f"c{k}": self._values(c) for k, c in enumerate(self.columns)}
+        if len(self.columns) >= 3:
+            self.source3d.data = self._columns3d(self.azimuth.value, self.elevation.value)
+
+    def _columns3d(self, azimuth: float, elevation: float) -> dict[str, np.ndarray]:
+        u, v, w = (P.scaled(self._values(c), *self._bounds(c), to=(-1.0, 1.0)) for c in self.columns[:3])
+        px, py = P.project(u, v, w, azimuth, elevation)
+        colour = self._values(self.colour) if self.colour else np.full(len(self.rows), np.nan)
+        return {"u": u, "v": v, "w": w, "px": px, "py": py, "c": colour}
 
     # -- building --------------------------------------------------------------------------------------------
     def _values(self, name: str) -> np.ndarray:
@@ -145,11 +168,8 @@ class Dimensions:
         return fig
 
     def _scatter3d(self) -> Any:
-        u, v, w = (P.scaled(self._values(c), *self._bounds(c), to=(-1.0, 1.0)) for c in self.columns[:3])
-        px, py = P.project(u, v, w, AZIMUTH, ELEVATION)
-        colour = self._values(self.colour) if self.colour else np.full(len(self.rows), np.nan)
-        self.source3d = ColumnDataSource({"u": u, "v": v, "w": w, "px": px, "py": py, "c": colour},
-                                         name="scatter3d-source")
+        self.source3d = ColumnDataSource(self._columns3d(AZIMUTH, ELEVATION), name="scatter3d-source")
+        colour = self.source3d.data["c"]
         ends = P.axes_ends()
         apx, apy = P.project(*(np.array(ends[k]) for k in ("u", "v", "w")), AZIMUTH, ELEVATION)
         label = self.study.table.label
@@ -172,10 +192,10 @@ class Dimensions:
         lines = ColumnDataSource(self._axis_lines(apx, apy), name="scatter3d-lines")  # axis k: ends 2k, 2k + 1
         fig.multi_line(xs="xs", ys="ys", source=lines, color="#444444", line_width=1.5)
         fig.text("px", "py", text="label", source=axes, text_font_size="9pt", text_align="center")
-        azimuth = Slider(title="azimuth [rad]", start=-np.pi, end=np.pi, step=0.01, value=AZIMUTH, name="azimuth",
-                         width=270)
-        elevation = Slider(title="elevation [rad]", start=-np.pi / 2, end=np.pi / 2, step=0.01, value=ELEVATION,
-                           name="elevation", width=270)
+        self.azimuth = azimuth = Slider(title="azimuth [rad]", start=-np.pi, end=np.pi, step=0.01, value=AZIMUTH,
+                                        name="azimuth", width=270)
+        self.elevation = elevation = Slider(title="elevation [rad]", start=-np.pi / 2, end=np.pi / 2, step=0.01,
+                                            value=ELEVATION, name="elevation", width=270)
         project = CustomJS(args={"source": self.source3d, "axes": axes, "azimuth": azimuth, "elevation": elevation,
                                  "lines": lines},
                            code=P.PROJECT_JS + """

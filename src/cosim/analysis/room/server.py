@@ -7,7 +7,8 @@
   refused with 403.  The websocket accepts pages of this server's own address only (bokeh's origin check).
 - Port 0 (the default) takes a free port; the link says which.
 
-:func:`serve` runs until Ctrl-C; :class:`RoomServer` runs the same server in a thread (tests, notebooks).
+A results folder is served as a :class:`.live.LiveStudy`: the page draws new rows as a running study writes
+them.  :func:`serve` runs until Ctrl-C; :class:`RoomServer` runs the same server in a thread (tests, notebooks).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from functools import partial
 from typing import Any, Callable
 
 from cosim.analysis.room.data import Study
+from cosim.analysis.room.live import LiveStudy
 from cosim.analysis.table import AnalysisError
 
 TOKEN_COOKIE = "cosim_room_token"
@@ -88,7 +90,7 @@ def free_port(host: str) -> int:
         return int(s.getsockname()[1])
 
 
-def make_server(study: Study, host: str = LOOPBACK, port: int = 0, token: str | None = None,
+def make_server(study: Study | LiveStudy, host: str = LOOPBACK, port: int = 0, token: str | None = None,
                 webgl: bool | None = None, io_loop: Any = None, aggregate_above: int | None = None
                 ) -> tuple[Any, str]:
     """(a started-to-be bokeh Server of the room on ``host:port``, its link).  A token is made when ``host`` is
@@ -129,7 +131,7 @@ def make_server(study: Study, host: str = LOOPBACK, port: int = 0, token: str | 
     return server, link
 
 
-def serve(study: Study, host: str = LOOPBACK, port: int = 0, token: str | None = None,
+def serve(study: Study | LiveStudy, host: str = LOOPBACK, port: int = 0, token: str | None = None,
           announce: Callable[[str], None] = print) -> None:
     """Serve the room until interrupted, announcing its link first.
 
@@ -150,7 +152,7 @@ def serve(study: Study, host: str = LOOPBACK, port: int = 0, token: str | None =
 class RoomServer:
     """The room served from a daemon thread with its own event loop: ``link``, ``stop()``."""
 
-    def __init__(self, study: Study, host: str = LOOPBACK, port: int = 0, token: str | None = None,
+    def __init__(self, study: Study | LiveStudy, host: str = LOOPBACK, port: int = 0, token: str | None = None,
                  webgl: bool | None = None, aggregate_above: int | None = None):
         self._ready = threading.Event()
         self._error: BaseException | None = None
@@ -162,7 +164,7 @@ class RoomServer:
         if self._error is not None:
             raise self._error
 
-    def _run(self, study: Study, host: str, port: int, token: str | None, webgl: bool | None,
+    def _run(self, study: Study | LiveStudy, host: str, port: int, token: str | None, webgl: bool | None,
              aggregate_above: int | None) -> None:
         from tornado.ioloop import IOLoop
 

@@ -63,7 +63,8 @@ def cloud(data: dict[str, Any], statuses: tuple[list[str], list[str]], x_label: 
                             tooltips=[("design", "@point_id"), ("status", "@status")]))
     bar = ColorBar(color_mapper=mapper, title=colour_label or "", width=10)
     fig.add_layout(bar, "right")
-    return {"figure": fig, "source": source, "filters": filters, "mapper": mapper, "colour_bar": bar}
+    return {"figure": fig, "source": source, "filters": filters, "mapper": mapper, "colour_bar": bar,
+            "status_mapper": by_status}
 
 
 def cloud_image(x_range: tuple[float, float], y_range: tuple[float, float], x_label: str, y_label: str,
