@@ -200,3 +200,30 @@ def test_cosim_run_says_where_the_run_started_and_refuses_a_fixed_parameter(writ
     assert main(["run", path, "--set", "lag.x0=3"]) == 2
     err = capsys.readouterr()
     assert "'lag.x0' is a fixed parameter" in err.err + err.out and "remove experiment.warm_start" in err.err + err.out
+
+
+@pytest.mark.parametrize("mode, why", [(1, "died (killed by signal SIGSEGV)"), (3, "fmi2DoStep returned Error")])
+def test_a_study_warm_up_that_crashes_or_fails_is_a_clear_error_not_a_dead_client(tmp_path, mode, why):
+    """The `fault` FMU (our C sources) segfaults or fails at t >= 0.5, inside the warm-up to t = 1: the study's
+    payload is made in this process, the warm-up in a child process, so this process lives and says why."""
+    from cosim.parallel.isolation import make_payload
+
+    spec = lag_spec(SOURCES["fmi2"]())
+    spec["units"]["fault"] = {"fmu": str(ensure_built("fault", 2)), "parameters": {"mode": mode, "trigger_time": 0.5}}
+    system = system_of(spec, tmp_path)
+    with pytest.raises(UserError) as info:
+        make_payload(system)
+    [problem] = info.value.problems
+    assert problem.path == "$.experiment.warm_start" and "the warm-up run to t=1 failed" in problem.message
+    assert why in problem.message and problem.fix
+
+
+def test_a_study_names_the_unit_that_cannot_save_its_state_from_the_warm_up_child(tmp_path):
+    from cosim.parallel.isolation import make_payload
+
+    spec = lag_spec({"python": python_unit("LinearOde")})
+    spec["units"]["lag"]["parameters"] = {"x0": 0.0}
+    with pytest.raises(UserError) as info:
+        make_payload(system_of(spec, tmp_path))
+    [problem] = info.value.problems
+    assert problem.path == "$.experiment.warm_start" and "unit 'lag' cannot save and serialize" in problem.message

@@ -47,6 +47,7 @@ import sys
 import tempfile
 import threading
 import time
+from dataclasses import replace
 from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -67,12 +68,17 @@ def make_payload(system: Any) -> dict[str, Any]:
     ``files`` (unit name -> [(file name, bytes), ...]): the files each unit
     type reads (:meth:`~cosim.units.protocol.UnitType.files`: FMUs, ``file.py``
     units, played tables, a plug-in kind's files).  A spec with ``experiment.warm_start`` is warmed up here,
-    once (:func:`cosim.execution.warm_start.warmed`): the pickled System carries the units' serialized states.
+    once, in a child process (:func:`warm_up_isolated`): the pickled System carries the units' serialized states.
     Raises OSError when a unit's file cannot be read, UserError when the warm-up cannot be made.
     """
-    from cosim.execution.warm_start import warmed
+    if system.spec.experiment.warm_start is not None and system.warm_start is None:
+        # the warm-up runs once, in a child process like any point (it may crash or hang); its states travel
+        system = replace(system, warm_start=warm_up_isolated(_plain_payload(system, "-warm-up"), system))
+    return _plain_payload(system)
 
-    system = warmed(system)  # a spec with experiment.warm_start: the warm-up runs once, here; its states travel
+
+def _plain_payload(system: Any, key_suffix: str = "") -> dict[str, Any]:
+    """The payload of ``system`` as it is (see :func:`make_payload`); ``key_suffix`` sets its key apart."""
     files: dict[str, list[tuple[str, bytes]]] = {}
     for name, system_unit in system.units.items():
         paths = system_unit.unit_type.files()
@@ -87,7 +93,30 @@ def make_payload(system: Any) -> dict[str, Any]:
     from cosim.util.limits import settings
 
     # the client's limits hold in every worker child, wherever it runs (cosim.util.limits)
-    return {"key": h.hexdigest()[:16], "system": blob, "files": files, "limits": settings()}
+    return {"key": h.hexdigest()[:16] + key_suffix, "system": blob, "files": files, "limits": settings()}
+
+
+def warm_up_isolated(payload: dict[str, Any], system: Any) -> Any:
+    """The warm state of ``system`` (:mod:`cosim.execution.warm_start`), made in a child process loaded with
+    ``payload`` (its system without a warm state), within the ``timeout_first_seconds`` limit.
+
+    Raises UserError naming the spec's ``experiment.warm_start`` when the warm-up cannot be made: a unit fails,
+    cannot save its state, the child crashes or hangs.
+    """
+    from cosim.errors import Problem, UserError
+
+    runner = IsolatedRunner(payload)
+    try:
+        state, why = runner.warm_up(float(limit("timeout_first_seconds")))
+    finally:
+        runner.close()
+    if state is None:
+        if isinstance(why, UserError):
+            raise why
+        raise UserError([Problem(system.spec.path, "$.experiment.warm_start", f"the warm-up run to t="
+                                 f"{system.spec.experiment.warm_start:g} failed: {why}",
+                                 "fix what makes the run with the spec's own values fail, or remove warm_start")])
+    return state
 
 
 def load_payload(payload: dict[str, Any], folder: str) -> Any:
@@ -239,6 +268,9 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
                 kind, points = inbox.recv()
             except EOFError:
                 return
+            if kind == "warm":  # the study's warm-up (cosim.execution.warm_start), once, before any point
+                outbox.send(("warm", _warm_up_here(runner.system)))
+                continue
             if kind not in ("run", "run_each"):
                 return
             if kind == "run":  # lock-step groups where the system allows (cosim.execution.lockstep)
@@ -269,12 +301,26 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
         _remove_own_folder()
 
 
+def _warm_up_here(system: Any) -> tuple[Any, Any]:
+    """(the warm state, None), or (None, why it could not be made: the UserError itself, or a message)."""
+    from cosim.errors import UserError
+    from cosim.execution.warm_start import warm_up
+
+    try:
+        state, result = warm_up(system)
+    except UserError as exc:
+        return None, exc
+    except Exception as exc:  # a bug of cosim's must still reach the study as a reason, not a lost child
+        return None, f"internal error: {type(exc).__name__}: {exc}"
+    return (state, None) if state is not None else (None, result.message)
+
+
 # -- the parent side -----------------------------------------------------------------------
 
 MAX_MESSAGE = 64 << 20  # bytes of one message from a child (a row is a few kB)
 # "row": (PointRow, why the child ends itself after it or None); "group": n rows of one lock-step run follow
-# (cosim.execution.lockstep)
-_KINDS = ("ready", "error", "row", "group")
+# (cosim.execution.lockstep); "warm": (the warm state or None, why not) for a study's warm-up
+_KINDS = ("ready", "error", "row", "group", "warm")
 
 
 class _Channel:
@@ -638,6 +684,33 @@ class IsolatedRunner:
                     break
             remaining = remaining[done:]
         return rows
+
+    def warm_up(self, timeout: float) -> tuple[Any, Any]:
+        """(the warm state, None) made by the child, or (None, why not): a UserError of the warm-up, or a
+        message when the child cannot load the system, dies, hangs beyond ``timeout`` seconds or writes junk."""
+        if self._proc is None or self._proc.poll() is not None:
+            self.close()
+            problem = self._start()
+            if problem is not None:
+                self.close()
+                return None, problem
+        try:
+            self._outbox.send(("warm", None))
+        except OSError:
+            pass  # gone: the channel says so below
+        received = self._channel.get(timeout)
+        if received is None:
+            self.close(force=True)
+            return None, f"it did not finish within {timeout:g} s (COSIM_TIMEOUT_FIRST); it was stopped"
+        kind, body = received
+        if kind == "eof":
+            why = f"the process running it died ({self._exit_text()})"
+            self.close()
+            return None, why
+        if kind != "warm" or not (isinstance(body, tuple) and len(body) == 2):
+            self.close(force=True)
+            return None, f"the process running it wrote something other than a result on its channel ({body})"
+        return body
 
     def _exit_text_now(self) -> str:
         if self._proc is not None and self._proc.poll() is None:
