@@ -37,6 +37,7 @@ def main() -> None:
         B.set_filter(browser, "duration", 1.589, 1.75)
         B.set_and_wait(browser, "choose-colour", "value", "duration",
                        "return doc.get_model_by_name('choose-colour').value;")
+        B.show_tab(browser, 1)  # the Decide tab is built when first shown
         B.set_and_wait(browser, "minimise", "value", ["e_total", "duration", "peak_tau_ratio[2]"], B.RANKING_SCORES)
         B.set_and_wait(browser, "method", "value", "topsis", B.RANKING_SCORES)
         B.set_and_wait(browser, "weight:duration", "value", 0.5, B.RANKING_SCORES)
@@ -46,8 +47,10 @@ def main() -> None:
                                               ".slice(0, 3), Array.from(d.o2).slice(0, 3)];"))
         rows = browser.execute_script("return Array.from(Bokeh.documents[0].get_model_by_name('ranking')"
                                       ".source.data.row).slice(0, 3);")
+        B.show_tab(browser, 0)
         browser.execute_script(f"Bokeh.documents[0].get_model_by_name('cloud-source').selected.indices = {rows};")
-        B.wait_for(browser, "return doc.get_model_by_name('selected').text.includes('3 design');")
+        B.wait_for(browser, "return Array.from(doc.get_model_by_name('show-selected').booleans).filter(Boolean)"
+                            ".length === 3;")
         time.sleep(1.0)
         browser.save_screenshot(str(out / "room-points.png"))
         B.show_tab(browser, 1)
@@ -61,7 +64,12 @@ def main() -> None:
         print(f"re-run: {status}")
         time.sleep(1.5)
         browser.save_screenshot(str(out / "room-selection.png"))
-        print(f"written: {', '.join(str(out / f'room-{n}.png') for n in ('points', 'decide', 'selection'))}")
+        B.show_tab(browser, 4)
+        B.set_and_wait(browser, "azimuth", "value", 0.9,
+                       "return Bokeh.documents[0].get_model_by_name('scatter3d-source').data.px[0];")
+        time.sleep(1.5)
+        browser.save_screenshot(str(out / "room-dimensions.png"))
+        print(f"written: {', '.join(str(out / f'room-{n}.png') for n in ('points', 'decide', 'selection', 'dimensions'))}")
     finally:
         browser.quit()
         server.stop()

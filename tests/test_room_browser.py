@@ -225,6 +225,14 @@ def test_sweep_folder_filter_click_rerun_and_ranking(browser, studies, room):
     messages = browser.execute_script("return Array.from(Bokeh.documents[0].get_model_by_name('failures')"
                                       ".source.data.message);")
     assert len(messages) == 12 and all("boom" in m for m in messages)
+    # a second column chosen in the range filter narrows that column and leaves the first one's range as it was
+    a, x0 = table.values("ode.a"), table.values("ode.x0")
+    B.set_filter(browser, "ode.x0", 2.0, 3.0)
+    kept = (a >= (a.min() + a.max()) / 2) & (x0 >= 2.0)
+    assert browser.execute_script("return Bokeh.documents[0].get_model_by_name('count').text;").startswith(
+        f"<b>{int(kept.sum())}</b> of {len(df)}")
+    narrowed = browser.execute_script("return Bokeh.documents[0].get_model_by_name('narrowed').text;")
+    assert narrowed.count("<li>") == 2 and "ode.a: -1.25 … -0.5" in narrowed and "ode.x0: 2 … 3" in narrowed
     # the traces are the spec's recorded signal, y = x0 e^(a t), one line per selected design
     assert [name for name, _ in seen["traces"]] == ["trace:ode.y"]
     lines = {name.split(":")[-1]: (np.array(t), np.array(y)) for name, t, y in seen["traces"][0][1]}

@@ -240,6 +240,8 @@ class Room:
                 "value": (r.lo, r.hi if b.hi > b.lo else end), "tags": [name]}
 
     def _on_filter_column(self, attr: str, old: Any, new: Any) -> None:
+        # the column first: setting the value below calls _on_filter here at once, which narrows tags[0]
+        self.filter.tags = [new]
         self.filter.update(**self._filter_state(new))  # its value's echo from the page changes nothing
 
     def _on_filter(self, attr: str, old: Any, new: Any) -> None:
@@ -450,14 +452,15 @@ def make_document(doc: Any, study: D.Study | LiveStudy, webgl: bool | None = Non
         Room(doc, first, webgl, aggregate_above, live)
         return
     doc.title = f"cosim: {live.folder.name}"
-    doc.add_root(V.text(f"<p>Waiting for the first rows of <code>{html.escape(str(live.folder))}</code> …</p>",
-                        "waiting"))  # not 'count': the page keeps a removed model's name for a while
+    note = V.text(f"<p>Waiting for the first rows of <code>{html.escape(str(live.folder))}</code> …</p>",
+                  "waiting")  # not 'count': the page keeps a removed model's name for a while
+    doc.add_root(note)
 
     def look() -> None:
         ready = live.current()
         if ready is not None:
             doc.remove_periodic_callback(waiting)
-            doc.clear()
             Room(doc, ready, webgl, aggregate_above, live)
+            doc.remove_root(note)
 
     waiting = doc.add_periodic_callback(look, int(live.every * 1000))
