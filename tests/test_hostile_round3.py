@@ -106,7 +106,7 @@ def test_the_array_limit_is_raised_on_purpose_and_counts_every_array(tmp_path):
 # 2. --resume fails closed when metadata.json is empty, unreadable or deleted --------------------------------------
 
 TRIPLE = """
-import time
+import os, time
 from cosim import PythonUnit, Variable
 
 class Triple(PythonUnit):
@@ -115,15 +115,20 @@ class Triple(PythonUnit):
 
     def do_step(self, t, h):
         time.sleep(self.pause)
+        while GATE and os.path.exists(GATE):  # held until the test removes the gate file
+            time.sleep(0.05)
         self.y = FACTOR * self.k
 """
 
 
 def _triple_study(folder: Path, points: int, factor: float = 3.0, pause: float = 0.0, optimize: bool = False,
-                  budget: int | None = None) -> Path:
-    """A study of one Python unit y = factor * k over k = 1..points (a sweep grid, or an optimisation)."""
+                  budget: int | None = None, gate: Path | None = None) -> Path:
+    """A study of one Python unit y = factor * k over k = 1..points (a sweep grid, or an optimisation).
+
+    With ``gate``, every point waits while that file exists: a run is held for exactly as long as a test needs.
+    """
     folder.mkdir(parents=True, exist_ok=True)
-    (folder / "triple.py").write_text(TRIPLE.replace("FACTOR", repr(factor)))
+    (folder / "triple.py").write_text(_triple_source(factor, gate))
     spec = {"name": "triple", "units": {"s": {"python": "triple.py:Triple", "parameters": {"pause": pause}}},
             "experiment": {"stop": 0.1, "step": 0.1}, "objectives": {"y": {"signal": "s.y", "reduce": "final"}},
             "design": {"parameters": {"s.k": {"min": 1, "max": points, "step": 1}}}}
@@ -134,8 +139,12 @@ def _triple_study(folder: Path, points: int, factor: float = 3.0, pause: float =
     return path
 
 
+def _triple_source(factor: float, gate: Path | None = None) -> str:
+    return TRIPLE.replace("FACTOR", repr(factor)).replace("GATE", repr(str(gate) if gate else ""))
+
+
 def _set_factor(spec: Path, factor: float) -> None:
-    (spec.parent / "triple.py").write_text(TRIPLE.replace("FACTOR", repr(factor)))
+    (spec.parent / "triple.py").write_text(_triple_source(factor))
 
 
 def _damage_metadata(out: Path, how: str) -> None:
@@ -267,16 +276,24 @@ def test_two_optimisations_into_one_folder_the_second_is_refused(tmp_path, local
     """Before: both ran (30 rows for a budget of 24, two seeds, duplicate trial numbers)."""
     import pandas as pd
 
-    spec = _triple_study(tmp_path / "project", 16, pause=3.0, optimize=True)
+    # The first run's points wait on a gate file until both second runs are done (was: 3 s points, 24 s of
+    # sleeping that only had to outlast two refused runs). A second run let in past the lock would also wait on
+    # the gate and time out here: the test fails either way when the lock does not hold.
+    gate = tmp_path / "gate"
+    gate.touch()
+    spec = _triple_study(tmp_path / "project", 16, optimize=True, gate=gate)
     out = tmp_path / "out"
     run = ("optimize", str(spec), "--out", str(out), "--scheduler", local_cluster)
     first = _popen_cosim(*run)
-    _wait_for(lambda: (out / "metadata.json").exists())  # written once it holds the lock and runs
-    for extra in ((), ("--resume",)):  # also one that would resume the rows so far
-        second = _cosim(*run, *extra)
-        assert first.poll() is None, "the first run ended too soon for this test"
-        assert second.returncode == 2, second.stderr
-        assert f"{out} is in use by another cosim optimize (pid {first.pid}" in second.stderr, second.stderr
+    try:
+        _wait_for(lambda: (out / "metadata.json").exists())  # written once it holds the lock and runs
+        for extra in ((), ("--resume",)):  # also one that would resume the rows so far
+            second = _cosim(*run, *extra, timeout=120)
+            assert first.poll() is None, "the first run ended too soon for this test"
+            assert second.returncode == 2, second.stderr
+            assert f"{out} is in use by another cosim optimize (pid {first.pid}" in second.stderr, second.stderr
+    finally:
+        gate.unlink()  # the first run's points go on
     _, err = first.communicate(timeout=300)
     assert first.returncode == 0, err
     table = pd.read_parquet(out / "results.parquet")
