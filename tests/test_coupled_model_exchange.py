@@ -389,6 +389,15 @@ def test_a_loop_among_the_members_is_solved_inside_the_group(write_spec, version
     assert np.max(np.abs(x_in_a - LB * (xb - x_in_b))) < 1e-9 and np.max(np.abs(x_in_b - LA * (xa - x_in_a))) < 1e-9
 
 
+def test_inspect_says_a_loop_is_solved_inside_its_group(write_spec, capsys):
+    from cosim.cli.main import main
+
+    assert main(["inspect", str(write_spec(looped(3), "inspect.json"))]) == 0
+    out = capsys.readouterr().out
+    assert "integrated together (one solver): a+b = a, b" in out and "loop through units a, b" in out
+    assert "solved inside a+b at every evaluation of its equations" in out
+
+
 def test_a_loop_inside_a_group_without_solution_fails_the_run_naming_the_loop(write_spec):
     # kc = 1 on both masses: x_in_a + x_in_b = x_b and = x_a, which no value meets while x_a != x_b
     spec = looped(2)

@@ -221,6 +221,12 @@ def print_coupling(system: Any) -> None:
         values = sum(len(system.connections[i].target.refs) for i in loop.torn)
         print(f"  loop through units {', '.join(loop.units)}: tearing {', '.join(loop.tearing)} "
               f"({values} value{'' if values == 1 else 's'}); ports {', '.join(loop.ports)}")
+        group = next((g.name for g in system.model_exchange.groups if set(loop.units) <= set(g.members)), None)
+        if group is not None:
+            from cosim.master.coupled_me import GROUP_LOOP_TOLERANCE
+
+            print(f"    solved inside {group} at every evaluation of its equations (tolerance "
+                  f"{min(settings.tolerance, GROUP_LOOP_TOLERANCE):g}), not only at communication points")
         assumed = assumed_feedthrough(system.units, loop)
         if assumed:
             print(f"    note: unit(s) {', '.join(assumed)} declare no dependencies for their outputs, so every "
