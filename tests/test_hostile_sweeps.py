@@ -111,10 +111,10 @@ def test_a_running_sweep_holds_the_lock_and_releases_it(tmp_path, local_cluster)
     spec = _scale_spec(tmp_path, 1.0)
     out = tmp_path / "out"
     sweep = Sweep(spec, out=out, scheduler=local_cluster, quiet=True)
-    sweep.lock.acquire()  # as run() does, before the cluster starts
+    sweep.folder.lock.acquire()  # as run() does, before the cluster starts
     with pytest.raises(FolderInUse, match="in use by another cosim sweep"):
         Sweep(spec, out=out, scheduler=local_cluster, resume=True, quiet=True)
-    sweep.lock.release()
+    sweep.folder.lock.release()
     assert len(sweep.run()) == 4
     Sweep(spec, out=out, scheduler=local_cluster, resume=True, quiet=True)  # released after the run
 

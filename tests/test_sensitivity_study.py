@@ -122,3 +122,26 @@ def test_no_warning_for_indices_within_their_bounds():
     rows[0]["value"] = 1.21
     assert "S1 of b.x1 for y = 1.21" in unreliable_indices(pd.DataFrame(rows), "sobol", 8)
     assert unreliable_indices(pd.DataFrame(rows), "morris", 8) == ""  # mu* and sigma have no bound
+
+
+def test_a_sensitivity_folder_is_of_kind_sensitivity_from_its_first_row(write_spec, tmp_path, local_cluster):
+    """Its metadata said 'sensitivity' only once finished while its rows and its resume check said 'sweep': a
+    finished study could not be resumed ("holds sensitivity results, not sweep results") and a sweep could resume
+    into an interrupted one. Now the kind is 'sensitivity' from the start, in metadata.json and in every file of
+    rows, and a resume accepts that kind only."""
+    import pyarrow.parquet as pq
+
+    from cosim.results.store import IDENTITY_KEY
+    from cosim.studies.sweep import Sweep, SweepError
+
+    spec = write_spec(ishigami_spec())
+    out = tmp_path / "out"
+    options = dict(method="morris", n=4, seed=3, objectives=["y"], scheduler=local_cluster, quiet=True)
+    first, _ = SensitivityStudy(spec, out, **options).run()
+    table = pq.read_table(out / "results.parquet")
+    assert json.loads(table.schema.metadata[IDENTITY_KEY])["kind"] == "sensitivity"
+    again, indices = SensitivityStudy(spec, out, resume=True, **options).run()  # all points stored: none run
+    assert again == first and first["ok"] == len(pd.read_parquet(out / "results.parquet")) > 0
+    assert json.loads((out / "metadata.json").read_text())["kind"] == "sensitivity"
+    with pytest.raises(SweepError, match="holds sensitivity results, not sweep results"):
+        Sweep(spec, out=out, scheduler=local_cluster, resume=True, quiet=True)

@@ -1,4 +1,6 @@
-"""What every driver (a sweep, an optimisation) does alike with its results folder and its messages.
+"""What every driver (a sweep, an optimisation, a sensitivity study) does alike with its results folder, its
+cluster and its messages: the study skeleton, :class:`StudyFolder` (folder, lock, checks, metadata, final
+table) and :func:`study_cluster`, and the pieces it is made of.
 
 A driver writes its rows into a results folder (:class:`~cosim.results.store.ResultsStore`).
 Started afresh, the folder must hold no rows; with ``resume`` it must hold rows
@@ -213,3 +215,111 @@ def user_name() -> str:
         return getpass.getuser()
     except Exception:
         return ""
+
+
+# -- the skeleton every study shares ---------------------------------------------------------------------------
+
+
+class StudyFolder:
+    """One study's results folder from the first check to the final table: the part sweep, optimize and
+    sensitivity do alike, in this order.
+
+    1. The folder is opened (created when missing) and its lock checked free (FolderInUse otherwise), so a
+       study running into it is the first thing said; a folder that cannot be written is an OutputError.
+    2. :func:`check_results_folder`: rows of this spec and ``kind`` when resuming (:attr:`previous`, the
+       stored metadata), none otherwise.  When resuming, the unit and data files must be those that made the
+       rows (:func:`resume_differences`), else ``error`` names the files; a study that ``can_recompute``
+       (a sweep) then discards the rows when ``recompute`` is asked instead of refusing.
+    3. :meth:`locked` holds the lock while the study runs; :meth:`write_metadata` writes ``metadata.json``.
+    4. :meth:`finish` sets aside a part damaged meanwhile, merges the parts into ``results.parquet`` and
+       records the counts; ``error`` says which points are missing when a part was set aside.
+
+    ``to_resume`` completes "add --resume ... to" in the refusal of a folder that already holds rows;
+    ``command`` names the study in the lock ("cosim sweep"); ``note`` gets the notes that matter even when
+    quiet (a file of rows set aside).
+    """
+
+    def __init__(self, out: Path, system: Any, kind: str, resume: bool, error: type[UserError], to_resume: str,
+                 command: str, note: Callable[[str], None], can_recompute: bool = False, recompute: bool = False):
+        from cosim.results.checksums import data_file_checksums, unit_checksums
+        from cosim.results.lock import FolderLock
+        from cosim.results.store import ResultsStore  # (pandas and pyarrow are imported when the first rows come)
+
+        self.out, self.kind, self.error, self.command = Path(out), kind, error, command
+        with results_writes(self.out):  # a read-only or full disk: said with what to do (exit 2)
+            self.store = ResultsStore(self.out)
+            self.lock = FolderLock(self.out)
+            self.lock.check_free()  # a study running into this folder is the first thing to say
+        spec = system.spec
+        self.checksums, self.data_checksums = unit_checksums(system), data_file_checksums(system)
+        self.previous = check_results_folder(self.store, resume, spec.digest, kind, to_resume, error, note=note)
+        if resume:
+            self._check_unit_files(spec.folder, can_recompute, recompute)
+        self.store.identity = study_identity(spec.digest, kind, self.checksums, self.data_checksums)
+
+    def _check_unit_files(self, folder: Path, can_recompute: bool, recompute: bool) -> None:
+        changed, unverifiable = resume_differences(self.store, self.checksums, self.data_checksums, folder)
+        if can_recompute:
+            whole, rows, fix = ("table", "results", "use another --out, or add --recompute to discard the stored "
+                                "rows and compute every point again")
+        else:
+            whole, rows, fix = "study", "trials", "or start afresh in another --out"
+        if unverifiable and not recompute:
+            raise self.error(f"cannot resume {self.out}: {unverifiable}; resuming could mix two models in one "
+                             f"{whole}; restore metadata.json, {fix}")
+        if changed and not recompute:
+            raise self.error(f"{self.out} holds {rows} of other unit files than the spec names now ("
+                             + "; ".join(changed) + f"); resuming would mix two models in one {whole}; restore "
+                             f"the files, {fix}")
+        if changed or unverifiable:  # only with recompute: the stored rows go
+            self.store.discard_rows()
+
+    @contextmanager
+    def locked(self) -> Iterator[None]:
+        """Hold the folder's lock for the block (FolderInUse when another process holds it)."""
+        with results_writes(self.out):
+            self.lock.acquire(self.command)  # released when this process ends, however it ends
+        try:
+            yield
+        finally:
+            self.lock.release()
+
+    def write_metadata(self, metadata: Mapping[str, Any]) -> None:
+        """Write ``metadata.json`` (a failed write is an OutputError naming the folder and the fix)."""
+        with results_writes(self.out):
+            self.store.write_metadata(metadata)
+
+    def finish(self, missing: str, order: Any = None, csv: bool = False) -> dict[str, int]:
+        """Merge the rows into ``results.parquet`` (in ``order`` of point ids when given, see
+        ResultsStore.compact), record the counts by status; returns them.
+
+        Raises ``error`` when a part was damaged while the study ran (it is set aside): its message names
+        the part and ends with ``missing``, which may use ``{rows}`` (the rows in the table).
+        """
+        with results_writes(self.out):  # a full disk during the final merge loses nothing (see compact)
+            aside = self.store.set_aside_damaged()  # a part damaged while the study ran: its points are missing
+            counts = self.store.compact(order=order, csv=csv)
+            finish_metadata(self.store, counts)
+        if aside:
+            raise self.error(f"{self.out}: " + "; ".join(aside) + "; " + missing.format(rows=sum(counts.values())))
+        return counts
+
+
+@contextmanager
+def study_cluster(workers: int, scheduler: str | None, cluster: str | None, error: type[UserError],
+                  interrupted: Callable[[], None], early: Any = None) -> Iterator[tuple[Any, int, str]]:
+    """:func:`cosim.parallel.evaluator.dask_client` for a study: ``(client, worker threads, dashboard link)``.
+
+    A cluster that cannot be had is the study's ``error`` (exit 2); on a stop (KeyboardInterrupt)
+    ``interrupted()`` says where the rows are before it goes on.
+    """
+    from cosim.parallel.evaluator import ClusterError, dask_client
+
+    try:
+        with dask_client(workers, scheduler, cluster, early=early) as connected:
+            yield connected
+    except ClusterError as exc:
+        raise error(str(exc)) from None
+    except KeyboardInterrupt:
+        interrupted()
+        raise

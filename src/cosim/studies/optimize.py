@@ -67,10 +67,8 @@ import numpy as np
 from cosim.analysis.hypervolume import progress_hypervolume
 from cosim.errors import OptimizeError, Problem, SpecError
 from cosim.execution.point_row import PointRow
-from cosim.results.checksums import data_file_checksums, unit_checksums
-from cosim.results.lock import FolderLock
-from cosim.studies.driver import (check_results_folder, finish_metadata, now_utc, package_versions, resume_differences,
-                                  results_writes, run_metadata, say, study_identity)
+from cosim.studies.driver import (StudyFolder, now_utc, package_versions, results_writes, run_metadata, say,
+                                  study_cluster)
 from cosim.studies.optuna_storage import default_study_name, open_storage_study, shown_url
 from cosim.studies.progress import StatusLine
 
@@ -345,7 +343,6 @@ class Optimization:
         from cosim.parallel.cluster import read_cluster_file
         from cosim.parallel.evaluator import check_timeout
         from cosim.parallel.isolation import make_payload
-        from cosim.results.store import ResultsStore
         from cosim.system.validate import check_spec
 
         check_timeout(timeout, OptimizeError)
@@ -358,25 +355,10 @@ class Optimization:
         self.spec = self.system.spec
         self.space = optimization_space(self.spec)
         self.out, self.resume = Path(out), resume
-        with results_writes(self.out):  # a read-only or full disk: said with what to do (exit 2)
-            self.store = ResultsStore(self.out)
-            self.lock = FolderLock(self.out)
-            self.lock.check_free()  # another optimisation running into this folder is the first thing to say
-        previous = check_results_folder(self.store, resume, self.spec.digest, "optimization",
-                                        "continue that optimisation", OptimizeError,
-                                        note=lambda text: print(f"cosim: {text}", file=progress or sys.stderr,
-                                                                flush=True))
-        self.checksums, self.data_checksums = unit_checksums(self.system), data_file_checksums(self.system)
-        changed, unverifiable = resume_differences(self.store, self.checksums, self.data_checksums,
-                                                   self.spec.folder) if resume else ([], None)
-        if unverifiable:
-            raise OptimizeError(f"cannot resume {self.out}: {unverifiable}; resuming could mix two models in one "
-                                "study; restore metadata.json, or start afresh in another --out")
-        if changed:  # the stored trials would steer the sampler with another model's results
-            raise OptimizeError(f"{self.out} holds trials of other unit files than the spec names now ("
-                                + "; ".join(changed) + "); resuming would mix two models in one study; restore "
-                                "the files, or start afresh in another --out")
-        self.store.identity = study_identity(self.spec.digest, "optimization", self.checksums, self.data_checksums)
+        self.folder = StudyFolder(self.out, self.system, "optimization", resume, OptimizeError,
+                                  "continue that optimisation", "cosim optimize",
+                                  lambda text: print(f"cosim: {text}", file=progress or sys.stderr, flush=True))
+        self.store, previous = self.folder.store, self.folder.previous
         stored = (previous or {}).get("optimize", {})
         given = {"budget": budget, "sampler": sampler, "batch": batch, "seed": seed, "objectives": objectives}
         for key in ("sampler", "batch", "seed", "objectives"):  # a resume replays the stored run: these must not change
@@ -455,18 +437,13 @@ class Optimization:
         replaces the Dask evaluator (anything with Evaluator's ``evaluate``;
         benchmarks answer from a stored table with it).
         """
-        with results_writes(self.out):
-            self.lock.acquire("cosim optimize")  # released when this process ends, however it ends
-        try:
+        with self.folder.locked():
             return self._run_locked(evaluator)
-        finally:
-            self.lock.release()
 
     def _run_locked(self, evaluator: Any = None) -> dict[str, int]:
         import optuna
 
         from cosim.parallel.dashboard_points import open_board
-        from cosim.parallel.evaluator import ClusterError, dask_client
         from cosim.parallel.point_stream import Evaluator
 
         optuna.logging.set_verbosity(optuna.logging.WARNING)
@@ -483,28 +460,24 @@ class Optimization:
             study = optuna.create_study(directions=list(s.objectives.values()), sampler=sampler)
         dists = distributions(self.space)
         if evaluator is not None:
-            with results_writes(self.out):
-                self.store.write_metadata(self._metadata(started, "", 0))
+            self.folder.write_metadata(self._metadata(started, "", 0))
             self._loop(study, dists, evaluator, stored)
             return self._finish()
-        try:
-            with dask_client(self.workers, self.scheduler, self.cluster) as (client, n_workers, link):
-                with results_writes(self.out):
-                    self.store.write_metadata(self._metadata(started, client.scheduler.address, n_workers))
-                board = open_board(client, "optimize", self.spec.name, s.budget, before=len(stored), dashboard=link)
-                self._say(f"cosim optimize {self.spec.name}: {s.sampler}, budget {s.budget}, batch {s.batch}, "
-                          f"seed {s.seed}, {len(stored)} evaluations stored; {n_workers} worker(s); dashboard: "
-                          f"{link} ({board.describe()}); results: {self.out}")
-                with Evaluator(client, self.payload, n_workers, self.timeout, study=self.spec.name,
-                               board=board) as evaluator, board.running():
-                    self._loop(study, dists, evaluator, stored)
-        except ClusterError as exc:
-            raise OptimizeError(str(exc)) from None
-        except KeyboardInterrupt:
-            self._say(f"interrupted: the rows so far are in {self.out}; run again with --resume (or resume=True "
-                      "from Python) to go on")
-            raise
+        with study_cluster(self.workers, self.scheduler, self.cluster, OptimizeError, self._interrupted) as \
+                (client, n_workers, link):
+            self.folder.write_metadata(self._metadata(started, client.scheduler.address, n_workers))
+            board = open_board(client, "optimize", self.spec.name, s.budget, before=len(stored), dashboard=link)
+            self._say(f"cosim optimize {self.spec.name}: {s.sampler}, budget {s.budget}, batch {s.batch}, "
+                      f"seed {s.seed}, {len(stored)} evaluations stored; {n_workers} worker(s); dashboard: "
+                      f"{link} ({board.describe()}); results: {self.out}")
+            with Evaluator(client, self.payload, n_workers, self.timeout, study=self.spec.name,
+                           board=board) as evaluator, board.running():
+                self._loop(study, dists, evaluator, stored)
         return self._finish()
+
+    def _interrupted(self) -> None:
+        self._say(f"interrupted: the rows so far are in {self.out}; run again with --resume (or resume=True "
+                  "from Python) to go on")
 
     def _loop(self, study: Any, dists: dict[str, Any], evaluator: Any, stored: dict[str, dict]) -> None:
         s = self.settings
@@ -663,18 +636,13 @@ class Optimization:
             info["optuna_storage"] = {"url": shown_url(self.storage), "study_name": self.study_name}
         return run_metadata(self.store, self.system, info, kind="optimization", optimize=asdict(self.settings),
                             packages=package_versions("optuna"), points=self.settings.budget,
-                            unit_checksums=self.checksums, data_file_checksums=self.data_checksums,
+                            unit_checksums=self.folder.checksums, data_file_checksums=self.folder.data_checksums,
                             design_method=f"optimize ({self.settings.sampler})")
 
     def _finish(self) -> dict[str, int]:
-        with results_writes(self.out):  # a full disk during the final merge loses nothing (see compact)
-            aside = self.store.set_aside_damaged()  # a part damaged while the study ran: its trials are missing
-            counts = self.store.compact()  # rows stay in the order they were evaluated
-            finish_metadata(self.store, counts)
-        if aside:
-            raise OptimizeError(f"{self.out}: " + "; ".join(aside) + "; run the same command with --resume (or "
-                                "resume=True from Python) to evaluate their designs again")
-        return counts
+        # rows stay in the order they were evaluated
+        return self.folder.finish("run the same command with --resume (or resume=True from Python) to evaluate "
+                                  "their designs again")
 
 
 def optimize(spec_path: str | Path, out: str | Path, **options: Any) -> "Any":

@@ -10,8 +10,9 @@ SALib does the statistics; cosim runs the sample:
    Sobol' sequence, ``n * (D + 2)`` runs for D dimensions (first-order and
    total indices); ``morris`` -- ``n`` trajectories of ``D + 1`` runs on a
    4-level grid.
-3. The sample runs as a sweep (:class:`~cosim.studies.sweep.Sweep` with this
-   sample as its points: Dask, isolation, timeouts, fault rows, ``--resume``).
+3. The sample runs as a sweep (:class:`~cosim.studies.sweep.Sweep` of kind
+   ``sensitivity`` with this sample as its points: Dask, isolation, timeouts,
+   fault rows, ``--resume`` of a sensitivity folder only).
    Two sample rows that round to the same design run once.
 4. SALib analyses each objective: Sobol gives ``S1`` and ``ST`` with their
    95 % bootstrap confidence half-widths; Morris gives ``mu_star`` (with its
@@ -218,7 +219,7 @@ class SensitivityStudy:
             self.sample_space = SampleSpace(space, self.sample, f"{method} (SALib, n={self.n}, seed={self.seed})")
             return self.sample_space
 
-        self.sweep = Sweep(spec_path, out=self.out, space_of=space_of, **sweep_options)
+        self.sweep = Sweep(spec_path, out=self.out, space_of=space_of, kind="sensitivity", **sweep_options)
         self.objectives = choose_objectives(self.sweep.spec, objectives)
         previous = self.sweep.store.metadata() if sweep_options.get("resume") else None
         if previous and previous.get("design_method") != self.sample_space.method:
@@ -235,7 +236,7 @@ class SensitivityStudy:
         indices.to_csv(self.out / TABLE_NAME, index=False)
         write_figure(indices, self.out / FIGURE_NAME, self.method)
         meta = self.sweep.store.metadata() or {}
-        meta.update(kind="sensitivity", sensitivity={
+        meta.update(sensitivity={
             "method": self.method, "n": self.n, "seed": self.seed, "samples": len(self.sample),
             "designs": len(self.sample_space or []), "objectives": self.objectives,
             "parameters": self.problem["names"], "bounds": self.problem["bounds"],

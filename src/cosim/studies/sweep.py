@@ -51,11 +51,8 @@ from cosim.parallel.early_cluster import EarlyCluster
 from cosim.parallel.evaluator import check_timeout
 from cosim.parallel.isolation import IsolatedRunner, make_payload, preload_spare_children, stop_spare_children
 from cosim.parallel.point_stream import BatchSizer, PointStream
-from cosim.results.checksums import changed_files, data_file_checksums, unit_checksums
-from cosim.results.lock import FolderLock
 from cosim.spec.design import DesignSpace, Point
-from cosim.studies.driver import (check_results_folder, finish_metadata, now_utc, results_writes,  # noqa: F401
-                                  resume_differences, run_metadata, say, study_identity)
+from cosim.studies.driver import StudyFolder, now_utc, results_writes, run_metadata, say, study_cluster
 from cosim.studies.progress import StatusLine, duration
 
 if TYPE_CHECKING:
@@ -66,7 +63,8 @@ if TYPE_CHECKING:
 
 
 class Progress:
-    """The sweep's status line: points done, not ok, rate, time left (see :class:`cosim.studies.progress.StatusLine`)."""
+    """The sweep's status line: points done, not ok, rate, time left
+    (see :class:`cosim.studies.progress.StatusLine`)."""
 
     def __init__(self, total: int, stream: TextIO | None = None):
         self.total, self.done, self.failed = total, 0, 0
@@ -102,6 +100,10 @@ class Sweep:
     object with DesignSpace's ``__iter__``, ``__len__``, ``head``, ``columns``,
     ``targets`` and ``method``).
 
+    ``kind`` is the study's kind in ``metadata.json`` and in every file of
+    rows (a ``sensitivity`` study runs its sample as a sweep of that kind):
+    a resume refuses a folder of another kind.
+
     ``start_early`` (``cosim sweep``'s way): once the spec is checked, the
     local cluster (when one is used) starts in the background while the rest
     is prepared (:mod:`cosim.parallel.early_cluster`); :meth:`run`,
@@ -113,7 +115,7 @@ class Sweep:
                  batch_size: int | None = None, csv: bool = False, progress: TextIO | None = None,
                  quiet: bool = False, experiment: dict | None = None, space_of: Any = None,
                  cluster: str | Path | None = None, recompute: bool = False, start_early: bool = False,
-                 explore: bool = False):
+                 explore: bool = False, kind: str = "sweep"):
         from cosim.parallel.cluster import read_cluster_file
         from cosim.system.validate import check_spec
 
@@ -134,7 +136,7 @@ class Sweep:
         self.workers = workers or os.cpu_count() or 1
         self.scheduler, self.timeout, self.resume = scheduler, timeout, resume
         self.batch_size, self.csv, self.quiet = batch_size, csv, quiet
-        self.progress_stream = progress
+        self.progress_stream, self.kind = progress, kind
         self._temporary = out is None
         self.explore = explore
         if explore and out is None:
@@ -151,17 +153,10 @@ class Sweep:
             stop_spare_children()  # none of them will be used
             self._early = None
         try:
-            from cosim.results.store import ResultsStore  # (pandas and pyarrow are imported when the first rows come)
-
             self.out = Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="cosim_sweep_"))
-            with results_writes(self.out):
-                self.store = ResultsStore(self.out)
-                self.lock = FolderLock(self.out)
-                self.lock.check_free()  # a sweep running into this folder is the first thing to say
-            self.checksums = unit_checksums(self.system)
-            self.data_checksums = data_file_checksums(self.system)
-            self.recompute = recompute
-            self._check_folder()
+            self.folder = StudyFolder(self.out, self.system, self.kind, resume, SweepError, f"finish that {kind}",
+                                      f"cosim {kind}", self._note, can_recompute=True, recompute=recompute)
+            self.store = self.folder.store
             if self._early is None:
                 self.payload = make_payload(self.system)
         except BaseException:
@@ -180,35 +175,12 @@ class Sweep:
         if early is not None:
             early.close()
 
-    def _check_folder(self) -> None:
-        check_results_folder(self.store, self.resume, self.spec.digest, "sweep", "finish that sweep", SweepError,
-                             note=self._note)
-        if self.resume:
-            changed, unverifiable = resume_differences(self.store, self.checksums, self.data_checksums,
-                                                       self.spec.folder)
-            if unverifiable and not self.recompute:
-                raise SweepError(f"cannot resume {self.out}: {unverifiable}; resuming could mix two models in one "
-                                 "table; restore metadata.json, use another --out, or add --recompute to discard "
-                                 "the stored rows and compute every point again")
-            if changed and not self.recompute:
-                raise SweepError(f"{self.out} holds results of other unit files than the spec names now ("
-                                 + "; ".join(changed) + "); resuming would mix two models in one table; restore "
-                                 "the files, use another --out, or add --recompute to discard the stored rows "
-                                 "and compute every point again")
-            if changed or unverifiable:
-                self.store.discard_rows()
-        self.store.identity = study_identity(self.spec.digest, "sweep", self.checksums, self.data_checksums)
-
-    def _changed_units(self, previous: dict[str, Any]) -> list[str]:
-        """Units and data files whose content differs from the checksums stored with the rows."""
-        return changed_files(previous, self.checksums, self.data_checksums, self.spec.folder)
-
     def _say(self, text: str) -> None:
         say(text, self.quiet, self.progress_stream)
 
     def _metadata(self, client_info: dict[str, Any]) -> dict[str, Any]:
-        return run_metadata(self.store, self.system, client_info, unit_checksums=self.checksums,
-                            data_file_checksums=self.data_checksums,
+        return run_metadata(self.store, self.system, client_info, kind=self.kind,
+                            unit_checksums=self.folder.checksums, data_file_checksums=self.folder.data_checksums,
                             points=len(self.space), design_method=self.space.method)
 
     def run(self) -> pd.DataFrame:
@@ -238,19 +210,13 @@ class Sweep:
 
     def _run(self) -> dict[str, int]:
         try:
-            with results_writes(self.out):
-                self.lock.acquire()  # released when this process ends, however it ends
-        except BaseException:
-            self.close()  # the early cluster
-            raise
-        try:
-            return self._run_locked()
+            with self.folder.locked():
+                return self._run_locked()
         finally:
-            self.lock.release()
+            self.close()  # the early cluster, if no cluster took it
 
     def _run_locked(self) -> dict[str, int]:
         from cosim.parallel.dashboard_points import open_board
-        from cosim.parallel.evaluator import ClusterError, dask_client
 
         started = now_utc()
         done = self.store.done_ids() if self.resume else set()
@@ -258,55 +224,43 @@ class Sweep:
         todo = total - len(done & {p.id for p in self.space}) if done else total
         if todo == 0:
             self.close()
-            self._say(f"cosim sweep {self.spec.name}: all {total} points already in {self.out}")
+            self._say(f"cosim {self.kind} {self.spec.name}: all {total} points already in {self.out}")
             if self.store.metadata() is None:  # lost or damaged, and the rows showed the same model: written anew
-                with results_writes(self.out):
-                    self.store.write_metadata(self._metadata({"started": started, "scheduler": "", "workers": 0,
-                                                              "timeout": self.timeout}))
+                self.folder.write_metadata(self._metadata({"started": started, "scheduler": "", "workers": 0,
+                                                           "timeout": self.timeout}))
             return self._finish()
-        try:
-            with dask_client(self.workers, self.scheduler, self.cluster, early=self._early) as \
-                    (client, n_workers, link):
-                info = {"started": started, "scheduler": client.scheduler.address, "workers": n_workers,
-                        "timeout": self.timeout}
-                with results_writes(self.out):
-                    self.store.write_metadata(self._metadata(info))
-                room = open_room(self.out) if self.explore else None
-                board = open_board(client, "sweep", self.spec.name, total, before=total - todo, dashboard=link,
-                                   room=room.link if room else None)
-                self._say(f"cosim sweep {self.spec.name}: {total} points ({todo} to run) on {n_workers} "
-                          f"worker(s); dashboard: {link} ({board.describe()}); results: {self.out}"
-                          + (f"; decision room: {room.link}" if room else ""))
-                try:
-                    with board.running():
-                        self._evaluate(client, done, todo, n_workers, board)
-                finally:
-                    if room is not None:
-                        room.stop()
-        except ClusterError as exc:
-            raise SweepError(str(exc)) from None
-        except KeyboardInterrupt:
-            self._say(f"interrupted: the rows so far are in {self.out}; run again with --resume (or resume=True "
-                      "from Python) to finish")
-            raise
-        finally:
-            self.close()  # the early cluster, if dask_client did not take it
+        with study_cluster(self.workers, self.scheduler, self.cluster, SweepError, self._interrupted,
+                           early=self._early) as (client, n_workers, link):
+            info = {"started": started, "scheduler": client.scheduler.address, "workers": n_workers,
+                    "timeout": self.timeout}
+            self.folder.write_metadata(self._metadata(info))
+            room = open_room(self.out) if self.explore else None
+            board = open_board(client, self.kind, self.spec.name, total, before=total - todo, dashboard=link,
+                               room=room.link if room else None)
+            self._say(f"cosim {self.kind} {self.spec.name}: {total} points ({todo} to run) on {n_workers} "
+                      f"worker(s); dashboard: {link} ({board.describe()}); results: {self.out}"
+                      + (f"; decision room: {room.link}" if room else ""))
+            try:
+                with board.running():
+                    self._evaluate(client, done, todo, n_workers, board)
+            finally:
+                if room is not None:
+                    room.stop()
         return self._finish()
+
+    def _interrupted(self) -> None:
+        self._say(f"interrupted: the rows so far are in {self.out}; run again with --resume (or resume=True "
+                  "from Python) to finish")
 
     def _note(self, text: str) -> None:
         """A note that matters even with ``quiet`` (a file of rows set aside): always on stderr."""
         print(f"cosim: {text}", file=self.progress_stream or sys.stderr, flush=True)
 
     def _finish(self) -> dict[str, int]:
-        with results_writes(self.out):  # a full disk during the final merge loses nothing (see compact)
-            aside = self.store.set_aside_damaged()  # a part damaged while the sweep ran: its points are missing
-            counts = self.store.compact(order=(p.id for p in self.space), csv=self.csv)  # order: older parts
-            finish_metadata(self.store, counts)
-        if aside:
-            raise SweepError(f"{self.out}: " + "; ".join(aside) + f"; the table holds {sum(counts.values())} of "
-                             f"{len(self.space)} points: run the same command with --resume (or resume=True "
-                             "from Python) to compute the others")
-        return counts
+        # order: parts of an older cosim carry no design index
+        return self.folder.finish(f"the table holds {{rows}} of {len(self.space)} points: run the same command "
+                                  "with --resume (or resume=True from Python) to compute the others",
+                                  order=(p.id for p in self.space), csv=self.csv)
 
     def _evaluate(self, client: Any, done: set[str], todo: int, n_workers: int, board: Any = None) -> None:
         """Run the points not in ``done`` through the one evaluate loop; each row is stored as its point finishes."""
@@ -318,7 +272,7 @@ class Sweep:
             if progress is not None:
                 progress.update(len(pairs), sum(not r.ok for _, r in pairs))
 
-        with PointStream(client, self.payload, n_workers, "sweep", self.spec.name, timeout=self.timeout,
+        with PointStream(client, self.payload, n_workers, self.kind, self.spec.name, timeout=self.timeout,
                          adaptive_timeout=True, board=board) as stream:
             stream.run((p for p in self.space if p.id not in done), BatchSizer(todo, n_workers, self.batch_size),
                        store, total=len(self.space))
