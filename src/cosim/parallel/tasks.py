@@ -111,6 +111,13 @@ class RowSender:
     row is on its way within ROWS_EVERY seconds.  Rows still waiting when the
     task ends are not sent: its result brings every row.  Without a topic, or
     outside a Dask worker, it does nothing.
+
+    A Dask scheduler keeps the recent events of each topic, as many as its
+    configuration says (recent distributed: ``low-level-log-length``, which
+    is ``evaluator.LOG_LENGTH`` on the clusters cosim starts), so the rows of a
+    study's last events stay in its memory until pushed out.
+    A task of cheap points (about half a second, see ``BatchSizer``) sends one
+    or two events; one of slow points one per point.
     """
 
     def __init__(self, topic: str | None, worker_name: str):
