@@ -61,6 +61,15 @@ def test_the_errors_of_a_tab_gone_are_dropped_and_other_errors_kept_as_one_line(
 
 def test_closing_dashboard_tabs_during_a_sweep_prints_no_error(tmp_path, browser):  # noqa: F811
     spec = _spec(tmp_path, 60, pause=1.0)  # 30 s on 2 workers: time for a dozen tabs
+    # ... and once the tabs are done, the rest of the points without their pause (the sweep went on sleeping
+    # for up to 30 s after the last tab): each point pauses only while the file `tabs_open` exists
+    tabs_open = tmp_path / "tabs_open"
+    tabs_open.touch()
+    unit = (tmp_path / "triple.py").read_text()
+    assert "        time.sleep(self.pause)\n" in unit
+    (tmp_path / "triple.py").write_text(unit.replace(
+        "        time.sleep(self.pause)\n",
+        f"        if __import__('os').path.exists({str(tabs_open)!r}):\n            time.sleep(self.pause)\n"))
     proc = subprocess.Popen([sys.executable, "-m", "cosim.cli.main", "sweep", str(spec), "--out", str(tmp_path / "o"),
                              "--workers", "2", "--batch-size", "1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=dict(os.environ, PYTHONPATH=str(SRC)), start_new_session=True)
@@ -85,6 +94,7 @@ def test_closing_dashboard_tabs_during_a_sweep_prints_no_error(tmp_path, browser
         browser.close()
         browser.switch_to.window(home)
         closed += 1
+    tabs_open.unlink()
     _, err = proc.communicate(timeout=300)
     assert proc.returncode == 0, err
     assert closed >= 6, closed  # the tabs were opened and closed while the sweep ran
