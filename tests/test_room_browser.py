@@ -486,15 +486,18 @@ def test_the_room_of_a_running_sweep_draws_points_as_they_arrive(browser, tmp_pa
     assert f"href='{link}'" in urllib.request.urlopen(points_page, timeout=30).read().decode()
     browser.get(link)
     seen = []
+    look = ("const d = Bokeh.documents[0], s = d.get_model_by_name('cloud-source');"
+            "return s ? [d.get_model_by_name('count').text, Array.from(s.data.point_id), Array.from(s.data.x),"
+            " Array.from(s.data.y)] : null;")
     while thread.is_alive():
-        try:
-            seen.append(browser.execute_script(
-                "const d = Bokeh.documents[0], s = d.get_model_by_name('cloud-source');"
-                "return s ? [d.get_model_by_name('count').text, Array.from(s.data.point_id), Array.from(s.data.x),"
-                " Array.from(s.data.y)] : null;"))
+        try:  # a state the page shows for a while: the server's changes of one update arrive one by one
+            first = browser.execute_script(look)
+            time.sleep(0.1)
+            if browser.execute_script(look) == first:
+                seen.append(first)
         except Exception:  # between the waiting page and the room, or the room stopping with the sweep
             pass
-        time.sleep(0.3)
+        time.sleep(0.2)
     thread.join()
     final = load_results(out).df
     assert len(final) == 12 and (final["status"] == "ok").all()
@@ -509,3 +512,33 @@ def test_the_room_of_a_running_sweep_draws_points_as_they_arrive(browser, tmp_pa
         # the cloud's axes are the design parameter and the objective: y_end = gain (y = gain t at t = 1)
         assert np.allclose(x, by_id.loc[ids, "s.gain"].to_numpy(float))
         assert np.allclose(y, by_id.loc[ids, "y_end"].to_numpy(float)) and np.allclose(y, x)
+
+
+def test_an_optimisation_with_explore_serves_its_room_while_it_runs(tmp_path, local_cluster):
+    """``optimize(explore=True)``: the start line gives the room's link, and the room answers while the
+    optimisation runs (its page, titled by the spec's name, fetched from a thread)."""
+    import io
+    import re
+    import threading
+    import time
+
+    import cosim
+
+    spec = write(tmp_path / "opt", {**bowls_spec(), "optimize": {"budget": 16, "batch": 4, "seed": 3}})
+    said = io.StringIO()
+    pages: list = []
+
+    def fetch() -> None:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and not pages:
+            found = re.search(r"decision room: (http://\S+)", said.getvalue())
+            if found:
+                pages.append(urllib.request.urlopen(found.group(1), timeout=60).read().decode())
+            time.sleep(0.05)
+
+    watcher = threading.Thread(target=fetch, daemon=True)
+    watcher.start()
+    cosim.optimize(spec, tmp_path / "opt" / "out", scheduler=local_cluster, explore=True, progress=said)
+    watcher.join(10)
+    assert re.search(r"; decision room: http://127\.0\.0\.1:\d+/", said.getvalue())
+    assert pages and "<title>cosim: " in pages[0]

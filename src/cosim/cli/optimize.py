@@ -37,6 +37,9 @@ def add_optimize_parser(sub: Any) -> None:
     p.add_argument("--sampler", choices=SAMPLERS, help="Optuna sampler (default: optimize.sampler, or tpe)")
     p.add_argument("--batch", type=int, metavar="K",
                    help="designs asked and evaluated in parallel per round (default 8; nsga2: 20, its population)")
+    p.add_argument("--explore", action="store_true",
+                   help="serve the decision room of the results folder while the optimisation runs (new evaluations "
+                        "appear as they are written; linked from the Dask dashboard's Cosim page); on loopback")
     p.add_argument("--seed", type=int, metavar="S", help="sampler seed (default: optimize.seed, or a random one)")
     p.add_argument("--resume", action="store_true", help="continue the optimisation stored in --out to the budget")
     p.add_argument("--workers", type=int, metavar="N", help="local workers, each running points in a child process (default: one per core)")
@@ -65,7 +68,7 @@ def cmd_optimize(args: argparse.Namespace) -> int:
     run = Optimization(args.spec, out, objectives=objectives, budget=args.budget, sampler=args.sampler, batch=args.batch,
                        seed=args.seed, resume=args.resume, workers=args.workers, scheduler=args.scheduler,
                        cluster=args.cluster, timeout=args.timeout, quiet=getattr(args, "quiet", False),
-                       storage=args.storage, study_name=args.study_name)
+                       storage=args.storage, study_name=args.study_name, explore=args.explore)
     runs_before = runs_recorded(run.store)
     counts = run.run()
     total = sum(counts.values())

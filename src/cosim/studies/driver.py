@@ -10,7 +10,7 @@ raised as the driver's own :class:`~cosim.errors.UserError` subclass
 naming the folder and the fix.  ``metadata.json`` records the spec, the FMUs'
 checksums, package versions, host and user and one entry per run
 (:func:`run_metadata`, :func:`finish_metadata`); :func:`say` prints a driver's
-messages.
+messages; :func:`open_room` serves the decision room of the folder while the driver writes it (``--explore``).
 """
 
 from __future__ import annotations
@@ -323,3 +323,13 @@ def study_cluster(workers: int, scheduler: str | None, cluster: str | None, erro
     except KeyboardInterrupt:
         interrupted()
         raise
+
+
+def open_room(folder: Path) -> Any:
+    """The decision room of ``folder`` served on loopback from a thread while the study writes it (``--explore``):
+    a :class:`cosim.analysis.room.server.RoomServer` with its ``link``; stopped by the caller.  Raises
+    AnalysisError when no port can be bound."""
+    from cosim.analysis.room.live import LiveStudy
+    from cosim.analysis.room.server import RoomServer
+
+    return RoomServer(LiveStudy(folder))

@@ -67,8 +67,8 @@ import numpy as np
 from cosim.analysis.hypervolume import progress_hypervolume
 from cosim.errors import OptimizeError, Problem, SpecError
 from cosim.execution.point_row import PointRow
-from cosim.studies.driver import (StudyFolder, now_utc, package_versions, results_writes, run_metadata, say,
-                                  study_cluster)
+from cosim.studies.driver import (StudyFolder, now_utc, open_room, package_versions, results_writes,
+                                  run_metadata, say, study_cluster)
 from cosim.studies.optuna_storage import default_study_name, open_storage_study, shown_url
 from cosim.studies.progress import StatusLine
 
@@ -337,7 +337,7 @@ class Optimization:
                  batch: int | None = None, seed: int | None = None, resume: bool = False, workers: int | None = None,
                  scheduler: str | None = None, timeout: float | None = None, progress: TextIO | None = None,
                  quiet: bool = False, cluster: str | Path | None = None, storage: str | None = None,
-                 study_name: str | None = None):
+                 study_name: str | None = None, explore: bool = False):
         import os
 
         from cosim.parallel.cluster import read_cluster_file
@@ -355,6 +355,7 @@ class Optimization:
         self.spec = self.system.spec
         self.space = optimization_space(self.spec)
         self.out, self.resume = Path(out), resume
+        self.explore = explore  # serve the decision room of out while the study runs
         self.folder = StudyFolder(self.out, self.system, "optimization", resume, OptimizeError,
                                   "continue that optimisation", "cosim optimize",
                                   lambda text: print(f"cosim: {text}", file=progress or sys.stderr, flush=True))
@@ -466,13 +467,20 @@ class Optimization:
         with study_cluster(self.workers, self.scheduler, self.cluster, OptimizeError, self._interrupted) as \
                 (client, n_workers, link):
             self.folder.write_metadata(self._metadata(started, client.scheduler.address, n_workers))
-            board = open_board(client, "optimize", self.spec.name, s.budget, before=len(stored), dashboard=link)
+            room = open_room(self.out) if self.explore else None
+            board = open_board(client, "optimize", self.spec.name, s.budget, before=len(stored), dashboard=link,
+                               room=room.link if room else None)
             self._say(f"cosim optimize {self.spec.name}: {s.sampler}, budget {s.budget}, batch {s.batch}, "
                       f"seed {s.seed}, {len(stored)} evaluations stored; {n_workers} worker(s); dashboard: "
-                      f"{link} ({board.describe()}); results: {self.out}")
-            with Evaluator(client, self.payload, n_workers, self.timeout, study=self.spec.name,
-                           board=board) as evaluator, board.running():
-                self._loop(study, dists, evaluator, stored)
+                      f"{link} ({board.describe()}); results: {self.out}"
+                      + (f"; decision room: {room.link}" if room else ""))
+            try:
+                with Evaluator(client, self.payload, n_workers, self.timeout, study=self.spec.name,
+                               board=board) as evaluator, board.running():
+                    self._loop(study, dists, evaluator, stored)
+            finally:
+                if room is not None:
+                    room.stop()
         return self._finish()
 
     def _interrupted(self) -> None:
@@ -649,7 +657,8 @@ def optimize(spec_path: str | Path, out: str | Path, **options: Any) -> "Any":
     """Optimise the spec's design space; returns the results table (one row per evaluation).
 
     Options as :class:`Optimization` (budget, sampler, batch, seed, resume,
-    workers, scheduler, cluster, timeout, progress, quiet).  Raises SpecError for a bad
+    workers, scheduler, cluster, timeout, progress, quiet, explore: the decision room of ``out`` served while
+    it runs).  Raises SpecError for a bad
     spec, OptimizeError when ``out`` or the cluster cannot be used.
     """
     run = Optimization(spec_path, out, **options)

@@ -52,7 +52,8 @@ from cosim.parallel.evaluator import check_timeout
 from cosim.parallel.isolation import IsolatedRunner, make_payload, preload_spare_children, stop_spare_children
 from cosim.parallel.point_stream import BatchSizer, PointStream
 from cosim.spec.design import DesignSpace, Point
-from cosim.studies.driver import StudyFolder, now_utc, results_writes, run_metadata, say, study_cluster
+from cosim.studies.driver import (StudyFolder, now_utc, open_room, results_writes, run_metadata, say,
+                                  study_cluster)
 from cosim.studies.progress import StatusLine, duration
 
 if TYPE_CHECKING:
@@ -322,16 +323,6 @@ def check_scheduler_address(address: str) -> None:
     except (ValueError, TypeError) as exc:
         raise SweepError(f"--scheduler '{address}' is not a Dask scheduler address ({exc}); write it as "
                          "tcp://HOST:PORT, as `dask scheduler` prints it, e.g. tcp://127.0.0.1:8786") from None
-
-
-def open_room(folder: Path) -> Any:
-    """The decision room of ``folder`` served on loopback from a thread while the study writes it (``--explore``):
-    a :class:`cosim.analysis.room.server.RoomServer` with its ``link``; stopped by the caller.  Raises
-    AnalysisError when no port can be bound."""
-    from cosim.analysis.room.live import LiveStudy
-    from cosim.analysis.room.server import RoomServer
-
-    return RoomServer(LiveStudy(folder))
 
 
 def sweep(spec_path: str | Path, workers: int | None = None, out: str | Path | None = None,
