@@ -158,3 +158,76 @@ class Fast(PythonUnit):
     assert "BrokenPipe" not in err and "Traceback" not in err, err
     kept = _rows(out)
     assert len(kept) > 0 and (kept["y"] == 2.0 * kept["s.k"]).all()  # the rows written before the kill are whole
+
+
+OPTIMIZED = """
+import os, time, uuid
+from cosim import PythonUnit, Variable
+
+class Slow(PythonUnit):
+    variables = (Variable("k", "parameter", start=1.0), Variable("pause", "parameter", start=0.0),
+                 Variable("y", "output", start=0.0))
+
+    def do_step(self, t, h):
+        time.sleep(self.pause)
+        self.y = 3.0 * self.k + 0.5
+        marker = os.path.join(MARKERS, uuid.uuid4().hex)
+        with open(marker + ".tmp", "w") as f:
+            f.write(f"{self.k!r} {time.time()!r}")
+        os.replace(marker + ".tmp", marker)
+"""
+
+
+def test_sigint_keeps_every_finished_point_of_an_optimisation_and_resume_ends_as_uninterrupted(tmp_path):
+    """cosim optimize goes through the same loop: a row is stored as its point finishes, not when its batch of 8
+    ends, and the table is in trial order however the points of a batch finished."""
+    markers = tmp_path / "markers"
+    markers.mkdir()
+    folder = tmp_path / "study"
+    folder.mkdir()
+    (folder / "slow.py").write_text(OPTIMIZED.replace("MARKERS", repr(str(markers))))
+    spec = folder / "spec.json"
+    spec.write_text(json.dumps({
+        "name": "slow", "units": {"s": {"python": "slow.py:Slow", "parameters": {"pause": PAUSE}}},
+        "experiment": {"stop": 0.1, "step": 0.1},
+        "objectives": {"y": {"signal": "s.y", "reduce": "final", "sense": "minimize"}},
+        "design": {"parameters": {"s.k": {"min": 1.0, "max": 100.0}}},
+        "optimize": {"sampler": "random", "budget": 24, "batch": 8, "seed": 5}}))
+
+    def finished() -> dict[float, float]:
+        out = {}
+        for p in markers.iterdir():
+            if not p.name.endswith(".tmp"):
+                k, at = p.read_text().split()
+                out[float(k)] = float(at)
+        return out
+
+    out = tmp_path / "out"
+    run = ["optimize", str(spec), "--out", str(out), "--workers", "2"]
+    proc = _cosim(*run)
+    deadline = time.monotonic() + 180
+    while len(finished()) < 11:  # the second batch of 8 has begun: 4 points a task, some done
+        assert proc.poll() is None, proc.communicate()
+        assert time.monotonic() < deadline, "the points did not run"
+        time.sleep(0.05)
+    signalled = time.time()
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "cosim: interrupted" in err and "Traceback" not in err and "BrokenPipe" not in err, err
+    assert time.time() - signalled < 5
+    done = {k for k, at in finished().items() if at <= signalled}
+    rows = _rows(out)
+    assert len(done) >= 11 and done <= set(rows["s.k"]), f"finished but not kept: {sorted(done - set(rows['s.k']))}"
+    assert (rows["status"] == "ok").all() and (rows["y"] == 3.0 * rows["s.k"] + 0.5).all()
+
+    resumed = _cosim(*run, "--resume")
+    _, err = resumed.communicate(timeout=300)
+    assert resumed.returncode == 0, err
+    whole = _cosim("optimize", str(spec), "--out", str(tmp_path / "whole"), "--workers", "2")
+    _, err = whole.communicate(timeout=300)
+    assert whole.returncode == 0, err
+    same = ["point_id", "s.k", "y", "status", "trial", "batch", "sampler", "feasible"]
+    table = pd.read_parquet(out / "results.parquet")
+    pd.testing.assert_frame_equal(table[same], pd.read_parquet(tmp_path / "whole" / "results.parquet")[same])
+    assert len(table) == 24 and list(table["trial"]) == sorted(table["trial"])

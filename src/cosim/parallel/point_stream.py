@@ -343,6 +343,8 @@ class Evaluator:
     ``board`` counts them on its page.  :meth:`close` (or ``with``) releases its futures.
     """
 
+    streams_rows = True  # evaluate() takes on_rows (cosim.studies.optimize stores rows as they come)
+
     def __init__(self, client: Any, payload: dict[str, Any], n_workers: int, timeout: float | None = None,
                  study: str = "", board: Any = None):
         self.n_workers = max(1, n_workers)

@@ -20,7 +20,8 @@ Optuna's ask-and-tell drives the search; cosim only translates:
   (``cosim pareto``, ``cosim report``).
 - **Batches**: K designs are asked, evaluated in parallel through
   :class:`~cosim.parallel.point_stream.Evaluator` (isolation, timeouts, fault rows,
-  as ``cosim sweep``), appended to the table as one part file, then told.
+  as ``cosim sweep``), each row appended to the table as its point finishes,
+  then told when the batch is done.
   A row not ``ok`` (failed, timeout, crashed) is told as a failed trial.
 - **Table**: one row per evaluation in ``DIR/results.parquet``, with
   ``trial`` (Optuna's trial number), ``batch``, ``sampler`` and ``feasible``
@@ -436,7 +437,9 @@ class Optimization:
         cosim process writes into the same folder, OutputError (exit 2) when the folder cannot be
         written (read-only, full).  ``evaluator``
         replaces the Dask evaluator (anything with Evaluator's ``evaluate``;
-        benchmarks answer from a stored table with it).
+        benchmarks answer from a stored table with it; one whose ``streams_rows`` is true gets
+        ``on_rows``, as :class:`~cosim.parallel.point_stream.Evaluator` does, and its rows are stored as
+        their points finish, so a stop keeps every finished point of a batch).
         """
         with self.folder.locked():
             return self._run_locked(evaluator)
@@ -539,12 +542,21 @@ class Optimization:
             if to_run and unreplayed:
                 self._absorb(study, dists, stored, unreplayed, rows)
             if to_run:
-                ran = evaluator.evaluate(list(to_run.items()))
-                new = [self._table_row(to_run[r.point_id], r, self._trial_of(plan, r.point_id), batch_index)
-                       for r in ran]
-                with results_writes(self.out):
-                    self.store.append(new)
-                rows.update((r["point_id"], r) for r in new)
+                written: dict[str, dict] = {}
+
+                def store(ran: list[PointRow]) -> None:  # each row as its point finishes: a stop keeps it
+                    new = [self._table_row(to_run[r.point_id], r, self._trial_of(plan, r.point_id), batch_index)
+                           for r in ran if r.point_id not in written]
+                    with results_writes(self.out):
+                        self.store.append(new)
+                    written.update((r["point_id"], r) for r in new)
+
+                if getattr(evaluator, "streams_rows", False):
+                    ran = evaluator.evaluate(list(to_run.items()), on_rows=store)
+                else:
+                    ran = evaluator.evaluate(list(to_run.items()))
+                store(ran)  # rows not given before
+                rows.update((pid, written[pid]) for pid in to_run)
             for trial, pid in plan:
                 self._tell(study, trial, rows.get(pid) if pid is not None else None)
             batch_index += 1
@@ -648,9 +660,11 @@ class Optimization:
                             design_method=f"optimize ({self.settings.sampler})")
 
     def _finish(self) -> dict[str, int]:
-        # rows stay in the order they were evaluated
+        # rows in trial order (the order an uninterrupted run asks for them; they are stored as they finish)
+        stored = self.store.read()
+        order = list(stored.sort_values("trial", kind="stable")["point_id"]) if "trial" in stored.columns else None
         return self.folder.finish("run the same command with --resume (or resume=True from Python) to evaluate "
-                                  "their designs again")
+                                  "their designs again", order=order)
 
 
 def optimize(spec_path: str | Path, out: str | Path, **options: Any) -> "Any":
