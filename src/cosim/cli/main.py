@@ -69,9 +69,34 @@ def main(argv: Sequence[str] | None = None) -> int:
         return exit_code(exc)
     finally:
         sys.stdout = stdout
-        restore_signals(previous)  # main() may be called from a program with handlers of its own
-        if argv is None:
+        if argv is None:  # cosim is the program, and it ends now
+            _end_at_once_on_signals()
             _skip_final_collections()
+        else:
+            restore_signals(previous)  # main() may be called from a program with handlers of its own
+
+
+def _end_at_once_on_signals() -> None:
+    """The command is done and its process ends: a Ctrl-C, SIGTERM or SIGHUP from now on ends it at once, quietly.
+
+    Python's own handlers raised KeyboardInterrupt wherever the interpreter was while it shut down (a weakref
+    callback, a module's exit hook), which printed "Exception ignored ... KeyboardInterrupt" with a traceback
+    after ``cosim: interrupted`` when an impatient user pressed Ctrl-C again.  What the command wrote is
+    flushed first; the exit code is 128 + the signal's number, as a shell reports a process a signal ended.
+    """
+    import signal
+
+    def end(signum: int, frame: Any) -> None:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except Exception:  # noqa: BLE001 - a closed pipe, or a write this signal interrupted
+                pass
+        os._exit(128 + signum)
+
+    for name in ("SIGINT", "SIGTERM", "SIGHUP"):
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), end)
 
 
 def _skip_final_collections() -> None:

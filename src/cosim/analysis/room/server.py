@@ -17,6 +17,7 @@ import asyncio
 import errno
 import hmac
 import ipaddress
+import logging
 import secrets
 import socket
 import threading
@@ -90,6 +91,33 @@ def free_port(host: str) -> int:
         return int(s.getsockname()[1])
 
 
+class _NotForTheUser(logging.Filter):
+    """Drops bokeh's note that a tab closed before a message to it went out: the user closed it."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return record.getMessage() != "Failed sending message as connection was closed"
+
+
+_QUIET = _NotForTheUser()
+
+
+def quiet_room_logs() -> None:
+    """Keep bokeh's notes that are no news to the user off the terminal of ``cosim explore``.
+
+    - ``W-1002 (EMPTY_LAYOUT)``: the tabs of the room are built when first shown (issue 27), so each new page
+      has empty layouts on purpose; bokeh warned four times per page opened.
+    - ``Failed sending message as connection was closed``: a tab was closed while the server sent to it.
+    Idempotent; real problems (errors, other warnings) are still printed.
+    """
+    from bokeh.core.validation import silence
+    from bokeh.core.validation.warnings import EMPTY_LAYOUT
+
+    silence(EMPTY_LAYOUT, True)
+    ws = logging.getLogger("bokeh.server.views.ws")
+    if _QUIET not in ws.filters:
+        ws.addFilter(_QUIET)
+
+
 def make_server(study: Study | LiveStudy, host: str = LOOPBACK, port: int = 0, token: str | None = None,
                 webgl: bool | None = None, io_loop: Any = None, aggregate_above: int | None = None
                 ) -> tuple[Any, str]:
@@ -105,6 +133,7 @@ def make_server(study: Study | LiveStudy, host: str = LOOPBACK, port: int = 0, t
 
     if token is None and not is_loopback(host):
         token = secrets.token_urlsafe(32)
+    quiet_room_logs()
     application = Application(FunctionHandler(partial(make_document, study=study, webgl=webgl,
                                                          aggregate_above=aggregate_above)))
     options: dict[str, Any] = {"address": host, "websocket_max_message_size": 512 * 1024 * 1024}
