@@ -13,7 +13,6 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from cosim.analysis.pareto import front_of, resolve_objectives
 from cosim.cli.exit_codes import EXIT_OK
 
 FIGURE_SUFFIXES = (".png", ".svg", ".pdf")
@@ -129,6 +128,7 @@ def cmd_pareto(args: argparse.Namespace) -> int:
     """``cosim pareto``: the non-dominated ok rows; ties are all kept, rows with a missing value never count."""
     import pandas as pd
 
+    from cosim.analysis.pareto import front_of, resolve_objectives
     from cosim.analysis.table import AnalysisError, load_results
 
     table = load_results(args.table, args.spec)

@@ -25,7 +25,7 @@ class _Objective(argparse.Action):
 def add_optimize_parser(sub: Any) -> None:
     """Register the ``optimize`` subcommand on an argparse sub-parser collection."""
     from cosim.cli.sweep import add_cluster_options
-    from cosim.studies.optimize import SAMPLERS
+    from cosim.studies.sampler_names import SAMPLERS
 
     p = sub.add_parser("optimize", help="search a spec's design space for the Pareto front (Optuna, on Dask)")
     p.add_argument("spec", help="path to spec.json")

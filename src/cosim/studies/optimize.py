@@ -72,8 +72,8 @@ from cosim.studies.driver import (StudyFolder, now_utc, open_room, package_versi
                                   run_metadata, say, study_cluster)
 from cosim.studies.optuna_storage import default_study_name, open_storage_study, shown_url
 from cosim.studies.progress import StatusLine
+from cosim.studies.sampler_names import SAMPLERS
 
-SAMPLERS = ("tpe", "nsga2", "gp", "random", "qmc")
 DEFAULT_BUDGET = 200
 DEFAULT_BATCH = {"nsga2": 20}  # a generation of NSGA-II is one batch; the others ask 8 at a time
 MAX_TRIALS_PER_EVALUATION = 20
