@@ -287,7 +287,9 @@ class Board:
         try:
             yield
         except KeyboardInterrupt:
-            self.end("interrupted")
+            # the signal may have ended the scheduler too (a cluster file's `dask spec` closes on Ctrl-C): the
+            # stop does not wait the usual 5 s for a page that may be gone
+            self.end("interrupted", wait=1)
             raise
         except BaseException:
             self.end("failed")
@@ -299,15 +301,16 @@ class Board:
         self._send({"key": key, "done": len(rows), "failed": sum(not r.ok for r in rows),
                     "final": True})
 
-    def end(self, state: str) -> None:
-        """Tell the page the study ended (``finished``, ``interrupted``, ``failed``); never raises."""
-        self._send({"op": "end", "study": self.study, "state": state})
+    def end(self, state: str, wait: float = 5) -> None:
+        """Tell the page the study ended (``finished``, ``interrupted``, ``failed``), waiting at most ``wait``
+        seconds for the scheduler; never raises."""
+        self._send({"op": "end", "study": self.study, "state": state}, wait)
 
-    def _send(self, msg: dict[str, Any]) -> None:
+    def _send(self, msg: dict[str, Any], wait: float = 5) -> None:
         if self.link is None:
             return
         try:
-            self.client.sync(self.client.scheduler.log_event, topic=TOPIC, msg=msg, callback_timeout=5)
+            self.client.sync(self.client.scheduler.log_event, topic=TOPIC, msg=msg, callback_timeout=wait)
         except BaseException:  # also while Ctrl-C stops the study: the page's counts are not worth a traceback
             pass
 

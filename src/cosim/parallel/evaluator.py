@@ -183,6 +183,7 @@ def _client(workers: int, scheduler: str | None, cluster_file: str | None,
                                f"Dask's protocol ({type(exc).__name__}: {str(exc)[:100]}); check the address and "
                                "port (a scheduler listens on 8786 unless told otherwise)") from None
         link = client.dashboard_link
+    stopped = False  # by Ctrl-C or a stop signal (KeyboardInterrupt, see cosim.parallel.interrupts)
     try:
         if cluster_file is not None or scheduler is not None:  # a scheduler of another environment
             _check_scheduler_imports_cosim(client, f"{scheduler}{origin}")
@@ -194,13 +195,34 @@ def _client(workers: int, scheduler: str | None, cluster_file: str | None,
                 raise ClusterError(f"the scheduler at {scheduler} has no workers (waited {wait} s); {hint}") from None
             n_workers = _thread_count(client)
         yield client, n_workers, link
+    except KeyboardInterrupt:
+        stopped = True
+        raise
     finally:
+        _close(client, cluster, stopped)
+
+
+# How long closing a cluster after a stop may wait for each of its processes to answer.  A terminal's Ctrl-C
+# also reaches the processes a cluster file's class started here, and some close themselves on it (a
+# SubprocessCluster's `dask spec` scheduler installs its own SIGINT handler): closing then waited Dask's connect
+# timeout (30 s) per attempt to reach a process that was gone, 30-40 s after the user's Ctrl-C.
+CLOSE_AFTER_STOP_CONNECT = "1s"
+
+
+def _close(client: Any, cluster: Any, stopped: bool) -> None:
+    """Close ``client`` and ``cluster`` (None: a scheduler cosim did not start); after a stop, without waiting
+    long for processes that the signal already ended."""
+    import dask
+
+    settings = {"distributed.comm.timeouts.connect": CLOSE_AFTER_STOP_CONNECT} if stopped else {}
+    with dask.config.set(settings):
         client.close()
         if cluster is not None:
             try:
                 cluster.close()
             except OSError:  # its processes are already gone (a kill reached them): nothing left to close
-                pass
+                # (TimeoutError is an OSError.)  Dask's exit hook would try closing it again, for another 10 s
+                cluster.shutdown_on_close = False
 
 
 def _check_scheduler_imports_cosim(client: Any, where: str) -> None:
