@@ -142,12 +142,13 @@ def wrap(owner, attr, name):
     setattr(owner, attr, stamped)
 
 def main():
-    from orchestrator import cli
+    import cosim.cli.main as cli
     mark("cli imported")
     import cosim.studies.sweep
     sweep = sys.modules["cosim.studies.sweep"]
     import distributed
-    from orchestrator import results, validate
+    import cosim.results.store as results
+    import cosim.system.validate as validate
     mark("sweep, results, distributed imported")
     wrap(validate, "check_spec", "spec check")
     wrap(distributed.LocalCluster, "__init__", "cluster start")
@@ -219,7 +220,7 @@ started = time.perf_counter()
 runner.run([(point.id, point.values)])
 second = time.perf_counter() - started
 runner.close()
-print(f"{first:.3f} {second:.3f} {row['status']}")
+print(f"{first:.3f} {second:.3f} {row.status}")
 '''
 
 
