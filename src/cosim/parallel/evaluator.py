@@ -171,6 +171,11 @@ def _client(workers: int, scheduler: str | None, cluster_file: str | None,
         # not cluster.dashboard_link: that names the machine's address, the server listens on 127.0.0.1 only
         link = (f"http://127.0.0.1:{cluster.scheduler.http_server.port}/status" if dashboard
                 else "unavailable (install bokeh to get it)")
+        if dashboard:
+            # Imported before the link is printed: the page's callbacks (bokeh, in Dask's IO-loop thread) import
+            # pandas once a tab is open, and racing this thread's own first import of it (when the first rows
+            # come) handed them a partially initialised module (an AttributeError traceback on the terminal).
+            import pandas  # noqa: F401
     else:
         try:
             client = Client(scheduler, timeout=10)
