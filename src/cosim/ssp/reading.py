@@ -75,12 +75,8 @@ class Reading:
         problems are reported, so that they point at the user's own file.
         """
         root, problems = parse_file(path, label, kind)
-        if root is not None and problems:
-            fixed, notes = tolerated(root, label)
-            if notes and not schema_problems(fixed, label, kind):
-                for note in notes:
-                    self.alike.add(*note)
-                return fixed
+        if root is not None and problems and (fixed := self._tolerated(root, label, kind)) is not None:
+            return fixed
         self.problems.extend(problems)
         return None if problems else root
 
@@ -88,15 +84,22 @@ class Reading:
         """An inline ssv:ParameterSet or ssm:ParameterMapping checked against its schema (tolerated forms
         corrected, as :meth:`parse`), or None with its problems recorded."""
         problems = schema_problems(root, label, kind)
-        if problems:
-            fixed, notes = tolerated(root, label)
-            if notes and not schema_problems(fixed, label, kind):
-                for note in notes:
-                    self.alike.add(*note)
-                return fixed
-            self.problems.extend(problems)
+        if not problems:
+            return root
+        if (fixed := self._tolerated(root, label, kind)) is not None:
+            return fixed
+        self.problems.extend(problems)
+        return None
+
+    def _tolerated(self, root: Any, label: str, kind: str) -> Any:
+        """``root`` corrected to the standard's forms (:mod:`.tolerant`), its notes recorded, when a correction
+        was made and satisfies the schema; else None (nothing recorded)."""
+        fixed, notes = tolerated(root, label)
+        if not notes or schema_problems(fixed, label, kind):
             return None
-        return root
+        for note in notes:
+            self.alike.add(*note)
+        return fixed
 
     def resolve(self, uri: str, base: Path) -> Path | None:
         """A file a component or binding refers to: inside the SSP first, then next to the archive; a
