@@ -90,3 +90,18 @@ def oms3_expected(t: float, x0_a: float = 2.0, x0_b: float = 0.0, b_b: float = -
     exactly: y = x0_b + b_b * x0_a * t (under either algorithm: initialization already sets B.u = A.y).
     """
     return {"A.y": x0_a, "sub.B.y": x0_b + b_b * x0_a * t}
+
+
+TABLE_COMPONENT = ('      <ssd:Component name="setpoint" type="text/csv" source="resources/setpoint.csv">\n'
+                   '        <ssd:Connectors>\n          <ssd:Connector name="speed" kind="output">\n'
+                   '            <ssc:Real/>\n          </ssd:Connector>\n        </ssd:Connectors>\n'
+                   '      </ssd:Component>\n')
+SETPOINT = b'"time","speed"\n0,0\n0.5,0\n1.5,1\n2,1\n'  # OMSimulator's result CSVs quote the names
+
+
+def table_ssd() -> str:
+    """oms3.ssd with a table component 'setpoint' (as OMSimulator 3 writes it) feeding sub.speed instead of A;
+    its CSV is resources/setpoint.csv (:data:`SETPOINT`)."""
+    ssd = oms3_ssd().replace('      <ssd:System name="sub">', TABLE_COMPONENT + '      <ssd:System name="sub">', 1)
+    return ssd.replace('startElement="A" startConnector="y" endElement="sub"',
+                       'startElement="setpoint" startConnector="speed" endElement="sub"')

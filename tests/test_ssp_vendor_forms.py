@@ -21,7 +21,17 @@ from cosim.execution.run import Execution
 from cosim.ssp import read_ssp
 from cosim.system.validate import check_spec
 
-from .ssp_fixtures import SSP_FILES, oms3_expected, oms3_files, oms3_ssd, write_archive, write_folder
+from .ssp_fixtures import (
+    SETPOINT,
+    SSP_FILES,
+    TABLE_COMPONENT,
+    oms3_expected,
+    oms3_files,
+    oms3_ssd,
+    table_ssd,
+    write_archive,
+    write_folder,
+)
 
 STEP = {"step": 0.1}
 
@@ -477,28 +487,14 @@ def test_solver_assignments_cosim_cannot_follow_are_notes_or_problems(tmp_path):
 
 # --- item 11: a CSV table as a component, played ------------------------------------------------------------
 
-_TABLE = ('      <ssd:Component name="setpoint" type="text/csv" source="resources/setpoint.csv">\n'
-          '        <ssd:Connectors>\n          <ssd:Connector name="speed" kind="output">\n'
-          '            <ssc:Real/>\n          </ssd:Connector>\n        </ssd:Connectors>\n'
-          '      </ssd:Component>\n')
-SETPOINT = b'"time","speed"\n0,0\n0.5,0\n1.5,1\n2,1\n'  # OMSimulator's result CSVs quote the names
-
-
 def _setpoint(t: float) -> float:
     """The table, interpolated linearly by hand."""
     return 0.0 if t <= 0.5 else (t - 0.5 if t <= 1.5 else 1.0)
 
 
-def _table_ssd() -> str:
-    """oms3.ssd with a table component 'setpoint' (as OMSimulator 3 writes it) feeding sub.speed instead of A."""
-    ssd = oms3_ssd().replace('      <ssd:System name="sub">', _TABLE + '      <ssd:System name="sub">', 1)
-    return ssd.replace('startElement="A" startConnector="y" endElement="sub"',
-                       'startElement="setpoint" startConnector="speed" endElement="sub"')
-
-
 @pytest.mark.parametrize("algorithm", ["jacobi", "gauss-seidel"])
 def test_a_csv_component_is_played_into_the_system(tmp_path, algorithm):
-    members = oms3_files(_table_ssd(), **{"resources/setpoint.csv": SETPOINT})
+    members = oms3_files(table_ssd(), **{"resources/setpoint.csv": SETPOINT})
     path = write_archive(tmp_path / "table.ssp", members)
     raw = read_ssp(path).raw
     assert raw["units"]["setpoint"] == {"player": f"{path.resolve()}!/resources/setpoint.csv",
@@ -517,19 +513,19 @@ def test_a_csv_component_is_played_into_the_system(tmp_path, algorithm):
 
 
 def test_table_components_cosim_cannot_play_are_problems_at_their_element(tmp_path):
-    members = oms3_files(_table_ssd().replace("resources/setpoint.csv", "resources/Gain_res.mat"),
+    members = oms3_files(table_ssd().replace("resources/setpoint.csv", "resources/Gain_res.mat"),
                          **{"resources/Gain_res.mat": b"MATLAB 5.0"})
     [problem] = _problems(write_archive(tmp_path / "mat.ssp", members))
     assert "table 'resources/Gain_res.mat' is no CSV file" in problem.message and "CSV" in problem.fix
     assert problem.path.endswith("ssd:Component[@name='setpoint']")
 
-    ssd = _table_ssd().replace('<ssd:Connector name="speed" kind="output">', '<ssd:Connector name="sped" kind="output">')
+    ssd = table_ssd().replace('<ssd:Connector name="speed" kind="output">', '<ssd:Connector name="sped" kind="output">')
     ssd = ssd.replace('startConnector="speed" endElement="sub"', 'startConnector="sped" endElement="sub"')
     [problem] = _problems(write_archive(tmp_path / "col.ssp", oms3_files(ssd, **{"resources/setpoint.csv": SETPOINT})))
     assert "connector 'sped' is not a column of resources/setpoint.csv" in problem.message
     assert "Did you mean 'speed'" in problem.message
 
-    members = oms3_files(_table_ssd(), **{"resources/setpoint.csv": b"t,speed\n0,1\n"})
+    members = oms3_files(table_ssd(), **{"resources/setpoint.csv": b"t,speed\n0,1\n"})
     [problem] = _problems(write_archive(tmp_path / "notime.ssp", members))
     assert "cannot read table 'resources/setpoint.csv'" in problem.message and "'time'" in problem.message
 
@@ -760,7 +756,7 @@ def test_an_ssd_with_any_element_or_attribute_removed_or_spoilt_reads_or_gives_p
     nothing else is raised."""
     from lxml import etree
 
-    ssd = _solver_ssd().replace('      <ssd:System name="sub">', _TABLE + '      <ssd:System name="sub">', 1)
+    ssd = _solver_ssd().replace('      <ssd:System name="sub">', TABLE_COMPONENT + '      <ssd:System name="sub">', 1)
     folder = write_folder(tmp_path / "mutated", oms3_files(ssd, **{"resources/setpoint.csv": SETPOINT}))
     original = etree.fromstring(ssd.encode())
     mutations = []
@@ -792,7 +788,7 @@ def test_an_ssd_with_any_element_or_attribute_removed_or_spoilt_reads_or_gives_p
 
 
 def test_a_table_starting_with_a_separator_line_is_read_with_a_note(tmp_path):
-    members = oms3_files(_table_ssd(), **{"resources/setpoint.csv": b'"sep=,"\n' + SETPOINT})
+    members = oms3_files(table_ssd(), **{"resources/setpoint.csv": b'"sep=,"\n' + SETPOINT})
     path = write_archive(tmp_path / "sep.ssp", members)
     system = read_ssp(path)
     assert f"{path}:resources/setpoint.csv starts with a 'sep=' line" in " ".join(system.notes)

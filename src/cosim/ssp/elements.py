@@ -16,6 +16,7 @@ from cosim.ssp.annotations import (
     read_system_solvers,
     step_size_hint,
 )
+from cosim.ssp.bounds import table_size_problem
 from cosim.ssp.connections import read_connection
 from cosim.ssp.model import (
     FMU_TYPES,
@@ -178,6 +179,10 @@ def _read_table(reading: Reading, node: Node) -> Node:
     if path is None:
         reading.problem(element, f"table '{source}' not found", "put the CSV under resources/ of the SSP, or fix "
                         "the component's 'source'")
+        return node
+    too_large = table_size_problem(path, reading.files.label(path))
+    if too_large is not None:  # refused before pandas reads it (a table takes several times its size)
+        reading.problems.append(too_large)
         return node
     from cosim.units.player import PlayerUnitType
 

@@ -2,7 +2,7 @@
 
 Every SSP file (.ssd, .ssv, .ssm) is read up to ``COSIM_SSP_FILE_MB`` (a
 bigger file is refused before it is parsed: lxml's tree takes about 13 times
-the file's size), parsed without entity expansion, without network access,
+the file's size; see :mod:`.bounds`), parsed without entity expansion, without network access,
 without DTD loading and with lxml's size limits on, then checked against the
 official SSP schemas shipped in ``schema/`` (see its README).  An entity
 reference (``&name;``) left in the text is refused: it is never expanded, and
@@ -21,7 +21,7 @@ from pathlib import Path
 from lxml import etree
 
 from cosim.errors import Problem
-from cosim.util.limits import limit, raise_hint
+from cosim.ssp.bounds import read_bounded
 
 NS = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -156,27 +156,6 @@ def parse_file(path: Path, label: str, kind: str) -> tuple[etree._Element | None
     if entities:
         return None, entities
     return root, schema_problems(root, label, kind)
-
-
-def read_bounded(path: Path, label: str) -> tuple[bytes | None, list[Problem]]:
-    """The bytes of an SSP file, or None and a problem when it cannot be read or is larger than
-    ``COSIM_SSP_FILE_MB``; at most one byte beyond the limit is read (a file's stated size may lie: /proc)."""
-    megabytes = limit("ssp_file_mb")
-    most = int(megabytes * 1024 * 1024)
-    try:
-        size = path.stat().st_size
-        data = b""
-        if size <= most:  # a bigger file is refused unread; one whose stated size lies, after most + 1 bytes
-            with open(path, "rb") as stream:
-                data = stream.read(most + 1)
-            size = max(size, len(data))
-    except OSError as exc:
-        return None, [Problem(label, "/", f"cannot read the file: {exc}", "check that the file exists")]
-    if size > most:
-        return None, [Problem(label, "/", f"the file holds {size / 1024 / 1024:,.1f} MB ({size:,} bytes), above "
-                              f"the limit of {megabytes:g} MB for one SSP file (.ssd, .ssv, .ssm)",
-                              "split the parameter values into several files, or " + raise_hint("ssp_file_mb"))]
-    return data, []
 
 
 def entity_problems(root: etree._Element, label: str) -> list[Problem]:

@@ -39,8 +39,9 @@ LIMITS: dict[str, Limit] = {
     # FMI 3.0 arrays (cosim.units.fmu.description): one object per element is made when an FMU is described
     "array_elements": Limit("COSIM_ARRAY_ELEMENTS", 1_000_000, "elements of the arrays of one FMU, all arrays "
                             "together (FMI 3.0 <Dimension>s and the structural parameters that size them)"),
-    # SSP files read as XML (cosim.ssp.xml): lxml's tree takes about 13 times the file's size
-    "ssp_file_mb": Limit("COSIM_SSP_FILE_MB", 64, "megabytes of one SSP file read as XML (.ssd, .ssv, .ssm)",
+    # SSP files read whole (cosim.ssp.bounds): lxml's tree takes about 13 times an XML file's size
+    "ssp_file_mb": Limit("COSIM_SSP_FILE_MB", 64, "megabytes of one SSP file read whole (.ssd, .ssv, .ssm as XML; "
+                         "a table component's .csv)",
                          integer=False),
     # spec.json and the design space (cosim.spec.loader, cosim.spec.design)
     "json_depth": Limit("COSIM_JSON_DEPTH", 64, "nesting depth of arrays and objects in spec.json"),
