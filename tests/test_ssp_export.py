@@ -14,12 +14,12 @@ from cosim.cli.main import main
 from cosim.errors import SpecError
 from cosim.execution.point import run_point
 from cosim.execution.run import Execution
-from cosim.export.ssp import export_ssp
+from cosim.export.ssp import companion_spec_path, export_ssp
 from cosim.ssp.xml import NS
 from cosim.system.validate import check_spec
 
 from .conftest import python_unit
-from .ssp_fixtures import nested_expected, nested_files, write_archive
+from .ssp_fixtures import nested_expected, nested_files, oms3_expected, oms3_files, oms3_ssd, write_archive
 
 ROOT = Path(__file__).resolve().parent.parent
 DRIVE_ENERGY = ROOT / "examples" / "drive_energy" / "spec.json"
@@ -246,3 +246,101 @@ def test_a_warm_start_survives_the_export_and_runs_the_same_from_the_ssp(tmp_pat
     # lag: x' = -x + 2 b, b = 1 to t = 0.5, then b = 3: x(1) = 6 + (x(0.5) - 6) e^-0.5, x(0.5) = 2 (1 - e^-0.5)
     x_half = 2 * (1 - np.exp(-0.5))
     assert second.traces["lag.y"].iloc[-1] == pytest.approx(6 + (x_half - 6) * np.exp(-0.5), abs=1e-12)
+
+
+# --- connectors units (an SSP's system connectors as signals) become system connectors again -------------------
+
+_SCALED_OUT = ('<ssd:Connection startElement="sub" startConnector="res" endElement="" endConnector="out">'
+               '<ssc:LinearTransformation factor="2.0" offset="1.0"/></ssd:Connection>')
+
+
+def _read_back(spec_path, exported):
+    """Traces of the spec and of the exported archive read back through its companion spec."""
+    first = _traces(spec_path)
+    again = _traces(companion_spec_path(exported))
+    assert list(again.traces.columns) == list(first.traces.columns)
+    assert np.array_equal(again.traces.to_numpy(), first.traces.to_numpy())
+    return again.traces
+
+
+def test_scaled_and_constant_system_connectors_are_exported_as_system_connectors(tmp_path, capsys):
+    # issue 25's leftover: default.out = 2 x sub.res + 1 (a LinearTransformation), default.k and default.sub.gain
+    # constants (-0.5): a spec recording them has connectors units 'default' and 'default.sub', which cosim export
+    # writes as the root system's and sub-system sub's connectors; read back, the same signals
+    ssd = oms3_ssd().replace('<ssd:Connection startElement="sub" startConnector="res" endElement="" '
+                             'endConnector="out"/>', _SCALED_OUT)
+    write_archive(tmp_path / "scaled.ssp", oms3_files(ssd))
+    (tmp_path / "spec.json").write_text(json.dumps({
+        "system": "scaled.ssp", "experiment": {"step": 0.1, "algorithm": "jacobi"},
+        "record": ["default.out", "default.k", "sub.gain", "sub.B.y"],
+        "objectives": {"out_final": {"signal": "default.out", "reduce": "final"}}}))
+    assert main(["export", str(tmp_path / "spec.json"), "-o", str(tmp_path / "flat.ssp")]) == 0
+    with zipfile.ZipFile(tmp_path / "flat.ssp") as zf:
+        ssd_out = etree.fromstring(zf.read("SystemStructure.ssd"))
+    top = ssd_out.find(f"{{{NS['ssd']}}}System")
+    assert top.get("name") == "default"  # the connectors units' root system
+    assert [(c.get("name"), c.get("kind")) for c in top.find(f"{{{NS['ssd']}}}Connectors")] == \
+        [("out", "output"), ("k", "parameter")]
+    [into_out] = [c for c in top.iter(f"{{{NS['ssd']}}}Connection") if c.get("endConnector") == "out"]
+    assert (into_out.get("startElement"), into_out.get("startConnector"), into_out.get("endElement")) == \
+        ("sub.B", "y", None)
+    assert dict(into_out.find(f"{{{NS['ssc']}}}LinearTransformation").attrib) == {"factor": "2.0", "offset": "1.0"}
+    [sub] = [s for s in top.iter(f"{{{NS['ssd']}}}System") if s.get("name") == "sub"]
+    assert [p.get("name") for p in sub.iter(f"{{{NS['ssv']}}}Parameter")] == ["gain"]
+    assert sub.find(f".//{{{NS['ssv']}}}Real").get("value") == "-0.5"
+    companion = json.loads((tmp_path / "flat.spec.json").read_text())
+    assert "units" not in companion  # no unit of the companion: the connectors come from the SSP again
+    traces = _read_back(tmp_path / "spec.json", tmp_path / "flat.ssp")
+    for t, out, y in zip(traces["time"], traces["default.out"], traces["sub.B.y"]):
+        assert y == pytest.approx(oms3_expected(t)["sub.B.y"], rel=1e-12, abs=1e-12)
+        assert out == pytest.approx(2 * oms3_expected(t)["sub.B.y"] + 1, rel=1e-12, abs=1e-12)
+    assert traces["default.k"].tolist() == traces["default.sub.gain"].tolist() == [-0.5] * 11
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def test_connectors_units_of_a_spec_nested_two_deep_with_units_and_typed_constants(tmp_path):
+    # a hand-written spec: Top.a.b.v = 3 x ramp.y + 1 in rpm (ramp.y = 2 t), constants of every type; Top.a.b
+    # becomes system b inside system a inside the root system Top, the value passed on through a's connector b_v
+    spec = {"name": "deep",
+            "units": {"src": {"fmu": "builtin:linear_ode_fmi2", "parameters": {"a": 0.0, "b": 0.0, "x0": 2.0}},
+                      "ramp": {"fmu": "builtin:linear_ode_fmi3", "parameters": {"a": 0.0, "b": 1.0, "x0": 0.0}},
+                      "Top": {"connectors": "Top", "parameters": {"k": 7, "flag": True, "label": "x"}},
+                      "Top.a.b": {"connectors": "Top.a.b", "inputs": {"v": "rpm"}, "parameters": {"gain": 0.25}}},
+            "connections": [{"from": "src.y", "to": "ramp.u"},
+                            {"from": "ramp.y", "to": "Top.a.b.v", "factor": 3.0, "offset": 1.0}],
+            "experiment": {"stop": 1.0, "step": 0.1, "algorithm": "gauss-seidel"},
+            "record": ["Top.a.b.v", "Top.k", "Top.flag", "Top.label", "Top.a.b.gain", "ramp.y"]}
+    (tmp_path / "spec.json").write_text(json.dumps(spec))
+    exported = export_ssp(check_spec(tmp_path / "spec.json"), tmp_path / "deep.ssp")
+    with zipfile.ZipFile(exported) as zf:
+        ssd = etree.fromstring(zf.read("SystemStructure.ssd"))
+    systems = {s.get("name"): s for s in ssd.iter(f"{{{NS['ssd']}}}System")}
+    assert list(systems) == ["Top", "a", "b"]
+    connectors = {n: [(c.get("name"), c.get("kind")) for c in s.findall(f"{{{NS['ssd']}}}Connectors/*")]
+                  for n, s in systems.items()}
+    assert connectors == {"Top": [("k", "parameter"), ("flag", "parameter"), ("label", "parameter")],
+                          "a": [("b_v", "input")], "b": [("v", "output"), ("gain", "parameter")]}
+    again = check_spec(companion_spec_path(exported))
+    assert again.units["Top.a.b"].description.by_name["v"].unit == "rpm"
+    traces = _read_back(tmp_path / "spec.json", exported)
+    assert traces["ramp.y"].to_numpy() == pytest.approx(2 * traces["time"].to_numpy(), rel=1e-12, abs=1e-12)
+    assert traces["Top.a.b.v"].to_numpy() == pytest.approx(6 * traces["time"].to_numpy() + 1, rel=1e-12)
+    assert (traces["Top.k"].tolist(), traces["Top.flag"].tolist(), traces["Top.label"].tolist()) == \
+        ([7] * 11, [True] * 11, ["x"] * 11)
+    assert traces["Top.a.b.gain"].tolist() == [0.25] * 11
+
+
+def test_connectors_units_under_two_root_systems_or_named_like_a_unit_are_refused(tmp_path, capsys):
+    spec = {"units": {"src": {"fmu": "builtin:linear_ode_fmi2"},
+                      "Top": {"connectors": "Top", "parameters": {"k": 1.0}},
+                      "Other.x": {"connectors": "Other.x", "parameters": {"k": 2.0}},
+                      "Top.src": {"connectors": "Top.src", "parameters": {"k": 3.0}}},
+            "experiment": {"stop": 1.0, "step": 0.1}}
+    (tmp_path / "spec.json").write_text(json.dumps(spec))
+    assert main(["export", str(tmp_path / "spec.json"), "-o", str(tmp_path / "x.ssp")]) == 2
+    err = capsys.readouterr().err
+    assert ("$.units.Other.x: the connectors unit 'Other.x' names the root system 'Other', another connectors unit "
+            "'Top': an SSP has one root system") in err
+    assert "$.units.Top.src: the connectors unit 'Top.src' becomes the sub-system 'src', which is also the name " \
+           "of a unit" in err
+    assert "Traceback" not in err and not (tmp_path / "x.ssp").exists()

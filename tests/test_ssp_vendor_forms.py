@@ -808,18 +808,3 @@ def test_inspect_of_a_spec_on_an_ssp_without_stop_or_step(tmp_path, capsys):
     assert "experiment: 0 .. (no stop time: give --stop to run), step (none: give --step to run)" in out
     assert _port_rows(out)["sub.B"]["b"][4] == "-0.5 *"
     assert main(["validate", str(tmp_path / "spec.json")]) == 2  # running needs them
-
-
-def test_cosim_export_refuses_a_spec_recording_a_scaled_system_connector_with_a_fix(tmp_path, capsys):
-    import json
-
-    ssd = oms3_ssd().replace('<ssd:Connection startElement="sub" startConnector="res" endElement="" '
-                             'endConnector="out"/>', _SCALED_OUT)
-    write_archive(tmp_path / "scaled.ssp", oms3_files(ssd))
-    (tmp_path / "spec.json").write_text(json.dumps({"system": "scaled.ssp", "experiment": {"step": 0.1},
-                                                    "record": ["default.out"]}))
-    assert main(["export", str(tmp_path / "spec.json"), "-o", str(tmp_path / "flat.ssp")]) == 2
-    err = capsys.readouterr().err
-    assert "$.units.default: the system connectors of 'default' (a connectors unit" in err
-    assert "name the unit ports those connectors carry instead" in err and "Traceback" not in err
-    assert not (tmp_path / "flat.ssp").exists()

@@ -2,7 +2,9 @@
 
 :func:`export_ssp` writes ``SystemStructure.ssd`` with one flat root system:
 one ``ssd:Component`` per unit (FMUs copied to ``resources/``; Python units
-built into FMI 2.0 FMUs with pythonfmu, see :mod:`cosim.export.fmu`),
+built into FMI 2.0 FMUs with pythonfmu, see :mod:`cosim.export.fmu`; a
+``connectors`` unit as the system connectors it stands for, see
+:mod:`cosim.export.system_connectors`),
 its connectors and ``implementation`` (``CoSimulation`` or ``ModelExchange``, as the unit runs), one
 ``resources/<unit>.ssv`` per unit with the spec's
 parameter and start values (written with 17 significant digits, so they read
@@ -36,6 +38,12 @@ from typing import Any
 from lxml import etree
 
 from cosim.errors import Problem, SpecError
+from cosim.export.system_connectors import (
+    export_problems,
+    is_connectors_target,
+    root_name,
+    write_system_connectors,
+)
 from cosim.ssp.annotations import COSIM_UNIT_OPTIONS
 from cosim.ssp.experiment import COSIM_EXPERIMENT_FLAGS, COSIM_EXPERIMENT_GROUPS
 from cosim.ssp.xml import NS, schema_problems
@@ -69,20 +77,18 @@ def _number(value: Any) -> str:
 def export_ssp(system: System, out: str | Path, spec_copy: bool = True) -> Path:
     """Write ``system`` as an SSP 2.0 archive at ``out``; returns its path.
 
-    Raises SpecError for a unit that cannot go into an SSP: only FMUs and
-    Python units (built into FMUs) can; not a player, nor a plug-in's kind.
+    Raises SpecError for a unit that cannot go into an SSP: only FMUs,
+    Python units (built into FMUs) and ``connectors`` units (as the system
+    connectors they stand for, see :mod:`cosim.export.system_connectors`)
+    can; not a player, nor a plug-in's kind.
     """
     out = Path(out)
     spec = system.spec
     problems = [Problem(spec.path, f"$.units.{u.name}", f"a {u.kind} unit cannot be exported to an SSP",
                         "only FMU and Python units go into an SSP: make it one of those (e.g. an FMU), or export "
                         "the system without it")
-                if u.kind != "connectors" else
-                Problem(spec.path, f"$.units.{u.name}", f"the system connectors of '{u.source}' (a connectors unit: "
-                        "connectors that scale a value or hold a constant, named in record or objectives) cannot be "
-                        "exported: cosim export writes one flat system",
-                        "name the unit ports those connectors carry instead, or export the SSP's spec without them")
-                for u in spec.units if u.kind not in ("fmu", "python")]
+                for u in spec.units if u.kind not in ("fmu", "python", "connectors")]
+    problems += export_problems(system)
     if problems:
         raise SpecError(problems)
     with tempfile.TemporaryDirectory(prefix="cosim_ssp_export_") as scratch:
@@ -137,6 +143,8 @@ def _write_fmus(system: System, resources: Path) -> dict[str, tuple[str, str]]:
     result: dict[str, tuple[str, str]] = {}
     copied: dict[str, str] = {}
     for name, unit in system.units.items():
+        if unit.spec.kind == "connectors":
+            continue  # system connectors, not a component
         if unit.spec.kind == "fmu":
             unit_type: FmuUnitType = unit.unit_type  # type: ignore[assignment]
             if unit_type.digest not in copied:
@@ -173,11 +181,13 @@ def _ssd(system: System, fmus: dict[str, tuple[str, str]], resources: Path) -> A
     root.set("generationTool", "cosim")
     if spec.description:
         root.set("description", spec.description)
-    top = _e(root, "ssd", "System", name=spec.name)
+    top = _e(root, "ssd", "System", name=root_name(system) or spec.name)  # connectors units name the root
     elements = _e(top, "ssd", "Elements")
     values = _unit_values(system)
     solvers = _cvode_solvers(system)
     for name, unit in system.units.items():
+        if name not in fmus:
+            continue  # a connectors unit: written below, as system connectors
         source, fmi_version = fmus[name]
         component = _e(elements, "ssd", "Component", name=name, type="application/x-fmu-sharedlibrary",
                        source=source, implementation=_implementation(unit))
@@ -209,11 +219,14 @@ def _ssd(system: System, fmus: dict[str, tuple[str, str]], resources: Path) -> A
             _e(_e(component_annotations, "ssc", "Annotation", type="org.cosim"), "cosim", "Unit", **options)
     connections = _e(top, "ssd", "Connections")
     for c in system.connections:
+        if is_connectors_target(system, c):
+            continue  # written with the system connector it feeds
         for start, end in zip(_element_names(c.source), _element_names(c.target), strict=True):
             connection = _e(connections, "ssd", "Connection", startElement=c.source.unit, startConnector=start,
                             endElement=c.target.unit, endConnector=end, suppressUnitConversion="true")
             if c.transforms:
                 _e(connection, "ssc", "LinearTransformation", factor=c.factor, offset=c.offset)
+    write_system_connectors(system, top, elements, connections, _e, _element_names)
     exp = spec.experiment
     annotations = _e(top, "ssd", "Annotations")
     oms_annotations = _e(_e(annotations, "ssc", "Annotation", type="org.openmodelica"), "oms", "Annotations")
