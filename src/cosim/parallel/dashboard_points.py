@@ -42,6 +42,8 @@ from typing import TYPE_CHECKING, Any, Iterator
 from distributed.diagnostics.plugin import SchedulerPlugin
 from tornado import web
 
+from cosim.parallel.interrupts import scheduler_gone
+
 if TYPE_CHECKING:  # only named: this module is sent to the scheduler by value, needing nothing of cosim there
     from cosim.execution.point_row import PointRow
 
@@ -287,9 +289,10 @@ class Board:
         try:
             yield
         except KeyboardInterrupt:
-            # the signal may have ended the scheduler too (a cluster file's `dask spec` closes on Ctrl-C): the
-            # stop does not wait the usual 5 s for a page that may be gone
-            self.end("interrupted", wait=1)
+            # the signal may have ended the scheduler too (a cluster file's `dask spec` closes on Ctrl-C): then
+            # there is no page to tell, and otherwise the stop does not wait the usual 5 s for it
+            if not scheduler_gone(self.client):
+                self.end("interrupted", wait=1)
             raise
         except BaseException:
             self.end("failed")

@@ -219,15 +219,51 @@ def _close(client: Any, cluster: Any, stopped: bool) -> None:
     long for processes that the signal already ended."""
     import dask
 
+    from cosim.parallel.interrupts import scheduler_gone
+
     settings = {"distributed.comm.timeouts.connect": CLOSE_AFTER_STOP_CONNECT} if stopped else {}
     with dask.config.set(settings):
+        gone = stopped and scheduler_gone(client)
         client.close()
-        if cluster is not None:
+        if cluster is not None and gone and _end_processes(cluster):
+            # Dask's exit hook would try the orderly close, through the scheduler that is gone, for 10 s
+            cluster.shutdown_on_close = False
+        elif cluster is not None:
             try:
                 cluster.close()
             except OSError:  # its processes are already gone (a kill reached them): nothing left to close
                 # (TimeoutError is an OSError.)  Dask's exit hook would try closing it again, for another 10 s
                 cluster.shutdown_on_close = False
+
+
+def _end_processes(cluster: Any) -> bool:
+    """End the processes of ``cluster`` whose scheduler the stop signal already ended; False if it is no SpecCluster.
+
+    An orderly close (``cluster.close()``) retires the workers through the
+    scheduler: with the scheduler gone it waited a connect timeout per attempt,
+    and the workers' nannies, which closed themselves on the same Ctrl-C,
+    went on for 2-4 s more and logged their closing on the terminal after
+    cosim's last line.  A SpecCluster (SubprocessCluster, dask-jobqueue's
+    clusters) ends each of its processes itself (a SubprocessCluster's:
+    SIGKILL to the process and its children).  Only unfinished points die with
+    them: the rows of the finished ones were collected before (PointStream).
+    """
+    import asyncio
+
+    from distributed import SpecCluster
+
+    if not isinstance(cluster, SpecCluster):
+        return False
+
+    async def close_each() -> None:
+        processes = [*cluster.workers.values(), cluster.scheduler]
+        await asyncio.gather(*(p.close() for p in processes if p is not None), return_exceptions=True)
+
+    try:
+        cluster.sync(close_each, callback_timeout=5)
+    except Exception:  # what is left ends by itself (it got the signal too)
+        pass
+    return True
 
 
 def _check_scheduler_imports_cosim(client: Any, where: str) -> None:

@@ -17,6 +17,9 @@ the rows written so far and says ``cosim: interrupted``):
 - :func:`processes_started_here_ignore_ctrl_c` does the same for the
   processes a cluster file's class starts on this machine.
 - Point children (:mod:`cosim.parallel.isolation`) ignore SIGINT themselves.
+- :func:`scheduler_gone` tells the client, after a stop, that the signal ended
+  the scheduler too (a cluster file's ``dask spec`` processes close themselves on
+  SIGINT), so that it neither sends to it nor waits for it.
 """
 
 from __future__ import annotations
@@ -54,6 +57,18 @@ def stop_cleanly_on_signals() -> dict[int, Any]:
         return {}
     stopping = [signal.SIGTERM, signal.SIGINT] + ([signal.SIGHUP] if hasattr(signal, "SIGHUP") else [])
     return {signum: signal.signal(signum, stop) for signum in stopping}
+
+
+def scheduler_gone(client: Any) -> bool:
+    """True when ``client`` has lost its scheduler: nothing sent to it would arrive, nothing would answer.
+
+    A SubprocessCluster's ``dask spec`` scheduler installs its own SIGINT
+    handler and closes itself on the terminal's Ctrl-C, whatever cosim set
+    before starting it; its client then reconnects (status ``connecting``)
+    in vain.  Waiting for it (the points page's end message, an orderly
+    close of the cluster through it) cost seconds after the user's Ctrl-C.
+    """
+    return getattr(client, "status", "running") != "running"
 
 
 def restore_signals(previous: dict[int, Any]) -> None:
