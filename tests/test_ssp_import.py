@@ -33,7 +33,10 @@ def _run(path, algorithm="jacobi", **experiment):
 def test_nested_archive_runs_as_computed_by_hand(tmp_path, algorithm):
     path = write_archive(tmp_path / "nested.ssp", nested_files())
     system, result = _run(path, algorithm)
-    assert list(system.units) == ["source", "SuT.integrator", "sink"]
+    # the components, and the connectors of sub-system SuT (its output 'out' is recorded as Root.SuT.out)
+    assert list(system.units) == ["source", "SuT.integrator", "sink", "Root.SuT"]
+    assert system.units["Root.SuT"].spec.kind == "connectors"
+    assert result.traces["Root.SuT.out"].tolist() == result.traces["SuT.integrator.y"].tolist()
     expected = nested_expected(algorithm)
     for column, value in expected.items():
         assert _final(result, column) == pytest.approx(value, rel=1e-12, abs=1e-12), column

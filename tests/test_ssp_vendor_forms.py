@@ -808,3 +808,52 @@ def test_inspect_of_a_spec_on_an_ssp_without_stop_or_step(tmp_path, capsys):
     assert "experiment: 0 .. (no stop time: give --stop to run), step (none: give --step to run)" in out
     assert _port_rows(out)["sub.B"]["b"][4] == "-0.5 *"
     assert main(["validate", str(tmp_path / "spec.json")]) == 2  # running needs them
+
+
+# --- `cosim run x.ssp` records the output connectors of the root system and its sub-systems ------------------
+
+
+def test_running_an_ssp_records_its_systems_output_connectors_by_their_names(tmp_path, capsys):
+    # issue 25's leftover: default.out = 2 x sub.res + 1 (a LinearTransformation) and sub.res = sub.B.y (unchanged)
+    # are outputs of the root system and of sub: recorded as default.out and default.sub.res; sub.speed (an
+    # input) and default.k (a parameter) are not outputs
+    import json
+
+    import pandas as pd
+
+    ssd = oms3_ssd().replace('<ssd:Connection startElement="sub" startConnector="res" endElement="" '
+                             'endConnector="out"/>', _SCALED_OUT)
+    path = write_archive(tmp_path / "scaled.ssp", oms3_files(ssd))
+    assert main(["run", str(path), "--step", "0.1", "--algorithm", "jacobi", "--out", str(tmp_path / "t.csv")]) == 0
+    traces = pd.read_csv(tmp_path / "t.csv")
+    assert list(traces.columns) == ["time", "A.y", "sub.B.y", "default.out", "default.sub.res"]
+    assert traces["time"].to_numpy() == pytest.approx([k / 10 for k in range(11)], abs=1e-12)
+    for t, out, res in zip(traces["time"], traces["default.out"], traces["default.sub.res"]):
+        assert res == pytest.approx(oms3_expected(t)["sub.B.y"], rel=1e-12, abs=1e-12)  # y = -t
+        assert out == pytest.approx(2 * oms3_expected(t)["sub.B.y"] + 1, rel=1e-12, abs=1e-12)
+    # a spec naming the SSP without 'record' records the same; with 'record', what it names
+    (tmp_path / "spec.json").write_text(json.dumps({"system": "scaled.ssp",
+                                                    "experiment": {"step": 0.1, "algorithm": "jacobi"}}))
+    same = _run(tmp_path / "spec.json").traces
+    assert list(same.columns) == list(traces.columns)
+    assert same.to_numpy() == pytest.approx(traces.to_numpy(), rel=1e-15, abs=0)
+    (tmp_path / "spec.json").write_text(json.dumps({"system": "scaled.ssp", "record": ["default.out"],
+                                                    "experiment": {"step": 0.1, "algorithm": "jacobi"}}))
+    assert list(_run(tmp_path / "spec.json").traces.columns) == ["time", "default.out"]
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def test_output_connectors_of_a_system_named_like_a_spec_unit_are_left_out_of_the_implied_record(tmp_path):
+    # a spec unit 'default' (the root system's name) keeps its name; the root's connectors are then not recorded,
+    # sub's are (its connectors unit is 'default.sub'); as before, a spec without 'record' records the SSP's units
+    import json
+
+    write_archive(tmp_path / "oms3.ssp", oms3_files())
+    (tmp_path / "spec.json").write_text(json.dumps({
+        "system": "oms3.ssp", "experiment": {"step": 0.1, "algorithm": "jacobi"},
+        "units": {"default": {"fmu": "builtin:linear_ode_fmi2", "parameters": {"a": 0.0, "b": 0.0, "x0": 4.0}}}}))
+    traces = _run(tmp_path / "spec.json").traces
+    assert list(traces.columns) == ["time", "A.y", "sub.B.y", "default.sub.res"]
+    assert traces["sub.B.y"].to_numpy() == pytest.approx([oms3_expected(t)["sub.B.y"] for t in traces["time"]],
+                                                         rel=1e-12, abs=1e-12)
+    assert traces["default.sub.res"].tolist() == traces["sub.B.y"].tolist()

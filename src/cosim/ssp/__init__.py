@@ -28,10 +28,12 @@ def ssp_raw_spec(path: str | Path, experiment: Mapping[str, Any] | None = None, 
     """The spec content of the SSP at ``path`` (its ``variant``, if given), with ``experiment`` fields (command
     line) on top.
 
-    An SSP with no component runs the constants its system connectors hold (a ``connectors`` unit per system,
-    see :mod:`.system_connectors`), recording them.  Raises SpecError for every problem of the SSP, when it has
-    neither a component nor a constant, and when it gives no stop time or step size and ``experiment`` does not
-    either.
+    The run records every component's outputs and the output connectors of the root system and its sub-systems
+    (``Root.sub.connector``: a ``connectors`` unit per system, see :mod:`.system_connectors`, whose inputs are
+    fed by the component outputs the connectors carry, scaled as their chains scale them).  An SSP with no
+    component runs the constants its system connectors hold, recording them.  Raises SpecError for every problem
+    of the SSP, when it has neither a component nor a constant, and when it gives no stop time or step size and
+    ``experiment`` does not either.
     """
     system = read_ssp(path, variant)
     raw = system.raw
@@ -41,6 +43,12 @@ def ssp_raw_spec(path: str | Path, experiment: Mapping[str, Any] | None = None, 
             raise SpecError([_nothing_to_run(system)])
         raw["units"], _ = connector_units(constants)
         raw["record"] = [c.name for c in constants]
+    else:
+        outputs = recorded_outputs(system, raw["units"])
+        units, connections = connector_units(outputs)
+        raw["units"].update(units)
+        raw["connections"].extend(connections)
+        raw["record"].extend(c.name for c in outputs)
     raw["experiment"].update(experiment or {})
     missing = [k for k in ("stop", "step") if k not in raw["experiment"]]
     if missing:
@@ -53,6 +61,16 @@ def ssp_raw_spec(path: str | Path, experiment: Mapping[str, Any] | None = None, 
                                  f"(\"system\": \"{Path(path).name}\") with \"experiment\": {{\"{k}\": ...}}")
                          for k in missing])
     return raw
+
+
+def recorded_outputs(system: SspSystem, units: Mapping[str, Any]) -> list[ConnectorSignal]:
+    """What the output connectors of the root system and its sub-systems carry, in document order, each a
+    signal of its own (also one carrying a component output unchanged: a run records it by the connector's
+    name); left out: a connector that carries nothing known (fed by nothing), and the connectors of a system
+    named like one of ``units`` (a component, or a spec's own unit)."""
+    signals = system.connector_signals
+    return [signals[name] for name in system.output_connectors
+            if name in signals and signals[name].system not in units]
 
 
 def _constants(system: SspSystem) -> list[ConnectorSignal]:
@@ -123,26 +141,31 @@ def merge_system(spec: dict, spec_path: Path) -> dict:
     fed = {c.get("to") for c in own_connections if isinstance(c, dict)}
     merged["connections"] = own_connections + [c for c in ssp["connections"] if c["to"] not in fed]
     merged["experiment"] = {**ssp["experiment"], **(spec.get("experiment") or {})}
-    if "record" not in spec:
-        merged["record"] = ssp["record"]
+    implied: list[ConnectorSignal] = []
+    if "record" not in spec and units:  # recorded as the SSP alone records: its units' ports and output connectors
+        implied = recorded_outputs(system, units)
+        merged["record"] = ssp["record"] + [c.name for c in implied]
     merged.setdefault("name", ssp["name"])
-    problems = _name_connectors(merged, system, str(spec_path))
+    problems = _name_connectors(merged, system, str(spec_path), implied)
     if problems:
         raise SpecError(problems)
     return merged
 
 
-def _name_connectors(spec: dict, system: SspSystem, file: str) -> list[Problem]:
+def _name_connectors(spec: dict, system: SspSystem, file: str, implied: list[ConnectorSignal]) -> list[Problem]:
     """Signals in ``record``, objectives and ``stop_when`` that name the SSP's system connectors
     (``Root.SuT.speed``, as a tool's users write them) or a unit with the root system's name in front
     (``Root.SuT.motor.y``), rewritten to what they mean: a connector carrying a unit port unchanged is that port;
     one scaling it or holding a constant is a port of the ``connectors`` unit of its system (added to the spec
     with the connections feeding it, see :func:`~cosim.ssp.system_connectors.connector_units`); a spec without
-    any unit runs the SSP's constants.  A problem for a ``connectors`` unit whose name a spec unit has."""
+    any unit runs the SSP's constants.  ``implied``: the output connectors recorded for a spec without ``record``
+    (:func:`recorded_outputs`), kept by their own names.  A problem for a ``connectors`` unit whose name a spec
+    unit has."""
     units = [u for u in spec.get("units") or {} if isinstance(u, str)]
     signals, root = system.connector_signals, system.root_system
     problems: list[Problem] = []
-    named: dict[str, ConnectorSignal] = {}
+    named: dict[str, ConnectorSignal] = {c.name: c for c in implied}
+    implied_names = set(named)
 
     def names_unit(text: str) -> bool:
         return any(text.startswith(u + ".") for u in units)
@@ -168,7 +191,8 @@ def _name_connectors(spec: dict, system: SspSystem, file: str) -> list[Problem]:
         return text
 
     if isinstance(spec.get("record"), list):
-        spec["record"] = [resolve(r, f"$.record[{i}]") for i, r in enumerate(spec["record"])]
+        spec["record"] = [r if r in implied_names else resolve(r, f"$.record[{i}]")
+                          for i, r in enumerate(spec["record"])]
     for name, objective in (spec.get("objectives") or {}).items() if isinstance(spec.get("objectives"), dict) \
             else ():
         if isinstance(objective, dict) and "signal" in objective:

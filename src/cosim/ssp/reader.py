@@ -52,6 +52,8 @@ class SspSystem:
     # 'Root.sub.connector' (and 'sub.connector') -> what it carries (see system_connectors.connector_signals)
     connector_signals: dict[str, ConnectorSignal] = field(default_factory=dict)
     root_system: str = ""
+    # 'Root.sub.connector' of every system connector of kind output, in document order (recorded by a run)
+    output_connectors: list[str] = field(default_factory=list)
 
 
 def read_ssp(path: str | Path, variant: str | None = None) -> SspSystem:
@@ -92,8 +94,10 @@ def _read(reading: Reading) -> SspSystem:
     root_name = system.get("name", "")
     connectors = [".".join((root_name, *n.path, c)) for n in reading.nodes.values() if n.kind == "system"
                   for c in n.connectors]
+    outputs = [".".join((root_name, *n.path, name)) for n in reading.nodes.values() if n.kind == "system"
+               for name, c in n.connectors.items() if c.kind == "output"]
     signals = connector_signals(reading, flow, bindings, names, root_name)
-    return SspSystem(reading.files, raw, reading.notes, connectors, signals, root_name)
+    return SspSystem(reading.files, raw, reading.notes, connectors, signals, root_name, outputs)
 
 
 def _raise_problems(reading: Reading) -> None:
