@@ -344,3 +344,46 @@ def test_connectors_units_under_two_root_systems_or_named_like_a_unit_are_refuse
     assert "$.units.Top.src: the connectors unit 'Top.src' becomes the sub-system 'src', which is also the name " \
            "of a unit" in err
     assert "Traceback" not in err and not (tmp_path / "x.ssp").exists()
+
+
+def test_a_parameter_connector_a_design_names_is_exported_with_its_parameter_connections(tmp_path, capsys):
+    # default.k (-0.5) feeds A.x0 = -4 k and, through sub.gain, sub.B.b = 2 k + 0.1; the design names default.k.
+    # Exported, k feeds A.x0 and sub.B.b by connections with those LinearTransformations (their .ssv values left
+    # out), so the companion spec's design sets them again: a point with k = 0.5 runs bit for bit the same
+    ssd = oms3_ssd().replace(
+        '<ssd:Connection startElement="" startConnector="k" endElement="sub" endConnector="gain"/>',
+        '<ssd:Connection startElement="" startConnector="k" endElement="sub" endConnector="gain">'
+        '<ssc:LinearTransformation factor="2.0" offset="0.1"/></ssd:Connection>'
+        '<ssd:Connection startElement="" startConnector="k" endElement="A" endConnector="x0">'
+        '<ssc:LinearTransformation factor="-4.0"/></ssd:Connection>')
+    write_archive(tmp_path / "feeds.ssp", oms3_files(ssd))
+    spec = {"system": "feeds.ssp", "experiment": {"step": 0.1, "algorithm": "jacobi"},
+            "record": ["A.y", "sub.B.y", "default.k"],
+            "design": {"parameters": {"default.k": {"values": [-0.5, 0.5]}}}}
+    (tmp_path / "spec.json").write_text(json.dumps(spec))
+    original = check_spec(tmp_path / "spec.json")
+    exported = export_ssp(original, tmp_path / "flat.ssp")
+    with zipfile.ZipFile(exported) as zf:
+        ssd_out = etree.fromstring(zf.read("SystemStructure.ssd"))
+        sub_b = etree.fromstring(zf.read("resources/sub.B.ssv"))
+    feeds = {(c.get("endElement"), c.get("endConnector")): dict(c.find(f"{{{NS['ssc']}}}LinearTransformation").attrib)
+             for c in ssd_out.iter(f"{{{NS['ssd']}}}Connection") if c.get("startConnector") == "k"}
+    assert feeds == {("sub.B", "b"): {"factor": "2.0", "offset": "0.1"}, ("A", "x0"): {"factor": "-4.0",
+                                                                                       "offset": "0.0"}}
+    assert [p.get("name") for p in sub_b.iter(f"{{{NS['ssv']}}}Parameter")] == ["a", "x0"]  # b comes from k
+    again = check_spec(companion_spec_path(exported))
+    for k in (-0.5, 0.5):
+        first, second = (run_point(s, {"default.k": k}, record=True) for s in (original, again))
+        assert first.ok and second.ok, (first.message, second.message)
+        assert list(first.traces.columns) == list(second.traces.columns)
+        assert np.array_equal(first.traces.to_numpy(), second.traces.to_numpy())
+        assert second.traces["A.y"].iloc[-1] == pytest.approx(-4 * k, rel=1e-12)
+        assert second.traces["sub.B.y"].iloc[-1] == pytest.approx((2 * k + 0.1) * -4 * k, rel=1e-12)
+    # a spec value of a fed parameter that is not what the connector feeds it: an SSP holds one of them
+    spec["units"] = {"sub.B": {"parameters": {"b": 5.0}}}
+    (tmp_path / "spec.json").write_text(json.dumps(spec))
+    assert main(["export", str(tmp_path / "spec.json"), "-o", str(tmp_path / "other.ssp")]) == 2
+    err = capsys.readouterr().err
+    assert ("$.units.sub.B.parameters.b: 'sub.B.b' is 5.0 here, but the system connector 'default.k' feeds it "
+            "-0.9: an SSP holds one of them") in err
+    assert not (tmp_path / "other.ssp").exists()

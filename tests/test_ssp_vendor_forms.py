@@ -857,3 +857,91 @@ def test_output_connectors_of_a_system_named_like_a_spec_unit_are_left_out_of_th
     assert traces["sub.B.y"].to_numpy() == pytest.approx([oms3_expected(t)["sub.B.y"] for t in traces["time"]],
                                                          rel=1e-12, abs=1e-12)
     assert traces["default.sub.res"].tolist() == traces["sub.B.y"].tolist()
+
+
+# --- a design parameter naming a system's parameter connector sets the parameters it feeds ---------------------
+
+# default.k (bound -0.5) feeds sub.gain through 2 k + 0.1 and from there sub.B.b; and A.x0 through -4 k: at the
+# bound value B.b = -0.9 and A.x0 = 2 (as A's own binding says, which the root's parameter connection beats)
+_K_FEEDS = ('<ssd:Connection startElement="" startConnector="k" endElement="sub" endConnector="gain">'
+            '<ssc:LinearTransformation factor="2.0" offset="0.1"/></ssd:Connection>\n'
+            '      <ssd:Connection startElement="" startConnector="k" endElement="A" endConnector="x0">'
+            '<ssc:LinearTransformation factor="-4.0"/></ssd:Connection>')
+
+
+def _k_feeds_ssp(tmp_path):
+    ssd = oms3_ssd().replace('<ssd:Connection startElement="" startConnector="k" endElement="sub" '
+                             'endConnector="gain"/>', _K_FEEDS)
+    return write_archive(tmp_path / "feeds.ssp", oms3_files(ssd))
+
+
+def test_a_design_parameter_naming_a_parameter_connector_sets_every_parameter_it_feeds(tmp_path):
+    # issue 25's leftover: a sweep over default.k sets A.x0 = -4 k and sub.B.b = 2 k + 0.1; so A.y = -4 k and
+    # sub.B.y(1) = b x A.y x 1 (B integrates b u exactly from 0, u = A.y held)
+    import json
+
+    import cosim
+
+    _k_feeds_ssp(tmp_path)
+    ks = [-0.5, -0.25, 0.5]
+    (tmp_path / "spec.json").write_text(json.dumps({
+        "system": "feeds.ssp", "experiment": {"step": 0.1, "algorithm": "jacobi"},
+        "objectives": {"a": {"signal": "A.y", "reduce": "final"}, "b": {"signal": "sub.B.y", "reduce": "final"}},
+        "design": {"parameters": {"default.k": {"values": ks}}}}))
+    system = check_spec(tmp_path / "spec.json")
+    assert system.units["default"].spec.options["feeds"] == {"k": [
+        {"to": "sub.B.b", "factor": 2.0, "offset": 0.1}, {"to": "A.x0", "factor": -4.0, "offset": 0.0}]}
+    base = Execution(system, record=True).run()  # the bound value: as the SSP alone runs
+    assert base.ok and base.traces["A.y"].iloc[-1] == 2.0
+    assert base.traces["sub.B.y"].iloc[-1] == pytest.approx(-0.9 * 2.0, rel=1e-12)
+    table = cosim.sweep(str(tmp_path / "spec.json"), workers=1, quiet=True).sort_values("default.k")
+    assert table["default.k"].tolist() == ks and (table["status"] == "ok").all()
+    for k, a, b in zip(ks, table["a"], table["b"]):
+        assert a == pytest.approx(-4 * k, rel=1e-12)
+        assert b == pytest.approx((2 * k + 0.1) * (-4 * k) * 1.0, rel=1e-12, abs=1e-15)
+    # the root's bare name and the value on the command line (--set) mean the same
+    assert main(["run", str(tmp_path / "spec.json"), "--set", "default.k=0.25", "--out",
+                 str(tmp_path / "t.csv")]) == 0
+    import pandas as pd
+
+    traces = pd.read_csv(tmp_path / "t.csv")
+    assert traces["A.y"].iloc[-1] == pytest.approx(-1.0, rel=1e-12)
+    assert traces["sub.B.y"].iloc[-1] == pytest.approx(0.6 * -1.0, rel=1e-12)
+
+
+def test_a_design_parameter_naming_an_output_or_fed_connector_is_a_clear_problem(tmp_path):
+    import json
+
+    _k_feeds_ssp(tmp_path)
+    (tmp_path / "spec.json").write_text(json.dumps({
+        "system": "feeds.ssp", "experiment": {"step": 0.1},
+        "design": {"parameters": {"default.out": {"values": [1.0, 2.0]}, "sub.speed": {"values": [1.0]}}}}))
+    problems = _problems(tmp_path / "spec.json", None)
+    by_path = {p.path: p for p in problems}
+    assert by_path["$.design.parameters.default.out"].message == (
+        "'default.out' is an output connector of the SSP's system 'default', which carries sub.B.y: a design "
+        "parameter sets a value before the run, which only a parameter connector (kind=\"parameter\") of a system "
+        "takes")
+    assert by_path["$.design.parameters.sub.speed"].message.startswith(
+        "'sub.speed' is a connector of the SSP's system 'default.sub', which carries A.y:")
+    assert "parameter connector" in by_path["$.design.parameters.sub.speed"].fix
+    assert main(["validate", str(tmp_path / "spec.json")]) == 2
+
+
+def test_a_design_parameter_naming_a_connector_that_sets_no_parameter_is_a_clear_problem(tmp_path):
+    # sub.gain takes its value from default.k (the connector to sweep); out holds none in oms3's own form
+    import json
+
+    _k_feeds_ssp(tmp_path)
+    ssd = oms3_ssd().replace('<ssv:Parameter name="k">\n                <ssv:Real value="-0.5"/>\n'
+                             '              </ssv:Parameter>\n', '')
+    assert ssd != oms3_ssd()
+    write_archive(tmp_path / "unbound.ssp", oms3_files(ssd))
+    for ssp, key, start in (("feeds.ssp", "sub.gain", "'sub.gain' is a connector of the SSP's system 'default.sub' "
+                             "that sets no unit parameter"),
+                            ("unbound.ssp", "k", "'k' is a connector of the SSP's system 'default' that holds no "
+                             "value")):
+        (tmp_path / "spec.json").write_text(json.dumps({"system": ssp, "experiment": {"step": 0.1},
+                                                        "design": {"parameters": {key: {"values": [1.0]}}}}))
+        [problem] = _problems(tmp_path / "spec.json", None)
+        assert problem.path == f"$.design.parameters.{key}" and problem.message.startswith(start), problem.message

@@ -27,7 +27,8 @@ def assignments_for(system: System, values: Mapping[str, Any] | None) -> list[As
     """The checked assignments setting ``values`` ('unit.param' -> value) on ``system``, in order.
 
     A design parameter's value is in its design ``unit`` (as in the results table) and is converted to its
-    port's unit here.  Raises SpecError listing every target or value that does not fit (not only the first).
+    port's unit here; a target that feeds other parameters (an SSP system's parameter connector, see
+    :meth:`~cosim.system.builder.System.fed_by`) sets them too.  Raises SpecError listing every target or value that does not fit (not only the first).
     """
     assignments: list[Assignment] = []
     problems: list[Problem] = []
@@ -37,6 +38,8 @@ def assignments_for(system: System, values: Mapping[str, Any] | None) -> list[As
             value = converted(value, *conversions[target])
         try:
             assignments.append(system.assignment_for(target, value))
+            # an SSP system's parameter connector sets the FMU parameters its parameter connections reach
+            assignments.extend(system.assignment_for(fed, fed_value) for fed, fed_value in system.fed_by(target, value))
         except SpecError as exc:
             problems.extend(exc.problems)
     if problems:

@@ -40,6 +40,8 @@ from lxml import etree
 from cosim.errors import Problem, SpecError
 from cosim.export.system_connectors import (
     export_problems,
+    fed_parameters,
+    fed_value_problems,
     is_connectors_target,
     root_name,
     write_system_connectors,
@@ -89,6 +91,7 @@ def export_ssp(system: System, out: str | Path, spec_copy: bool = True) -> Path:
                         "the system without it")
                 for u in spec.units if u.kind not in ("fmu", "python", "connectors")]
     problems += export_problems(system)
+    problems += fed_value_problems(system, _unit_values(system))
     if problems:
         raise SpecError(problems)
     with tempfile.TemporaryDirectory(prefix="cosim_ssp_export_") as scratch:
@@ -184,6 +187,9 @@ def _ssd(system: System, fmus: dict[str, tuple[str, str]], resources: Path) -> A
     top = _e(root, "ssd", "System", name=root_name(system) or spec.name)  # connectors units name the root
     elements = _e(top, "ssd", "Elements")
     values = _unit_values(system)
+    for target in fed_parameters(system):  # set by a connection from the system connector feeding it
+        unit, _, port = target.rpartition(".")
+        values[unit] = [entry for entry in values.get(unit, []) if entry[0] != port]
     solvers = _cvode_solvers(system)
     for name, unit in system.units.items():
         if name not in fmus:

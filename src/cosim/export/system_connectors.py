@@ -10,7 +10,10 @@ root system ``Root``) becomes the system ``sub`` (nested below the root system, 
   between the root and ``sub`` passes the value on through an ``input`` connector named by the rest of the path
   (``b_c`` for ``c`` of ``Root.a.b``);
 - each parameter ``k`` becomes the system's ``parameter`` connector ``k`` with the value bound to it (inline
-  ``ssd:ParameterValues``).
+  ``ssd:ParameterValues``); the unit parameters it ``feeds`` (an SSP's parameter connections) are fed by a
+  connection from it with the feed's factor and offset as ``LinearTransformation`` (through ``parameter``
+  connectors ``b_k`` of the systems on the way) instead of a value of their own, so that a design parameter
+  naming ``Root.sub.k`` sets them again when the archive is read back.
 
 Reading the archive back (:mod:`cosim.ssp.system_connectors`) gives the same signals: ``Root.sub.c`` is factor
 x ``unit.port`` + offset, ``Root.sub.k`` the constant, so a spec recording them records the same traces.
@@ -70,6 +73,34 @@ def export_problems(system: Any) -> list[Problem]:
     return problems
 
 
+def fed_parameters(system: Any) -> dict[str, tuple[str, str, float, float]]:
+    """The unit parameters the ``connectors`` units feed: 'unit.param' -> (connectors unit, its parameter,
+    factor, offset)."""
+    fed = {}
+    for name, unit in connectors_units(system).items():
+        for connector, feeds in (unit.spec.options.get("feeds") or {}).items():
+            for feed in feeds:
+                fed[feed["to"]] = (name, connector, float(feed.get("factor", 1.0)), float(feed.get("offset", 0.0)))
+    return fed
+
+
+def fed_value_problems(system: Any, values: dict[str, list[tuple[str, str, Any]]]) -> list[Problem]:
+    """A problem for every fed parameter whose own value (``values``: unit -> (port, type, value)) is not what its
+    connector feeds it: an SSP holds one of the two."""
+    problems = []
+    for target, (name, connector, factor, offset) in fed_parameters(system).items():
+        unit, _, port = target.rpartition(".")
+        constant = system.units[name].unit_type.constants.get(connector)
+        fed = constant if (factor, offset) == (1.0, 0.0) else factor * constant + offset
+        own = next((v for p, _, v in values.get(unit, ()) if p == port), fed)
+        if own != fed:
+            problems.append(Problem(system.spec.path, f"$.units.{unit}.parameters.{port}",
+                                    f"'{target}' is {own!r} here, but the system connector '{name}.{connector}' "
+                                    f"feeds it {fed!r}: an SSP holds one of them",
+                                    f"drop the value of '{target}' (or set '{name}.{connector}' instead)"))
+    return problems
+
+
 def is_connectors_target(system: Any, connection: Any) -> bool:
     """Whether ``connection`` feeds a ``connectors`` unit (written by :func:`write_system_connectors`)."""
     return system.units[connection.target.unit].spec.kind == "connectors"
@@ -124,10 +155,24 @@ def _tree(system: Any, element_names: Callable) -> _System:
             for depth in range(1, len(path)):
                 systems[depth].connectors.append((via[depth - 1], "input", "Real", measure or None))
                 systems[depth].connections.append(("", via[depth - 1], path[depth], via[depth], None))
+        feeds = unit.spec.options.get("feeds") or {}
         for constant, value in unit_type.constants.items():
             kind = next(t for python, t in _TYPES if isinstance(value, python))
             target.connectors.append((constant, "parameter", kind, None))
             target.values.append((constant, kind, value))
+            if not feeds.get(constant):
+                continue
+            # outwards: path[-1].k -> path[:-1]'s own via ... -> the root: path[0].via -> each fed unit parameter
+            via = ["_".join((*path[d:], constant)) for d in range(len(path) + 1)]  # via[len(path)] == k
+            for depth in range(len(path) - 1, 0, -1):
+                systems[depth].connectors.append((via[depth], "parameter", kind, None))
+                systems[depth].connections.append((path[depth], via[depth + 1], "", via[depth], None))
+            for feed in feeds[constant]:
+                fed_unit, _, fed_port = feed["to"].rpartition(".")
+                factor, offset = float(feed.get("factor", 1.0)), float(feed.get("offset", 0.0))
+                transform = (factor, offset) if (factor, offset) != (1.0, 0.0) else None
+                root.connections.append((path[0] if path else "", via[1] if path else constant, fed_unit, fed_port,
+                                         transform))
     return root
 
 

@@ -159,8 +159,10 @@ def _name_connectors(spec: dict, system: SspSystem, file: str, implied: list[Con
     one scaling it or holding a constant is a port of the ``connectors`` unit of its system (added to the spec
     with the connections feeding it, see :func:`~cosim.ssp.system_connectors.connector_units`); a spec without
     any unit runs the SSP's constants.  ``implied``: the output connectors recorded for a spec without ``record``
-    (:func:`recorded_outputs`), kept by their own names.  A problem for a ``connectors`` unit whose name a spec
-    unit has."""
+    (:func:`recorded_outputs`), kept by their own names.  Design parameters naming a system's parameter
+    connector become that port of its ``connectors`` unit, which ``feeds`` the FMU parameters the connector sets.
+    A problem for a ``connectors`` unit whose name a spec unit has, and for a design parameter naming a connector
+    fed by a component output."""
     units = [u for u in spec.get("units") or {} if isinstance(u, str)]
     signals, root = system.connector_signals, system.root_system
     problems: list[Problem] = []
@@ -190,6 +192,47 @@ def _name_connectors(spec: dict, system: SspSystem, file: str, implied: list[Con
             return text[len(root) + 1:]  # OMSimulator's result names carry the root system's name
         return text
 
+    def design_target(key: str, where: str) -> str:
+        """A design parameter naming a system connector: a parameter connector is a parameter of its system's
+        ``connectors`` unit, which sets the FMU parameters the connector feeds; one fed by a component output
+        (an output, or an input of a sub-system) has no value to set before the run: a problem."""
+        if names_unit(key):
+            return key
+        if key not in signals:
+            full = key if key in every_connector else f"{root}.{key}"
+            if full in every_connector:  # a system connector that holds no value and is fed by nothing
+                problems.append(Problem(file, where, f"'{key}' is a connector of the SSP's system "
+                                        f"'{full.rsplit('.', 1)[0]}' that holds no value: cosim sets the "
+                                        "parameters a parameter connector feeds from the value bound to it",
+                                        f"bind a value to {full} in the SSP (ssd:ParameterBinding of its system), "
+                                        "or name the unit parameters it feeds"))
+                return key
+            return resolve(key, where)
+        carried = signals[key]
+        output = carried.name in outputs
+        if output or carried.port is not None:
+            what = "an output connector" if output else "a connector"
+            carries = f", which carries {carried.port}" if carried.port is not None else ""
+            problems.append(Problem(file, where, f"'{key}' is {what} of the SSP's system '{carried.system}'"
+                                    f"{carries}: a design parameter sets a value before the run, which only a "
+                                    "parameter connector (kind=\"parameter\") of a system takes",
+                                    "name a system's parameter connector, or a unit's parameter (unit.parameter)"))
+            return key
+        if not carried.feeds:  # fed by another connector, connected to nothing, or beaten by direct bindings
+            problems.append(Problem(file, where, f"'{key}' is a connector of the SSP's system '{carried.system}' "
+                                    "that sets no unit parameter through a parameter connection of its own (it is "
+                                    "connected to none, takes its value from another connector, or the "
+                                    "parameters keep a direct binding of a higher system)",
+                                    "name the parameter connector the value comes from, or the unit parameters"))
+            return key
+        return resolve(key, where)
+
+    outputs = set(system.output_connectors)
+    every_connector = set(system.system_connectors)
+    design = spec.get("design")
+    if isinstance(design, dict) and isinstance(design.get("parameters"), dict):
+        design["parameters"] = {design_target(key, f"$.design.parameters.{key}") if isinstance(key, str) else key:
+                                value for key, value in design["parameters"].items()}
     if isinstance(spec.get("record"), list):
         spec["record"] = [r if r in implied_names else resolve(r, f"$.record[{i}]")
                           for i, r in enumerate(spec["record"])]

@@ -41,6 +41,8 @@ class Bindings:
         self._order = 0
         self._prefixed: set[tuple[str, tuple[str, ...]]] = set()  # (file, component) noted for Component.param
         self.system_values: dict[Target, tuple] = {}
+        # FMU variables a direct binding keeps although a system connector with a value is connected to them
+        self.kept: set[Target] = set()
 
     # --- reading ------------------------------------------------------------
 
@@ -245,6 +247,7 @@ class Bindings:
             via = f"system connector '{'.'.join((*start[0], start[1]))}' (parameter connection)"
             direct = chosen.get(end)
             if direct is not None and direct[0] <= depth:
+                self.kept.add(end)
                 if direct[0] == depth:
                     self.reading.alike.add("bound twice", f"'{'.'.join(end[0])}.{end[1]}' is bound directly "
                                            f"({direct[5]}) and through {via} by the same system: the direct "

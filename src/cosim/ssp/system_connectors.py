@@ -15,6 +15,7 @@ from typing import Any
 
 from cosim.ssp.bindings import Bindings
 from cosim.ssp.connections import Flow
+from cosim.ssp.model import variable_of
 from cosim.ssp.reading import Reading
 
 
@@ -30,6 +31,8 @@ class ConnectorSignal:
     offset: float = 0.0
     value: Any = None
     unit: str | None = None  # of measure, of a scaled port's value as the connector carries it
+    # a parameter connector's parameter connections: (unit.variable, factor, offset) it sets, as 'feeds' says
+    feeds: tuple[tuple[str, float, float], ...] = ()
 
     @property
     def name(self) -> str:
@@ -65,6 +68,7 @@ def connector_signals(reading: Reading, flow: Flow, bindings: Bindings, unit_nam
                 value = factor * value + offset
         return value
 
+    feeds = _parameter_feeds(reading, flow, bindings, unit_names)
     for node in reading.nodes.values():
         if node.kind != "system":
             continue
@@ -82,12 +86,35 @@ def connector_signals(reading: Reading, flow: Flow, bindings: Bindings, unit_nam
                 elif start in system_values:
                     carried = ConnectorSignal(system, name, value=constant(start, chain))
             elif end in system_values:
-                carried = ConnectorSignal(system, name, value=constant(end))
+                carried = ConnectorSignal(system, name, value=constant(end), feeds=feeds.get(end, ()))
             if carried is not None:
                 signals[".".join((root_name, *node.path, name))] = carried
                 signals.setdefault(".".join((*node.path, name)), carried)
     reading.problems[:] = problems  # a chain only named here (no FMU input at its end) reports nothing new
     return signals
+
+
+def _parameter_feeds(reading: Reading, flow: Flow, bindings: Bindings,
+                     unit_names: dict) -> dict[tuple, tuple[tuple[str, float, float], ...]]:
+    """Per system connector, the FMU variables it sets through parameter connections, each with the chain's
+    factor and offset (unit conversions and LinearTransformations: variable = factor x connector + offset); a
+    variable whose direct binding beats the connector's value is left out (it keeps that binding)."""
+    feeds: dict[tuple, list[tuple[str, float, float]]] = {}
+    nodes = reading.nodes
+    for end in flow.into:
+        node = nodes[end[0]]
+        if node.kind != "component" or node.fmu is None or end in bindings.kept or end[0] not in unit_names:
+            continue
+        variable = variable_of(node, end[1])
+        if variable is None or variable.causality not in ("parameter", "structuralParameter"):
+            continue
+        chain = flow.chain(end)
+        start = chain[0].start
+        if nodes[start[0]].kind != "system":
+            continue
+        factor, offset = flow.compose(chain, flow.unit_of(start))
+        feeds.setdefault(start, []).append((f"{unit_names[end[0]]}.{end[1]}", factor, offset))
+    return {start: tuple(targets) for start, targets in feeds.items()}
 
 
 def connector_units(signals: list[ConnectorSignal]) -> tuple[dict[str, dict], list[dict]]:
@@ -100,6 +127,9 @@ def connector_units(signals: list[ConnectorSignal]) -> tuple[dict[str, dict], li
         unit = units.setdefault(signal.system, {"connectors": signal.system})
         if signal.port is None:
             unit.setdefault("parameters", {})[signal.connector] = signal.value
+            if signal.feeds:  # a value set on the connector (design, --set) sets the parameters it feeds
+                unit.setdefault("feeds", {})[signal.connector] = [
+                    {"to": to, "factor": factor, "offset": offset} for to, factor, offset in signal.feeds]
             continue
         inputs = unit.setdefault("inputs", {})
         if signal.connector in inputs:

@@ -22,7 +22,7 @@ from cosim.system.parts import Assignment, Connection, LoadedUnits, Signal, Syst
 from cosim.system.signals import add_recorded, resolve_signal, split_unit_name
 from cosim.master.loops import Coupling
 from cosim.system.stepping import check_algebraic_loops, feedthrough_coupling, stepping_order
-from cosim.system.study_checks import check_design, check_objective_expressions
+from cosim.system.study_checks import check_design, check_objective_expressions, fed_values
 from cosim.system.warm_start_checks import check_warm_start_design
 from cosim.system.value_checks import SETTABLE_AS_PARAMETER, SETTABLE_AS_START, assignment  # noqa: F401  (their old place)
 from cosim.units.fmu.description import FmuProblems
@@ -74,6 +74,12 @@ class System:
         if result is None:
             raise SpecError(problems)
         return result
+
+    def fed_by(self, target: str, value: Any) -> list[tuple[str, Any]]:
+        """The unit parameters a value set on ``target`` sets too, as ``(target, value)``: an SSP system's
+        parameter connector (a ``connectors`` unit's parameter with ``feeds``) sets the FMU parameters its
+        parameter connections reach, each through its factor and offset; empty for other targets."""
+        return fed_values(self.units, target, value)
 
     def recording(self, texts: Sequence[str]) -> "System":
         """This system, also recording ``texts`` ('unit.port' or 'unit.*' for every output of a unit).

@@ -52,6 +52,34 @@ def converted(value: Any, factor: float, offset: float) -> Any:
     return factor * value + offset
 
 
+def fed_values(units: Any, target: str, value: Any) -> list[tuple[str, Any]]:
+    """The unit parameters a value set on ``target`` ('unit.port') sets too, each as ``(target, value)``: the
+    unit's ``feeds`` for that port (a ``connectors`` unit's parameter connector, whose parameter connections
+    set ``to`` = factor x value + offset); empty for any other target."""
+    unit_name, _, port = split_unit_name(target, units)
+    unit = units.get(unit_name)
+    feeds = ((unit.spec.options.get("feeds") or {}).get(port) or ()) if unit is not None else ()
+    result = []
+    for feed in feeds:
+        factor, offset = float(feed.get("factor", 1.0)), float(feed.get("offset", 0.0))
+        result.append((feed["to"], value if (factor, offset) == (1.0, 0.0) else converted(value, factor, offset)))
+    return result
+
+
+def _check_fed(units: Any, target: str, samples: list[Any], file: str, path: str, problems: list[Problem]) -> None:
+    """Problems of the values the parameters fed by ``target`` get (see :func:`fed_values`)."""
+    for sample in samples:
+        for fed, value in fed_values(units, target, sample):
+            unit_name, _, port = split_unit_name(fed, units, units.failed)
+            if unit_name not in units:
+                if unit_name not in units.failed:
+                    problems.append(Problem(file, path, f"'{target}' feeds '{fed}', a port of no unit",
+                                            f"name units of the spec in the 'feeds' of '{target.rsplit('.', 1)[0]}'"))
+                return
+            if assignment(units[unit_name], port, value, None, problems, file, f"{path} (feeding '{fed}')") is None:
+                return
+
+
 def _design_unit_conversion(p: Any, unit: Any, port: str, file: str, path: str,
                             problems: list[Problem]) -> tuple[float, float] | None:
     """``(factor, offset)`` from a design parameter's ``unit`` to its port's declared unit; None (after adding a
@@ -106,6 +134,8 @@ def check_design(spec: Spec, units: LoadedUnits, problems: list[Problem]) -> dic
         for value in samples:
             if assignment(units[unit_name], port, value, None, problems, spec.path, path) is None:
                 break
+        else:
+            _check_fed(units, p.target, samples, spec.path, path, problems)
         if p.values is None and not p.is_bool:
             # the ends only: whether a range needs a step is the study's (a sweep's grid does, cosim optimize and
             # cosim sensitivity draw from [min, max]); DesignSpace checks it for a sweep, validate --for chooses

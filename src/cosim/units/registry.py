@@ -371,6 +371,14 @@ CONNECTORS = UnitKind("connectors", {
     "inputs": {"type": "object", "additionalProperties": {"type": "string"},
                "description": "connectors only: the connectors fed by a connection, each with its unit of measure "
                               "('' for none)."},
+    "feeds": {"type": "object",
+              "additionalProperties": {"type": "array", "items": {
+                  "type": "object", "required": ["to"], "additionalProperties": False,
+                  "properties": {"to": {"type": "string"}, "factor": {"type": "number"},
+                                 "offset": {"type": "number"}}}},
+              "description": "connectors only: the unit parameters each parameter connector sets (an SSP's "
+                             "parameter connections): a value given to the connector by a design parameter or "
+                             "--set sets each 'to' to factor x value + offset (default 1 and 0)."},
 }, _create_connectors, example='"connectors": "default.sub"',
     description="the connectors of an SSP's system, as signals of their own")
 
