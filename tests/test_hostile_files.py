@@ -55,7 +55,7 @@ def _exact(table, points: int) -> None:
 
 def _cosim(*args: str, timeout: float = 180, **popen) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "cosim.cli.main", *args], capture_output=True, text=True,
-                          env=dict(os.environ, PYTHONPATH=str(REPO)), timeout=timeout, **popen)
+                          env=dict(os.environ, PYTHONPATH=str(REPO / "src")), timeout=timeout, **popen)
 
 
 @contextlib.contextmanager
@@ -141,7 +141,7 @@ def test_ctrl_c_and_kill_print_no_traceback_and_resume_is_exact(tmp_path, how):
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-m", "cosim.cli.main", "sweep", str(spec), "--out", str(out),
                              "--workers", "2", "--batch-size", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=dict(os.environ, PYTHONPATH=str(REPO)), start_new_session=True)
+                            text=True, env=dict(os.environ, PYTHONPATH=str(REPO / "src")), start_new_session=True)
     deadline = time.monotonic() + 120
     while not list((out / "parts").glob("part-*.parquet")) and time.monotonic() < deadline:
         time.sleep(0.2)  # stop it once some rows are written

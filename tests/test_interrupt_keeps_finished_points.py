@@ -111,6 +111,7 @@ def test_sigint_keeps_every_finished_point_and_resume_ends_as_an_uninterrupted_s
     _, err = resumed.communicate(timeout=300)
     assert resumed.returncode == 0, err
     assert not kept & set(_finished(markers)), "a point kept before the stop was computed again"
+    assert not (out / "parts").exists()  # the finished study's rows are all in its table: no parts folder left
     table = pd.read_parquet(out / "results.parquet")
     uninterrupted = _cosim("sweep", str(spec), "--out", str(tmp_path / "whole"), *cluster)
     _, err = uninterrupted.communicate(timeout=300)
@@ -224,6 +225,7 @@ def test_sigint_keeps_every_finished_point_of_an_optimisation_and_resume_ends_as
     resumed = _cosim(*run, "--resume")
     _, err = resumed.communicate(timeout=300)
     assert resumed.returncode == 0, err
+    assert not (out / "parts").exists()
     whole = _cosim("optimize", str(spec), "--out", str(tmp_path / "whole"), "--workers", "2")
     _, err = whole.communicate(timeout=300)
     assert whole.returncode == 0, err

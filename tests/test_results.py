@@ -32,7 +32,7 @@ def test_append_then_read_and_compact_in_order(tmp_path):
     assert list(df["point_id"]) == ["a", "c", "d"]
     assert list(df.columns) == ["point_id", "p.x", "y", "status", "message", "run_time", "worker"]
     assert math.isnan(df.loc[0, "y"]) and df.loc[1, "y"] == 1.0
-    assert not list((tmp_path / "out" / "parts").iterdir())
+    assert not (tmp_path / "out" / "parts").exists()  # the rows are in the table: no part, no parts folder
     assert pd.read_csv(tmp_path / "out" / "results.csv")["point_id"].tolist() == ["a", "c", "d"]
     assert counts_by_status(df) == counts == {"ok": 2, "failed": 1, "timeout": 0, "crashed": 0}
 
@@ -126,7 +126,32 @@ def test_rows_with_the_design_index_are_merged_by_it_in_windows_latest_row_winni
     assert y["id1"] == 99.0 and y["id0"] == 0.0 and y["id9"] == 7.0 and y["id3"] == 2.0
     assert all(math.isnan(y[f"id{i}"]) for i in (4, 5, 6))
     assert counts == {"ok": 7, "failed": 3, "timeout": 0, "crashed": 0}
-    assert not list((tmp_path / "parts").iterdir())
+    assert not (tmp_path / "parts").exists()
+
+
+def test_the_parts_folder_exists_only_while_rows_wait_for_the_final_merge(tmp_path):
+    out = tmp_path / "out"
+    ResultsStore(out)
+    assert out.is_dir() and not (out / "parts").exists()  # a study stopped before its first row leaves none
+    store = ResultsStore(out)
+    store.append(rows(["a", "b"], y=1.0))
+    store.append(rows(["c"], y=2.0))
+    assert sorted(p.name for p in (out / "parts").iterdir()) == ["part-00000000.parquet", "part-00000001.parquet"]
+    reopened = ResultsStore(out)  # an interrupted study, resumed: its parts are read and numbered on
+    assert reopened.done_ids() == {"a", "b", "c"}
+    (out / "parts" / "tmpk3j9x_2q.tmp").write_bytes(b"PAR1")  # a part whose writing a kill -9 cut short
+    reopened.append(rows(["d"], y=3.0))
+    assert (out / "parts" / "part-00000002.parquet").is_file()
+    assert reopened.compact(order=["a", "b", "c", "d"]) == {"ok": 4, "failed": 0, "timeout": 0, "crashed": 0}
+    assert list(reopened.table()["y"]) == [1.0, 1.0, 2.0, 3.0]
+    assert sorted(p.name for p in out.iterdir()) == ["results.parquet"]  # parts/ and the cut-short part gone
+
+    again = ResultsStore(out)  # a finished study resumed: rows go to a new parts folder, merged into the table
+    again.append(rows(["e"], y=4.0))
+    (out / "parts" / "notes.txt").write_text("not cosim's")
+    assert again.compact(order=["a", "b", "c", "d", "e"])["ok"] == 5
+    assert list(again.table()["point_id"]) == ["a", "b", "c", "d", "e"]
+    assert sorted(p.name for p in (out / "parts").iterdir()) == ["notes.txt"]  # someone else's file is kept
 
 
 def test_the_index_merge_and_the_id_merge_give_the_same_table(tmp_path):

@@ -5,7 +5,9 @@ Layout of a results folder ``DIR``:
 - ``DIR/parts/part-NNNNNNNN.parquet``: rows appended during a sweep, one file
   per completed batch.  Each file is written under a temporary name and then
   renamed, so a kill -9 of the client leaves either a whole part or none: at
-  most the points in flight are lost.
+  most the points in flight are lost.  The folder is made with the first part
+  and removed by the final merge (:meth:`ResultsStore.compact`): a finished
+  study has none, a stopped or running one has its rows there.
 - ``DIR/results.parquet``: the compacted table (:meth:`ResultsStore.compact`,
   called at the end of a sweep): every point exactly once (a later row of the
   same point id replaces an earlier one).
@@ -68,6 +70,7 @@ from cosim.results.columns import STATUSES, TAIL_COLUMNS  # noqa: F401  (defined
 from cosim.results.folder import default_folder  # noqa: F401  (its home before it needed no pandas)
 
 _PART = re.compile(r"^part-(\d+)\.parquet$")
+_WRITING = re.compile(r"^tmp\w+\.tmp$")  # a part being written (tempfile.mkstemp's name in parts/), renamed when whole
 COMPACT_WINDOW = 10_000  # rows held at once while merging parts into the final table
 # The point's place in the design order, written by the sweep into part files only (never into results.parquet)
 DESIGN_INDEX = "__design_index"
@@ -90,8 +93,7 @@ class ResultsStore:
         self.table_path = self.folder / "results.parquet"
         self.metadata_path = self.folder / "metadata.json"
         self.folder.mkdir(parents=True, exist_ok=True)
-        self.parts.mkdir(exist_ok=True)
-        self._next = max((int(m.group(1)) for m in map(_PART.match, os.listdir(self.parts)) if m), default=-1) + 1
+        self._next = max((int(_PART.match(p.name).group(1)) for p in self._part_files()), default=-1) + 1
         self._parts_written = 0
         # what made the rows (spec digest, kind, unit and data-file checksums): written into every file of rows
         # by the driver that sets it, read back by row_identities()
@@ -120,6 +122,7 @@ class ResultsStore:
         temporary file, fsync, rename (whole or absent after a kill)."""
         final = self.parts / f"part-{self._next:08d}.parquet"
         self._next += 1
+        self.parts.mkdir(exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=self.parts, suffix=".tmp")
         try:
             with os.fdopen(fd, "wb") as f:
@@ -251,7 +254,23 @@ class ResultsStore:
         return lines
 
     def _part_files(self) -> list[Path]:
+        if not self.parts.is_dir():  # no row written yet, or merged into the table (see compact)
+            return []
         return sorted(p for p in self.parts.iterdir() if _PART.match(p.name))
+
+    def _remove_parts_folder(self) -> None:
+        """Remove ``parts/`` once its rows are in the table: with its part files, the temporary files a
+        killed write left there (whole parts are renamed from them, so they never hold a row of their own).
+        Anything else in it (not cosim's) keeps the folder."""
+        if not self.parts.is_dir():
+            return
+        for path in self.parts.iterdir():
+            if _PART.match(path.name) or _WRITING.match(path.name):
+                path.unlink(missing_ok=True)
+        try:
+            self.parts.rmdir()
+        except OSError:  # not empty: someone else's file
+            pass
 
     def discard_rows(self) -> None:
         """Remove every stored row (table, CSV, parts); the metadata stays."""
@@ -296,7 +315,8 @@ class ResultsStore:
           written; this holds the point ids (about 100 bytes a point).
 
         The parts are removed only after the new table is in place, so an
-        interruption here loses nothing.
+        interruption here loses nothing; then the ``parts/`` folder goes too
+        (a resume makes it again when it writes rows).
         """
         sources = ([self.table_path] if self.table_path.exists() else []) + self._part_files()
         schema = _unified_schema(sources)
@@ -325,8 +345,7 @@ class ResultsStore:
         os.replace(tmp, self.table_path)
         if csv:
             os.replace(csv_tmp, self.folder / "results.csv")
-        for part in self._part_files():
-            part.unlink()
+        self._remove_parts_folder()
         return counts
 
     def table(self, columns: Sequence[str] | None = None) -> pd.DataFrame:
