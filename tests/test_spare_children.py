@@ -125,3 +125,14 @@ def test_a_sweep_refused_after_starting_its_spares_leaves_no_child_and_no_folder
     assert done.returncode == 2, done.stderr
     assert "nowhere.py" in done.stderr and "Traceback" not in done.stderr
     assert not list(temp.glob("cosim_worker_*"))  # the spares' folders: removed with the spares
+
+
+def test_a_spare_whose_parent_ends_before_its_payload_ends_quietly(capfd):
+    """A sweep refused for its spec's problems ends before its spares get a payload: their channel closes,
+    and they end without a traceback on the terminal after the problems (exit 0)."""
+    start_spare_children(1)
+    [spare] = isolation._SPARES
+    capfd.readouterr()
+    spare._outbox.close()  # what the parent's exit does to the child's end of the channel
+    assert spare._proc.wait(timeout=60) == 0
+    assert capfd.readouterr().err == ""

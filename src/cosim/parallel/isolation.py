@@ -286,9 +286,10 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
                 outbox.send(("row", (row, reason)))
                 if reason:
                     return
-    except (BrokenPipeError, ConnectionResetError):
-        # the parent is gone (a kill -9 of the sweep) or stopped listening: nobody waits for this row, and a
-        # traceback here would land on the terminal of a client that no longer runs
+    except (BrokenPipeError, ConnectionResetError, EOFError):
+        # the parent is gone (a kill -9 of the sweep; or it ended before giving a spare child its payload: a
+        # sweep refused for its spec's problems) or stopped listening: nobody waits for this row, and a
+        # traceback here would land on the terminal of a client that no longer runs, after its last line
         return
     finally:
         if grouped is not None:
