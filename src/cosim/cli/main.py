@@ -17,6 +17,7 @@ from typing import Any, Sequence
 
 from cosim.cli.exit_codes import EXIT_INTERNAL, EXIT_OK, EXIT_RUN_FAILED, EXIT_USAGE, exit_code
 from cosim.cli.options import add_experiment_options, experiment_overrides  # noqa: F401  (their old place)
+from cosim.cli.problems import ALL_PROBLEMS, SHOWN, print_problems
 from cosim.cli.spec import cmd_inspect, cmd_run, cmd_validate, parse_assignment  # noqa: F401  (their old place)
 from cosim.errors import DEBUG_VARIABLE, UnitError, UsageError, UserError
 
@@ -65,7 +66,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BaseException as exc:  # noqa: BLE001 - every outcome gets its exit code here, and only here
         if isinstance(exc, SystemExit):
             raise
-        report_error(exc, debug=args.debug)
+        report_error(exc, debug=args.debug, all_problems=args.all_problems)
         return exit_code(exc)
     finally:
         sys.stdout = stdout
@@ -157,11 +158,12 @@ def _discard_stdout() -> None:
     os.close(devnull)
 
 
-def report_error(exc: BaseException, debug: bool = False) -> None:
+def report_error(exc: BaseException, debug: bool = False, all_problems: bool = False) -> None:
     """Print what a user needs to know about ``exc`` on stderr: no traceback for a user's mistake, unless
-    ``debug`` (``cosim --debug``), which prints every error's whole traceback after its message."""
+    ``debug`` (``cosim --debug``), which prints every error's whole traceback after its message.  Many
+    problems are listed as a sample by kind unless ``all_problems`` (see :mod:`cosim.cli.problems`)."""
     if isinstance(exc, UserError):
-        _print_problems(exc.problems)
+        print_problems(exc.problems, every=all_problems)
     elif isinstance(exc, KeyboardInterrupt):
         print("cosim: interrupted", file=sys.stderr)
         return
@@ -174,11 +176,11 @@ def report_error(exc: BaseException, debug: bool = False) -> None:
         traceback.print_exception(exc)
 
 
-GLOBAL_FLAGS = ("--debug", "-q", "--quiet", "-v", "-vv", "--verbose")
+GLOBAL_FLAGS = ("--debug", ALL_PROBLEMS, "-q", "--quiet", "-v", "-vv", "--verbose")
 
 
 def _global_options_first(arguments: list[str]) -> list[str]:
-    """The options of every command (--debug, -q, -v, --log-level LEVEL) moved to the front, so that
+    """The options of every command (--debug, --all-problems, -q, -v, --log-level LEVEL) moved to the front, so that
     ``cosim sweep spec.json -q`` works as well as ``cosim -q sweep spec.json``."""
     front, rest, i = [], [], 0
     while i < len(arguments):
@@ -229,6 +231,9 @@ def _parser() -> argparse.ArgumentParser:
                         help="print every error's whole traceback (also a user's mistake), and keep the whole "
                              "traceback, cosim's frames included, of a Python unit that raised (anywhere on the "
                              "command line)")
+    parser.add_argument(ALL_PROBLEMS, action="store_true",
+                        help=f"list every problem of a spec or file; without it, above {SHOWN} problems a sample "
+                             "by kind is listed, with how many more there are (anywhere on the command line)")
     loudness = parser.add_mutually_exclusive_group()
     loudness.add_argument("-q", "--quiet", action="store_true",
                           help="only errors: no progress line or notes from sweep, optimize and sensitivity, log "
@@ -244,16 +249,6 @@ def _parser() -> argparse.ArgumentParser:
 
     add_examples(sub)
     return parser
-
-
-def _print_problems(problems: Sequence[Any]) -> None:
-    if len(problems) == 1 and not problems[0].file and not problems[0].path:  # a command-line mistake
-        print(f"cosim: error: {problems[0]}", file=sys.stderr)
-        return
-    count = len(problems)
-    print(f"{count} problem{'s' if count != 1 else ''} found:", file=sys.stderr)
-    for problem in problems:
-        print(f"- {problem}", file=sys.stderr)
 
 
 if __name__ == "__main__":  # python -m cosim.cli.main
