@@ -54,6 +54,19 @@ def screenshot(driver, name: str) -> None:
         driver.save_screenshot(str(Path(folder) / f"room-{name}.png"))
 
 
+@pytest.fixture(autouse=True)
+def no_console_errors(request):
+    """Every test that drives the browser ends with no error in chromium's console (an uncaught exception in
+    bokeh's scripts, a failed request): the page may look right and still have failed to draw a view."""
+    if "browser" not in request.fixturenames:
+        yield
+        return
+    driver = request.getfixturevalue("browser")
+    B.console_errors(driver)  # a previous test's, reported there
+    yield
+    assert B.console_errors(driver) == []
+
+
 # -- the studies --------------------------------------------------------------------------------------------------
 
 
@@ -455,6 +468,19 @@ def test_dimensions_matrix_parallel_coordinates_brushing_and_3d(browser, studies
     ca, sa = np.cos(after), np.sin(after)
     assert np.allclose(px, u * ca - v * sa)
 
+    # other columns: the views are built again in the page, the 3-D view still coloured by the colour column
+    in_tab = ("const tab = doc.get_model_by_name('dimensions-tab');"
+              "const find = (m) => m.name === 'scatter3d' ? m : (m.children || []).map(find).find((f) => f);"
+              "const fig = tab.children.map(find).find((f) => f);")
+    before = B.wait_for(browser, in_tab + "return fig.id;")
+    browser.execute_script("Bokeh.documents[0].get_model_by_name('dimensions').value = arguments[0];",
+                           ["ode.x0", "ode.a", "y_end"])
+    fills = B.wait_for(browser, in_tab + f"if (fig.id === {json.dumps(before)}) return null;"
+                       "const v = Bokeh.index.find_one(fig); if (!v || !v.has_finished()) return null;"
+                       "return fig.renderers.map((r) => r.glyph.fill_color).filter((c) => c && c.field !== undefined)"
+                       ".map((c) => [c.field, 'value' in c]);")
+    assert fills == [["c", False]]
+
 
 def test_the_room_of_a_running_sweep_draws_points_as_they_arrive(browser, tmp_path, local_cluster):
     """``sweep(explore=True)`` serves the room of its folder while it runs, linked from the dashboard's Cosim
@@ -512,6 +538,49 @@ def test_the_room_of_a_running_sweep_draws_points_as_they_arrive(browser, tmp_pa
         # the cloud's axes are the design parameter and the objective: y_end = gain (y = gain t at t = 1)
         assert np.allclose(x, by_id.loc[ids, "s.gain"].to_numpy(float))
         assert np.allclose(y, by_id.loc[ids, "y_end"].to_numpy(float)) and np.allclose(y, x)
+
+
+def test_a_page_waiting_for_the_first_rows_becomes_the_room_without_console_errors(browser, studies, tmp_path):
+    """A page opened on a watched folder before its first rows waits, then turns into the room when rows
+    appear (here the sweep's table copied in): the cloud is drawn with its colour map, and chromium's console
+    has no error.  Before the fix, the room's models went to the page while bokeh's property validation was
+    off (a speed-up of the server), which made bokeh send the colour map's field as a constant: the page
+    logged "color is not iterable" and never drew the cloud."""
+    import shutil
+    import time
+
+    from cosim.analysis.room.live import LiveStudy
+    from cosim.analysis.room.server import RoomServer
+
+    folder = tmp_path / "watched"
+    folder.mkdir()
+    server = RoomServer(LiveStudy(folder, every=0.2))
+    try:
+        B.console_errors(browser)  # what the earlier tests left in the log
+        browser.get(server.link)
+        B.wait_for(browser, "return doc !== undefined && doc.get_model_by_name('waiting') !== null;")
+        for name in ("metadata.json", "results.parquet"):
+            shutil.copy(studies["sweep"] / name, folder / name)
+        df = load_results(folder).df
+        errors: list[str] = []
+        drawn = None
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not errors and not drawn:
+            time.sleep(0.1)
+            errors += B.console_errors(browser)
+            drawn = browser.execute_script(  # the count, once the cloud's view is built and drawn
+                "const doc = Bokeh.documents[0], cloud = doc.get_model_by_name('cloud');"
+                "const view = cloud && Bokeh.index.find_one(cloud);"
+                "return view && view.has_finished() ? doc.get_model_by_name('count').text : null;")
+        errors += B.console_errors(browser)
+        assert not errors, errors
+        assert drawn is not None and f"of {len(df)} designs" in drawn and f"live: {len(df)} rows" in drawn
+        assert B.count_true(browser, "show-ok") == int((df["status"] == "ok").sum())
+        fill = browser.execute_script("const c = Bokeh.documents[0].get_model_by_name('cloud-ok').glyph.fill_color;"
+                                      "return [c.field === undefined ? null : c.field, 'value' in c];")
+        assert fill == ["c", False]  # the colour column, not a constant
+    finally:
+        server.stop()
 
 
 def test_an_optimisation_with_explore_serves_its_room_while_it_runs(tmp_path, local_cluster):

@@ -53,10 +53,22 @@ AGGREGATE_ABOVE = 200_000  # rows from which the cloud is an image of bins made 
 class Room:
     """The models and callbacks of one document (module docstring)."""
 
-    @without_property_validation  # the cloud's masks: bokeh would check their n booleans one by one
     def __init__(self, doc: Any, study: D.Study, webgl: bool | None = None, aggregate_above: int | None = None,
                  live: LiveStudy | None = None):
         self.doc, self.study, self.live = doc, study, live
+        self._build(webgl, aggregate_above)
+        # attached to the document only now, with bokeh's property validation back on: a document bound to a page
+        # (a live page turning from waiting into the room) sends new models at once, and bokeh 3.9 encodes a
+        # field with a transform (the colour map's) as a constant while validation is off ("color is not
+        # iterable" in the page, and no cloud)
+        doc.add_root(self.tabs)
+        if live is not None:  # a folder watched while its study runs: new rows are drawn as they arrive
+            doc.add_periodic_callback(self._look, int(live.every * 1000))
+
+    @without_property_validation  # the cloud's masks: bokeh would check their n booleans one by one
+    def _build(self, webgl: bool | None, aggregate_above: int | None) -> None:
+        """The page's models, not yet in the document (see __init__)."""
+        study, doc = self.study, self.doc
         self.decision = Decision(study.table)
         table = study.table
         self.x, self.y, self.colour = study.default_axes(self.decision)
@@ -126,9 +138,6 @@ class Room:
                          [TabPanel(child=column(name=f"tab:{name}"), title=name.capitalize())
                           for name in ("decide", "selection", "study", "dimensions")], name="tabs")
         self.tabs.on_change("active", self._on_tab)
-        doc.add_root(self.tabs)
-        if live is not None:  # a folder watched while its study runs: new rows are drawn as they arrive
-            doc.add_periodic_callback(self._look, int(live.every * 1000))
 
     # -- a running study's new rows -------------------------------------------------------------------------------
     def _look(self) -> None:

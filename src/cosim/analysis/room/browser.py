@@ -90,6 +90,7 @@ def chromium(width: int = 1400, height: int = 1000) -> Any:
         raise RuntimeError("the decision room's browser needs Debian's chromium and chromium-driver packages")
     options = webdriver.ChromeOptions()
     options.binary_location = binary
+    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})  # the page's console, for console_errors
     for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", f"--window-size={width},{height}",
                 "--disable-dev-shm-usage"):
         options.add_argument(arg)
@@ -97,6 +98,12 @@ def chromium(width: int = 1400, height: int = 1000) -> Any:
     browser.set_script_timeout(600)
     browser.set_page_load_timeout(600)
     return browser
+
+
+def console_errors(browser: Any) -> list[str]:
+    """The page's errors in chromium's console since the last call (each read empties the log): uncaught
+    exceptions of bokeh's scripts, ``console.error`` and failed requests, as chromium words them (level SEVERE)."""
+    return [entry["message"] for entry in browser.get_log("browser") if entry["level"] == "SEVERE"]
 
 
 def load(browser: Any, link: str) -> tuple[str, float]:

@@ -105,8 +105,14 @@ class Dimensions:
         b = self.decision.filters.bounds[name]
         return b.lo, b.hi
 
-    @without_property_validation
     def _build(self) -> None:
+        # the views are put in the layout, which is in the page when the columns change, only with bokeh's
+        # property validation back on (see cosim.analysis.room.app.Room.__init__: a field with a transform would
+        # be sent as a constant)
+        self.layout.children = self._views()
+
+    @without_property_validation
+    def _views(self) -> list:
         self.columns = list(self.chooser.value)[:MAX_COLUMNS]
         self.filters = {layer: BooleanFilter(booleans=self.kept if layer == "kept" else ~self.kept,
                                              name=f"dimensions-{layer}") for layer in ("kept", "greyed")}
@@ -117,7 +123,7 @@ class Dimensions:
         if len(self.columns) >= 3:
             parts += [Div(text="<b>3-D scatter</b> (drag in the plot, or the sliders, to turn it)"),
                       self._scatter3d()]
-        self.layout.children = parts
+        return parts
 
     def _matrix(self) -> Any:
         self.matrix_source = ColumnDataSource({f"c{k}": self._values(c) for k, c in enumerate(self.columns)},

@@ -118,6 +118,24 @@ def quiet_room_logs() -> None:
         ws.addFilter(_QUIET)
 
 
+def serve_without_mathjax(server: Any) -> None:
+    """Leave bokeh's MathJax bundle out of the pages ``server`` (a bokeh Server) serves.
+
+    bokeh's server page loads every bundle, not knowing what the page will hold: MathJax is 1.8 MB of the
+    3.9 MB of JavaScript, parsed at each load, for TeX the room never typesets (its texts are plain; the
+    labels are column names).  bokeh has no option for it (bokeh/embed/server.py asks for every component
+    when it makes the page), so the server's resources are replaced by the same without that component.
+    """
+    tornado = server._tornado  # bokeh 3.4 to 3.9: the BokehTornado whose resources() the page handler asks
+    resources = tornado.resources
+
+    def lighter(absolute_url: Any = None) -> Any:
+        full = resources(absolute_url)
+        return full.clone(components=[c for c in full.components if c != "bokeh-mathjax"])
+
+    tornado.resources = lighter
+
+
 def make_server(study: Study | LiveStudy, host: str = LOOPBACK, port: int = 0, token: str | None = None,
                 webgl: bool | None = None, io_loop: Any = None, aggregate_above: int | None = None
                 ) -> tuple[Any, str]:
@@ -156,6 +174,7 @@ def make_server(study: Study | LiveStudy, host: str = LOOPBACK, port: int = 0, t
                 continue  # another program took the free port meanwhile
             raise AnalysisError(f"cosim explore: cannot serve at {host}:{chosen}: {exc.strerror or exc}; choose "
                                 "another --port (0 takes a free one)") from None
+    serve_without_mathjax(server)
     link = f"http://{link_host(host)}:{server.port}/" + (f"?token={token}" if token else "")
     return server, link
 

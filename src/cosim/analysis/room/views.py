@@ -248,4 +248,6 @@ def button(label: str, name: str, kind: str = "default") -> Button:
 
 
 def text(html: str, name: str, width: int = WIDTH) -> Div:
-    return Div(text=html, name=name, width=width)
+    """A block of HTML.  Never typeset as TeX: a ``$$`` in a message or a column name stays as it is (the page
+    is served without bokeh's MathJax, :func:`cosim.analysis.room.server.serve_without_mathjax`)."""
+    return Div(text=html, name=name, width=width, disable_math=True)
