@@ -277,3 +277,27 @@ def test_explore_without_a_display_is_a_usage_error(tmp_path):
     done = subprocess.run([sys.executable, "-m", "cosim.cli.main", "explore", str(path), "--tk"], env=env,
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 2 and "cannot open a window" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_the_trace_window_of_a_rerun_with_event_rows_draws_each_bounce_as_a_step(xvfb, tmp_path):
+    # record_events: the bouncing ball's re-run has two rows at each bounce's time (tests/test_event_trace_viewers)
+    import tkinter as tk
+
+    from cosim.analysis.explorer import ExplorerWindow
+
+    from .test_event_trace_viewers import HEIGHTS, assert_steps, ball_study
+
+    table = load_results(ball_study(tmp_path / "ball"))
+    root = tk.Tk()
+    try:
+        window = ExplorerWindow(root, ExplorerState(table))
+        pump(root, timeout=0.5)
+        window.state.select(1)
+        window.rerun_button.invoke()
+        assert pump(root, lambda: bool(window.trace_windows), timeout=120), window.status.cget("text")
+        win = window.trace_windows[0]
+        assert "h2" in win.title() and "ok" in win.title()  # dropped from 2 m
+        [v] = [line for ax in win.figure.axes for line in ax.get_lines() if line.get_label() == "v"]
+        assert_steps(np.asarray(v.get_xdata()), np.asarray(v.get_ydata()), HEIGHTS[1])
+    finally:
+        root.destroy()

@@ -107,3 +107,27 @@ def test_the_engine_shows_robot_signals_only_through_the_viewer_plug_in(robot_ru
             if isinstance(node, (ast.Import, ast.ImportFrom)):
                 names = [a.name for a in node.names] if isinstance(node, ast.Import) else [node.module or ""]
                 assert not any(n.split(".")[:1] == ["models"] or n.startswith("cosim.models") for n in names), path
+
+
+def test_arm_animation_frames_are_evenly_spaced_in_time_when_event_rows_repeat_a_time(robot_run):
+    # event rows ("record_events") repeat a time: a burst of 300 rows at one time early in the run must not take
+    # the animation's frames (frames by row number showed that instant 6 times out of 10)
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    traces = robot_run[0].traces
+    at = len(traces) // 10
+    with_events = pd.concat([traces.iloc[:at], traces.iloc[[at] * 300], traces.iloc[at:]], ignore_index=True)
+    times = with_events["time"].to_numpy()
+    duration = times[-1] - times[0]
+    fig = matplotlib.figure.Figure()
+    FigureCanvasAgg(fig)
+    anim = arm_animation(fig, with_events, frames=10)
+    shown = []
+    for k in range(10):
+        anim._func(k)
+        shown.append(float(fig.axes[0].get_title().split()[2]))
+    step = float(np.max(np.diff(traces["time"].to_numpy())))
+    expected = np.linspace(times[0], times[-1], 10)
+    # each frame at the last row at or before its time: within one communication step of it (and its title's 0.01)
+    assert np.all(np.abs(np.array(shown) - expected) <= step + 0.005), (shown, expected)
+    assert shown.count(round(float(times[at]), 2)) <= 1 and duration > 1.0

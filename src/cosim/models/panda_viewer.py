@@ -62,8 +62,21 @@ def arm_points(q: np.ndarray) -> np.ndarray:
     return out
 
 
+def frame_rows(times: np.ndarray, frames: int) -> np.ndarray:
+    """The rows shown as ``frames`` frames evenly spaced in time from the first row to the last: per frame the
+    last row at or before its time (after an event at that time; times never decrease), each row once."""
+    if len(times) == 0:
+        return np.zeros(0, dtype=int)
+    at = np.linspace(times[0], times[-1], max(frames, 1))
+    rows = np.searchsorted(times, at, side="right") - 1
+    rows[-1] = len(times) - 1
+    return np.unique(np.clip(rows, 0, len(times) - 1))
+
+
 def arm_animation(fig: Any, traces: Any, frames: int = 60) -> Any:
-    """A FuncAnimation of the arm over the run (``frames`` evenly spaced samples); None without q[1..7].
+    """A FuncAnimation of the arm over the run (``frames`` samples evenly spaced in time: at each frame's time the
+    last row at or before it, so that a run with event rows, which repeat a time, is not slowed down where its
+    events crowd); None without q[1..7].
 
     Keep a reference to the returned animation, or it stops.
     """
@@ -72,7 +85,8 @@ def arm_animation(fig: Any, traces: Any, frames: int = 60) -> Any:
     q_cols = joint_columns(traces, "q")
     if not q_cols:
         return None
-    idx = np.unique(np.linspace(0, len(traces) - 1, frames).round().astype(int))
+    idx = frame_rows(traces["time"].to_numpy(dtype=float) if "time" in traces.columns else
+                     np.arange(len(traces), dtype=float), frames)
     pts = arm_points(traces[q_cols].to_numpy(dtype=float)[idx])
     times = traces["time"].to_numpy()[idx] if "time" in traces.columns else idx
     fig.clear()
