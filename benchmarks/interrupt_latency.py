@@ -11,6 +11,12 @@ before the signal (the log) with the rows kept in the results folder's part file
 those not ok: a point the stop cut short must get no row).
 
 Target (issue 29): exit within about 2 s of the signal whatever P, every point finished before it kept.
+
+    python benchmarks/interrupt_latency.py --cluster subprocess --seconds 0.3
+
+runs the sweep on a cluster file's SubprocessCluster of 2 workers instead (``--cluster local``: a LocalCluster
+file) and stops it as a terminal's Ctrl-C does, SIGINT to its whole process group (the cluster's processes
+get it too); the time is then until the client exits, and "group gone" until no process of the group is left.
 """
 
 from __future__ import annotations
@@ -43,7 +49,27 @@ class Slow(PythonUnit):
 """
 
 
-def run_case(folder: Path, pause: float) -> dict:
+CLUSTER_FILES = {
+    "subprocess": {"type": "distributed.deploy.subprocess.SubprocessCluster",
+                   "kwargs": {"n_workers": 2, "worker_kwargs": {"nthreads": 1}, "dashboard_address": "127.0.0.1:0"}},
+    "local": {"type": "distributed.LocalCluster",
+              "kwargs": {"n_workers": 2, "threads_per_worker": 1, "dashboard_address": "127.0.0.1:0"}},
+}
+
+
+def _group_alive(group: int) -> bool:
+    import psutil
+
+    for process in psutil.process_iter(["status"]):
+        try:
+            if os.getpgid(process.pid) == group and process.info["status"] != psutil.STATUS_ZOMBIE:
+                return True
+        except (ProcessLookupError, psutil.Error):
+            pass
+    return False
+
+
+def run_case(folder: Path, pause: float, cluster: str | None = None) -> dict:
     points = max(8, int(40 / max(pause, 0.3)))
     log = folder / "finished.log"
     (folder / "slow.py").write_text(UNIT.replace("LOG", repr(str(log))))
@@ -52,9 +78,14 @@ def run_case(folder: Path, pause: float) -> dict:
             "design": {"parameters": {"s.k": {"min": 1, "max": points, "step": 1}}}}
     (folder / "spec.json").write_text(json.dumps(spec))
     out = folder / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "cosim.cli.main", "sweep", str(folder / "spec.json"), "--out",
-                             str(out), "--workers", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=dict(os.environ, PYTHONPATH=str(REPO / "src")), start_new_session=True)
+    where = ["--workers", "2"]
+    if cluster is not None:
+        (folder / "cluster.json").write_text(json.dumps(CLUSTER_FILES[cluster]))
+        where = ["--cluster", str(folder / "cluster.json")]
+    with open(folder / "stderr.txt", "w") as stderr:  # a file: a pipe would wait for every process holding it
+        proc = subprocess.Popen([sys.executable, "-m", "cosim.cli.main", "sweep", str(folder / "spec.json"), "--out",
+                                 str(out), *where], stdout=subprocess.DEVNULL, stderr=stderr, text=True,
+                                env=dict(os.environ, PYTHONPATH=str(REPO / "src")), start_new_session=True)
     started = time.monotonic()
     wait = 2.5 * pause if pause >= 1 else None
     while True:
@@ -64,9 +95,17 @@ def run_case(folder: Path, pause: float) -> dict:
             break
         time.sleep(0.05)
     signalled = time.time()
-    os.kill(proc.pid, signal.SIGTERM)
-    _, err = proc.communicate(timeout=600)
+    if cluster is None:
+        os.kill(proc.pid, signal.SIGTERM)
+    else:  # Ctrl-C: the cluster's processes on this machine get it too
+        os.killpg(proc.pid, signal.SIGINT)
+    proc.wait(timeout=600)
     latency = time.time() - signalled
+    while _group_alive(proc.pid) and time.time() - signalled < 60:
+        time.sleep(0.05)
+    group_gone = time.time() - signalled
+    time.sleep(1.0)  # what the group's last processes print
+    err = (folder / "stderr.txt").read_text()
     finished = {float(line.split()[0]) for line in log.read_text().split("\n") if line.strip()
                 and float(line.split()[1]) <= signalled}
     import pandas as pd
@@ -79,7 +118,8 @@ def run_case(folder: Path, pause: float) -> dict:
         subprocess.run(["pkill", "-s", str(proc.pid)], check=False)  # only this sweep's own session
     except OSError:
         pass
-    return {"pause": pause, "exit_code": proc.returncode, "latency": latency, "finished": len(finished),
+    return {"pause": pause, "exit_code": proc.returncode, "latency": latency, "group_gone": group_gone,
+            "last_line": (err.strip().splitlines() or [""])[-1], "finished": len(finished),
             "kept": len(kept & finished), "kept_rows": len(kept), "not_ok": not_ok, "traceback": "Traceback" in err,
             "broken_pipe": "BrokenPipe" in err}
 
@@ -87,16 +127,19 @@ def run_case(folder: Path, pause: float) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--seconds", default="0.3,5,60")
-    pauses = [float(s) for s in parser.parse_args().seconds.split(",")]
+    parser.add_argument("--cluster", choices=sorted(CLUSTER_FILES), help="a cluster file's cluster, stopped by Ctrl-C")
+    args = parser.parse_args()
+    pauses = [float(s) for s in args.seconds.split(",")]
     print(time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()), "load", open("/proc/loadavg").read().split()[:3])
-    print("| point time | exit code | signal to exit | points finished before the signal | of them kept | "
-          "rows kept | rows not ok | traceback | BrokenPipe |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("| point time | exit code | signal to exit | group gone | points finished before the signal | of them kept | "
+          "rows kept | rows not ok | traceback | BrokenPipe | last line |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for pause in pauses:
         with tempfile.TemporaryDirectory() as tmp:
-            r = run_case(Path(tmp), pause)
-        print(f"| {pause:g} s | {r['exit_code']} | {r['latency']:.1f} s | {r['finished']} | {r['kept']} | {r['kept_rows']} | "
-              f"{r['not_ok']} | {'yes' if r['traceback'] else 'no'} | {'yes' if r['broken_pipe'] else 'no'} |", flush=True)
+            r = run_case(Path(tmp), pause, args.cluster)
+        print(f"| {pause:g} s | {r['exit_code']} | {r['latency']:.1f} s | {r['group_gone']:.1f} s | {r['finished']} | "
+              f"{r['kept']} | {r['kept_rows']} | {r['not_ok']} | {'yes' if r['traceback'] else 'no'} | "
+              f"{'yes' if r['broken_pipe'] else 'no'} | `{r['last_line'][:50]}` |", flush=True)
     print(time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()), "load", open("/proc/loadavg").read().split()[:3])
 
 

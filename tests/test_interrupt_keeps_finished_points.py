@@ -1,8 +1,8 @@
 """A stopped study keeps every point that finished before the stop (issue 29 item 3): rows stream back per point.
 
 Before: rows came back per batch, so a Ctrl-C kept only the rows of whole batches (17 of 34 finished points with
-0.3 s points). Here a real `cosim sweep` (its own local cluster, or workers in other processes behind
---scheduler) of a Python unit that sleeps 0.3 s per point and then leaves a marker file per finished point (the
+0.3 s points). Here a real `cosim sweep` (its own local cluster, workers in other processes behind
+--scheduler, or a cluster file's SubprocessCluster, whose `dask spec` processes get the Ctrl-C too) of a Python unit that sleeps 0.3 s per point and then leaves a marker file per finished point (the
 independent record) gets SIGINT from its terminal's process group (as Ctrl-C sends it) once N points finished.
 Every marker older than the signal must have its row, no row may be made up by the stop (a killed point as
 crashed, a point not run as failed), the client must be gone within a few seconds, and --resume must end with
@@ -74,13 +74,19 @@ def _rows(out: Path) -> pd.DataFrame:
     return pd.concat([pd.read_parquet(p) for p in parts]) if parts else pd.DataFrame({"s.k": [], "status": []})
 
 
-@pytest.mark.parametrize("where", ["own local cluster", "scheduler in other processes"])
+SUBPROCESS_CLUSTER = {"type": "distributed.deploy.subprocess.SubprocessCluster",
+                      "kwargs": {"n_workers": 2, "worker_kwargs": {"nthreads": 1}, "dashboard_address": "127.0.0.1:0"}}
+
+
+@pytest.mark.parametrize("where", ["own local cluster", "scheduler in other processes", "SubprocessCluster file"])
 def test_sigint_keeps_every_finished_point_and_resume_ends_as_an_uninterrupted_sweep(tmp_path, where,
                                                                                      local_cluster):
     markers = tmp_path / "markers"
     spec = _study(tmp_path / "study", markers)
     out = tmp_path / "out"
-    cluster = ["--workers", "2"] if where == "own local cluster" else ["--scheduler", local_cluster]
+    cluster = {"own local cluster": ["--workers", "2"], "scheduler in other processes": ["--scheduler", local_cluster],
+               "SubprocessCluster file": ["--cluster", str(tmp_path / "cluster.json")]}[where]
+    (tmp_path / "cluster.json").write_text(json.dumps(SUBPROCESS_CLUSTER))
     sweep = ["sweep", str(spec), "--out", str(out), *cluster]
     proc = _cosim(*sweep)
     deadline = time.monotonic() + 180

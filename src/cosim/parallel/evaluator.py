@@ -223,9 +223,9 @@ def _close(client: Any, cluster: Any, stopped: bool) -> None:
 
     settings = {"distributed.comm.timeouts.connect": CLOSE_AFTER_STOP_CONNECT} if stopped else {}
     with dask.config.set(settings):
-        gone = stopped and scheduler_gone(client)
+        at_once = stopped and cluster is not None and (scheduler_gone(client) or _scheduler_in_own_process(cluster))
         client.close()
-        if cluster is not None and gone and _end_processes(cluster):
+        if at_once and _end_processes(cluster):
             # Dask's exit hook would try the orderly close, through the scheduler that is gone, for 10 s
             cluster.shutdown_on_close = False
         elif cluster is not None:
@@ -236,17 +236,27 @@ def _close(client: Any, cluster: Any, stopped: bool) -> None:
                 cluster.shutdown_on_close = False
 
 
-def _end_processes(cluster: Any) -> bool:
-    """End the processes of ``cluster`` whose scheduler the stop signal already ended; False if it is no SpecCluster.
+def _scheduler_in_own_process(cluster: Any) -> bool:
+    """Whether ``cluster`` is a SpecCluster whose scheduler runs in a process of its own (a SubprocessCluster's
+    ``dask spec``), not in this one (LocalCluster, dask-jobqueue's clusters)."""
+    from distributed import Scheduler, SpecCluster
 
-    An orderly close (``cluster.close()``) retires the workers through the
+    return isinstance(cluster, SpecCluster) and not isinstance(getattr(cluster, "scheduler", None), Scheduler)
+
+
+def _end_processes(cluster: Any) -> bool:
+    """After a stop, end the processes of ``cluster`` at once; False if it is no SpecCluster (nothing done).
+
+    For a cluster whose scheduler the stop signal ended, or whose scheduler
+    runs in a process of its own (:func:`_scheduler_in_own_process`).  An
+    orderly close (``cluster.close()``) retires the workers through the
     scheduler: with the scheduler gone it waited a connect timeout per attempt,
-    and the workers' nannies, which closed themselves on the same Ctrl-C,
-    went on for 2-4 s more and logged their closing on the terminal after
-    cosim's last line.  A SpecCluster (SubprocessCluster, dask-jobqueue's
-    clusters) ends each of its processes itself (a SubprocessCluster's:
-    SIGKILL to the process and its children).  Only unfinished points die with
-    them: the rows of the finished ones were collected before (PointStream).
+    and the workers' nannies went on for 2-4 s more and logged their closing
+    on the terminal after cosim's last line; with the scheduler there, the
+    nannies still log their closing.  A SpecCluster ends each of its processes
+    itself (a SubprocessCluster's: SIGKILL to the process and its children).
+    Only unfinished points die with them: the rows of the finished ones were
+    collected before (PointStream).
     """
     import asyncio
 

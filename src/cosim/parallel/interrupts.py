@@ -9,11 +9,14 @@ the rows written so far and says ``cosim: interrupted``):
 - :func:`stop_cleanly_on_signals` (called by ``cosim``'s ``main``) turns
   SIGINT, SIGTERM and SIGHUP into KeyboardInterrupt in the client and, once a stop has
   begun, hushes what Dask logs while its half-stopped workers go down.
-- :func:`dask_setup` is a Dask *preload*: every worker process a cluster
-  file starts here runs it at start-up and ignores SIGINT from then on, so it neither
-  prints a traceback nor dies before the client closes it.  The worker
-  process ignores it itself; nothing it does not own (the nanny, the client's
-  own handler while workers are restarted after a loss) is changed.
+- :func:`dask_setup` is a Dask *preload*: every scheduler, nanny and worker
+  process a cluster file starts here runs it at start-up and ignores SIGINT
+  from then on, so it neither prints a traceback nor closes itself (a
+  SubprocessCluster's ``dask spec`` processes install their own SIGINT
+  handler, which closed them, their scheduler first, so that rows still on
+  their way to the client were lost) before the client closes it.  Each
+  process ignores it itself; nothing it does not own (the client's own handler
+  while workers are restarted after a loss) is changed.
 - :func:`processes_started_here_ignore_ctrl_c` does the same for the
   processes a cluster file's class starts on this machine.
 - Point children (:mod:`cosim.parallel.isolation`) ignore SIGINT themselves.
@@ -30,7 +33,12 @@ import threading
 from contextlib import contextmanager
 from typing import Any, Iterator
 
-WORKER_PRELOAD = __name__  # the module name given to Dask's ``preload`` for the workers cosim starts
+WORKER_PRELOAD = __name__  # the module name given to Dask's ``preload`` for the processes cosim starts
+# Dask's preload settings, as the environment variables through which processes started here read them: a
+# `dask spec` process (SubprocessCluster) reads its configuration from its environment, not from this process
+PRELOAD_VARIABLES = {"distributed.scheduler.preload": "DASK_DISTRIBUTED__SCHEDULER__PRELOAD",
+                     "distributed.nanny.preload": "DASK_DISTRIBUTED__NANNY__PRELOAD",
+                     "distributed.worker.preload": "DASK_DISTRIBUTED__WORKER__PRELOAD"}
 
 
 def stop_cleanly_on_signals() -> dict[int, Any]:
@@ -92,28 +100,51 @@ def processes_started_here_ignore_ctrl_c() -> Iterator[None]:
     while the block runs, so processes started meanwhile inherit that (an
     ignored signal stays ignored across exec, and Python then keeps it so),
     and workers a nanny starts later get the :func:`dask_setup` preload
-    through Dask's ``distributed.worker.preload`` setting.  A Ctrl-C while the
-    block runs is lost (cluster classes start quickly; their jobs start
-    later).  Outside the main thread only the preload is set.
+    through Dask's ``distributed.worker.preload`` setting.  Processes that set
+    their own SIGINT handler (``dask spec``) get the preload through their
+    environment (:data:`PRELOAD_VARIABLES`, set while the block runs), which
+    ignores SIGINT again once they have started.  A Ctrl-C while the block
+    runs is lost (cluster classes start quickly; their jobs start later).
+    Outside the main thread only the preload is set.
     """
+    import os
+
     import dask
 
-    preloads = [*dask.config.get("distributed.worker.preload", []), WORKER_PRELOAD]
+    preloads = [*_preloads("distributed.worker.preload"), WORKER_PRELOAD]
+    environment = {variable: os.environ.get(variable) for variable in PRELOAD_VARIABLES.values()}
     main = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
     try:
+        for key, variable in PRELOAD_VARIABLES.items():
+            os.environ[variable] = repr([*_preloads(key), WORKER_PRELOAD])  # Dask reads it as a Python literal
         with dask.config.set({"distributed.worker.preload": preloads}):
             yield
     finally:
+        for variable, value in environment.items():
+            if value is None:
+                os.environ.pop(variable, None)
+            else:
+                os.environ[variable] = value
         if main:
             signal.signal(signal.SIGINT, previous)
 
 
-def dask_setup(worker: Any) -> None:
-    """Dask preload hook, run in each worker process at start-up: ignore Ctrl-C (the client handles it).
+def _preloads(key: str) -> list[str]:
+    """The preload modules Dask's setting ``key`` names (a name or a list), cosim's own left out."""
+    import dask
 
-    A worker process runs its event loop, and so this hook, in its main
+    value = dask.config.get(key, None) or []
+    return [name for name in ([value] if isinstance(value, str) else list(value)) if name != WORKER_PRELOAD]
+
+
+def dask_setup(server: Any) -> None:
+    """Dask preload hook, run in each scheduler, nanny and worker process cosim starts here, at start-up:
+    ignore Ctrl-C (the client handles it).
+
+    Such a process runs its event loop, and so this hook, in its main
     thread, where a signal handler may be set; elsewhere it does nothing.
+    It runs after ``dask spec`` installed its own handler, and replaces it.
     """
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
