@@ -182,6 +182,9 @@ def exercise(driver, link: str, folder: Path, filter_column: str, name: str) -> 
                   "const ringed = Array.from(doc.get_model_by_name('show-selected').booleans).filter(Boolean).length; "
                   "return s.length && ringed === s.length ? Array.from(s) : null;")
     assert row in selected
+    # the hover names the design of the row it is over (the ids go to the page as one text)
+    assert driver.execute_script("return Bokeh.documents[0].get_model_by_name('cloud-ids')"
+                                  ".format(arguments[0], 'id', {index: arguments[0]});", row) == first
 
     # the ranking reorders when a weight changes: the first objective's weight to 0 ranks by the others only
     objectives = driver.execute_script(
@@ -493,11 +496,12 @@ def test_the_room_of_a_running_sweep_draws_points_as_they_arrive(browser, tmp_pa
 
     import cosim
 
+    ROWS = 24  # enough for the page to show the table growing on a loaded machine (it draws each new table)
     spec = write(tmp_path / "live", {
         "name": "sleepy", "units": {"s": {"python": python_unit("Sleeper"), "parameters": {"delay": 0.15}}},
         "experiment": {"stop": 1.0, "step": 0.1},
         "objectives": {"y_end": {"signal": "s.y", "reduce": "final", "sense": "maximize"}},
-        "design": {"parameters": {"s.gain": {"values": [float(g) for g in range(1, 13)]}}}})
+        "design": {"parameters": {"s.gain": {"values": [float(g) for g in range(1, 1 + ROWS)]}}}})
     out = tmp_path / "live" / "out"
     said = io.StringIO()
     done: dict = {}
@@ -513,7 +517,7 @@ def test_the_room_of_a_running_sweep_draws_points_as_they_arrive(browser, tmp_pa
     browser.get(link)
     seen = []
     look = ("const d = Bokeh.documents[0], s = d.get_model_by_name('cloud-source');"
-            "return s ? [d.get_model_by_name('count').text, Array.from(s.data.point_id), Array.from(s.data.x),"
+            f"return s ? [d.get_model_by_name('count').text, ({B.CLOUD_IDS})(d), Array.from(s.data.x),"
             " Array.from(s.data.y)] : null;")
     while thread.is_alive():
         try:  # a state the page shows for a while: the server's changes of one update arrive one by one
@@ -526,15 +530,15 @@ def test_the_room_of_a_running_sweep_draws_points_as_they_arrive(browser, tmp_pa
         time.sleep(0.2)
     thread.join()
     final = load_results(out).df
-    assert len(final) == 12 and (final["status"] == "ok").all()
+    assert len(final) == ROWS and (final["status"] == "ok").all()
     by_id = final.set_index("point_id")
     shown = [s for s in seen if s is not None]
     sizes = [len(ids) for _, ids, _, _ in shown]
-    assert any(0 < k < 12 for k in sizes) and len(set(sizes)) >= 2, sizes  # it grew while the page was open
+    assert any(0 < k < ROWS for k in sizes) and len(set(sizes)) >= 2, sizes  # it grew while the page was open
     assert sizes == sorted(sizes)
     for text, ids, x, y in shown:
         assert f"live: {len(ids)} rows ({len(ids)} ok)" in text
-        assert "the study is running" in text or len(ids) == 12
+        assert "the study is running" in text or len(ids) == ROWS
         # the cloud's axes are the design parameter and the objective: y_end = gain (y = gain t at t = 1)
         assert np.allclose(x, by_id.loc[ids, "s.gain"].to_numpy(float))
         assert np.allclose(y, by_id.loc[ids, "y_end"].to_numpy(float)) and np.allclose(y, x)

@@ -54,6 +54,9 @@ const f = new Function('doc', js);
 """
 
 COUNT_TEXT = "return doc.get_model_by_name('count').text;"
+# a JS function of the document: the cloud's design ids in row order (the hover's text of them, views.hover_ids)
+CLOUD_IDS = ("(doc) => { const a = doc.get_model_by_name('cloud-ids').args; "
+             "const ids = a instanceof Map ? a.get('ids') : a.ids; return ids === '' ? [] : ids.split('\\n'); }")
 RANKING_SCORES = "const s = doc.get_model_by_name('ranking').source.data.score; return s.length ? s.join() : null;"
 RANKING_IDS = "const ids = doc.get_model_by_name('ranking').source.data.point_id; return ids.length ? ids.join() : null;"
 

@@ -38,7 +38,7 @@ class PointCloud:
         self.x, self.y, self.colour = axes
         self.size: str | None = None
         label = study.table.label
-        self.parts = V.cloud(D.points(study, decision, self.x, self.y, self.colour, None),
+        self.parts = V.cloud(D.points(study, decision, self.x, self.y, self.colour, None), D.ids_text(study),
                              D.status_palette(study.status), label(self.x), label(self.y),
                              label(self.colour) if self.colour else None, webgl)
         self.figure = self.parts["figure"]
@@ -77,6 +77,7 @@ class PointCloud:
         self.study, self.decision = study, decision
         self.parts["source"].selected.indices = []  # row positions of the old table; the app re-selects by id
         self.parts["source"].data = D.points(study, decision, self.x, self.y, self.colour, self.size)
+        self.parts["ids"].args = {"ids": D.ids_text(study)}
         factors, colours = D.status_palette(study.status)
         self.parts["status_mapper"].update(factors=factors or ["failed"], palette=colours or [V.GREY])
         if self.colour:

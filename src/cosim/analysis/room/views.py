@@ -12,8 +12,8 @@ from typing import Any, Sequence
 
 import numpy as np
 from bokeh.models import (BooleanFilter, Button, CategoricalColorMapper, CDSView, ColorBar, ColumnDataSource,
-                          DataTable, Div, HoverTool, LinearColorMapper, NumberFormatter, Range1d, RangeSlider, Select,
-                          Slider, TableColumn, Whisker)
+                          CustomJSHover, DataTable, Div, HoverTool, LinearColorMapper, NumberFormatter, Range1d,
+                          RangeSlider, Select, Slider, TableColumn, Whisker)
 from bokeh.palettes import Category10_10, Viridis256
 from bokeh.plotting import figure
 
@@ -27,11 +27,13 @@ NONE = "(none)"
 WIDTH = 760
 
 
-def cloud(data: dict[str, Any], statuses: tuple[list[str], list[str]], x_label: str, y_label: str,
+def cloud(data: dict[str, Any], ids: str, statuses: tuple[list[str], list[str]], x_label: str, y_label: str,
           colour_label: str | None, webgl: bool) -> dict[str, Any]:
     """The point cloud: greyed (filtered out), ok rows by the colour map, other statuses in their colour, the
-    Pareto front ringed, the selection ringed in red.  Returns the figure and the models the app updates."""
+    Pareto front ringed, the selection ringed in red; the hover names a point's design from ``ids`` (one per
+    line, :func:`.data.ids_text`; ``cloud-ids``).  Returns the figure and the models the app updates."""
     source = ColumnDataSource(data, name="cloud-source")
+    design = hover_ids(ids)
     n = len(data["x"])
     filters = {layer: BooleanFilter(booleans=np.zeros(n, dtype=bool), name=f"show-{layer}")
                for layer in ("greyed", "ok", "not_ok", "front", "selected")}
@@ -57,14 +59,19 @@ def cloud(data: dict[str, Any], statuses: tuple[list[str], list[str]], x_label: 
                 **same)
     fig.legend.location = "top_right"
     fig.legend.click_policy = "hide"
-    fig.add_tools(HoverTool(renderers=[ok], tooltips=[("design", "@point_id"), ("x", "@x"), ("y", "@y"),
-                                                        ("colour", "@c")]))
+    fig.add_tools(HoverTool(renderers=[ok], tooltips=[("design", "$index{id}"), ("x", "@x"), ("y", "@y"),
+                                                        ("colour", "@c")], formatters={"$index": design}))
     fig.add_tools(HoverTool(renderers=[r for r in fig.renderers if r.name == "cloud-not-ok"],
-                            tooltips=[("design", "@point_id"), ("status", "@status")]))
+                            tooltips=[("design", "$index{id}"), ("status", "@status")], formatters={"$index": design}))
     bar = ColorBar(color_mapper=mapper, title=colour_label or "", width=10)
     fig.add_layout(bar, "right")
     return {"figure": fig, "source": source, "filters": filters, "mapper": mapper, "colour_bar": bar,
-            "status_mapper": by_status}
+            "status_mapper": by_status, "ids": design}
+
+
+def hover_ids(ids: str) -> CustomJSHover:
+    """A hover formatter of a row (``$index{id}``, the row in the source) giving its design's id from ``ids``."""
+    return CustomJSHover(name="cloud-ids", args={"ids": ids}, code="return ids.split('\\n')[value] ?? '';")
 
 
 def cloud_image(x_range: tuple[float, float], y_range: tuple[float, float], x_label: str, y_label: str,
