@@ -25,6 +25,10 @@ def test_explore_serves_the_room_on_loopback_and_prints_its_link(tmp_path, write
         assert "token" not in link
         page = urllib.request.urlopen(link, timeout=60).read().decode()
         assert "<title>cosim: decay</title>" in page
+        # bokeh's bundles but MathJax's (1.8 MB of JavaScript for TeX the room never typesets)
+        scripts = [name for name in ("bokeh.min.js", "bokeh-gl.min.js", "bokeh-widgets.min.js", "bokeh-tables.min.js",
+                                     "bokeh-mathjax.min.js") if f"/static/js/{name}?" in page]
+        assert scripts == ["bokeh.min.js", "bokeh-gl.min.js", "bokeh-widgets.min.js", "bokeh-tables.min.js"]
     finally:
         os.killpg(proc.pid, signal.SIGINT)
         try:
