@@ -131,3 +131,53 @@ def test_arm_animation_frames_are_evenly_spaced_in_time_when_event_rows_repeat_a
     # each frame at the last row at or before its time: within one communication step of it (and its title's 0.01)
     assert np.all(np.abs(np.array(shown) - expected) <= step + 0.005), (shown, expected)
     assert shown.count(round(float(times[at]), 2)) <= 1 and duration > 1.0
+
+
+def test_link_frames_of_the_arm_are_its_forward_kinematics_at_every_sample(robot_run):
+    """The viewer's frames for the browser: base, joints and tool at each sample, one chain, the tool's path."""
+    from cosim.models.panda_viewer import VIEWER
+
+    traces = robot_run[0].traces
+    frames = VIEWER.link_frames(traces.iloc[::10])
+    q = traces[[f"robot.q[{i}]" for i in range(1, 8)]].to_numpy()[::10]
+    assert np.array_equal(frames.time, traces["time"].to_numpy()[::10])
+    assert np.array_equal(frames.points, arm_points(q))
+    assert frames.segments == tuple((k, k + 1) for k in range(8)) and frames.path == 8
+    assert frames.labels[0] == "base" and frames.labels[-1] == "tool"
+    assert VIEWER.link_frames(traces.drop(columns=["robot.q[7]"])) is None
+
+
+def test_link_frames_that_do_not_fit_together_name_the_mistake():
+    from cosim.analysis.viewers import LinkFrames
+
+    points = np.zeros((4, 3, 3))
+    with pytest.raises(ValueError, match=r"points must be \(samples, links, 3\) for 5 times"):
+        LinkFrames(np.arange(5.0), points, ((0, 1),))
+    with pytest.raises(ValueError, match="a segment names a link outside 0..2"):
+        LinkFrames(np.arange(4.0), points, ((0, 3),))
+    with pytest.raises(ValueError, match="path link 5"):
+        LinkFrames(np.arange(4.0), points, ((0, 1),), path=5)
+    with pytest.raises(ValueError, match="2 labels for 3 links"):
+        LinkFrames(np.arange(4.0), points, ((0, 1),), labels=("a", "b"))
+
+
+def test_the_room_draws_segments_as_strokes_and_shows_the_sample_at_or_before_a_time():
+    from cosim.analysis.room.animation import frame_at, strokes
+
+    assert strokes([(0, 1), (1, 2), (2, 3)]) == [0, 1, 2, 3]  # a chain: one stroke
+    assert strokes([(0, 1), (1, 2), (1, 3), (3, 4)]) == [0, 1, 2, -1, 1, 3, 4]  # a branch starts a stroke
+    times = np.array([0.0, 0.1, 0.2, 0.3])
+    assert [frame_at(times, t) for t in (-1.0, 0.0, 0.15, 0.2, 0.3, 9.0)] == [0, 0, 1, 2, 3, 3]
+
+
+def test_the_room_sends_rows_evenly_spaced_in_time_even_where_event_rows_repeat_a_time():
+    from cosim.analysis.room.animation import sampled
+
+    t = np.concatenate([np.linspace(0.0, 1.0, 1001)[:101], np.full(500, 0.1), np.linspace(0.0, 1.0, 1001)[101:]])
+    traces = pd.DataFrame({"time": t, "y": np.arange(len(t))})
+    rows = sampled(traces, 11)
+    # at each of 0, 0.1, ..., 1 the last row at or before it (after the burst of event rows at 0.1)
+    assert rows["time"].tolist() == pytest.approx(np.linspace(0.0, 1.0, 11).tolist())
+    assert rows["y"].tolist()[1] == 600 and rows["y"].iloc[-1] == len(t) - 1
+    short = traces.iloc[:50]
+    assert sampled(short, 100) is short

@@ -3,8 +3,12 @@
 The engine shows any run as time plots, one panel per port.  A unit package
 that knows more about its signals (a robot arm's joint angles, its geometry)
 supplies a :class:`TraceViewer`: panels that group its signals and, if it
-can, an animation.  The explorer asks every registered viewer, in order, and
-uses the first that recognises the traces.
+can, an animation: a matplotlib one for the desktop window (``animation``)
+and, for the browser's decision room, the positions of its link frames over
+the run (``link_frames``, returning :class:`LinkFrames`), which the room draws
+as a turnable 3-D stick figure with a time slider.  The explorer and the room
+ask every registered viewer, in order, and use the first that recognises the
+traces.
 
 Viewers come from :func:`register_viewer` and from the ``cosim.viewers`` entry
 point group (a distribution declares ``[project.entry-points."cosim.viewers"]
@@ -20,7 +24,47 @@ from dataclasses import dataclass
 from importlib import metadata
 from typing import Any, Callable
 
+import numpy as np
+
 ENTRY_POINT_GROUP = "cosim.viewers"
+
+
+@dataclass(frozen=True)
+class LinkFrames:
+    """Where a mechanism's link frames are over a run, for a 3-D stick figure.
+
+    ``time`` (samples,) in seconds, never decreasing (event rows repeat a time); ``points`` (samples, links, 3) the frames' origins in metres
+    in one world frame whose third axis points up; ``segments`` the pairs of link indices drawn as sticks;
+    ``path`` the index of the link whose path over the run is drawn too (a tool point), or None; ``labels``
+    one name per link (shown when hovering), or empty.
+
+    Raises ValueError when the shapes do not fit together (checked here, so a plug-in's mistake names itself
+    instead of drawing nonsense in a page).
+    """
+
+    time: np.ndarray
+    points: np.ndarray
+    segments: tuple[tuple[int, int], ...]
+    path: int | None = None
+    labels: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        time = np.asarray(self.time, dtype=float)
+        points = np.asarray(self.points, dtype=float)
+        object.__setattr__(self, "time", time)
+        object.__setattr__(self, "points", points)
+        object.__setattr__(self, "segments", tuple((int(a), int(b)) for a, b in self.segments))
+        object.__setattr__(self, "labels", tuple(str(label) for label in self.labels))
+        if points.ndim != 3 or points.shape[2] != 3 or points.shape[0] != time.shape[0] or time.ndim != 1:
+            raise ValueError(f"link frames: points must be (samples, links, 3) for {time.shape[0]} times, "
+                             f"got {points.shape}")
+        links = points.shape[1]
+        if any(not (0 <= i < links) for pair in self.segments for i in pair):
+            raise ValueError(f"link frames: a segment names a link outside 0..{links - 1}: {self.segments}")
+        if self.path is not None and not 0 <= self.path < links:
+            raise ValueError(f"link frames: path link {self.path} is outside 0..{links - 1}")
+        if self.labels and len(self.labels) != links:
+            raise ValueError(f"link frames: {len(self.labels)} labels for {links} links")
 
 
 @dataclass(frozen=True)
@@ -31,11 +75,15 @@ class TraceViewer:
     recognises the traces (a pandas DataFrame with a ``time`` column), else
     None.  ``animation(figure, traces)`` draws into a matplotlib figure and
     returns the animation object (keep a reference to it), or None.
+    ``link_frames(traces)`` returns the :class:`LinkFrames` of the run at the
+    traces' samples (the browser animates them), or None when the traces
+    lack what it needs; the caller passes as many samples as it wants drawn.
     """
 
     name: str
     panels: Callable[[Any], list[tuple[str, list[str]]] | None]
     animation: Callable[[Any, Any], Any] | None = None
+    link_frames: Callable[[Any], LinkFrames | None] | None = None
 
 
 _LOCK = threading.Lock()

@@ -1,4 +1,5 @@
-"""The Panda arm's trace viewer for cosim: joint, torque and power panels and a stick-figure animation.
+"""The Panda arm's trace viewer for cosim: joint, torque and power panels and a stick-figure animation
+(matplotlib, for the desktop window) and its link frames (for the browser's decision room).
 
 Registered with cosim through the ``cosim.viewers`` entry point (pyproject.toml),
 so the engine itself knows nothing about robots.  Joint angles are found as
@@ -13,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from cosim.analysis.viewers import TraceViewer
+from cosim.analysis.viewers import LinkFrames, TraceViewer
 
 _ELEMENT = re.compile(r"^(.*)\[(\d+)\]$")
 
@@ -107,4 +108,19 @@ def arm_animation(fig: Any, traces: Any, frames: int = 60) -> Any:
     return FuncAnimation(fig, update, frames=len(idx), interval=50, blit=False)
 
 
-VIEWER = TraceViewer("panda", panels, arm_animation)
+ARM_LINKS = ("base", *(f"joint {j}" for j in range(1, 8)), "tool")
+ARM_SEGMENTS = tuple((k, k + 1) for k in range(8))  # a chain: base, joints 1..7, tool point
+
+
+def link_frames(traces: Any) -> LinkFrames | None:
+    """The arm's base, joints and tool point at every sample of ``traces`` (pinocchio's forward kinematics of
+    q[1..7]), joined base to tool, with the tool's path; None without q[1..7]."""
+    q_cols = joint_columns(traces, "q")
+    if not q_cols:
+        return None
+    times = traces["time"].to_numpy(dtype=float) if "time" in traces.columns else np.arange(len(traces), dtype=float)
+    return LinkFrames(time=times, points=arm_points(traces[q_cols].to_numpy(dtype=float)), segments=ARM_SEGMENTS,
+                      path=8, labels=ARM_LINKS)
+
+
+VIEWER = TraceViewer("panda", panels, arm_animation, link_frames)

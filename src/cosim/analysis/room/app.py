@@ -9,7 +9,9 @@ Tabs of the page:
 - **Decide**: objectives to minimise and to maximise, the ranking method (weighted sum, TOPSIS), a weight
   per objective, the best designs (a click on a row selects it), the radar of the selected designs.
 - **Selection**: the selected designs, their re-run with the spec's recorded signals (traces overlaid per
-  port), the selection as CSV and as ``cosim run --point`` commands.
+  port) and, when a trace viewer supplies link frames (:mod:`.animation`; e.g. the Panda arm's), the designs
+  as 3-D stick figures over time; a switch that draws these figures as SVG (their save buttons then write
+  SVG, not PNG); the selection as CSV and as ``cosim run --point`` commands.
 - **Study**: counts by status; an optimisation's hypervolume against evaluations; a sensitivity analysis's
   indices with their confidence intervals.
 
@@ -31,12 +33,13 @@ from typing import Any
 
 from bokeh.core.property.validation import without_property_validation
 from bokeh.layouts import column, row
-from bokeh.models import MultiChoice, Select, TabPanel, Tabs
+from bokeh.models import MultiChoice, SaveTool, Select, TabPanel, Tabs, Toggle
 
 from cosim.analysis.decision import Decision
 from cosim.analysis.table import AnalysisError
 from cosim.analysis.ranking import METHODS
 from cosim.analysis.rerun import port_groups, rerun_rows
+from cosim.analysis.room import animation as A
 from cosim.analysis.room import data as D
 from cosim.analysis.room import views as V
 from cosim.analysis.room.clouds import BinnedCloud, PointCloud
@@ -74,6 +77,9 @@ class Room:
         self.x, self.y, self.colour = study.default_axes(self.decision)
         self.size: str | None = None
         self.runs: list = []
+        self.motions: list[A.Motion] = []  # the re-run designs' link frames, when a viewer supplies them
+        self.motion_note = ""
+        self.link_view: A.LinkView | None = None
         self._pending = False
         self._weight_sliders: dict[str, Any] = {}
         self.ranking = self.radar = None  # the Decide tab's, built when it is first shown
@@ -122,6 +128,8 @@ class Room:
         self.rerun_button = V.button("Re-run selected", "rerun", "primary")
         self.rerun_status = V.text("", "rerun-status")
         self.traces = column(name="traces")
+        self.viewer = column(name="viewer")  # the 3-D view of the re-run designs (animation.LinkView)
+        self.svg = Toggle(label="figures as SVG", active=False, name="svg-figures", width=180)
         self.export = V.text("", "export")
 
         self._wire()
@@ -194,7 +202,8 @@ class Room:
                     column(self.ranking, self.radar["figure"]))]
 
     def _build_selection(self) -> list:
-        return [self.selected, row(self.rerun_button, self.rerun_status), self.traces, self.export]
+        return [self.selected, row(self.rerun_button, self.svg, self.rerun_status), row(self.traces, self.viewer),
+                self.export]
 
     def _build_dimensions(self) -> list:
         table = self.study.table
@@ -236,6 +245,7 @@ class Room:
         self.maximise.on_change("value", self._on_objectives)
         self.method.on_change("value", self._on_method)
         self.rerun_button.on_click(self._on_rerun)
+        self.svg.on_change("active", lambda attr, old, new: self._draw_runs())
 
     def _on_axis(self, which: str, attr: str, old: Any, new: Any) -> None:
         setattr(self, which, None if new == V.NONE else new)
@@ -426,7 +436,7 @@ class Room:
     def _rerun(self, rows: list[int]) -> None:
         try:
             runs = rerun_rows(self.study.table, rows, self.study.spec_path)
-            outcome: Any = runs
+            outcome: Any = (runs, *A.motions(runs))  # the link frames here: not in the server's loop
         except Exception as exc:  # a bad spec or value is shown in the page, never a dead server
             outcome = exc
         self.doc.add_next_tick_callback(partial(self._show_runs, outcome))
@@ -437,15 +447,36 @@ class Room:
             first = str(outcome).splitlines()[0] if str(outcome) else repr(outcome)
             self.rerun_status.text = f"<span style='color:#a40000'>re-run failed: {html.escape(first)}</span>"
             return
-        self.runs = outcome
-        recorded = []
-        for run in outcome:
-            if run.result.traces is not None:
-                recorded += [c for c in D.trace_columns(run.result.traces) if c not in recorded]
-        self.traces.children = V.trace_figures(port_groups(recorded), outcome)
+        self.runs, self.motions, self.motion_note = outcome
+        self._draw_runs()
         self.rerun_status.text = "; ".join(
             f"{html.escape(run.point_id)}: {html.escape(run.result.status)} in {run.result.elapsed:.2f} s"
-            + (f" ({html.escape(run.result.message)})" if run.result.message else "") for run in outcome)
+            + (f" ({html.escape(run.result.message)})" if run.result.message else "") for run in self.runs)
+
+    def _draw_runs(self) -> None:
+        """The re-run designs' trace plots and 3-D view, drawn as SVG when the switch says so (bokeh picks a
+        plot's backend when its view is made, so they are made anew); their save buttons name the file
+        (``cosim-trace_robot_q.png`` or ``.svg`` for ``trace:robot.q``)."""
+        backend = "svg" if self.svg.active else "canvas"
+        recorded: list[str] = []
+        for run in self.runs:
+            if run.result.traces is not None:
+                recorded += [c for c in D.trace_columns(run.result.traces) if c not in recorded]
+        figures = V.trace_figures(port_groups(recorded), self.runs, backend)
+        same = self.link_view is not None and list(map(id, self.link_view.motions)) == list(map(id, self.motions))
+        shown = self.link_view.state() if same else {}  # the same designs drawn anew (as SVG): same time, angles
+        if self.link_view is not None:  # its play timer in the page stops with it
+            self.link_view.play.active = False
+        self.link_view = view = A.LinkView(self.motions, backend, **shown) if self.motions else None
+        for fig in figures:  # a 200 px plot's toolbar has room for four tools: save went into its "…" menu
+            fig.height = 240
+        for fig in figures + ([view.figure] if view else []):
+            fig.toolbar.logo = None
+            for tool in fig.select(type=SaveTool):
+                # no dot: the browser adds .png or .svg only to a name without an extension
+                tool.filename = "cosim-" + "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in fig.name)
+        self.traces.children = figures
+        self.viewer.children = [view.layout] if view else [A.note(self.motion_note)] if self.motion_note else []
 
 
 def make_document(doc: Any, study: D.Study | LiveStudy, webgl: bool | None = None,

@@ -72,10 +72,14 @@ if (rect.top < 0 || rect.bottom > window.innerHeight) {  // scrolled into the vi
 return [rect.left + view.frame.x_scale.compute(x), rect.top + view.frame.y_scale.compute(y)];
 """
 
-# the viewport position of a widget's centre
+# the viewport position of a widget's centre, scrolled into view when outside it
 WIDGET_ON_SCREEN = """
 const view = Bokeh.index.find_one(Bokeh.documents[0].get_model_by_name(arguments[0]));
-const rect = view.el.getBoundingClientRect();
+let rect = view.el.getBoundingClientRect();
+if (rect.top < 0 || rect.bottom > window.innerHeight) {
+  view.el.scrollIntoView({block: 'center'});
+  rect = view.el.getBoundingClientRect();
+}
 return [rect.left + rect.width / 2, rect.top + rect.height / 2];
 """
 
@@ -97,6 +101,7 @@ def chromium(width: int = 1400, height: int = 1000) -> Any:
     for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", f"--window-size={width},{height}",
                 "--disable-dev-shm-usage"):
         options.add_argument(arg)
+    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})  # the console, for browser.get_log("browser")
     browser = webdriver.Chrome(service=Service(driver), options=options)
     browser.set_script_timeout(600)
     browser.set_page_load_timeout(600)
@@ -211,3 +216,53 @@ def binned_image(browser: Any) -> dict[str, Any]:
 def ranking_ids(browser: Any) -> list[str]:
     return browser.execute_script("return Array.from(Bokeh.documents[0].get_model_by_name('ranking')"
                                   ".source.data.point_id);")
+
+
+# `live(name)`: the one model of that name in the page's tree.  Bokeh's page forgets a model the server removed
+# only some 30 s later (BokehJS recomputes its models on a timer after a partial update), so for a while
+# get_model_by_name finds a redrawn figure twice; this looks only at what the roots reference.
+LIVE_JS = """
+const live = (name) => {
+  const hits = [];
+  for (const root of Bokeh.documents[0].all_roots) for (const m of root.references()) if (m.name === name) hits.push(m);
+  if (hits.length !== 1) throw new Error(`${hits.length} models named ${name} in the page`);
+  return hits[0];
+};
+"""
+
+# the viewport position of the save button of a figure's toolbar (by the figure's name)
+SAVE_BUTTON_ON_SCREEN = LIVE_JS + """
+const fig = live(arguments[0]);
+const toolbar = Bokeh.index.find_one(fig.toolbar);
+for (const button of toolbar._tool_button_views.values()) {
+  if (button.model.tool.type === 'SaveTool') {
+    button.el.scrollIntoView({block: 'center'});
+    const rect = button.el.getBoundingClientRect();
+    return rect.width > 0 ? [rect.left + rect.width / 2, rect.top + rect.height / 2] : 'hidden';
+  }
+}
+return null;
+"""
+
+
+def save_figure(browser: Any, name: str, downloads: Any, timeout: float = 60.0) -> Any:
+    """Click the save button of figure ``name`` and return the Path of the file it wrote into ``downloads`` (the
+    folder given to chromium with ``Browser.setDownloadBehavior``; the figure's save tool names the file).
+
+    Raises RuntimeError when the figure has no save button or no new file is complete within ``timeout``."""
+    from pathlib import Path
+
+    folder = Path(downloads)
+    before = set(folder.iterdir())
+    where = browser.execute_script(SAVE_BUTTON_ON_SCREEN, name)
+    if where is None or where == "hidden":
+        raise RuntimeError(f"the figure '{name}' has no save button" if where is None else
+                           f"the save button of figure '{name}' is hidden (in its toolbar's overflow menu)")
+    click_at(browser, *where)
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        new = [p for p in set(folder.iterdir()) - before if not p.name.endswith(".crdownload")]
+        if new and new[0].stat().st_size > 0:
+            return new[0]
+        time.sleep(0.05)
+    raise RuntimeError(f"saving '{name}' wrote no file into {folder} within {timeout:.0f} s")

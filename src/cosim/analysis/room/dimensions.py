@@ -202,8 +202,8 @@ class Dimensions:
                                         name="azimuth", width=270)
         self.elevation = elevation = Slider(title="elevation [rad]", start=-np.pi / 2, end=np.pi / 2, step=0.01,
                                             value=ELEVATION, name="elevation", width=270)
-        project = CustomJS(args={"source": self.source3d, "axes": axes, "azimuth": azimuth, "elevation": elevation,
-                                 "lines": lines},
+        project = CustomJS(args={"sources": [self.source3d, axes], "axes": axes, "azimuth": azimuth,
+                                 "elevation": elevation, "lines": lines},
                            code=P.PROJECT_JS + """
 const ends = axes.data;
 lines.data = {xs: [0, 2, 4].map((k) => [ends.px[k], ends.px[k + 1]]),
@@ -211,13 +211,7 @@ lines.data = {xs: [0, 2, 4].map((k) => [ends.px[k], ends.px[k + 1]]),
 """)
         azimuth.js_on_change("value", project)
         elevation.js_on_change("value", project)
-        fig.js_on_event(Pan, CustomJS(args={"azimuth": azimuth, "elevation": elevation}, code="""
-const clip = (v, lo, hi) => Math.min(hi, Math.max(lo, v));
-let a = azimuth.value + cb_obj.delta_x * 0.01;
-a = a > Math.PI ? a - 2 * Math.PI : (a < -Math.PI ? a + 2 * Math.PI : a);
-azimuth.value = a;
-elevation.value = clip(elevation.value + cb_obj.delta_y * 0.01, -Math.PI / 2, Math.PI / 2);
-"""))
+        fig.js_on_event(Pan, CustomJS(args={"azimuth": azimuth, "elevation": elevation}, code=P.TURN_JS))
         return row(fig, column(azimuth, elevation))
 
     @staticmethod

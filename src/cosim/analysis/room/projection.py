@@ -40,12 +40,13 @@ def project(u: np.ndarray, v: np.ndarray, w: np.ndarray, azimuth: float, elevati
     return u * ca - v * sa, w * ce + (u * sa + v * ca) * se
 
 
-# the same as project(), over the source's u, v, w into px, py, and over the axes' ends; `source`, `axes`,
-# `azimuth` and `elevation` are the CustomJS arguments
+# the same as project(), over each of the sources' u, v, w into its px, py; `sources` (a list of
+# ColumnDataSources), `azimuth` and `elevation` (sliders) are the CustomJS arguments.  Used by the 3-D scatter
+# (dimensions.py) and the 3-D view of a viewer's link frames (animation.py).
 PROJECT_JS = """
 const a = azimuth.value, e = elevation.value;
 const ca = Math.cos(a), sa = Math.sin(a), ce = Math.cos(e), se = Math.sin(e);
-for (const s of [source, axes]) {
+for (const s of sources) {
   const d = s.data, n = d.u.length;
   const px = new Float64Array(n), py = new Float64Array(n);
   for (let i = 0; i < n; i++) {
@@ -54,6 +55,16 @@ for (const s of [source, axes]) {
   }
   s.data = {...d, px: px, py: py};
 }
+"""
+
+# a drag in a 3-D view turns it: horizontal pixels turn the azimuth (wrapped to [-pi, pi]), vertical ones the
+# elevation (clipped to [-pi/2, pi/2]); a Pan event's CustomJS with the `azimuth` and `elevation` sliders
+TURN_JS = """
+const clip = (v, lo, hi) => Math.min(hi, Math.max(lo, v));
+let a = azimuth.value + cb_obj.delta_x * 0.01;
+a = a > Math.PI ? a - 2 * Math.PI : (a < -Math.PI ? a + 2 * Math.PI : a);
+azimuth.value = a;
+elevation.value = clip(elevation.value + cb_obj.delta_y * 0.01, -Math.PI / 2, Math.PI / 2);
 """
 
 def axes_ends() -> dict[str, list]:

@@ -182,14 +182,14 @@ def radar_columns(data: dict[str, Any], ids: Sequence[str]) -> dict[str, list]:
             "colour": [Category10_10[k % 10] for k in range(len(ids))]}
 
 
-def trace_figures(groups: list[tuple[str, list[str]]], runs: Sequence[Any]) -> list:
+def trace_figures(groups: list[tuple[str, list[str]]], runs: Sequence[Any], backend: str = "canvas") -> list:
     """One figure per port (``trace:<port>``), a line per design and element, designs in their own colour,
-    x ranges linked."""
+    x ranges linked; drawn through ``backend`` ("canvas", or "svg" for a save button that writes SVG)."""
     figures: list = []
     for port, columns in groups:
         linked = {"x_range": figures[0].x_range} if figures else {}
         fig = figure(name=f"trace:{port}", width=WIDTH, height=200, x_axis_label="time [s]", y_axis_label=port,
-                     tools="pan,wheel_zoom,box_zoom,reset,save", **linked)
+                     tools="pan,wheel_zoom,box_zoom,reset,save", output_backend=backend, **linked)
         for k, run in enumerate(runs):
             traces = run.result.traces
             if traces is None or not len(traces):
