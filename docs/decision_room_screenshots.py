@@ -5,7 +5,8 @@
 Serves examples/pick_and_place/study (with examples/pick_and_place/spec.json for the re-runs) as
 ``cosim explore`` does, and does in the page what the walk through says: narrows duration to the faster
 designs, ranks by e_total, duration and the shoulder's torque peak with TOPSIS, selects the three best designs,
-re-runs them; one screenshot per tab.  Needs Debian's chromium and chromium-driver and selenium.
+re-runs them; one screenshot per tab, and one of the re-run designs' 3-D arm view (room-arm.png).  Needs
+Debian's chromium and chromium-driver and selenium.
 """
 
 from __future__ import annotations
@@ -64,12 +65,21 @@ def main() -> None:
         print(f"re-run: {status}")
         time.sleep(1.5)
         browser.save_screenshot(str(out / "room-selection.png"))
+        # the 3-D view of the arms (the Panda's trace viewer, cosim.models.panda_viewer) at 0.8 s, turned a little
+        B.set_and_wait(browser, "arm-time", "value", 0.8,
+                       "return doc.get_model_by_name('arm-time').value === 0.8 && doc.is_idle;")
+        B.set_and_wait(browser, "arm-azimuth", "value", -0.9,
+                       "return doc.get_model_by_name('arm-azimuth').value === -0.9 && doc.is_idle;")
+        browser.execute_script("Bokeh.index.find_one(Bokeh.documents[0].get_model_by_name('arm-box')).el"
+                               ".scrollIntoView({block: 'center'});")
+        time.sleep(1.0)
+        browser.save_screenshot(str(out / "room-arm.png"))
         B.show_tab(browser, 4)
         B.set_and_wait(browser, "azimuth", "value", 0.9,
                        "return Bokeh.documents[0].get_model_by_name('scatter3d-source').data.px[0];")
         time.sleep(1.5)
         browser.save_screenshot(str(out / "room-dimensions.png"))
-        print(f"written: {', '.join(str(out / f'room-{n}.png') for n in ('points', 'decide', 'selection', 'dimensions'))}")
+        print(f"written: {', '.join(str(out / f'room-{n}.png') for n in ('points', 'decide', 'selection', 'arm', 'dimensions'))}")
     finally:
         browser.quit()
         server.stop()

@@ -33,10 +33,10 @@ ENTRY_POINT_GROUP = "cosim.viewers"
 class LinkFrames:
     """Where a mechanism's link frames are over a run, for a 3-D stick figure.
 
-    ``time`` (samples,) in seconds, never decreasing (event rows repeat a time); ``points`` (samples, links, 3) the frames' origins in metres
-    in one world frame whose third axis points up; ``segments`` the pairs of link indices drawn as sticks;
-    ``path`` the index of the link whose path over the run is drawn too (a tool point), or None; ``labels``
-    one name per link (shown when hovering), or empty.
+    ``time`` (samples,) in seconds, never decreasing (event rows repeat a time); ``points`` (samples, links,
+    3) the frames' origins in metres in one world frame whose third axis points up; ``segments`` the pairs of
+    link indices drawn as sticks; ``path`` the index of the link whose path over the run is drawn too (a tool
+    point), or None; ``labels`` one name per link (shown when hovering), or empty.
 
     Raises ValueError when the shapes do not fit together (checked here, so a plug-in's mistake names itself
     instead of drawing nonsense in a page).
