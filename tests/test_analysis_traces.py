@@ -181,3 +181,40 @@ def test_the_room_sends_rows_evenly_spaced_in_time_even_where_event_rows_repeat_
     assert rows["y"].tolist()[1] == 600 and rows["y"].iloc[-1] == len(t) - 1
     short = traces.iloc[:50]
     assert sampled(short, 100) is short
+
+
+def test_the_rooms_motions_come_from_the_viewer_and_a_failing_one_costs_only_the_3d_view(robot_run):
+    """motions(): the Panda viewer's frames of each re-run design in its trace colour; a viewer whose link_frames
+    raises gives no motions and a note naming it (with a warning), and LinkView's first pose is the projection
+    of the frames at the run's start."""
+    from bokeh.palettes import Category10_10
+
+    from cosim.analysis.rerun import Rerun
+    from cosim.analysis.room import projection as P
+    from cosim.analysis.room.animation import AZIMUTH, ELEVATION, LinkView, motions
+    from cosim.analysis.viewers import TraceViewer, register_viewer, unregister_viewer
+
+    result, values = robot_run
+    runs = [Rerun(0, "p0", values, result), Rerun(1, "p1", values, result)]
+    found, note = motions(runs)
+    assert note == "" and [m.point_id for m in found] == ["p0", "p1"]
+    assert [m.colour for m in found] == list(Category10_10[:2])
+    q = result.traces[[f"robot.q[{i}]" for i in range(1, 8)]].to_numpy()
+    assert np.array_equal(found[0].frames.points, arm_points(q))  # fewer rows than MAX_FRAMES: every one
+    view = LinkView(found)
+    joints = view.sources["p0"]["joints"].data
+    u, v, w = ((arm_points(q[0])[0] - view.centre) / view.scale).T
+    px, py = P.project(u, v, w, AZIMUTH, ELEVATION)
+    assert np.allclose(joints["px"], px) and np.allclose(joints["py"], py) and joints["time"][0] == 0.0
+
+    def broken(traces):
+        raise RuntimeError("no kinematics here")
+
+    unregister_viewer("panda")
+    register_viewer(TraceViewer("broken", lambda traces: [("all", ["robot.q[1]"])], link_frames=broken))
+    try:
+        with pytest.warns(UserWarning, match="trace viewer 'broken' failed on the link frames of p0"):
+            found, note = motions(runs)
+        assert found == [] and note == "no 3-D view: the trace viewer 'broken' failed: no kinematics here"
+    finally:
+        unregister_viewer("broken")
