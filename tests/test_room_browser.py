@@ -241,6 +241,15 @@ def test_sweep_folder_filter_click_rerun_and_ranking(browser, studies, room):
     messages = browser.execute_script("return Array.from(Bokeh.documents[0].get_model_by_name('failures')"
                                       ".source.data.message);")
     assert len(messages) == 12 and all("boom" in m for m in messages)
+    # ... and drawn as crosses from a source of their own (the cloud's has no string column), the kept ones shown
+    crosses = browser.execute_script("const d = Bokeh.documents[0].get_model_by_name('cloud-not-ok-source').data;"
+                                     "return [Array.from(d.point_id), Array.from(d.status)];")
+    assert crosses == [list(df.loc[failed, "point_id"].astype(str)), ["failed"] * 12]
+    y, _ = B.set_and_wait(browser, "choose-y", "value", "ode.x0",  # a column the failed designs have
+                          "return Array.from(doc.get_model_by_name('cloud-not-ok-source').data.y).join();")
+    assert np.allclose([float(v) for v in y.split(",")], table.values("ode.x0")[failed])
+    a = table.values("ode.a")
+    assert B.count_true(browser, "show-not_ok") == int((failed & (a >= (a.min() + a.max()) / 2)).sum())
     # a second column chosen in the range filter narrows that column and leaves the first one's range as it was
     a, x0 = table.values("ode.a"), table.values("ode.x0")
     B.set_filter(browser, "ode.x0", 2.0, 3.0)

@@ -38,11 +38,19 @@ class PointCloud:
         self.x, self.y, self.colour = axes
         self.size: str | None = None
         label = study.table.label
-        self.parts = V.cloud(D.points(study, decision, self.x, self.y, self.colour, None), D.ids_text(study),
+        self.not_ok = D.not_ok_rows(study)
+        points = D.points(study, decision, self.x, self.y, self.colour, None)
+        self.parts = V.cloud(points, D.ids_text(study), D.not_ok_points(study, points, self.not_ok),
                              D.status_palette(study.status), label(self.x), label(self.y),
                              label(self.colour) if self.colour else None, webgl)
         self.figure = self.parts["figure"]
-        self.parts["source"].selected.on_change("indices", lambda attr, old, new: on_select(list(new)))
+        self.on_select = on_select
+        for source in (self.parts["source"], self.parts["not_ok_source"]):  # a box may take points of both
+            source.selected.on_change("indices", lambda attr, old, new: self._on_pick())
+
+    def _on_pick(self) -> None:
+        crosses = [int(self.not_ok[i]) for i in self.parts["not_ok_source"].selected.indices]
+        self.on_select(sorted(set(self.parts["source"].selected.indices) | set(crosses)))
 
     @without_property_validation
     def set_axes(self, x: str, y: str, colour: str | None, size: str | None) -> None:
@@ -51,6 +59,8 @@ class PointCloud:
                                          ("s", size, self.size)) if new != old}
         self.x, self.y, self.colour, self.size = x, y, colour, size
         self.parts["source"].data.update({k: columns[k] for k in changed})
+        crosses = D.not_ok_points(self.study, columns, self.not_ok)
+        self.parts["not_ok_source"].data.update({k: crosses[k] for k in changed if k in crosses})
         self.figure.xaxis.axis_label = self.study.table.label(x)
         self.figure.yaxis.axis_label = self.study.table.label(y)
         if "c" in changed:
@@ -60,7 +70,7 @@ class PointCloud:
     @without_property_validation  # bokeh would check each of the masks' n booleans one by one
     def show(self, masks: dict[str, np.ndarray]) -> None:
         for layer, mask in masks.items():
-            self.parts["filters"][layer].booleans = mask
+            self.parts["filters"][layer].booleans = mask[self.not_ok] if layer == "not_ok" else mask
 
     @without_property_validation
     def show_selection(self, rows: list[int]) -> None:
@@ -69,14 +79,19 @@ class PointCloud:
         self.parts["filters"]["selected"].booleans = mask
 
     def select(self, rows: list[int]) -> None:
+        self.parts["not_ok_source"].selected.indices = []
         self.parts["source"].selected.indices = rows  # fires on_select like a click
 
     @without_property_validation
     def reload(self, study: D.Study, decision: Decision) -> None:
         """The same folder with more rows (a running study): every column anew; the app then shows the masks."""
         self.study, self.decision = study, decision
-        self.parts["source"].selected.indices = []  # row positions of the old table; the app re-selects by id
-        self.parts["source"].data = D.points(study, decision, self.x, self.y, self.colour, self.size)
+        for source in (self.parts["not_ok_source"], self.parts["source"]):  # row positions of the old table;
+            source.selected.indices = []  # the app re-selects by id
+        self.not_ok = D.not_ok_rows(study)
+        points = D.points(study, decision, self.x, self.y, self.colour, self.size)
+        self.parts["not_ok_source"].data = D.not_ok_points(study, points, self.not_ok)
+        self.parts["source"].data = points
         self.parts["ids"].args = {"ids": D.ids_text(study)}
         factors, colours = D.status_palette(study.status)
         self.parts["status_mapper"].update(factors=factors or ["failed"], palette=colours or [V.GREY])

@@ -126,15 +126,27 @@ def status_codes(status: np.ndarray, factors: Sequence[str]) -> np.ndarray:
 
 def points(study: Study, decision: Decision, x: str, y: str, colour: str | None, size: str | None
            ) -> dict[str, Any]:
-    """The columns of the point cloud, one entry per table row: x, y, c (the colour column, NaN without one),
-    s (marker size) and status.  Strings are what makes the page slow to load: the messages are in the table
-    of designs not ok, the designs' ids in one text (:func:`ids_text`)."""
+    """The columns of the point cloud, one entry per table row: x, y, c (the colour column, NaN without one)
+    and s (marker size).  Strings are what makes the page slow to load: the designs' ids go in one text
+    (:func:`ids_text`), the statuses with the designs not ok only (:func:`not_ok_points`), the messages in the
+    table of designs not ok."""
     f = decision.filters
     n = len(study.ids)
     return {"x": f.values(x), "y": f.values(y),
             "c": f.values(colour) if colour else np.full(n, np.nan),
-            "s": scaled_sizes(f.values(size)) if size else np.full(n, PLAIN_SIZE),
-            "status": study.status}
+            "s": scaled_sizes(f.values(size)) if size else np.full(n, PLAIN_SIZE)}
+
+
+def not_ok_rows(study: Study) -> np.ndarray:
+    """The rows of the designs not ok (failed, timed out, crashed), in table order."""
+    return np.flatnonzero(study.status != "ok")
+
+
+def not_ok_points(study: Study, points: dict[str, Any], rows: np.ndarray) -> dict[str, Any]:
+    """The cloud's crosses: x, y and s of ``points`` (the cloud's columns) at ``rows`` (:func:`not_ok_rows`),
+    with each design's status and id."""
+    return {"x": points["x"][rows], "y": points["y"][rows], "s": points["s"][rows],
+            "status": list(study.status[rows]), "point_id": list(study.ids[rows])}
 
 
 def ids_text(study: Study) -> str:

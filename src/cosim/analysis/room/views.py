@@ -27,16 +27,18 @@ NONE = "(none)"
 WIDTH = 760
 
 
-def cloud(data: dict[str, Any], ids: str, statuses: tuple[list[str], list[str]], x_label: str, y_label: str,
-          colour_label: str | None, webgl: bool) -> dict[str, Any]:
-    """The point cloud: greyed (filtered out), ok rows by the colour map, other statuses in their colour, the
+def cloud(data: dict[str, Any], ids: str, not_ok: dict[str, Any], statuses: tuple[list[str], list[str]],
+          x_label: str, y_label: str, colour_label: str | None, webgl: bool) -> dict[str, Any]:
+    """The point cloud: greyed (filtered out), ok rows by the colour map, the designs not ok as crosses in
+    their status's colour (a source of their own, ``cloud-not-ok-source``: :func:`.data.not_ok_points`), the
     Pareto front ringed, the selection ringed in red; the hover names a point's design from ``ids`` (one per
     line, :func:`.data.ids_text`; ``cloud-ids``).  Returns the figure and the models the app updates."""
     source = ColumnDataSource(data, name="cloud-source")
+    crosses = ColumnDataSource(not_ok, name="cloud-not-ok-source")
     design = hover_ids(ids)
     n = len(data["x"])
-    filters = {layer: BooleanFilter(booleans=np.zeros(n, dtype=bool), name=f"show-{layer}")
-               for layer in ("greyed", "ok", "not_ok", "front", "selected")}
+    filters = {layer: BooleanFilter(booleans=np.zeros(len(not_ok["x"]) if layer == "not_ok" else n, dtype=bool),
+                                    name=f"show-{layer}") for layer in ("greyed", "ok", "not_ok", "front", "selected")}
     fig = figure(name="cloud", width=WIDTH, height=520, x_axis_label=x_label, y_axis_label=y_label,
                  tools="pan,wheel_zoom,box_zoom,tap,box_select,lasso_select,reset,save",
                  output_backend="webgl" if webgl else "canvas", active_scroll="wheel_zoom")
@@ -48,7 +50,7 @@ def cloud(data: dict[str, Any], ids: str, statuses: tuple[list[str], list[str]],
                      fill_color={"field": "c", "transform": mapper}, name="cloud-ok", **same)
     factors, colours = statuses
     by_status = CategoricalColorMapper(factors=factors or ["failed"], palette=colours or [GREY])
-    fig.scatter("x", "y", source=source, view=CDSView(filter=filters["not_ok"]), size="s", marker="x",
+    fig.scatter("x", "y", source=crosses, view=CDSView(filter=filters["not_ok"]), size="s", marker="x",
                 line_color={"field": "status", "transform": by_status}, line_width=2, legend_field="status",
                 name="cloud-not-ok", **same)
     fig.scatter("x", "y", source=source, view=CDSView(filter=filters["front"]), size=PLAIN_SIZE + 6,
@@ -62,11 +64,11 @@ def cloud(data: dict[str, Any], ids: str, statuses: tuple[list[str], list[str]],
     fig.add_tools(HoverTool(renderers=[ok], tooltips=[("design", "$index{id}"), ("x", "@x"), ("y", "@y"),
                                                         ("colour", "@c")], formatters={"$index": design}))
     fig.add_tools(HoverTool(renderers=[r for r in fig.renderers if r.name == "cloud-not-ok"],
-                            tooltips=[("design", "$index{id}"), ("status", "@status")], formatters={"$index": design}))
+                            tooltips=[("design", "@point_id"), ("status", "@status")]))
     bar = ColorBar(color_mapper=mapper, title=colour_label or "", width=10)
     fig.add_layout(bar, "right")
-    return {"figure": fig, "source": source, "filters": filters, "mapper": mapper, "colour_bar": bar,
-            "status_mapper": by_status, "ids": design}
+    return {"figure": fig, "source": source, "not_ok_source": crosses, "filters": filters, "mapper": mapper,
+            "colour_bar": bar, "status_mapper": by_status, "ids": design}
 
 
 def hover_ids(ids: str) -> CustomJSHover:
