@@ -50,7 +50,6 @@ from cosim.ssp.annotations import COSIM_UNIT_OPTIONS
 from cosim.ssp.experiment import COSIM_EXPERIMENT_FLAGS, COSIM_EXPERIMENT_GROUPS
 from cosim.ssp.xml import NS, schema_problems
 from cosim.system.builder import System
-from cosim.units.protocol import parse_port
 
 OMS_NS = "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd"
 OSP_NS = "http://opensimulationplatform.com/SSP/OSPAnnotations"
