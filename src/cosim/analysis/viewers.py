@@ -86,6 +86,26 @@ class TraceViewer:
     link_frames: Callable[[Any], LinkFrames | None] | None = None
 
 
+def trace_times(traces: Any) -> np.ndarray:
+    """The ``time`` column of ``traces`` as floats, or the row numbers when it has none."""
+    if "time" in traces.columns:
+        return traces["time"].to_numpy(dtype=float)
+    return np.arange(len(traces), dtype=float)
+
+
+def rows_evenly_in_time(times: np.ndarray, count: int) -> np.ndarray:
+    """The rows shown as ``count`` frames evenly spaced in time from the first row to the last: per frame the
+    last row at or before its time (after an event at that time: event rows repeat a time, times never
+    decrease), the last row always, each row once.  Viewers animate these rows, so that a burst of event rows
+    at one instant does not crowd the frames."""
+    if len(times) == 0:
+        return np.zeros(0, dtype=int)
+    at = np.linspace(times[0], times[-1], max(count, 1))
+    rows = np.searchsorted(times, at, side="right") - 1
+    rows[-1] = len(times) - 1
+    return np.unique(np.clip(rows, 0, len(times) - 1))
+
+
 _LOCK = threading.Lock()
 _VIEWERS: dict[str, TraceViewer] = {}
 _entry_points_loaded = False

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from cosim.analysis.viewers import LinkFrames, TraceViewer
+from cosim.analysis.viewers import LinkFrames, TraceViewer, rows_evenly_in_time, trace_times
 
 _ELEMENT = re.compile(r"^(.*)\[(\d+)\]$")
 
@@ -63,17 +63,6 @@ def arm_points(q: np.ndarray) -> np.ndarray:
     return out
 
 
-def frame_rows(times: np.ndarray, frames: int) -> np.ndarray:
-    """The rows shown as ``frames`` frames evenly spaced in time from the first row to the last: per frame the
-    last row at or before its time (after an event at that time; times never decrease), each row once."""
-    if len(times) == 0:
-        return np.zeros(0, dtype=int)
-    at = np.linspace(times[0], times[-1], max(frames, 1))
-    rows = np.searchsorted(times, at, side="right") - 1
-    rows[-1] = len(times) - 1
-    return np.unique(np.clip(rows, 0, len(times) - 1))
-
-
 def arm_animation(fig: Any, traces: Any, frames: int = 60) -> Any:
     """A FuncAnimation of the arm over the run (``frames`` samples evenly spaced in time: at each frame's time the
     last row at or before it, so that a run with event rows, which repeat a time, is not slowed down where its
@@ -86,10 +75,10 @@ def arm_animation(fig: Any, traces: Any, frames: int = 60) -> Any:
     q_cols = joint_columns(traces, "q")
     if not q_cols:
         return None
-    idx = frame_rows(traces["time"].to_numpy(dtype=float) if "time" in traces.columns else
-                     np.arange(len(traces), dtype=float), frames)
+    all_times = trace_times(traces)
+    idx = rows_evenly_in_time(all_times, frames)
     pts = arm_points(traces[q_cols].to_numpy(dtype=float)[idx])
-    times = traces["time"].to_numpy()[idx] if "time" in traces.columns else idx
+    times = all_times[idx]
     fig.clear()
     ax = fig.add_subplot(111, projection="3d")
     reach = float(np.abs(pts).max()) * 1.05
@@ -118,9 +107,8 @@ def link_frames(traces: Any) -> LinkFrames | None:
     q_cols = joint_columns(traces, "q")
     if not q_cols:
         return None
-    times = traces["time"].to_numpy(dtype=float) if "time" in traces.columns else np.arange(len(traces), dtype=float)
-    return LinkFrames(time=times, points=arm_points(traces[q_cols].to_numpy(dtype=float)), segments=ARM_SEGMENTS,
-                      path=8, labels=ARM_LINKS)
+    return LinkFrames(time=trace_times(traces), points=arm_points(traces[q_cols].to_numpy(dtype=float)),
+                      segments=ARM_SEGMENTS, path=8, labels=ARM_LINKS)
 
 
 VIEWER = TraceViewer("panda", panels, arm_animation, link_frames)

@@ -37,7 +37,7 @@ from bokeh.palettes import Category10_10
 from bokeh.plotting import figure
 
 from cosim.analysis.room import projection as P
-from cosim.analysis.viewers import LinkFrames, viewer_for
+from cosim.analysis.viewers import LinkFrames, rows_evenly_in_time, trace_times, viewer_for
 
 MAX_FRAMES = 300  # samples of a design's run sent to the page at most
 TICK_MS = 50  # the play toggle's step: the slider advances by this much run time per tick (real time)
@@ -58,13 +58,9 @@ def sampled(traces: Any, limit: int = MAX_FRAMES) -> Any:
     """``traces`` when they have at most ``limit`` rows, else at most ``limit`` rows evenly spaced in time: at each
     of ``limit`` times from the first row's to the last's, the last row at or before it (so that event rows,
     which repeat a time, do not crowd the frames; the last row is always kept)."""
-    n = len(traces)
-    if n <= limit:
+    if len(traces) <= limit:
         return traces
-    times = traces["time"].to_numpy(dtype=float) if "time" in traces.columns else np.arange(n, dtype=float)
-    rows = np.searchsorted(times, np.linspace(times[0], times[-1], limit), side="right") - 1
-    rows[-1] = n - 1
-    return traces.iloc[np.unique(np.clip(rows, 0, n - 1))]
+    return traces.iloc[rows_evenly_in_time(trace_times(traces), limit)]
 
 
 def motions(runs: Sequence[Any]) -> tuple[list[Motion], str]:
