@@ -20,17 +20,11 @@ _CHUNK = 1 << 20
 def read_bounded(path: Path, label: str) -> tuple[bytes | None, list[Problem]]:
     """The bytes of an SSP XML file, or None and a problem when it cannot be read or is larger than
     ``COSIM_SSP_FILE_MB``; at most one byte beyond the limit is read (a file's stated size may lie: /proc)."""
-    most = _most()
     try:
-        size = path.stat().st_size
-        data = b""
-        if size <= most:  # a bigger file is refused unread; one whose stated size lies, after most + 1 bytes
-            with open(path, "rb") as stream:
-                data = stream.read(most + 1)
-            size = max(size, len(data))
+        size, data = _measured(path, keep=True)
     except OSError as exc:
-        return None, [Problem(label, "/", f"cannot read the file: {exc}", "check that the file exists")]
-    if size > most:
+        return None, [_unreadable(label, exc)]
+    if size > _most():
         return None, [_too_large(label, size, "split the parameter values into several files")]
     return data, []
 
@@ -39,21 +33,39 @@ def table_size_problem(path: Path, label: str) -> Problem | None:
     """A problem when the table file at ``path`` (a table component's CSV) is larger than ``COSIM_SSP_FILE_MB``,
     else None: checked before anything parses it.  Its bytes are counted (not kept) up to one beyond the limit,
     so a file whose stated size lies is bounded too."""
-    most = _most()
     try:
-        size = path.stat().st_size
-        if size <= most:
-            counted = 0
-            with open(path, "rb") as stream:
-                while counted <= most and (chunk := stream.read(min(_CHUNK, most + 1 - counted))):
-                    counted += len(chunk)
-            size = max(size, counted)
+        size, _ = _measured(path, keep=False)
     except OSError as exc:
-        return Problem(label, "/", f"cannot read the file: {exc}", "check that the file exists")
-    if size > most:
+        return _unreadable(label, exc)
+    if size > _most():
         return _too_large(label, size, "shorten the table (resample it to fewer rows, or split its columns "
                                        "among several table components)")
     return None
+
+
+def _measured(path: Path, keep: bool) -> tuple[int, bytes]:
+    """The size of the file at ``path`` and, when ``keep``, its bytes: a file whose stated size is over the limit
+    is not opened; otherwise it is read (counted in chunks when not kept) up to one byte beyond the limit, since
+    its stated size may lie, so the size is the larger of the stated and the counted one.  Raises OSError when
+    it cannot be read."""
+    most = _most()
+    size = path.stat().st_size
+    data = b""
+    if size <= most:
+        with open(path, "rb") as stream:
+            if keep:  # one read: the bytes are held once, never as chunks and their join
+                data = stream.read(most + 1)
+                counted = len(data)
+            else:
+                counted = 0
+                while counted <= most and (chunk := stream.read(min(_CHUNK, most + 1 - counted))):
+                    counted += len(chunk)
+        size = max(size, counted)
+    return size, data
+
+
+def _unreadable(label: str, exc: OSError) -> Problem:
+    return Problem(label, "/", f"cannot read the file: {exc}", "check that the file exists")
 
 
 def _most() -> int:
