@@ -224,7 +224,9 @@ def ranking_ids(browser: Any) -> list[str]:
 LIVE_JS = """
 const live = (name) => {
   const hits = [];
-  for (const root of Bokeh.documents[0].all_roots) for (const m of root.references()) if (m.name === name) hits.push(m);
+  // bokeh 3.4's document has roots(), later ones all_roots
+  const doc = Bokeh.documents[0];
+  for (const root of doc.all_roots ?? doc.roots()) for (const m of root.references()) if (m.name === name) hits.push(m);
   if (hits.length !== 1) throw new Error(`${hits.length} models named ${name} in the page`);
   return hits[0];
 };
