@@ -109,7 +109,23 @@ def test_bad_samples_are_reported():
     with pytest.raises(ValueError, match="two distinct samples"):
         SampledPath.from_samples(np.zeros((5, 7)), v_max=LIMITS.qd_max)
     with pytest.raises(ValueError, match="increase"):
-        SampledPath.from_samples(line_samples(3), s=[0.0, 0.5, 0.5])
+        SampledPath.from_samples(line_samples(3), s=[0.0, 0.5, 0.25])
+
+
+def test_a_recorded_event_two_rows_at_one_time_is_refused_with_the_time_and_the_fix(tmp_path):
+    q = line_samples(4)
+    times = [1.0, 1.5, 1.5, 2.0]  # an event at 1.5 s: the row before it and the row after it
+    with pytest.raises(ValueError, match=r"two different samples at path parameter \(time\) 1\.5.*one row per time"):
+        SampledPath.from_samples(q, s=times)
+    table = pd.DataFrame({"time": times, **{f"traj.q_ref[{j + 1}]": q[:, j] for j in range(7)}})
+    table.to_csv(tmp_path / "recorded.csv", index=False)
+    with pytest.raises(ValueError, match=r"recorded\.csv: two different samples at path parameter \(time\) 1\.5"):
+        SampledPath.from_table(tmp_path / "recorded.csv")
+    # the fix the message names: one row per time (the last) gives a path through the three rows kept
+    table.drop_duplicates("time", keep="last").to_csv(tmp_path / "fixed.csv", index=False)
+    path = SampledPath.from_table(tmp_path / "fixed.csv")
+    assert np.array_equal(path.s, [0.0, 0.5, 1.0])
+    assert np.allclose(path.waypoints, q[[0, 2, 3]], atol=0, rtol=0)
 
 
 def recorded_blend(tmp_path, design=(-45.0, 70.0)):

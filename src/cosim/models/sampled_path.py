@@ -50,6 +50,7 @@ class SampledPath:
             raise ValueError(f"path samples must be an m x {N_JOINTS} array, got shape {q.shape}")
         if not np.all(np.isfinite(q)):
             raise ValueError("path samples must be finite")
+        start = 0.0  # the first sample's own path parameter, for messages
         keep = np.ones(len(q), dtype=bool)
         keep[1:] = np.any(q[1:] != q[:-1], axis=1)
         if s is None:
@@ -63,10 +64,19 @@ class SampledPath:
             if s.shape != (len(q),) or not np.all(np.isfinite(s)):
                 raise ValueError(f"s must hold {len(q)} finite values, one per sample")
             q, s = q[keep], s[keep]  # a recording at rest repeats samples: the path is the same
-            s = s - s[0]
+            start = float(s[0])
+            s = s - start
         if len(q) < 2:
             raise ValueError("a path needs at least two distinct samples")
-        if np.any(np.diff(s) <= 0):
+        steps = np.diff(s)
+        if np.any(steps == 0):
+            # `cosim run --out` records an event as two rows at one time (before and after it): a jump of q the
+            # spline cannot pass through, so it is refused rather than smoothed over
+            at = float(s[1:][steps == 0][0] + start)
+            raise ValueError(f"two different samples at path parameter (time) {at:g}, as a recorded event's rows "
+                             "are: a path must pass each time once; keep one row per time (e.g. the last) or "
+                             "record the path without the event")
+        if np.any(steps < 0):
             raise ValueError("the samples' path parameters (times) must increase")
         return cls(waypoints=q, s=s)
 
