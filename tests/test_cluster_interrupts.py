@@ -34,6 +34,12 @@ CLUSTERS = {
     "SubprocessCluster file": {"type": "distributed.deploy.subprocess.SubprocessCluster",
                                "kwargs": {"n_workers": 2, "worker_kwargs": {"nthreads": 1},
                                           "dashboard_address": "127.0.0.1:0"}},
+    # workers that its adapt starts after the class returned (as a job system's would): they too must ignore the
+    # Ctrl-C and leave the stop to cosim's client (before: their KeyboardInterrupt tracebacks on the terminal)
+    "LocalCluster file, adapting": {"type": "distributed.LocalCluster",
+                                    "kwargs": {"n_workers": 0, "threads_per_worker": 1,
+                                               "dashboard_address": "127.0.0.1:0"},
+                                    "adapt": {"minimum": 2, "maximum": 2}},
 }
 
 

@@ -28,7 +28,7 @@ from __future__ import annotations
 import collections
 import math
 import time
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from typing import Any, Iterator, Sequence
 
 from cosim.errors import ClusterError, UserError
@@ -135,9 +135,13 @@ def dask_client(workers: int, scheduler: str | None = None, cluster_file: str | 
     import dask
 
     from cosim.parallel.dashboard import web_server_tracebacks_as_lines
+    from cosim.parallel.interrupts import processes_started_here_get_the_preload
 
+    # the workers a cluster file's scale/adapt starts at any time of the study ignore Ctrl-C as the first ones
+    preload = processes_started_here_get_the_preload() if cluster_file is not None else nullcontext()
     # LOG_LENGTH for the client's connections, and for the scheduler and workers of a cluster started here
-    with dask.config.set({"distributed.admin.low-level-log-length": LOG_LENGTH}), web_server_tracebacks_as_lines():
+    with dask.config.set({"distributed.admin.low-level-log-length": LOG_LENGTH}), web_server_tracebacks_as_lines(), \
+            preload:
         yield from _client(workers, scheduler, cluster_file, early)
 
 

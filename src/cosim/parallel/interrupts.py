@@ -18,7 +18,9 @@ the rows written so far and says ``cosim: interrupted``):
   process ignores it itself; nothing it does not own (the client's own handler
   while workers are restarted after a loss) is changed.
 - :func:`processes_started_here_ignore_ctrl_c` does the same for the
-  processes a cluster file's class starts on this machine.
+  processes a cluster file's class starts on this machine, and
+  :func:`processes_started_here_get_the_preload` for those its scale/adapt
+  starts later, as long as the cluster lives.
 - Point children (:mod:`cosim.parallel.isolation`) ignore SIGINT themselves.
 - :func:`scheduler_gone` tells the client, after a stop, that the signal ended
   the scheduler too (a cluster file's ``dask spec`` processes close themselves on
@@ -98,14 +100,33 @@ def processes_started_here_ignore_ctrl_c() -> Iterator[None]:
     workers, a SubprocessCluster's scheduler): they must not print tracebacks
     or die before the client closes them.  SIGINT is ignored in this process
     while the block runs, so processes started meanwhile inherit that (an
-    ignored signal stays ignored across exec, and Python then keeps it so),
-    and workers a nanny starts later get the :func:`dask_setup` preload
-    through Dask's ``distributed.worker.preload`` setting.  Processes that set
-    their own SIGINT handler (``dask spec``) get the preload through their
-    environment (:data:`PRELOAD_VARIABLES`, set while the block runs), which
-    ignores SIGINT again once they have started.  A Ctrl-C while the block
-    runs is lost (cluster classes start quickly; their jobs start later).
-    Outside the main thread only the preload is set.
+    ignored signal stays ignored across exec, and Python then keeps it so);
+    processes that set their own SIGINT handler (``dask spec``) ignore it again
+    through :func:`processes_started_here_get_the_preload`, which holds while
+    the block runs.  A Ctrl-C while the block runs is lost (cluster classes
+    start quickly; their jobs start later).  Outside the main thread only the
+    preload is set.
+    """
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+    try:
+        with processes_started_here_get_the_preload():
+            yield
+    finally:
+        if main:
+            signal.signal(signal.SIGINT, previous)
+
+
+@contextmanager
+def processes_started_here_get_the_preload() -> Iterator[None]:
+    """Every Dask scheduler, nanny and worker process started here while the block runs runs :func:`dask_setup`.
+
+    For the whole life of a cluster a cluster file starts (cosim.parallel.evaluator): the workers its
+    scale/adapt starts later, after the cluster's class returned, ignore Ctrl-C as the first ones do.
+    Processes a nanny of this process starts get it through Dask's ``distributed.worker.preload`` setting
+    (a nanny hands its configuration to its worker); processes started as commands (a SubprocessCluster's
+    ``dask spec``) through their environment (:data:`PRELOAD_VARIABLES`).  Preloads set before are kept;
+    both are put back as they were when the block ends.
     """
     import os
 
@@ -113,8 +134,6 @@ def processes_started_here_ignore_ctrl_c() -> Iterator[None]:
 
     preloads = [*_preloads("distributed.worker.preload"), WORKER_PRELOAD]
     environment = {variable: os.environ.get(variable) for variable in PRELOAD_VARIABLES.values()}
-    main = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
     try:
         for key, variable in PRELOAD_VARIABLES.items():
             os.environ[variable] = repr([*_preloads(key), WORKER_PRELOAD])  # Dask reads it as a Python literal
@@ -126,8 +145,6 @@ def processes_started_here_ignore_ctrl_c() -> Iterator[None]:
                 os.environ.pop(variable, None)
             else:
                 os.environ[variable] = value
-        if main:
-            signal.signal(signal.SIGINT, previous)
 
 
 def _preloads(key: str) -> list[str]:
