@@ -206,6 +206,18 @@ def test_the_rooms_motions_come_from_the_viewer_and_a_failing_one_costs_only_the
     u, v, w = ((arm_points(q[0])[0] - view.centre) / view.scale).T
     px, py = P.project(u, v, w, AZIMUTH, ELEVATION)
     assert np.allclose(joints["px"], px) and np.allclose(joints["py"], py) and joints["time"][0] == 0.0
+    # the view is as wide as the farthest drawn point from its centre (5 % margin): every frame of both designs
+    # stays inside it at any angle, and the arm fills it (not the unit cube's corners, 1.8, as before)
+    every = (np.concatenate([m.frames.points.reshape(-1, 3) for m in found]) - view.centre) / view.scale
+    reach = view.figure.x_range.end
+    assert (view.figure.x_range.start, view.figure.y_range.start, view.figure.y_range.end) == (-reach, -reach, reach)
+    axes = view.scaled(np.vstack([np.zeros(3), np.diag([0.23 * view.scale] * 3)]))  # origin, axis labels
+    farthest = np.max(np.linalg.norm(np.vstack([every, axes]), axis=1))
+    assert reach == pytest.approx(1.05 * farthest, rel=1e-12) and reach < 1.8
+    for azimuth in np.linspace(-np.pi, np.pi, 9):
+        for elevation in np.linspace(-np.pi / 2, np.pi / 2, 5):
+            px, py = P.project(*every.T, azimuth, elevation)
+            assert np.all(np.abs(px) <= reach) and np.all(np.abs(py) <= reach)
 
     def broken(traces):
         raise RuntimeError("no kinematics here")
@@ -218,3 +230,26 @@ def test_the_rooms_motions_come_from_the_viewer_and_a_failing_one_costs_only_the
         assert found == [] and note == "no 3-D view: the trace viewer 'broken' failed: no kinematics here"
     finally:
         unregister_viewer("broken")
+
+
+def test_the_rooms_trace_legend_has_one_entry_per_design_beside_the_plot(robot_run):
+    """An array port (robot.q, 7 elements) of two designs: 14 lines, a legend of 2 entries (each hides its
+    design's 7 lines on a click) placed right of the plot so that it covers no curve; the hover names the line."""
+    from bokeh.models import HoverTool
+
+    from cosim.analysis.rerun import Rerun, port_groups
+    from cosim.analysis.room import views as V
+
+    result, values = robot_run
+    runs = [Rerun(0, "p0", values, result), Rerun(1, "p1", values, result)]
+    recorded = [c for c in result.traces.columns if c != "time"]
+    figures = {f.name: f for f in V.trace_figures(port_groups(recorded), runs)}
+    fig = figures["trace:robot.q"]
+    [legend] = fig.legend
+    assert legend in fig.right and legend not in fig.center
+    assert [item.label.value for item in legend.items] == ["p0", "p1"]
+    for item, design in zip(legend.items, ("p0", "p1")):
+        assert sorted(r.name for r in item.renderers) == sorted(f"trace:robot.q[{i}]:{design}" for i in range(1, 8))
+    assert legend.click_policy == "hide"
+    [hover] = [t for t in fig.tools if isinstance(t, HoverTool)]
+    assert ("line", "$name") in hover.tooltips

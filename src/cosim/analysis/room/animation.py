@@ -43,6 +43,7 @@ MAX_FRAMES = 300  # samples of a design's run sent to the page at most
 TICK_MS = 50  # the play toggle's step: the slider advances by this much run time per tick (real time)
 AZIMUTH, ELEVATION = -0.7, 0.35  # radians: the first view, from the front left and a little above
 SIZE = 560  # px of the square plot
+AXIS_LENGTH, AXIS_LABEL_AT = 0.2, 1.15  # the x, y, z axes: a fifth of the view's scale; labels just past their ends
 
 
 @dataclass(frozen=True)
@@ -186,7 +187,8 @@ class LinkView:
                               name="arm-azimuth", width=270)
         self.elevation = Slider(title="elevation [rad]", start=-np.pi / 2, end=np.pi / 2, step=0.01,
                                 value=self.angles[1], name="arm-elevation", width=270)
-        self.figure = figure(name="arm-view", width=SIZE, height=SIZE, x_range=(-1.8, 1.8), y_range=(-1.8, 1.8),
+        reach = self.reach()
+        self.figure = figure(name="arm-view", width=SIZE, height=SIZE, x_range=(-reach, reach), y_range=(-reach, reach),
                              tools="save", match_aspect=True, output_backend=backend,
                              title="re-run designs in 3-D (drag to turn)",
                              tags=[{"centre": [float(c) for c in self.centre], "scale": self.scale}])
@@ -206,6 +208,15 @@ class LinkView:
         """Points (..., 3) in metres as the view's u, v, w."""
         return (np.asarray(points, dtype=float) - self.centre) / self.scale
 
+    def reach(self) -> float:
+        """Half the width of the view: every drawn point (links, paths, axes and their labels) at every time stays
+        inside it at every angle, with a margin of 5 %.  The projection is a rotation dropping one axis, so a
+        point's distance from the view's centre is at most its u, v, w's length."""
+        label = AXIS_LENGTH * AXIS_LABEL_AT * self.scale
+        drawn = np.concatenate([np.concatenate([m.frames.points.reshape(-1, 3) for m in self.motions]),
+                                np.zeros((1, 3)), np.diag([label] * 3)])
+        return 1.05 * float(max(np.nanmax(np.linalg.norm(self.scaled(drawn), axis=1)), 1e-9))
+
     def _projected(self, u: np.ndarray, v: np.ndarray, w: np.ndarray) -> dict[str, np.ndarray]:
         px, py = P.project(u, v, w, *self.angles)
         return {"u": u, "v": v, "w": w, "px": px, "py": py}
@@ -217,12 +228,12 @@ class LinkView:
 
     def _draw_axes(self) -> None:
         """x, y, z from the world origin, a fifth of the view long, each with its label."""
-        length = 0.2 * self.scale
+        length = AXIS_LENGTH * self.scale
         ends = np.array([[0, 0, 0], [length, 0, 0], [np.nan] * 3, [0, 0, 0], [0, length, 0], [np.nan] * 3,
                          [0, 0, 0], [0, 0, length]], dtype=float)
         uvw = self.scaled(ends)
         axes = ColumnDataSource(self._projected(*uvw.T), name="arm-axes")
-        labels_uvw = self.scaled(np.diag([length * 1.15] * 3))
+        labels_uvw = self.scaled(np.diag([length * AXIS_LABEL_AT] * 3))
         labels = ColumnDataSource({**self._projected(*labels_uvw.T), "label": ["x", "y", "z"]},
                                   name="arm-axis-labels")
         self.figure.line("px", "py", source=axes, color="#888888", line_width=1)

@@ -186,12 +186,17 @@ def radar_columns(data: dict[str, Any], ids: Sequence[str]) -> dict[str, list]:
 
 def trace_figures(groups: list[tuple[str, list[str]]], runs: Sequence[Any], backend: str = "canvas") -> list:
     """One figure per port (``trace:<port>``), a line per design and element, designs in their own colour,
-    x ranges linked; drawn through ``backend`` ("canvas", or "svg" for a save button that writes SVG)."""
+    x ranges linked; drawn through ``backend`` ("canvas", or "svg" for a save button that writes SVG).
+
+    The legend, beside the plot, has one entry per design (a click hides its lines); the hover names the
+    element of an array port's line."""
     figures: list = []
     for port, columns in groups:
         linked = {"x_range": figures[0].x_range} if figures else {}
         fig = figure(name=f"trace:{port}", width=WIDTH, height=200, x_axis_label="time [s]", y_axis_label=port,
                      tools="pan,wheel_zoom,box_zoom,reset,save", output_backend=backend, **linked)
+        fig.add_tools(HoverTool(tooltips=[("line", "$name"), ("t [s]", "$x"), (port, "$y")],
+                                line_policy="nearest"))
         for k, run in enumerate(runs):
             traces = run.result.traces
             if traces is None or not len(traces):
@@ -200,12 +205,13 @@ def trace_figures(groups: list[tuple[str, list[str]]], runs: Sequence[Any], back
             for column in columns:
                 if column not in traces.columns:
                     continue
-                label = run.point_id if len(columns) == 1 else f"{run.point_id} {column[len(port):]}"
                 fig.line(t, traces[column].to_numpy(dtype=float), color=Category10_10[k % 10], line_width=1.5,
-                         legend_label=label, name=f"trace:{column}:{run.point_id}")
+                         legend_label=run.point_id, name=f"trace:{column}:{run.point_id}")
         if fig.renderers:
-            fig.legend.location = "top_right"
+            # beside the plot, not over its curves: an entry per design, however many elements the port has
+            fig.add_layout(fig.legend[0], "right")
             fig.legend.label_text_font_size = "8pt"
+            fig.legend.click_policy = "hide"
             figures.append(fig)
     return figures
 
