@@ -127,8 +127,8 @@ def test_the_tk_window_stops_on_ctrl_c_during_a_rerun(xvfb, tmp_path, panda_view
 
 def test_pages_opened_and_closed_leave_the_terminal_quiet(tmp_path, write_spec, browser):  # noqa: F811
     """Before, every page opened printed four bokeh warnings (EMPTY_LAYOUT: the room's tabs are built when first
-    shown) and a tab closed while the server sent to it one more; the terminal now shows only what the user
-    needs: the link, and at Ctrl-C `cosim: interrupted`."""
+    shown), a tab closed while the server sent to it one more, and every re-run one more; the terminal now shows
+    only what the user needs: the link, and at Ctrl-C `cosim: interrupted`."""
     from cosim.analysis.room import browser as B
 
     folder = linear_ode_sweep(tmp_path / "decay", write_spec).parent
@@ -137,6 +137,14 @@ def test_pages_opened_and_closed_leave_the_terminal_quiet(tmp_path, write_spec, 
     link = proc.stdout.readline().split(" is at ")[1].split()[0]
     count, _ = B.load(browser, link)
     assert count.startswith("<b>3</b> of 3 designs")
+    # a re-run from the Selection tab: bokeh's server warned 'reference already known' at every click
+    browser.execute_script("Bokeh.documents[0].get_model_by_name('cloud-source').selected.indices = [0];")
+    B.show_tab(browser, 2)
+    B.wait_for(browser, "return doc.is_idle && doc.get_model_by_name('selected').text.includes('1 design(s)');")
+    B.click_widget(browser, "rerun")
+    status = B.wait_for(browser, "const s = doc.get_model_by_name('rerun-status').text; "
+                                 "return doc.is_idle && !doc.get_model_by_name('rerun').disabled && s ? s : null;")
+    assert " ok in " in status, status
     home = browser.current_window_handle
     for i in range(6):  # tabs closed while loading, just loaded, or after their first updates
         browser.switch_to.new_window("tab")

@@ -107,12 +107,20 @@ def quiet_room_logs() -> None:
     - ``W-1002 (EMPTY_LAYOUT)``: the tabs of the room are built when first shown (issue 27), so each new page
       has empty layouts on purpose; bokeh warned four times per page opened.
     - ``Failed sending message as connection was closed``: a tab was closed while the server sent to it.
+    - ``BokehUserWarning: reference already known '...'``: printed at every click of *Re-run selected*.  The
+      page sends the button whole (its attributes, not only its id) with the click event (the button came
+      with its tab, after the page loaded); bokeh's server, which knows the button, keeps its own model and
+      warns (a warning, not an error, since bokeh/bokeh#12915).  Nothing is lost.
     Idempotent; real problems (errors, other warnings) are still printed.
     """
+    import warnings
+
     from bokeh.core.validation import silence
     from bokeh.core.validation.warnings import EMPTY_LAYOUT
+    from bokeh.util.warnings import BokehUserWarning
 
     silence(EMPTY_LAYOUT, True)
+    warnings.filterwarnings("ignore", message="reference already known ", category=BokehUserWarning)
     ws = logging.getLogger("bokeh.server.views.ws")
     if _QUIET not in ws.filters:
         ws.addFilter(_QUIET)
