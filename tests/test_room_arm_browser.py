@@ -174,6 +174,26 @@ def test_the_arm_of_rerun_designs_in_3d_with_time_slider_play_and_svg(browser, r
     time.sleep(0.3)
     assert shown(browser, ids)["time"] == paused["time"]  # no tick after the pause
 
+    # play through the end: the slider reaches the run's end, shows it, and goes on from the start
+    end = browser.execute_script("return Bokeh.documents[0].get_model_by_name('arm-time').end;")
+    B.set_and_wait(browser, "arm-time", "value", end - 0.12,
+                   f"return doc.get_model_by_name('arm-joints:{ids[0]}').data.time[0];")
+    browser.execute_script("const s = Bokeh.documents[0].get_model_by_name('arm-time'); window.seen = [];"
+                           "window.watch = setInterval(() => window.seen.push(s.value), 5);")
+    B.click_widget(browser, "arm-play")
+    B.wait_for(browser, "const t = doc.get_model_by_name('arm-time').value; return t < 0.2 ? true : null;")
+    B.click_widget(browser, "arm-play")
+    assert B.wait_for(browser, "return !doc.get_model_by_name('arm-play').active && doc.is_idle;")
+    seen = browser.execute_script("clearInterval(window.watch); return window.seen;")
+    values = list(dict.fromkeys(seen))  # each value the slider held, in order
+    wrap = next(k for k in range(1, len(values)) if values[k] < values[k - 1])
+    assert values[wrap - 1] == end and values[wrap] == 0.0, values  # the last frame, then the first
+    assert all(b > a for a, b in zip(values[:wrap - 1], values[1:wrap]))  # forward until then
+    B.set_and_wait(browser, "arm-time", "value", end,
+                   f"return doc.get_model_by_name('arm-joints:{ids[0]}').data.time[0];")
+    at_end = check_pose(browser, ids, traces)  # each design's last sample, its kinematics drawn
+    assert [at_end["designs"][i]["time"][0] for i in ids] == [traces[i][0][-1] for i in ids]
+
     # a real drag in the view turns it; the drawn joints follow the projection
     B.drag(browser, (-1.0, 0.0), (0.5, 0.0), "arm-view")
     turned = check_pose(browser, ids, traces)

@@ -137,7 +137,7 @@ for (let d = 0; d < frames.length; d++) {
 }
 """ + P.PROJECT_JS
 
-# the play toggle: while active, advance the time slider by `dt` every `ms` (from the start again at the end);
+# the play toggle: while active, advance the time slider by `dt` every `ms` (up to the end, then from the start);
 # stops when toggled off or when its view left the page (a new re-run)
 PLAY_JS = """
 if (cb_obj.active) {
@@ -145,8 +145,9 @@ if (cb_obj.active) {
   if (cb_obj._timer == null) {
     cb_obj._timer = setInterval(() => {
       if (!cb_obj.active || cb_obj.document == null) { clearInterval(cb_obj._timer); cb_obj._timer = null; return; }
-      const next = time.value + dt;
-      time.value = next > time.end + 1e-12 ? time.start : Math.min(next, time.end);
+      // the run's end is shown (also when it is not a whole number of steps away), then the start again
+      const now = time.value;
+      time.value = now >= time.end - 1e-12 ? time.start : Math.min(now + dt, time.end);
     }, ms);
   }
 } else {
