@@ -57,3 +57,51 @@ def test_loopback_addresses():
     assert is_loopback("127.0.0.1") and is_loopback("::1") and is_loopback("localhost")
     assert not is_loopback("0.0.0.0") and not is_loopback("10.1.2.3") and not is_loopback("login1")
 
+
+
+def _wait(condition, timeout: float = 30.0) -> None:
+    import time
+
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, "not within the time"
+        time.sleep(0.05)
+
+
+def test_a_page_gets_the_room_built_before_it_asked_and_a_folder_with_new_rows_gets_them(tmp_path, write_spec):
+    """The room's models are built when the server starts and again after a page took them (RoomsAhead), so a
+    page's address is answered without building them; a page of a watched folder whose rows changed meanwhile
+    gets a room of the new rows instead."""
+    import time
+
+    import pandas as pd
+
+    from cosim.analysis.room import app
+    from cosim.analysis.room.live import LiveStudy
+    from cosim.analysis.room.server import RoomServer
+
+    table = linear_ode_sweep(tmp_path / "decay", write_spec)
+    server = RoomServer(LiveStudy(table.parent, every=0.2))
+    try:
+        ahead = server.server.rooms_ahead
+        _wait(lambda: ahead.spare is not None)  # built at the start, before any page
+        built = ahead.spare
+        assert built.doc is None and len(built.study.ids) == 3
+        page = urllib.request.urlopen(server.link, timeout=60).read().decode()
+        assert "<title>cosim: decay</title>" in page
+        assert built.doc is not None and built.doc.roots == [built.tabs]  # the page's document shows it
+        assert ahead.spare is None
+        _wait(lambda: ahead.spare is not None, timeout=app.AHEAD_AFTER + 30)  # the next page's, a while after
+        stale = ahead.spare
+        assert stale is not built and stale.doc is None
+
+        rows = pd.read_parquet(table)  # the study writes a fourth row
+        more = pd.concat([rows, rows.iloc[[0]].assign(point_id="pd", **{"ode.a": -4.0})], ignore_index=True)
+        more.to_parquet(table, index=False)
+        time.sleep(0.5)  # longer than the folder's `every`: the next look reads the table again
+        urllib.request.urlopen(server.link, timeout=60).read()
+        assert stale.doc is None  # not given to the page: it shows three rows
+        _wait(lambda: ahead.spare is not None, timeout=app.AHEAD_AFTER + 30)
+        assert len(ahead.spare.study.ids) == 4
+    finally:
+        server.stop()
