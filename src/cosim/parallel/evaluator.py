@@ -238,6 +238,42 @@ def _close(client: Any, cluster: Any, stopped: bool) -> None:
             except OSError:  # its processes are already gone (a kill reached them): nothing left to close
                 # (TimeoutError is an OSError.)  Dask's exit hook would try closing it again, for another 10 s
                 cluster.shutdown_on_close = False
+        if stopped and cluster is not None:
+            _end_resource_tracker()
+
+
+def _end_resource_tracker(timeout: float = 2.0) -> None:
+    """End multiprocessing's resource tracker of this process, waiting up to ``timeout`` s for it to exit.
+
+    The worker processes of a cluster started here (a LocalCluster's nannies spawn them) started it; it ends
+    when the last process holding its pipe is gone, i.e. just after cosim itself, so after a stop it was the
+    one process of cosim's that outlived it (still running when the shell's prompt came back; seen on a loaded
+    machine).  Closing our end of the pipe, as multiprocessing's own ``_stop`` does, ends it now.  Uses the
+    tracker's private fields (CPython 3.11-3.13); does nothing where they differ.
+    """
+    import os
+    import time
+    from multiprocessing import resource_tracker
+
+    tracker = getattr(resource_tracker, "_resource_tracker", None)
+    fd, pid = getattr(tracker, "_fd", None), getattr(tracker, "_pid", None)
+    if not isinstance(fd, int) or not isinstance(pid, int):
+        return  # never started here, or not the layout known
+    try:
+        os.close(fd)
+    except OSError:
+        return
+    tracker._fd = None  # a later process started through multiprocessing starts a new tracker
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            ended, _ = os.waitpid(pid, os.WNOHANG)
+        except ChildProcessError:
+            ended = pid  # already reaped
+        if ended:
+            tracker._pid = None
+            return
+        time.sleep(0.01)
 
 
 def _scheduler_in_own_process(cluster: Any) -> bool:
