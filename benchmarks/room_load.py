@@ -3,8 +3,8 @@
     python benchmarks/room_load.py [--repeat 3] [--rows 17061,1000000] [--json out.jsonl]
 
 For each table: the room is served in this process (cosim.analysis.room.server.RoomServer), a fresh
-chromium page opens it (a new session each time, once the server has built the room ahead of it as it does
-for a user's first page: the server attaches it to the tab's document, sends it, the browser draws it), then a range filter on the first design parameter is narrowed to its upper half (the server
+chromium page opens it (a new session each time: the server builds the tab's document, sends it, the
+browser draws it), then a range filter on the first design parameter is narrowed to its upper half (the server
 recomputes the filters, the Pareto front, the ranking and the histogram and the page redraws) and a weight is
 set to 0 (the ranking is recomputed and redrawn; the study is ranked by e_total and duration, its spec giving
 e_total alone a sense).  Times are from the browser's request (or the property set
@@ -85,15 +85,9 @@ def measure(folder: Path, repeat: int) -> dict:
     lo, hi = float(np.nanmin(values)), float(np.nanmax(values))
     out: dict = {"rows": len(table.df), "table_read_s": round(read_s, 3), "load_s": [], "filter_s": [],
                  "decide_tab_s": [], "reweight_s": [], "load_cpu_s": []}
-    ahead = server.server.rooms_ahead
     browser = B.chromium()
     try:
         for _ in range(repeat):
-            # as a user following the printed link: the server has built the room ahead (RoomsAhead), which it
-            # does at its start and a few seconds after each page
-            deadline = time.monotonic() + 120
-            while ahead.spare is None and time.monotonic() < deadline:
-                time.sleep(0.05)
             cpu = cpu_seconds(browser)
             _, seconds = B.load(browser, server.link)
             out["load_s"].append(round(seconds, 3))

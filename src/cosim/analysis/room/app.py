@@ -58,25 +58,15 @@ class Room:
 
     def __init__(self, doc: Any, study: D.Study, webgl: bool | None = None, aggregate_above: int | None = None,
                  live: LiveStudy | None = None):
-        """The room of ``study`` in ``doc``; with ``doc`` None, its models only, for :meth:`attach` later."""
         self.doc, self.study, self.live = doc, study, live
         self._build(webgl, aggregate_above)
-        if doc is not None:
-            self.attach(doc)
-
-    def attach(self, doc: Any) -> None:
-        """Show the room in ``doc`` (a new page's document); once only."""
-        self.doc = doc
-        if isinstance(self.cloud, BinnedCloud):
-            self.cloud.doc = doc  # it re-bins from the document's next tick when the page zooms
-        doc.title = f"cosim: {self.study.name}"
         # attached to the document only now, with bokeh's property validation back on: a document bound to a page
         # (a live page turning from waiting into the room) sends new models at once, and bokeh 3.9 encodes a
         # field with a transform (the colour map's) as a constant while validation is off ("color is not
         # iterable" in the page, and no cloud)
         doc.add_root(self.tabs)
-        if self.live is not None:  # a folder watched while its study runs: new rows are drawn as they arrive
-            doc.add_periodic_callback(self._look, int(self.live.every * 1000))
+        if live is not None:  # a folder watched while its study runs: new rows are drawn as they arrive
+            doc.add_periodic_callback(self._look, int(live.every * 1000))
 
     @without_property_validation  # the cloud's masks: bokeh would check their n booleans one by one
     def _build(self, webgl: bool | None, aggregate_above: int | None) -> None:
@@ -145,6 +135,7 @@ class Room:
         self._wire()
         self._rebuild_weights()
         self.refresh()
+        self.doc.title = f"cosim: {study.name}"
         points = row(column(row(*self.choosers.values()), self.cloud.figure, self.count,
                             row(self.histogram_column), self.histogram["figure"],
                             self.failures),
@@ -488,63 +479,10 @@ class Room:
         self.viewer.children = [view.layout] if view else [A.note(self.motion_note)] if self.motion_note else []
 
 
-class RoomsAhead:
-    """The room of a study, built before a page asks for it.
-
-    A bokeh server makes a page's document before it answers the page's address, and building the room's models
-    was most of that wait (0.5-0.7 s for the 17061-design study; bokeh's models are slow to make, its rows are
-    not).  So one room is built while no page waits: when the server starts (before the user can follow the
-    printed link), and again :data:`AHEAD_AFTER` s after each page took the one built (not at once: that page
-    is still loading its scripts and document from the same server).  A page gets it when it shows the study's
-    current rows (a watched folder may have new ones since: then, and before one is ready, the page gets a room
-    built for it, as before).  Everything runs on the server's event loop, as the pages' callbacks do.
-    """
-
-    def __init__(self, study: D.Study | LiveStudy, webgl: bool | None = None, aggregate_above: int | None = None):
-        self.study, self.webgl, self.aggregate_above = study, webgl, aggregate_above
-        self.live = study if isinstance(study, LiveStudy) else None
-        self.spare: Room | None = None
-        self.loop: Any = None  # the server's event loop (tornado IOLoop), set by start()
-
-    def current(self) -> D.Study | None:
-        """The rows a page shows now (None: a watched folder without rows yet)."""
-        return self.live.current() if self.live is not None else self.study  # type: ignore[return-value]
-
-    def start(self, loop: Any) -> None:
-        """Build the first room on ``loop`` as soon as it runs."""
-        self.loop = loop
-        loop.add_callback(self.build)
-
-    def build(self) -> None:
-        study = self.current()
-        if study is not None and (self.spare is None or self.spare.study is not study):
-            self.spare = Room(None, study, self.webgl, self.aggregate_above, self.live)
-
-    def fill(self, doc: Any) -> bool:
-        """Show the room in ``doc``: the one built ahead when it shows the current rows, else one built now.
-        False (``doc`` left empty) while a watched folder has no rows yet."""
-        study = self.current()
-        if study is None:
-            return False
-        room, self.spare = self.spare, None
-        if room is not None and room.study is study:
-            room.attach(doc)
-        else:
-            Room(doc, study, self.webgl, self.aggregate_above, self.live)
-        if self.loop is not None:
-            self.loop.call_later(AHEAD_AFTER, self.build)
-        return True
-
-
-AHEAD_AFTER = 3.0  # s after a page took the room built ahead, the next one is built (see RoomsAhead)
-
-
 def make_document(doc: Any, study: D.Study | LiveStudy, webgl: bool | None = None,
-                  aggregate_above: int | None = None, ahead: RoomsAhead | None = None) -> None:
-    """Fill ``doc`` (a new browser tab) with the room of ``study`` (through ``ahead``, of the same study, when
-    given); of a watched folder (LiveStudy), a page that waits for its first rows when it has none yet."""
-    if ahead is not None and ahead.fill(doc):
-        return
+                  aggregate_above: int | None = None) -> None:
+    """Fill ``doc`` (a new browser tab) with the room of ``study``; of a watched folder (LiveStudy), a page that
+    waits for its first rows when it has none yet."""
     if isinstance(study, D.Study):
         Room(doc, study, webgl, aggregate_above)
         return

@@ -147,23 +147,21 @@ def serve_without_mathjax(server: Any) -> None:
 def make_server(study: Study | LiveStudy, host: str = LOOPBACK, port: int = 0, token: str | None = None,
                 webgl: bool | None = None, io_loop: Any = None, aggregate_above: int | None = None
                 ) -> tuple[Any, str]:
-    """(a started-to-be bokeh Server of the room on ``host:port``, its link).  The server's ``rooms_ahead`` (an
-    :class:`~cosim.analysis.room.app.RoomsAhead`) builds each page's room before it is asked for.  A token is
-    made when ``host`` is not loopback and none is given; ``webgl`` None lets the room choose by the table's size, and
+    """(a started-to-be bokeh Server of the room on ``host:port``, its link).  A token is made when ``host`` is
+    not loopback and none is given; ``webgl`` None lets the room choose by the table's size, and
     ``aggregate_above`` (rows) overrides the size from which the cloud is an image of bins.  Raises
     AnalysisError when the address cannot be bound."""
     from bokeh.application import Application
     from bokeh.application.handlers.function import FunctionHandler
     from bokeh.server.server import Server
 
-    from cosim.analysis.room.app import RoomsAhead, make_document
+    from cosim.analysis.room.app import make_document
 
     if token is None and not is_loopback(host):
         token = secrets.token_urlsafe(32)
     quiet_room_logs()
-    ahead = RoomsAhead(study, webgl, aggregate_above)
     application = Application(FunctionHandler(partial(make_document, study=study, webgl=webgl,
-                                                         aggregate_above=aggregate_above, ahead=ahead)))
+                                                         aggregate_above=aggregate_above)))
     options: dict[str, Any] = {"address": host, "websocket_max_message_size": 512 * 1024 * 1024}
     if io_loop is not None:
         options["io_loop"] = io_loop
@@ -185,8 +183,6 @@ def make_server(study: Study | LiveStudy, host: str = LOOPBACK, port: int = 0, t
             raise AnalysisError(f"cosim explore: cannot serve at {host}:{chosen}: {exc.strerror or exc}; choose "
                                 "another --port (0 takes a free one)") from None
     serve_without_mathjax(server)
-    ahead.start(server.io_loop)  # the first page's room is built while the user has yet to open the link
-    server.rooms_ahead = ahead  # (for tests and benchmarks: what was built ahead, and what a page took)
     link = f"http://{link_host(host)}:{server.port}/" + (f"?token={token}" if token else "")
     return server, link
 
