@@ -209,7 +209,9 @@ def trace_figures(groups: list[tuple[str, list[str]]], runs: Sequence[Any], back
                          legend_label=run.point_id, name=f"trace:{column}:{run.point_id}")
         if fig.renderers:
             # beside the plot, not over its curves: an entry per design, however many elements the port has
-            fig.add_layout(fig.legend[0], "right")
+            legend = fig.legend[0]
+            fig.center = [r for r in fig.center if r is not legend]  # bokeh 3.4 would keep it inside too
+            fig.add_layout(legend, "right")
             fig.legend.label_text_font_size = "8pt"
             fig.legend.click_policy = "hide"
             figures.append(fig)
