@@ -441,9 +441,20 @@ def test_a_folder_removed_mid_run_is_not_said_to_keep_its_rows(tmp_path, local_c
     spec = _logged_study(tmp_path / "project", 40, pause=0.3)
     out = tmp_path / "out"
     proc = _popen_cosim("sweep", str(spec), "--out", str(out), "--scheduler", local_cluster, "--batch-size", "2")
-    _wait_for(lambda: len(list((out / "parts").glob("part-*.parquet"))) >= 2)
-    shutil.rmtree(out)
-    _, err = proc.communicate(timeout=120)
+    try:
+        _wait_for(lambda: len(list((out / "parts").glob("part-*.parquet"))) >= 2)
+        for attempt in range(20):  # as `rm -rf` run again: the sweep may write a new part while it is removed
+            try:
+                shutil.rmtree(out)
+                break
+            except OSError:
+                if attempt == 19:
+                    raise
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:  # not left running on the module's cluster for the tests after this one
+            proc.kill()
+            proc.communicate()
     assert proc.returncode == 2, err
     assert "was removed while cosim wrote into it" in err and "the rows it held are gone" in err, err
     assert "kept" not in err and "--resume to" not in err and "resume=True" not in err and "Traceback" not in err
