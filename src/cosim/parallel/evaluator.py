@@ -252,7 +252,6 @@ def _end_resource_tracker(timeout: float = 2.0) -> None:
     tracker's private fields (CPython 3.11-3.13); does nothing where they differ.
     """
     import os
-    import time
     from multiprocessing import resource_tracker
 
     tracker = getattr(resource_tracker, "_resource_tracker", None)

@@ -212,8 +212,8 @@ def trace_figures(groups: list[tuple[str, list[str]]], runs: Sequence[Any], back
             legend = fig.legend[0]
             fig.center = [r for r in fig.center if r is not legend]  # bokeh 3.4 would keep it inside too
             fig.add_layout(legend, "right")
-            fig.legend.label_text_font_size = "8pt"
-            fig.legend.click_policy = "hide"
+            legend.label_text_font_size = "8pt"
+            legend.click_policy = "hide"
             figures.append(fig)
     return figures
 
