@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from cosim.execution.point import run_point
-from cosim.execution.warm_start import warmed
+from cosim.execution.warm_up import warmed
 from cosim.spec.loader import spec_from_dict
 from cosim.system.builder import build_system
 

@@ -13,7 +13,8 @@ import pytest
 
 import cosim
 from cosim import Execution, build_system, load_spec
-from cosim.master.algorithms import GaussSeidel, Jacobi, make_algorithm
+from cosim.master.contract import SystemView
+from cosim.master.registry import make_algorithm
 
 from .conftest import python_unit
 from .test_fmi_conformance import cli
@@ -190,8 +191,9 @@ def test_a_feedthrough_chain_under_jacobi_equals_gauss_seidel_at_every_communica
 
 
 def test_systems_without_loops_step_as_before(write_spec):
-    """No loop: Gauss-Seidel keeps its plain step; Jacobi without direct feed-through sets every input before
-    stepping and propagates nothing (the loop machinery is not in the stepping loop at all)."""
+    """No loop: Gauss-Seidel keeps its plain step (no loop solver, nothing solved after a unit's step); Jacobi
+    without direct feed-through sets every input before stepping and propagates nothing (the loop machinery is
+    not in the stepping loop at all)."""
     spec = {"units": {"one": {"fmu": "builtin:linear_ode_fmi2"}, "two": {"fmu": "builtin:linear_ode_fmi2"}},
             "connections": [{"from": "one.y", "to": "two.u"}, {"from": "two.y", "to": "one.u"}],
             "experiment": {"stop": 0.1, "step": 0.1}}
@@ -199,11 +201,13 @@ def test_systems_without_loops_step_as_before(write_spec):
     assert system.coupling.blocks == ()
     units = {name: u.unit_type.instantiate(name) for name, u in system.units.items()}
     try:
-        for name, cls in (("gauss-seidel", GaussSeidel), ("jacobi", Jacobi)):
-            algorithm = make_algorithm(name)
-            algorithm.bind(units, system.order, system.connections, system.coupling)
-            assert algorithm.step.__func__ is cls.step
-        assert algorithm._coupling is None and len(algorithm._transfers) == 2
+        view = SystemView(units, system.order, system.connections, system.coupling)
+        gauss_seidel = make_algorithm("gauss-seidel", system.spec.experiment)
+        gauss_seidel.bind(view)
+        assert gauss_seidel._loops is None and gauss_seidel._solve_after is None
+        jacobi = make_algorithm("jacobi", system.spec.experiment)
+        jacobi.bind(view)
+        assert jacobi._coupling is None and len(jacobi._transfers) == 2
     finally:
         for unit in units.values():
             unit.terminate()
@@ -302,27 +306,30 @@ def test_an_array_loop_with_an_offset_on_a_connection(write_spec, version):
         np.testing.assert_allclose(traces[f"g2.y[{i}]"], -0.6, rtol=1e-12)
 
 
-def test_an_algorithm_that_does_not_solve_loops_keeps_its_three_argument_bind(write_spec, monkeypatch):
-    """A master algorithm written before loops were solved (bind(units, order, links), no solves_loops) still
-    runs systems without loops, and the system check refuses a loop for it, naming it."""
-    from cosim.execution import run as run_module
-    from cosim.master.algorithms import ALGORITHMS, MasterAlgorithm, step_unit
+def test_an_algorithm_of_ones_own_runs_through_the_one_contract_and_is_refused_loops(write_spec, monkeypatch):
+    """A master algorithm of one's own implements the contract (bind a view, advance from t and say where it
+    got to) and is handed to Execution; it runs systems without loops, and the system check refuses a loop for
+    an algorithm that does not say ``solves_loops``, naming it."""
+    from cosim.master.algorithms import FixedStep
+    from cosim.master.contract import step_unit
+    from cosim.master.registry import ALGORITHMS
     from cosim.system.stepping import check_algebraic_loops
 
-    class InOrder(MasterAlgorithm):
+    class InOrder(FixedStep):
         name = "in-order"
 
-        def bind(self, units, order, connections):
-            self._units = [units[n] for n in order]
+        def bind(self, view):
+            self.view = view
+            self._units = [view.units[n] for n in view.order]
 
         def step(self, t, h):
             for unit in self._units:
                 step_unit(unit, t, h)
 
-    monkeypatch.setattr(run_module, "make_algorithm", lambda name: InOrder())
     spec = {"units": {"clock": {"python": python_unit("Clock")}}, "experiment": {"stop": 0.3, "step": 0.1},
             "record": ["clock.time"]}
-    _, result = _run(write_spec, spec)
+    system = build_system(load_spec(write_spec(spec)))
+    result = Execution(system, record=True, algorithm=InOrder(system.spec.experiment)).run()
     assert result.ok, result.message
     np.testing.assert_allclose(result.traces["clock.time"], [0.0, 0.1, 0.2, 0.3], atol=1e-15)
     monkeypatch.setitem(ALGORITHMS, "in-order", InOrder)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from cosim import Execution, build_system, load_spec
-from cosim.execution.run import step_count
+from cosim.master.contract import step_count
 
 from .conftest import python_unit
 

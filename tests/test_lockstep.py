@@ -19,7 +19,7 @@ import pytest
 from cosim import build_system, load_spec
 from cosim.execution.lockstep import LockstepRunner, can_run_in_lockstep, instantiate, run_lockstep
 from cosim.execution.point import assignments_for, run_point
-from cosim.master.algorithms import ALGORITHMS
+from cosim.master.registry import ALGORITHMS
 from cosim.parallel.isolation import PointRunner
 from cosim.units.python.batch import NotBatchable
 
@@ -90,7 +90,7 @@ def test_lockstep_gives_every_point_the_results_of_its_single_run_bit_for_bit(tm
 
 @pytest.mark.parametrize("algorithm", ["gauss-seidel", "jacobi", "jacobi-delayed"])
 def test_a_group_steps_through_the_master_algorithm_object_a_single_run_uses(tmp_path, monkeypatch, algorithm):
-    """No master algorithm of lock-step's own: the spec's class from cosim.master.algorithms, bound to the
+    """No master algorithm of lock-step's own: the spec's class from cosim.master.registry, bound to the
     batches, steps the group once per communication point until its last point ends."""
     system = build_system(load_spec(_spec_with(tmp_path, algorithm=algorithm)))
     cls, calls = ALGORITHMS[algorithm], []

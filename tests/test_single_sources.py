@@ -13,9 +13,9 @@ ROOT = Path(__file__).resolve().parent.parent
 ENGINE = ROOT / "src" / "cosim"
 
 
-def test_algorithm_names_come_from_the_algorithms_module():
+def test_algorithm_names_come_from_the_algorithm_registry():
     from cosim.cli.main import _parser
-    from cosim.master import algorithms
+    from cosim.master import registry as algorithms
     from cosim.spec import loader as spec
 
     schema = json.loads((ROOT / "src" / "cosim" / "spec" / "spec.schema.json").read_text())

@@ -81,7 +81,7 @@ def test_debug_keeps_cosims_frames_too(tmp_path):
         done = _cosim(*argv)
         assert done.returncode == 1, done.stderr
         _assert_the_units_frames(done.stderr, tmp_path)
-        assert "cosim/master/algorithms.py" in done.stderr and "in step_unit" in done.stderr or \
+        assert "cosim/master/contract.py" in done.stderr and "in step_unit" in done.stderr or \
             "in step\n" in done.stderr, done.stderr
 
 

@@ -18,7 +18,7 @@ import pytest
 import cosim
 from cosim.errors import SpecError, UserError
 from cosim.execution.point import run_point
-from cosim.execution.warm_start import warm_up, warmed
+from cosim.execution.warm_up import warm_up, warmed
 from cosim.fmus.build import ensure_built
 from cosim.spec.loader import spec_from_dict
 from cosim.system.builder import build_system

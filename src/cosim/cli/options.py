@@ -12,7 +12,7 @@ def add_experiment_options(p: argparse.ArgumentParser) -> None:
     group.add_argument("--start", type=float, metavar="S", help="start time (s)")
     group.add_argument("--stop", type=float, metavar="S", help="stop time (s)")
     group.add_argument("--step", type=float, metavar="S", help="communication step size (s)")
-    from cosim.master.algorithms import ALGORITHMS
+    from cosim.master.registry import ALGORITHMS
 
     group.add_argument("--algorithm", choices=tuple(ALGORITHMS), help="master algorithm")
 

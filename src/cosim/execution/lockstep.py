@@ -43,9 +43,10 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 import numpy as np
 
 from cosim.execution.point_row import PointRow
-from cosim.execution.run import FAILED, OK, UNIT_FAILURE, RunResult, step_count
-from cosim.master.algorithms import ALGORITHMS, MasterAlgorithm, make_algorithm
+from cosim.execution.result import FAILED, OK, UNIT_FAILURE, RunResult
+from cosim.master.contract import MasterAlgorithm, SystemView
 from cosim.master.observers import ObjectiveReducer, flatten_objectives
+from cosim.master.registry import ALGORITHMS, make_algorithm
 from cosim.master.transfers import Link
 from cosim.spec.expressions import evaluate_expressions
 from cosim.system.builder import Assignment, System
@@ -304,37 +305,7 @@ def run_lockstep(system: System, points: Sequence[Sequence[Assignment]], batches
             batches.wiring = wiring
     padded = list(points) + [points[0]] * (rows - n)  # spare rows copy the first point; never read
     wiring.initialize(padded)
-    wiring.algorithm.start(exp.start)  # as Execution does (no loops here: nothing to solve)
-    columns, probe, plan = wiring.columns, wiring.probe, wiring.algorithm.step
-    stop_column = columns.index(exp.stop_when) if exp.stop_when else None
-    n_steps = step_count(exp.start, exp.stop, exp.step)
-    start, h, last = exp.start, exp.step, n_steps - 1
-    end_probe = wiring.end_probe
-    samples = [probe.read(rows)]
-    end_probe.fill(samples[0], np.arange(rows))
-    times = [exp.start]
-    active = np.arange(n)
-    ends = np.full(n, -1)  # per point: the index of its last sample
-    _set_active(batches, active)
-    for k in range(n_steps):
-        t = start + k * h  # whole steps counted, as Execution does
-        t_next = exp.stop if k == last else start + (k + 1) * h
-        plan(t, t_next - t)
-        values = probe.read(rows)
-        samples.append(values)
-        times.append(t_next)
-        if stop_column is not None:
-            done = values[active, stop_column] != 0
-            if done.any():
-                ends[active[done]] = k + 1
-                end_probe.fill(values, active[done])  # their last sample: now the end-only columns too
-                active = active[~done]
-                if not len(active):
-                    break
-                _set_active(batches, active)
-    if len(active) and ends[active[0]] < 0:  # still running at the stop time: the last sample is theirs
-        end_probe.fill(samples[-1], active)
-    ends[ends < 0] = len(samples) - 1
+    times, samples, ends = _advance_together(system, wiring, batches, n)
     data = np.stack(samples)  # (samples, rows, columns)
     t_all = np.array(times)
     elapsed = (time.perf_counter() - started) / n
@@ -351,6 +322,44 @@ def run_lockstep(system: System, points: Sequence[Sequence[Assignment]], batches
         else:
             results.append(RunResult(OK, "", flat, None, elapsed, int(ends[i]), end_time))
     return results
+
+
+def _advance_together(system: System, wiring: "_Wiring", batches: Mapping[str, Any],
+                      n: int) -> tuple[list[float], list[np.ndarray], np.ndarray]:
+    """Advance the batches' first ``n`` rows to the stop time with the bound algorithm, each row until its
+    ``stop_when`` holds; returns the sample times, the samples (rows, columns) at each, and per row the index
+    of its last sample."""
+    exp = system.spec.experiment
+    rows = next(iter(batches.values())).rows
+    columns, probe, end_probe = wiring.columns, wiring.probe, wiring.end_probe
+    stop_column = columns.index(exp.stop_when) if exp.stop_when else None
+    wiring.algorithm.start(exp.start)  # as Execution does (no loops here: nothing to solve)
+    advance = wiring.algorithm.advance
+    samples = [probe.read(rows)]
+    end_probe.fill(samples[0], np.arange(rows))
+    times = [exp.start]
+    active = np.arange(n)
+    ends = np.full(n, -1)  # per point: the index of its last sample
+    _set_active(batches, active)
+    t = exp.start
+    while t < exp.stop:
+        t = advance(t)
+        values = probe.read(rows)
+        samples.append(values)
+        times.append(t)
+        if stop_column is not None:
+            done = values[active, stop_column] != 0
+            if done.any():
+                ends[active[done]] = len(samples) - 1
+                end_probe.fill(values, active[done])  # their last sample: now the end-only columns too
+                active = active[~done]
+                if not len(active):
+                    break
+                _set_active(batches, active)
+    if len(active) and ends[active[0]] < 0:  # still running at the stop time: the last sample is theirs
+        end_probe.fill(samples[-1], active)
+    ends[ends < 0] = len(samples) - 1
+    return times, samples, ends
 
 
 def probe_columns(system: System) -> list[str]:
@@ -424,12 +433,11 @@ def _bind_algorithm(system: System, batches: Mapping[str, Any]) -> MasterAlgorit
 
     Raises NotBatchable for an algorithm that is not ``batchable`` (its points then run one by one).
     """
-    algorithm = make_algorithm(system.spec.experiment.algorithm)
+    algorithm = make_algorithm(system.spec.experiment.algorithm, system.spec.experiment)
     if not algorithm.batchable:
         raise NotBatchable(f"no lock-step version of the master algorithm '{algorithm.name}'")
     # no loops here (can_run_in_lockstep): the coupling only orders the direct feed-through under Jacobi
-    coupling = system.coupling if algorithm.solves_loops else None
-    algorithm.bind(batches, system.order, system.connections, coupling, transfers=_transfers)
+    algorithm.bind(SystemView(batches, system.order, system.connections, system.coupling, transfers=_transfers))
     return algorithm
 
 

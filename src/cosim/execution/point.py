@@ -15,7 +15,7 @@ from typing import Any, Mapping, Sequence
 
 from cosim.errors import Problem, SpecError
 from cosim.execution.run import Execution, RunResult
-from cosim.execution.warm_start import warm_up
+from cosim.execution.warm_up import warm_up
 from cosim.master.observers import Observer
 from cosim.system.builder import Assignment, System
 from cosim.system.study_checks import converted

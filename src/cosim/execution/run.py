@@ -1,8 +1,10 @@
 """One run of one design point: the co-simulation loop.
 
 :class:`Execution` instantiates (or reuses) the units of a
-:class:`~cosim.system.builder.System`, sets parameters, initializes, steps with
-the master algorithm and feeds observers.  It does no file or network I/O.
+:class:`~cosim.system.builder.System`, sets parameters, initializes, advances
+the system with a master algorithm (:mod:`cosim.master.contract`) and feeds
+observers (:mod:`cosim.master.observers`; the run's own are in
+:mod:`cosim.execution.observers`).  It does no file or network I/O.
 Whatever goes wrong inside a run becomes data: the returned :class:`RunResult`
 carries the status and a message naming the unit, the time and the cause.
 Units it created are always terminated, also after a failure.
@@ -12,173 +14,56 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
-from typing import Any, Mapping, Sequence
-
-import numpy as np
+from dataclasses import dataclass
+from typing import Mapping, Sequence
 
 from cosim.errors import UnitError, UserError
+from cosim.execution.observers import Objectives, Recording, RunContext
+from cosim.execution.probe import Probe
+from cosim.execution.result import FAILED, INTERNAL_FAILURE, OK, UNIT_FAILURE, USER_FAILURE, RunResult
 from cosim.execution.warm_start import WarmSamples, WarmState, refuse_unsaveable, restore_warm, warm_steps
-from cosim.master.algorithms import group_transfers, make_algorithm
-from cosim.master.coupled_me import integrate_together, settle_groups
-from cosim.master.observers import ExactColumns, ObjectiveReducer, Observer, TraceRecorder, flatten_objectives
+from cosim.master.contract import MasterAlgorithm, StepGrid
+from cosim.master.coupled_me import integrate_together
+from cosim.master.observers import ExactColumns, Observer, StopCondition, StopWhen, flatten_objectives
+from cosim.master.registry import make_algorithm
+from cosim.master.transfers import group_transfers
 from cosim.spec.expressions import evaluate_expressions
 from cosim.system.builder import Assignment, System
-from cosim.units.protocol import NUMERIC_TYPES, SimulationEnded, Unit
+from cosim.units.protocol import SimulationEnded, Unit
 
-OK, FAILED = "ok", "failed"
-# Why a run failed, for RunResult.failure: a unit (or a non-finite objective),
-# a user's file found unusable only while running, or a bug in cosim.
-UNIT_FAILURE, USER_FAILURE, INTERNAL_FAILURE = "unit", "user", "internal"
+__all__ = ["Execution", "RunResult", "OK", "FAILED", "UNIT_FAILURE", "USER_FAILURE", "INTERNAL_FAILURE"]
 
 
 @dataclass
-class RunResult:
-    """What one run produced.
+class _Progress:
+    """Where a run got to: its time, the steps taken, and why it stopped before its end time (or None)."""
 
-    ``objectives`` is flat (array objectives as ``name[i]``); ``traces`` is a
-    pandas DataFrame when recording was asked for, else None.  ``failure``
-    says why a failed run failed: ``"unit"`` (a unit, or a non-finite
-    objective), ``"user"`` (a user's file found unusable only while running,
-    e.g. an FMU archive that escapes its folder) or ``"internal"`` (a bug).
-    ``steps`` counts the communication steps taken (the accepted ones under
-    the adaptive algorithm, whose ``step_stats`` say what else it did; under
-    ``experiment.warm_start`` those after the warm start).
-    """
-
-    status: str
-    message: str = ""
-    objectives: dict[str, float] = field(default_factory=dict)
-    traces: Any = None
-    elapsed: float = 0.0
+    t: float
     steps: int = 0
-    end_time: float = math.nan
-    failure: str = ""
-    # the adaptive algorithm's statistics (accepted, rejected, exceeded, smallest, largest, ...); None for a fixed step
-    step_stats: dict[str, Any] | None = None
-
-    @property
-    def ok(self) -> bool:
-        """Whether the run reached its stop time without a failure (status "ok")."""
-        return self.status == OK
-
-
-def step_count(start: float, stop: float, h: float) -> int:
-    """Number of communication steps from start to stop; the last may be shorter.
-
-    A ratio within 1e-9 of a whole number counts as that number, so 1.0/0.1
-    gives 10 steps, not 11.
-    """
-    ratio = (stop - start) / h
-    nearest = round(ratio)
-    if abs(ratio - nearest) <= 1e-9 * max(1.0, abs(ratio)):
-        return int(nearest)
-    return int(math.ceil(ratio))
-
-
-class Probe:
-    """Reads every probed signal of the system into one float vector.
-
-    Signals whose values are not floats (String, Binary) or do not fit one
-    exactly (64-bit integers) are also read as Python objects by
-    :meth:`read_exact`, for the trace recorder; only numbers enter the vector.
-    """
-
-    def __init__(self, system: System, units: Mapping[str, Unit]):
-        self.columns: list[str] = []
-        self.types: dict[str, tuple[str, str | None]] = {}
-        self.units: dict[str, str] = {}  # column -> unit of measure, for the recorded table's metadata
-        per_unit: dict[str, list] = {}
-        positions: dict[str, list[int]] = {}
-        exact: dict[str, list] = {}
-        self.exact_columns: list[str] = []
-        for signal in system.probes:
-            for ref, column in zip(signal.refs, signal.columns):
-                if column in self.types:
-                    continue
-                variable = signal.variable
-                self.types[column] = (variable.type, variable.fmi_type)
-                if variable.unit:
-                    self.units[column] = variable.unit
-                if variable.type not in NUMERIC_TYPES or variable.fmi_type in ("Int64", "UInt64"):
-                    exact.setdefault(signal.unit, []).append(ref)
-                    self.exact_columns.append(column)
-                if variable.type not in NUMERIC_TYPES:
-                    continue
-                positions.setdefault(signal.unit, []).append(len(self.columns))
-                per_unit.setdefault(signal.unit, []).append(ref)
-                self.columns.append(column)
-        self._exact_reads = [(units[name].select(refs), units[name]) for name, refs in exact.items()]
-        self.values = np.zeros(len(self.columns))
-        self._reads = []
-        self._reads_of: dict[str, tuple] = {}  # unit name -> its read, for read_units
-        for name, refs in per_unit.items():
-            where = np.array(positions[name], dtype=int)
-            contiguous = bool(np.all(np.diff(where) == 1))
-            # a contiguous run is written through a slice, cheaper than fancy indexing
-            target = slice(int(where[0]), int(where[-1]) + 1) if contiguous else where
-            self._reads.append((units[name].reader(units[name].select(refs)), target))
-            self._reads_of[name] = self._reads[-1]
-
-    def read(self) -> np.ndarray:
-        values = self.values
-        for read, where in self._reads:
-            values[where] = read()
-        return values
-
-    def read_units(self, names: Sequence[str]) -> np.ndarray:
-        """The vector with only the columns of the units ``names`` read anew; the others keep the values of the
-        last read (an event row: one unit is inside its step, the others are not to be read there)."""
-        values = self.values
-        for name in names:
-            if name in self._reads_of:
-                read, where = self._reads_of[name]
-                values[where] = read()
-        return values
-
-    def read_exact(self) -> list[Any]:
-        """The values of ``exact_columns``, as the units give them (str, bytes, int)."""
-        out: list[Any] = []
-        for selection, unit in self._exact_reads:
-            out.extend(unit.get(selection))
-        return out
-
-
-def _record_events(system: System, stepped: Mapping[str, Any], probe: Probe, recorder: TraceRecorder) -> list[Any]:
-    """Hook the model-exchange units whose spec says ``record_events`` (or the group integrating them) so that
-    every event they handle inside a step adds two rows to the traces: their recorded columns just before the
-    event and just after it, the other columns as at the last row.  Returns what was hooked."""
-    wanted = [name for name, unit in system.units.items() if unit.spec.options.get("record_events")]
-    by_stepping: dict[int, tuple[Any, list[str]]] = {}
-    for name in wanted:
-        stepping = stepped.get(name) or next((g for g in stepped.values() if name in getattr(g, "members", {})),
-                                             None)
-        if stepping is not None and hasattr(stepping, "on_event"):  # checked by the system: model exchange
-            by_stepping.setdefault(id(stepping), (stepping, []))[1].append(name)
-    for stepping, names in by_stepping.values():
-        def on_event(t: float, phase: str, names: tuple[str, ...] = tuple(names)) -> None:
-            recorder.event(t, probe.read_units(names))
-        stepping.on_event = on_event
-    return [stepping for stepping, _ in by_stepping.values()]
+    stopped: str | None = None
+    by_unit: bool = False  # a unit ended the run (SimulationEnded), not a stop condition
+    status: str = OK  # what a stop condition made of the run
 
 
 class Execution:
     """Runs one point of a system.
 
-    ``overrides`` are applied after the spec's own parameters (design-point
-    values). ``units``: live instances to reuse (the caller owns them and must
-    pass them freshly instantiated or reset); when None, the execution
-    instantiates its own and terminates them at the end. ``record`` keeps the
-    full traces of the recorded signals.
+    ``overrides`` are applied after the spec's own parameters (design-point values).  ``units``: live
+    instances to reuse (the caller owns them and must pass them freshly instantiated or reset); when None, the
+    execution instantiates its own and terminates them at the end.  ``record`` keeps the full traces of the
+    recorded signals.  ``observers`` watch the run beside its own (objectives, traces, ``stop_when``); a
+    :class:`~cosim.master.observers.StopCondition` among them may end it early.  ``algorithm``: the master
+    algorithm to advance with (default: the spec's ``experiment.algorithm``), bound anew at each run.
     """
 
     def __init__(self, system: System, overrides: Sequence[Assignment] = (), record: bool = False,
                  units: Mapping[str, Unit] | None = None, observers: Sequence[Observer] = (),
-                 warm: WarmState | None = None, save_warm: bool = False):
+                 warm: WarmState | None = None, save_warm: bool = False, algorithm: MasterAlgorithm | None = None):
         """``warm``: start from this saved warm-up (:mod:`cosim.execution.warm_start`; default: the system's
-        ``warm_start``, made by :func:`cosim.execution.warm_start.warmed`) instead of initializing anew: the units restored to its states, ``overrides`` set there (inputs and tunable parameters only), its
-        samples replayed to the observers, then the steps from its time on.  ``save_warm``: run only to the
-        spec's ``experiment.warm_start`` and keep the units' serialized states and the samples in :attr:`saved`."""
+        ``warm_start``, made by :func:`cosim.execution.warm_up.warmed`) instead of initializing anew: the units
+        restored to its states, ``overrides`` set there (inputs and tunable parameters only), its samples
+        replayed to the observers, then the steps from its time on.  ``save_warm``: run only to the spec's
+        ``experiment.warm_start`` and keep the units' serialized states and the samples in :attr:`saved`."""
         self.system = system
         self.overrides = tuple(overrides)
         self.record = record
@@ -187,152 +72,129 @@ class Execution:
         self.warm = None if save_warm else warm if warm is not None else system.warm_start
         self.save_warm = save_warm
         self.saved: WarmState | None = None
+        self.algorithm = algorithm
 
     def run(self) -> RunResult:
-        """Run to the stop time (or until ``stop_when`` is true); never raises for a unit's failure."""
+        """Run to the stop time (or until a stop condition holds); never raises for a unit's failure."""
         started = time.perf_counter()
-        exp = self.system.spec.experiment
+        progress = _Progress(self.system.spec.experiment.start)
         units: dict[str, Unit] = dict(self._given_units or {})
-        owned = self._given_units is None
-        t = exp.start
-        steps = 0
-        algorithm = None
-        hooked: list[Any] = []
+        algorithm: MasterAlgorithm | None = None
+        observers: list[Observer] = []
         try:
-            if owned:
+            if self._given_units is None:
                 for name, system_unit in self.system.units.items():
                     units[name] = system_unit.unit_type.instantiate(name)
-            n_steps = step_count(exp.start, exp.stop, exp.step)
-            first, end = 0, n_steps  # the steps this run takes: k = first .. end - 1
-            if self.save_warm:
-                end = warm_steps(exp)
-                refuse_unsaveable(self.system, units)
-            # groups of model-exchange units: joined before initialization; the master steps each as one unit
-            groups = self.system.model_exchange
-            stepped = integrate_together(units, groups.groups, self.system.connections, self.system.coupling)
-            order = groups.order if groups.groups else self.system.order
-            if self.warm is not None:
-                self._initialize(units, ())  # as the warm-up did; the run's own values are set at its time
-                t, first = restore_warm(self.warm, units, self.overrides, self.system.init_order), self.warm.steps
-            else:
-                self._initialize(units)
-            probe = Probe(self.system, units)
-            exact = ExactColumns(probe.exact_columns, probe.read_exact) if probe.exact_columns else None
-            recorder = TraceRecorder(probe.columns, self.system.recorded, n_steps + 1, exact,
-                                     probe.types, probe.units) if self.record else None
-            reducer = ObjectiveReducer(probe.columns, [(o.name, o.reduce, self._columns_of(o.signal)) for o in
-                                                       self.system.spec.objectives if o.signal])
-            observers = [o for o in (recorder, reducer) if o is not None] + self.extra_observers
-            if recorder is not None:
-                hooked = _record_events(self.system, stepped.units, probe, recorder)
-            keeper = WarmSamples(probe, exact) if self.save_warm else None
-            if keeper is not None:
-                observers.append(keeper)
-            stop_column = probe.columns.index(exp.stop_when) if exp.stop_when else None
-
-            algorithm = make_algorithm(exp.algorithm)
-            variable = algorithm.variable_step  # the adaptive algorithm: steps of its choosing, after the loop
-            if variable:
-                algorithm.configure(exp)  # type: ignore[attr-defined]  # its options, the run's span
-            if algorithm.solves_loops:  # given the feed-through and loops to solve (others never see a loop)
-                algorithm.bind(stepped.units, order, stepped.links, stepped.coupling)
-            else:
-                algorithm.bind(stepped.units, order, stepped.links)
-            algorithm.start(t)  # e.g. algebraic loops solved at the start time
-            if groups.groups:
-                settle_groups(stepped, t)  # loops among a group's members, solved at the start time too
-            if self.warm is not None:  # the observers see the warm-up's samples, as if this run had taken its steps
-                self.warm.replay(observers, exact)
-            else:
-                values = probe.read()
-                for observer in observers:
-                    observer.initialized(t, values)
-            start, h, last = exp.start, exp.step, n_steps - 1
-            step, read = algorithm.step, probe.read
-            hooks = [observer.step for observer in observers]
-            ended: SimulationEnded | None = None
-            for k in range(first, first if variable else end):
-                t = start + k * h  # whole steps counted, never summed: no drift
-                t_next = exp.stop if k == last else start + (k + 1) * h
-                try:
-                    step(t, t_next - t)
-                except SimulationEnded as stop:  # a unit ends the run: record where it got to, then stop
-                    ended, t_next = stop, stop.time
-                t = t_next
-                steps += 1
-                values = read()
-                for hook in hooks:
-                    hook(t, values)
-                if ended is not None or stop_column is not None and values[stop_column]:
-                    break
-            while variable and ended is None and t < exp.stop:
-                try:
-                    t = algorithm.advance(t)  # type: ignore[attr-defined]
-                except SimulationEnded as stop:
-                    ended, t = stop, stop.time
-                steps += 1
-                values = read()
-                for hook in hooks:
-                    hook(t, values)
-                if stop_column is not None and values[stop_column]:
-                    break
-            if keeper is not None:  # the warm-up: keep the states at the warm-start time, and the samples to it
-                self.saved = keeper.saved(self.system, units, t, end, ended, steps)
-                return RunResult(OK, "", elapsed=time.perf_counter() - started, steps=steps, end_time=t)
-            stats = algorithm.stats.as_dict() if variable else None  # type: ignore[attr-defined]
+            context, progress.t = self._prepared(units)
+            algorithm = self.algorithm or make_algorithm(self.system.spec.experiment.algorithm,
+                                                         self.system.spec.experiment)
+            algorithm.bind(context.view)
+            objectives, recording, keeper = Objectives(self.system), self._recording(), self._keeper()
+            observers = [o for o in (recording, objectives, keeper) if o is not None]
+            observers += self._stop_conditions() + self.extra_observers
             for observer in observers:
-                observer.finished(t)
-            objectives = evaluate_expressions(self.system.spec.objectives, reducer.results())
-            flat = flatten_objectives(objectives)
-            nan = [name for name, v in flat.items() if not math.isfinite(v)]
-            if nan:
-                return RunResult(FAILED, f"objective(s) not finite: {', '.join(nan)}", flat,
-                                 recorder.frame() if recorder else None, time.perf_counter() - started, steps, t,
-                                 failure=UNIT_FAILURE, step_stats=stats)
-            if ended is not None:
-                message = f"stopped early: {ended} (stop time {exp.stop:g})"
-                if exp.early_stop == "fail":  # the spec says a run must reach its stop time
-                    return RunResult(FAILED, message + "; experiment.early_stop is 'fail'", flat,
-                                     recorder.frame() if recorder else None, time.perf_counter() - started,
-                                     steps, t, failure=UNIT_FAILURE, step_stats=stats)
-                return RunResult(OK, message, flat, recorder.frame() if recorder else None,
-                                 time.perf_counter() - started, steps, t, step_stats=stats)
-            return RunResult(OK, "", flat, recorder.frame() if recorder else None,
-                             time.perf_counter() - started, steps, t, step_stats=stats)
-        except UnitError as exc:  # a Python unit's own frames kept in the message: where the user looks
-            return RunResult(FAILED, exc.with_traceback_text(), elapsed=time.perf_counter() - started, steps=steps, end_time=t,
-                             failure=UNIT_FAILURE)
-        except UserError as exc:  # e.g. an FMU archive found unsafe when it is extracted
-            if self.save_warm:
+                observer.attached(context)
+            self._drive(algorithm, context, observers, progress)
+            if keeper is not None:  # the warm-up: keep the states at the warm-start time, and the samples to it
+                self.saved = keeper.saved(self.system, units, progress.t, progress.steps, progress.stopped)
+                return RunResult(OK, "", elapsed=time.perf_counter() - started, steps=progress.steps,
+                                 end_time=progress.t)
+            for observer in observers:
+                observer.finished(progress.t)
+            return self._outcome(objectives, recording, algorithm, progress, time.perf_counter() - started)
+        except Exception as exc:
+            if isinstance(exc, UserError) and self.save_warm:
                 raise  # a warm-up that cannot be made (a unit without saved states): the study's error, not a row
-            return RunResult(FAILED, str(exc).replace("\n", " "), elapsed=time.perf_counter() - started,
-                             steps=steps, end_time=t, failure=USER_FAILURE)
-        except Exception as exc:  # an orchestrator bug must still become a row, not a lost point
-            return RunResult(FAILED, f"internal error at t={t:g}: {type(exc).__name__}: {exc}",
-                             elapsed=time.perf_counter() - started, steps=steps, end_time=t,
-                             failure=INTERNAL_FAILURE)
+            return _failed(exc, progress, time.perf_counter() - started)
         finally:
-            for stepping in hooked:
-                stepping.on_event = None  # units given by the caller outlive this run
-            if algorithm is not None and algorithm.variable_step:
-                try:
-                    algorithm.free()  # type: ignore[attr-defined]  # its saved states, before the units go
-                except Exception:
-                    pass  # freeing the units matters more
-            if owned:
-                for unit in units.values():
-                    try:
-                        unit.terminate()
-                    except Exception:
-                        pass  # terminating every unit matters more than one unit's complaint
+            _release(observers, algorithm, units if self._given_units is None else {})
 
-    def _columns_of(self, signal: str | None) -> list[str]:
-        for s in self.system.probes:
-            if s.text == signal:
-                return list(s.columns)
-        raise KeyError(signal)
+    def _prepared(self, units: Mapping[str, Unit]) -> tuple[RunContext, float]:
+        """Initialize ``units`` (or restore the warm start) and return what the observers learn of the run and
+        the time it starts from."""
+        if self.save_warm:
+            refuse_unsaveable(self.system, dict(units))
+        groups = self.system.model_exchange  # joined before initialization; the master steps each as one unit
+        view = integrate_together(units, groups.order if groups.groups else self.system.order, groups.groups,
+                                  self.system.connections, self.system.coupling)
+        t = self.system.spec.experiment.start
+        if self.warm is not None:
+            self._initialize(units, ())  # as the warm-up did; the run's own values are set at its time
+            t = restore_warm(self.warm, dict(units), self.overrides, self.system.init_order)
+        else:
+            self._initialize(units)
+        probe = Probe(self.system, units)
+        exact = ExactColumns(probe.exact_columns, probe.read_exact) if probe.exact_columns else None
+        return RunContext(self.system, units, view, probe, exact), t
+
+    def _recording(self) -> Recording | None:
+        if not self.record:
+            return None
+        return Recording(self.system, StepGrid.of(self.system.spec.experiment).steps + 1)
+
+    def _keeper(self) -> WarmSamples | None:
+        return WarmSamples() if self.save_warm else None
+
+    def _stop_conditions(self) -> list[Observer]:
+        stop_when = self.system.spec.experiment.stop_when
+        return [StopWhen(stop_when)] if stop_when else []
+
+    def _drive(self, algorithm: MasterAlgorithm, context: RunContext, observers: Sequence[Observer],
+               progress: _Progress) -> None:
+        """Start ``algorithm`` and advance it to the end time (the warm-start time for a warm-up), feeding the
+        observers at every communication point, until a unit ends the run or a stop condition holds."""
+        exp = self.system.spec.experiment
+        t_end = StepGrid.of(exp).time(warm_steps(exp)) if self.save_warm else exp.stop
+        algorithm.start(progress.t)  # e.g. algebraic loops solved at the start time
+        if self.warm is not None:  # the observers see the warm-up's samples, as if this run had taken its steps
+            self.warm.replay(observers, context.exact)
+        else:
+            values = context.probe.read()
+            for observer in observers:
+                observer.initialized(progress.t, values)
+        advance, read = algorithm.advance, context.probe.read
+        hooks = [observer.step for observer in observers]
+        stops = [observer for observer in observers if isinstance(observer, StopCondition)]
+        t = progress.t
+        while t < t_end:
+            try:
+                t = advance(t)
+            except SimulationEnded as ended:  # a unit ends the run: record where it got to, then stop
+                t, progress.stopped, progress.by_unit = ended.time, str(ended), True
+            progress.t, progress.steps = t, progress.steps + 1
+            values = read()
+            for hook in hooks:
+                hook(t, values)
+            if progress.stopped is not None:
+                return
+            for stop in stops:
+                if stop.reason is not None:
+                    progress.stopped, progress.status = stop.reason, stop.status
+                    return
+
+    def _outcome(self, objectives: Objectives, recording: Recording | None, algorithm: MasterAlgorithm,
+                 progress: _Progress, elapsed: float) -> RunResult:
+        """The run's result from its observers: failed for a non-finite objective, or when a unit ended it early
+        and the spec says ``early_stop: fail``."""
+        exp = self.system.spec.experiment
+        flat = flatten_objectives(evaluate_expressions(self.system.spec.objectives, objectives.results()))
+        traces = recording.frame() if recording is not None else None
+        row = dict(objectives=flat, traces=traces, elapsed=elapsed, steps=progress.steps, end_time=progress.t,
+                   step_stats=algorithm.statistics())
+        nan = [name for name, v in flat.items() if not math.isfinite(v)]
+        if nan:
+            return RunResult(FAILED, f"objective(s) not finite: {', '.join(nan)}", failure=UNIT_FAILURE, **row)
+        if progress.stopped is not None and progress.by_unit:
+            message = f"stopped early: {progress.stopped} (stop time {exp.stop:g})"
+            if exp.early_stop == "fail":  # the spec says a run must reach its stop time
+                return RunResult(FAILED, message + "; experiment.early_stop is 'fail'", failure=UNIT_FAILURE, **row)
+            return RunResult(OK, message, **row)
+        if progress.status != OK:  # a stop condition's own verdict on the run
+            return RunResult(progress.status, progress.stopped or "", **row)
+        return RunResult(OK, "", **row)
 
     def _initialize(self, units: Mapping[str, Unit], overrides: Sequence[Assignment] | None = None) -> None:
+        """Set up, set the spec's values and ``overrides`` (default: the run's), initialize in stepping order."""
         exp = self.system.spec.experiment
         for unit in units.values():
             unit.setup(exp.start, exp.stop)
@@ -353,3 +215,36 @@ class Execution:
             units[name].exit_initialization()
         for transfer in group_transfers(units, self.system.init_order):  # outputs may change when it ends
             transfer.run()
+
+
+def _failed(exc: Exception, progress: _Progress, elapsed: float) -> RunResult:
+    """The row of a run that raised: a unit's failure (its own frames kept in the message, where the user
+    looks), a user's file found unusable only while running, or an orchestrator bug (still a row, never a lost
+    point)."""
+    where = dict(elapsed=elapsed, steps=progress.steps, end_time=progress.t)
+    if isinstance(exc, UnitError):
+        return RunResult(FAILED, exc.with_traceback_text(), failure=UNIT_FAILURE, **where)
+    if isinstance(exc, UserError):  # e.g. an FMU archive found unsafe when it is extracted
+        return RunResult(FAILED, str(exc).replace("\n", " "), failure=USER_FAILURE, **where)
+    return RunResult(FAILED, f"internal error at t={progress.t:g}: {type(exc).__name__}: {exc}",
+                     failure=INTERNAL_FAILURE, **where)
+
+
+def _release(observers: Sequence[Observer], algorithm: MasterAlgorithm | None, owned: Mapping[str, Unit]) -> None:
+    """After a run, however it ended: observers detached, the algorithm's saved states freed before the units go,
+    the units the run made terminated (each one, whatever another one says)."""
+    for observer in observers:
+        try:
+            observer.detached()
+        except Exception:
+            pass  # releasing the units matters more
+    if algorithm is not None:
+        try:
+            algorithm.free()
+        except Exception:
+            pass  # freeing the units matters more
+    for unit in owned.values():
+        try:
+            unit.terminate()
+        except Exception:
+            pass  # terminating every unit matters more than one unit's complaint

@@ -23,19 +23,17 @@ the steps after ``T`` (``RunResult.steps`` counts them).  Needs a fixed-step alg
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any, Sequence
+from dataclasses import dataclass
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from cosim.errors import Problem, UserError
-from cosim.master.observers import ExactColumns, ObjectiveReducer, Observer, TraceRecorder
+from cosim.execution.probe import Probe
+from cosim.master.observers import ExactColumns, Observer
 from cosim.master.transfers import group_transfers
 from cosim.system.builder import Assignment, System
-from cosim.units.protocol import SimulationEnded, Unit
-
-if TYPE_CHECKING:
-    from cosim.execution.run import Probe, RunResult
+from cosim.units.protocol import Unit
 
 WARM_PATH = "$.experiment.warm_start"
 
@@ -60,16 +58,12 @@ class WarmState:
     def replay(self, observers: Sequence[Observer], exact: ExactColumns | None) -> None:
         """Give ``observers`` the warm-up's samples (``initialized`` the first, ``step`` the others), the exact
         columns read from the saved rows instead of the live units (which are at ``time`` already)."""
-        live = exact.read if exact is not None else None
+        live: Callable[[], Sequence[Any]] | None = exact.read if exact is not None else None
         if exact is not None:
             rows = iter(self.exact)
-            exact.read = lambda: next(rows)  # type: ignore[method-assign]
-        one_by_one = []
-        for observer in observers:  # the recorder and the reducer take all samples at once (the same rows)
-            if isinstance(observer, (TraceRecorder, ObjectiveReducer)) and not getattr(observer, "_exact", None):
-                observer.load(self.times, self.samples)
-            else:
-                one_by_one.append(observer)
+            exact.read = lambda: next(rows)
+        # the recorder and the reducer take all samples at once (the same rows); the others one by one
+        one_by_one = [observer for observer in observers if not observer.load(self.times, self.samples)]
         try:
             for observer in one_by_one:
                 observer.initialized(float(self.times[0]), self.samples[0])
@@ -78,8 +72,8 @@ class WarmState:
                 for hook in hooks:
                     hook(t, values)
         finally:
-            if exact is not None:
-                exact.read = live  # type: ignore[method-assign]
+            if exact is not None and live is not None:
+                exact.read = live
 
 
 def warm_steps(experiment: Any) -> int:
@@ -90,12 +84,16 @@ def warm_steps(experiment: Any) -> int:
 class WarmSamples(Observer):
     """Keeps every sample of the warm-up (a copy of the probe's vector, and its exact columns)."""
 
-    def __init__(self, probe: "Probe", exact: ExactColumns | None):
-        self.columns = tuple(probe.columns)
-        self._exact = exact
+    def __init__(self) -> None:
+        self.columns: tuple[str, ...] = ()
+        self._exact: ExactColumns | None = None
         self.times: list[float] = []
         self.samples: list[np.ndarray] = []
         self.exact_rows: list[tuple[Any, ...]] = []
+
+    def attached(self, context: Any) -> None:
+        probe: Probe = context.probe
+        self.columns, self._exact = tuple(probe.columns), context.exact
 
     def initialized(self, t: float, values: np.ndarray) -> None:
         self.step(t, values)
@@ -106,13 +104,12 @@ class WarmSamples(Observer):
         if self._exact is not None:
             self.exact_rows.append(tuple(self._exact.read()))
 
-    def saved(self, system: System, units: dict[str, Unit], t: float, steps: int, ended: SimulationEnded | None,
-              taken: int) -> WarmState:
-        """The warm state at ``t`` after ``taken`` of the ``steps`` to the warm-start time; raises UserError when
-        the run ended before it (a unit ended the simulation, or ``stop_when`` became true)."""
+    def saved(self, system: System, units: dict[str, Unit], t: float, steps: int, stopped: str | None) -> WarmState:
+        """The warm state at ``t`` after the ``steps`` to the warm-start time; raises UserError when the run
+        ended before it (``stopped``: why — a unit ended the simulation, or ``stop_when`` became true)."""
         exp = system.spec.experiment
-        if ended is not None or taken < steps:
-            why = str(ended) if ended is not None else f"'{exp.stop_when}' became true"
+        if stopped is not None:
+            why = stopped
             raise UserError([Problem(system.spec.path, WARM_PATH, f"the warm-up run ended at t={t:g}, before "
                                      f"warm_start {exp.warm_start:g} ({why})",
                                      "choose a warm_start before the run ends, or remove warm_start")])
@@ -169,30 +166,3 @@ def restore_warm(warm: WarmState, units: dict[str, Unit], overrides: Sequence[As
     for transfer in group_transfers(units, init_order):  # the inputs follow outputs the new values may change
         transfer.run()
     return warm.time
-
-
-def warm_up(system: System) -> tuple[WarmState | None, "RunResult"]:
-    """Run ``system`` with the spec's own values to its ``experiment.warm_start`` and save it there.
-
-    Returns (the warm state, the warm-up's result), or (None, the failed result) when a unit failed on the
-    way.  Raises UserError when a unit cannot save its state or the run ends before the warm-start time.
-    """
-    from cosim.execution.run import Execution  # the run uses this module: imported when a warm-up is made
-
-    execution = Execution(system, save_warm=True)
-    result = execution.run()
-    return execution.saved, result
-
-
-def warmed(system: System) -> System:
-    """``system`` carrying its warm state (``system.warm_start``) when its spec asks for a warm start and it has
-    none yet; the same system otherwise.  Raises UserError when the warm-up cannot be made (see :func:`warm_up`),
-    naming the failing unit."""
-    if system.spec.experiment.warm_start is None or system.warm_start is not None:
-        return system
-    state, result = warm_up(system)
-    if state is None:
-        raise UserError([Problem(system.spec.path, WARM_PATH, f"the warm-up run to t="
-                                 f"{system.spec.experiment.warm_start:g} failed: {result.message}",
-                                 "fix what makes the run with the spec's own values fail, or remove warm_start")])
-    return replace(system, warm_start=state)

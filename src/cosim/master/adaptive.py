@@ -37,8 +37,9 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from cosim.master.algorithms import GaussSeidel, Jacobi, Link, MasterAlgorithm
-from cosim.master.loops import Coupling
+from cosim.master.algorithms import GaussSeidel, Jacobi
+from cosim.master.contract import MasterAlgorithm, SystemView
+from cosim.master.transfers import Link
 from cosim.units.protocol import Unit
 
 SAFETY = 0.9  # aim below the allowance, so the next step is rarely rejected
@@ -180,33 +181,24 @@ class ExchangedSignals:
 
 
 class Adaptive(MasterAlgorithm):
-    """The adaptive master algorithm (module docstring).  After :meth:`bind`, :meth:`advance` takes one
-    accepted step; :attr:`stats` counts what happened."""
+    """The adaptive master algorithm (module docstring), made for an experiment (``start``, ``stop``, ``step``
+    and the options ``adaptive``; raises ValueError for options that cannot work).  Each :meth:`advance` takes
+    one accepted step; :meth:`statistics` says what happened."""
 
     name = "adaptive"
-    variable_step = True  # the run loop asks advance() for each step instead of stepping a fixed grid
     solves_loops = True  # as its base algorithms: the coupling is handed on to them
 
-    def __init__(self, experiment: Any = None):
-        self.settings: AdaptiveSettings | None = None
-        self.stats = StepStatistics("step doubling")
-        if experiment is not None:
-            self.configure(experiment)
-
-    def configure(self, experiment: Any) -> None:
-        """Take the options and span of ``experiment`` (``start``, ``stop``, ``step``, ``adaptive``);
-        raises ValueError for options that cannot work."""
+    def __init__(self, experiment: Any):
         self.settings = AdaptiveSettings.for_experiment(experiment)
+        self.stats = StepStatistics("step doubling")
 
-    def bind(self, units: Mapping[str, Unit], order: Sequence[str], connections: Sequence[Link],
-             coupling: Coupling | None = None) -> None:
-        if self.settings is None:
-            raise ValueError("the adaptive algorithm needs the experiment: configure(experiment) before bind")
+    def bind(self, view: SystemView) -> None:
+        self.view = view
         s = self.settings
         self._base = BASES[s.base]()
-        self._base.bind(units, order, connections, coupling)
-        self._units = list(units.values())
-        self._signals = ExchangedSignals(units, connections)
+        self._base.bind(view)
+        self._units = list(view.units.values())
+        self._signals = ExchangedSignals(view.units, view.links)
         self.restores = s.restore == "auto" and all(u.can_save_state for u in self._units)
         if self.restores:
             for unit in self._units:
@@ -217,11 +209,7 @@ class Adaptive(MasterAlgorithm):
         self._y: np.ndarray | None = None  # the signals at the current time
 
     def start(self, t: float) -> None:
-        self._base.start(t)
-
-    def step(self, t: float, h: float) -> None:
-        """One step of the base algorithm (no control): for callers that step a fixed grid."""
-        self._base.step(t, h)
+        self._base.start(t)  # its loops solved and the view's groups settled
 
     def advance(self, t: float) -> float:
         """Take one accepted step from ``t`` (repeating rejected tries where units can restore); returns
@@ -230,6 +218,9 @@ class Adaptive(MasterAlgorithm):
             self._y = self._signals.read()
             self._size = np.abs(self._y)  # each signal's largest magnitude so far: what rtol is relative to
         return self._advance_restoring(t) if self.restores else self._advance_adapting(t)
+
+    def statistics(self) -> dict[str, Any]:
+        return self.stats.as_dict()
 
     def free(self) -> None:
         """Release the saved states (call before the units are terminated)."""

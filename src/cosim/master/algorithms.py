@@ -1,68 +1,44 @@
-"""Master algorithms: Gauss-Seidel, Jacobi (zero-delay feed-through) and Jacobi with delay, with fixed
-steps; ``adaptive`` (steps chosen by an error estimate) is in :mod:`cosim.master.adaptive`.
+"""The fixed-step master algorithms: Gauss-Seidel, Jacobi (zero-delay feed-through) and Jacobi with delay.
 
-An algorithm is bound to live units once (:meth:`MasterAlgorithm.bind`),
-which resolves every connection into a :class:`Transfer` with pre-built
-selections; after that, :meth:`step` does no name lookup and no I/O.
-Time is counted in whole steps by the caller (``t_k = start + k*h``), so
-long runs do not drift.
+Each advances the system one communication step of the experiment's grid (:class:`~cosim.master.contract.StepGrid`)
+per :meth:`~cosim.master.contract.MasterAlgorithm.advance`; ``step(t, h)`` is that step of any length, which the
+adaptive algorithm (:mod:`cosim.master.adaptive`) uses to take the steps it chooses.  ``bind`` resolves every link
+into a transfer with pre-built selections, so a step does no name lookup and no I/O.
 """
 
 from __future__ import annotations
 
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any
 
-from cosim.master.loops import Coupling, CouplingRuntime
-from cosim.master.transfers import Link, Port, Transfer, TransferFactory, group_transfers  # noqa: F401  (re-exported: their old place)
-from cosim.units.protocol import SimulationEnded, Unit, UnitError
-
-
-def step_unit(unit: Unit, t: float, h: float) -> None:
-    """``unit.do_step(t, h)``; any exception becomes a UnitError naming the unit and time."""
-    try:
-        unit.do_step(t, h)
-    except (UnitError, SimulationEnded):
-        raise
-    except Exception as exc:  # a Python unit's own bug, reported like an FMU's error status
-        raise UnitError.raised(unit.name, "do_step", exc, t) from exc
+from cosim.master.contract import MasterAlgorithm, StepGrid, SystemView, step_unit
+from cosim.master.loops import CouplingRuntime
+from cosim.units.protocol import SimulationEnded, UnitError
 
 
-class MasterAlgorithm:
-    """Base: ``bind`` to live units, ``start(t)`` once at the start time, then ``step(t, h)`` advances all of them.
+class FixedStep(MasterAlgorithm):
+    """A master algorithm on the experiment's grid of communication points: ``advance(t)`` takes the grid's step
+    from ``t`` with :meth:`step`, which subclasses implement.  ``experiment`` (anything with ``start``, ``stop``
+    and ``step``) gives the grid; an algorithm made without one can only :meth:`step` (the adaptive algorithm's
+    base, a test)."""
 
-    ``coupling`` (:class:`cosim.master.loops.Coupling`): the system's direct feed-through and algebraic loops,
-    given to ``bind`` only when the algorithm says ``solves_loops`` (it then solves the loops at every
-    communication point); the system check refuses a system with loops for any other algorithm, whose ``bind``
-    may keep the three arguments.
+    def __init__(self, experiment: Any = None):
+        self.grid = StepGrid.of(experiment) if experiment is not None else None
 
-    An algorithm with ``variable_step = True`` chooses its own steps: the run gives it the experiment (start,
-    stop, step, options) with ``configure(experiment)`` and asks its ``advance(t)`` for each step (see
-    :mod:`cosim.master.adaptive`).
-
-    ``batchable``: the algorithm uses its units only through their ``name`` and ``do_step(t, h)`` and moves
-    values only through the transfers that ``bind``'s ``transfers`` factory makes (called like
-    :func:`group_transfers`, ``transfers(units, links)``), so it can be bound to other stepping objects
-    than units: the lock-step runner (:mod:`cosim.execution.lockstep`) binds it to batches of K points with
-    transfers that move all K rows at once. Others (the default) run point by point.
-    """
-
-    name = "abstract"
-    solves_loops = False
-    variable_step = False
-    batchable = False
-
-    def bind(self, units: Mapping[str, Unit], order: Sequence[str], connections: Sequence[Link],
-             coupling: Coupling | None = None, transfers: TransferFactory = group_transfers) -> None:
-        raise NotImplementedError
-
-    def start(self, t: float) -> None:
-        """Called once after initialization, before the first step: outputs consistent at ``t`` (default: as they are)."""
+    def advance(self, t: float) -> float:
+        grid = self.grid
+        if grid is None:
+            raise ValueError(f"the {self.name} algorithm was made without an experiment: it has no steps to advance")
+        k = round((t - grid.start) / grid.step) + 1  # grid.time(grid.index(t) + 1), without two calls per step
+        t_next = grid.stop if k >= grid.steps else grid.start + k * grid.step
+        self.step(t, t_next - t)
+        return t_next
 
     def step(self, t: float, h: float) -> None:
+        """Advance every unit from ``t`` by ``h`` (raises as :meth:`advance` does)."""
         raise NotImplementedError
 
 
-class GaussSeidel(MasterAlgorithm):
+class GaussSeidel(FixedStep):
     """Units step one after another in ``order``; each first takes its inputs
     from the *latest* outputs, so a unit later in the order sees the values its
     sources computed in this same step.  An algebraic loop is solved as soon as
@@ -72,32 +48,37 @@ class GaussSeidel(MasterAlgorithm):
     solves_loops = True
     batchable = True
 
-    def bind(self, units: Mapping[str, Unit], order: Sequence[str], connections: Sequence[Link],
-             coupling: Coupling | None = None, transfers: TransferFactory = group_transfers) -> None:
+    def bind(self, view: SystemView) -> None:
+        self.view = view
+        units, order, coupling = view.units, view.order, view.coupling
         self._plan = []
         for name in order:
-            incoming = [c for c in connections if c.target.unit == name]
-            self._plan.append((units[name], transfers(units, incoming)))
-        self._loops = (CouplingRuntime(coupling, units, connections, transfers)
-                       if coupling and coupling.loops else None)
-        if self._loops is not None:  # only then the step that solves loops (a system without any pays nothing)
+            incoming = [c for c in view.links if c.target.unit == name]
+            self._plan.append((units[name], view.transfers(units, incoming)))
+        self._loops = (CouplingRuntime(coupling, units, view.links, view.transfers)
+                       if self.solves_loops and coupling.loops else None)
+        self._solve_after: list[list[Any]] | None = None  # per unit in order: the loops solved once it has stepped
+        if self._loops is not None:  # a system without loops pays nothing for them
             last = {loop: max(order.index(u) for u in loop.units) for loop in coupling.loops}
             self._solve_after = [[self._loops.solver(loop).solve for loop in coupling.loops if last[loop] == i]
                                  for i in range(len(order))]
-            self.step = self._step_solving_loops  # type: ignore[method-assign]
 
     def start(self, t: float) -> None:
         if self._loops is not None:
             self._loops.propagate(t)
+        super().start(t)
 
     def step(self, t: float, h: float) -> None:
+        if self._solve_after is not None:
+            self._step_solving_loops(t, h)
+            return
         for unit, transfers in self._plan:
             for transfer in transfers:
                 transfer.run()
             step_unit(unit, t, h)
 
     def _step_solving_loops(self, t: float, h: float) -> None:
-        for (unit, transfers), solves in zip(self._plan, self._solve_after):
+        for (unit, transfers), solves in zip(self._plan, self._solve_after or ()):
             for transfer in transfers:
                 transfer.run()
             step_unit(unit, t, h)
@@ -105,7 +86,7 @@ class GaussSeidel(MasterAlgorithm):
                 solve(t + h)
 
 
-class Jacobi(MasterAlgorithm):
+class Jacobi(FixedStep):
     """All units step from the outputs at ``t``: step every unit (in any order;
     they are independent), then read every output and set every input.
 
@@ -126,19 +107,23 @@ class Jacobi(MasterAlgorithm):
     name = "jacobi"
     solves_loops = True
     batchable = True
+    zero_delay = True  # links into direct feed-through inputs are carried in dependency order
 
-    def bind(self, units: Mapping[str, Unit], order: Sequence[str], connections: Sequence[Link],
-             coupling: Coupling | None = None, transfers: TransferFactory = group_transfers) -> None:
-        direct = coupling.direct if coupling is not None else frozenset()
+    def bind(self, view: SystemView) -> None:
+        self.view = view
+        units, links = view.units, view.links
+        # without zero-delay feed-through (jacobi-delayed) every link is set at once, after all reads
+        direct = view.coupling.direct if self.zero_delay else frozenset()
         # links into direct inputs are set in dependency order (propagate), then the others all at once
-        self._transfers = transfers(units, [c for i, c in enumerate(connections) if i not in direct])
-        self._units = [units[n] for n in order]
-        self._coupling = CouplingRuntime(coupling, units, connections, transfers) if direct else None
-        self._loops = bool(coupling and coupling.loops)
+        self._transfers = view.transfers(units, [c for i, c in enumerate(links) if i not in direct])
+        self._units = [units[n] for n in view.order]
+        self._coupling = CouplingRuntime(view.coupling, units, links, view.transfers) if direct else None
+        self._loops = self._coupling is not None and bool(view.coupling.loops)
 
     def start(self, t: float) -> None:
-        if self._loops:  # initialization already set every input in dependency order: only loops remain
-            self._coupling.propagate(t)
+        if self._loops and self._coupling is not None:  # initialization set every input in dependency order:
+            self._coupling.propagate(t)                  # only loops remain
+        super().start(t)
 
     def step(self, t: float, h: float) -> None:
         try:  # step_unit's rule, with the try around the loop: one Python call less per unit and step
@@ -162,38 +147,4 @@ class JacobiDelayed(Jacobi):
 
     name = "jacobi-delayed"
     solves_loops = False
-
-    def bind(self, units: Mapping[str, Unit], order: Sequence[str], connections: Sequence[Link],
-             coupling: Coupling | None = None, transfers: TransferFactory = group_transfers) -> None:
-        super().bind(units, order, connections, None, transfers)
-
-
-class AdaptiveEntry:
-    """The adaptive algorithm's entry in ALGORITHMS: its class attributes, and calling it makes a
-    :class:`cosim.master.adaptive.Adaptive` (imported then: that module builds on the classes above)."""
-
-    name = "adaptive"
-    solves_loops = True
-    variable_step = True
-
-    def __new__(cls, experiment: Any = None) -> Any:  # type: ignore[misc]
-        from cosim.master.adaptive import Adaptive
-
-        return Adaptive(experiment)
-
-
-# the one list of master algorithm names (each maps to a class; a variable-step one takes the experiment)
-ALGORITHMS: dict[str, Callable[..., MasterAlgorithm]] = {
-    GaussSeidel.name: GaussSeidel, Jacobi.name: Jacobi, JacobiDelayed.name: JacobiDelayed,
-    AdaptiveEntry.name: AdaptiveEntry}
-DEFAULT_ALGORITHM = GaussSeidel.name
-
-
-def make_algorithm(name: str, experiment: Any = None) -> MasterAlgorithm:
-    """The algorithm called ``name``, for ``experiment`` (start, stop, step, options; needed by the adaptive
-    algorithm); raises ValueError for an unknown name or options that cannot work."""
-    try:
-        factory = ALGORITHMS[name]
-    except KeyError:
-        raise ValueError(f"unknown master algorithm '{name}'; use one of {', '.join(ALGORITHMS)}") from None
-    return factory(experiment) if getattr(factory, "variable_step", False) else factory()
+    zero_delay = False

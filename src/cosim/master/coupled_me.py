@@ -14,10 +14,12 @@ nothing more.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Any, Callable, Mapping, NamedTuple, Protocol, Sequence
+from functools import partial
+from typing import Any, Callable, Mapping, Protocol, Sequence
 
 import numpy as np
 
+from cosim.master.contract import SystemView
 from cosim.master.loops import Coupling, Loop, LoopSolver
 from cosim.master.transfers import Link, Port
 from cosim.units.fmu.coupled_me import CoupledModelExchange, Propagation
@@ -48,23 +50,16 @@ class _Link:
     offset: float
 
 
-class Stepped(NamedTuple):
-    """The units a master algorithm binds (each group as one unit, by the group's name), its links and the
-    direct feed-through among them (indices into ``links``)."""
-
-    units: dict[str, Unit]
-    links: list[Link]
-    coupling: Coupling
-
-
-def integrate_together(units: Mapping[str, Unit], groups: Sequence[Group], links: Sequence[Link],
-                       coupling: Coupling = Coupling()) -> Stepped:
-    """Each group's members joined to one :class:`CoupledModelExchange` (call before they are initialized:
-    joined members start no solver of their own), and the links and feed-through as the master sees them
-    (module docstring). ``coupling``: the system's, as indices into ``links``; the system groups no unit on an
-    algebraic loop (:mod:`cosim.system.coupled_me`), so only feed-through blocks can contain internal links."""
+def integrate_together(units: Mapping[str, Unit], order: Sequence[str], groups: Sequence[Group],
+                       links: Sequence[Link], coupling: Coupling = Coupling()) -> SystemView:
+    """What the master steps: each group's members joined to one :class:`CoupledModelExchange` (call before they
+    are initialized: joined members start no solver of their own), the links and feed-through as the master sees
+    them (module docstring) and, as the view's ``settle``, the loops inside groups solved at the start time.
+    ``order``: the stepping order with each group as one unit; ``coupling``: the system's, as indices into
+    ``links``; the system groups no unit on an algebraic loop (:mod:`cosim.system.coupled_me`), so only
+    feed-through blocks can contain internal links."""
     if not groups:
-        return Stepped(dict(units), list(links), coupling)
+        return SystemView(dict(units), order, list(links), coupling)
     stepped = dict(units)
     group_of: dict[str, CoupledModelExchange] = {}
     for group in groups:
@@ -84,15 +79,15 @@ def integrate_together(units: Mapping[str, Unit], groups: Sequence[Group], links
             continue
         renumbered[i] = len(outer)
         outer.append(_Link(_seen_from(link.source, source), _seen_from(link.target, target), link.factor, link.offset))
-    return Stepped(stepped, outer, _renumbered(coupling, renumbered))
+    return SystemView(stepped, order, outer, _renumbered(coupling, renumbered),
+                      settle=partial(_settle_groups, list(dict.fromkeys(group_of.values()))))
 
 
-def settle_groups(stepped: Stepped, t: float) -> None:
+def _settle_groups(groups: Sequence[CoupledModelExchange], t: float) -> None:
     """Solve the loops inside groups at ``t`` (after initialization, before the first step): the values read at
     the start time then satisfy them, as the master's loops are solved at the start time."""
-    for unit in stepped.units.values():
-        if isinstance(unit, CoupledModelExchange):
-            unit.settle(t)
+    for group in groups:
+        group.settle(t)
 
 
 class _MemberTransfer:

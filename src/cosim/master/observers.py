@@ -1,9 +1,13 @@
 """Observers: what watches a run without changing it.
 
-An observer gets three calls: ``initialized(t, values)`` once the units are
-initialized, ``step(t, values)`` after each communication step and
-``finished(t)`` at the end.  ``values`` is one numpy vector holding every
-probed scalar, in the order of the ``columns`` the observer was given.
+A run (:class:`cosim.execution.run.Execution`) is given its observers.  Each gets
+``attached(context)`` once the run's units are initialized (the context says
+what the run probes: its ``columns``, their types and units, the live units),
+``initialized(t, values)`` at the start time, ``step(t, values)`` after each
+communication step, ``finished(t)`` at a run's regular end and ``detached()``
+always, also after a failure.  ``values`` is one numpy vector holding every
+probed scalar, in the order of the context's ``columns``.  A
+:class:`StopCondition` may end the run at a communication point.
 
 :class:`TraceRecorder` keeps full traces; :class:`ObjectiveReducer` reduces
 signals to numbers on the fly, so a sweep never holds a whole trace.
@@ -48,7 +52,11 @@ REDUCERS: dict[str, Callable[[np.ndarray, np.ndarray], np.ndarray]] = {
 
 
 class Observer:
-    """Base class with no-op hooks."""
+    """Base class with no-op hooks (module docstring)."""
+
+    def attached(self, context: Any) -> None:
+        """The run's units are initialized: ``context`` has ``columns`` (the order of ``values``), ``types``,
+        ``units`` (of measure), ``system`` and ``live`` (the units by name)."""
 
     def initialized(self, t: float, values: np.ndarray) -> None:
         pass
@@ -56,8 +64,41 @@ class Observer:
     def step(self, t: float, values: np.ndarray) -> None:
         pass
 
+    def load(self, times: np.ndarray, values: np.ndarray) -> bool:
+        """Take many samples at once instead of ``initialized`` and ``step`` one by one (a warm start's replay):
+        ``times`` (n,), ``values`` (n, columns).  Returns False when this observer takes them one by one."""
+        return False
+
     def finished(self, t: float) -> None:
         pass
+
+    def detached(self) -> None:
+        """The run is over, however it ended: release what :meth:`attached` hooked."""
+
+
+class StopCondition(Observer):
+    """An observer that can end a run at a communication point: once :attr:`reason` is set (by its ``step``),
+    the run stops there, with ``status`` (``"ok"``: the run ended as asked, e.g. ``stop_when``)."""
+
+    status = "ok"
+    reason: str | None = None
+
+
+class StopWhen(StopCondition):
+    """Ends the run at the first communication point where the probed column ``column`` is non-zero (the
+    spec's ``experiment.stop_when``)."""
+
+    def __init__(self, column: str):
+        self.column = column
+        self.reason = None
+
+    def attached(self, context: Any) -> None:
+        self._index = list(context.columns).index(self.column)
+        self.reason = None
+
+    def step(self, t: float, values: np.ndarray) -> None:
+        if values[self._index]:
+            self.reason = f"'{self.column}' became true"
 
 
 class TraceRecorder(Observer):
@@ -95,25 +136,25 @@ class TraceRecorder(Observer):
             current = self._exact.read()
             self._exact_rows.append([current[i] for i in self._exact_index])
 
-    def initialized(self, t: float, values: np.ndarray) -> None:
-        self._append(t, values)
-
-    def step(self, t: float, values: np.ndarray) -> None:
-        self._append(t, values)
+    # every sample is one row, at the start and after each step (the hooks are the append itself: no extra call)
+    initialized = _append
+    step = _append
 
     def event(self, t: float, values: np.ndarray) -> None:
         """An extra row at an event inside a step (see a model-exchange unit's ``record_events``): rows stay in
         time order, so ``time`` is non-decreasing, with equal times at an event (before it, after it)."""
         self._append(t, values)
 
-    def load(self, times: np.ndarray, values: np.ndarray) -> None:
-        """Replace the samples by a whole run's: ``times`` (n,), ``values`` (n, all columns) as ``step`` receives them."""
+    def load(self, times: np.ndarray, values: np.ndarray) -> bool:
+        """Replace the samples by a whole run's: ``times`` (n,), ``values`` (n, all columns) as ``step`` receives
+        them; False (nothing loaded) when exact columns are recorded, which are read from the units one by one."""
         if self._exact is not None:
-            raise ValueError("load() takes numeric columns only")
+            return False
         data = np.empty((len(times), len(self._float_columns) + 1))  # row-major as step() fills it: the
         data[:, 0] = times                                             # reductions then sum in the same order
         data[:, 1:] = values[:, self._index]
         self._data, self._n = data, len(times)
+        return True
 
     def data(self) -> np.ndarray:
         """The samples so far: column 0 is time, then one column per recorded signal."""
@@ -161,7 +202,7 @@ class ExactColumns:
         self.read = read
 
 
-class ObjectiveReducer(Observer):
+class ObjectiveReducer(TraceRecorder):
     """Reduces the signals of the spec's objectives to numbers at the end of a run.
 
     Only the objective signals are kept (one row per communication point), so
@@ -185,23 +226,11 @@ class ObjectiveReducer(Observer):
             start = len(flat)
             flat.extend(columns.index(c) for c in cols)
             self._slices.append(slice(start, len(flat)))
-        self._samples = TraceRecorder(columns, [columns[i] for i in flat])
-        # called every step: straight to the recorder's append, not through two method calls
-        self.step = self._samples._append  # type: ignore[method-assign]
-
-    def initialized(self, t: float, values: np.ndarray) -> None:
-        self._samples.initialized(t, values)
-
-    def step(self, t: float, values: np.ndarray) -> None:
-        self._samples.step(t, values)
-
-    def load(self, times: np.ndarray, values: np.ndarray) -> None:
-        """Take a whole run's samples at once instead of step by step: ``times`` (n,), ``values`` (n, all columns)."""
-        self._samples.load(times, values)
+        super().__init__(columns, [columns[i] for i in flat])
 
     def results(self) -> dict[str, Any]:
         """Objective name -> value (float, or a numpy array for an array signal)."""
-        data = self._samples.data()
+        data = self.data()
         t, x = data[:, 0], data[:, 1:]
         reduced: dict[str, np.ndarray] = {}  # each reduction over every kept column at once, when first needed
         out: dict[str, Any] = {}

@@ -305,7 +305,7 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
 def _warm_up_here(system: Any) -> tuple[Any, Any]:
     """(the warm state, None), or (None, why it could not be made: the UserError itself, or a message)."""
     from cosim.errors import UserError
-    from cosim.execution.warm_start import warm_up
+    from cosim.execution.warm_up import warm_up
 
     try:
         state, result = warm_up(system)

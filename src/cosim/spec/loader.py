@@ -19,8 +19,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping
 
 from cosim.errors import Problem, SpecError, did_you_mean, json_path
-from cosim.master.algorithms import ALGORITHMS as MASTER_ALGORITHMS
-from cosim.master.algorithms import DEFAULT_ALGORITHM
+from cosim.master.registry import ALGORITHMS as MASTER_ALGORITHMS
+from cosim.master.registry import DEFAULT_ALGORITHM
 from cosim.master.loops import JACOBIANS as LOOP_JACOBIANS
 from cosim.master.loops import METHODS as LOOP_METHODS
 from cosim.master.loops import LoopSettings

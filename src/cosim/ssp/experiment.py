@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import Any
 
 from cosim.errors import AnnotationNumberError
-from cosim.master.algorithms import ALGORITHMS
+from cosim.master.registry import ALGORITHMS
 from cosim.ssp.annotations import json_scalar, number, unread_annotation_types
 from cosim.ssp.reading import Reading
 from cosim.ssp.xml import tag
