@@ -120,3 +120,91 @@ def test_type_checking_blocks_module_imports_and_relative_imports_count_too(tmp_
     victim = copy / "master" / "algorithms.py"
     victim.write_text(victim.read_text(encoding="utf-8") + "\n" + text, encoding="utf-8")
     assert [p for p in upward_imports(copy) if p.startswith("master/algorithms.py")] != []
+
+
+# -- inside a package: modules in no circle either (issue 34) ----------------------------------------------------
+
+
+def module_graph(engine: Path) -> dict[str, set[str]]:
+    """Module -> the modules of the same top-level package it imports (at module level, in functions, or under
+    TYPE_CHECKING: every import counts, as between packages)."""
+    modules = {".".join(("cosim", *p.relative_to(engine).with_suffix("").parts)).removesuffix(".__init__"): p
+               for p in sorted(engine.rglob("*.py"))}
+    graph: dict[str, set[str]] = {m: set() for m in modules}
+    for module, path in modules.items():
+        for _, name in imported_modules(path, module):
+            while name and name not in modules:  # `from cosim.a.b import name`: the module cosim.a.b
+                name = name.rpartition(".")[0]
+            if name and name != module and name.split(".")[:2] == module.split(".")[:2]:
+                graph[module].add(name)
+    return graph
+
+
+def module_circles(engine: Path) -> list[list[str]]:
+    """Every set of modules of one package that import each other in a circle (strongly connected, > 1)."""
+    graph, index, low, stack, on_stack, circles = module_graph(engine), {}, {}, [], set(), []
+
+    def visit(v: str) -> None:  # Tarjan's algorithm
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                circles.append(sorted(component))
+
+    for v in graph:
+        if v not in index:
+            visit(v)
+    return circles
+
+
+def long_functions(folder: Path, most: int = 60) -> list[str]:
+    """'file:function (lines)' for every function of ``folder`` longer than ``most`` lines."""
+    found = []
+    for path in sorted(folder.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                lines = node.end_lineno - node.lineno + 1
+                if lines > most:
+                    found.append(f"{path.relative_to(folder.parent)}:{node.name} ({lines})")
+    return found
+
+
+def test_no_circle_among_the_modules_of_a_package():
+    assert module_circles(ENGINE) == []
+
+
+def test_a_circle_between_two_modules_of_a_package_is_found(tmp_path):
+    copy = tmp_path / "cosim"
+    shutil.copytree(ENGINE, copy, ignore=shutil.ignore_patterns("__pycache__", "*.so", "*.fmu"))
+    victim = copy / "master" / "transfers.py"
+    victim.write_text(victim.read_text(encoding="utf-8") + "\n\ndef _late():\n"
+                      "    from cosim.master.algorithms import GaussSeidel\n    return GaussSeidel\n", encoding="utf-8")
+    assert any("cosim.master.transfers" in circle for circle in module_circles(copy))
+
+
+def test_the_stepping_core_has_no_function_over_60_lines():
+    """master/ and execution/ stay readable: each function fits on a screen."""
+    assert long_functions(ENGINE / "master") + long_functions(ENGINE / "execution") == []
+
+
+if __name__ == "__main__":  # python tests/test_layers.py: the numbers this check holds the tree to
+    packages = sorted(set().union(*LAYERS) | PLUGINS)
+    print(f"{len(packages)} top-level packages in {len(LAYERS)} layers (+ plug-ins {', '.join(sorted(PLUGINS))})")
+    print(f"imports up, sideways or into a plug-in: {len(upward_imports(ENGINE))}")
+    print(f"circles among the modules of a package: {len(module_circles(ENGINE))}")
+    print(f"functions over 60 lines in master/ and execution/: "
+          f"{len(long_functions(ENGINE / 'master') + long_functions(ENGINE / 'execution'))}")

@@ -3,6 +3,7 @@ in validate, run and sweep (found through the ``cosim.unit_kinds`` entry point, 
 
 from __future__ import annotations
 
+import importlib
 import json
 import math
 import os
@@ -18,7 +19,8 @@ from cosim import errors
 from cosim.cli.exit_codes import EXIT_USAGE
 from cosim.cli.main import main
 from cosim.units import registry as unit_kinds
-from cosim.units.registry import UnitKind, register_unit_kind, unregister_unit_kind
+from cosim.units.kind import UnitKind
+from cosim.units.registry import register_unit_kind, unregister_unit_kind
 
 ROOT = Path(__file__).resolve().parent.parent
 PLUGIN = ROOT / "examples" / "plugin_unit_kind"
@@ -50,9 +52,26 @@ def test_builtin_kinds_own_the_unit_fields_of_the_schema_file():
     """specs/spec.schema.json lists the built-in kinds' fields for editors; they must be the registry's."""
     schema = json.loads((ROOT / "src" / "cosim" / "spec" / "spec.schema.json").read_text())
     in_file = schema["$defs"]["unit"]["properties"]
-    owned = {name: fragment for kind in unit_kinds.BUILTIN_KINDS.values() for name, fragment in kind.fields.items()}
+    builtin = [unit_kinds.unit_kind(name) for name in unit_kinds.BUILTIN_KINDS]
+    owned = {name: fragment for kind in builtin for name, fragment in kind.fields.items()}
     assert {k: v for k, v in in_file.items() if k not in unit_kinds.COMMON_FIELDS} == owned
     assert [b["required"] for b in schema["$defs"]["unit"]["oneOf"]] == [[k] for k in unit_kinds.BUILTIN_KINDS]
+
+
+def test_builtin_kinds_are_declared_as_plug_ins_declare_theirs():
+    """Each built-in kind sits beside its units and is named by the cosim.unit_kinds entry points of
+    pyproject.toml, exactly as the registry loads it; the registry imports none of them."""
+    import tomllib
+
+    declared = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["entry-points"]["cosim.unit_kinds"]
+    assert declared == unit_kinds.BUILTIN_KINDS
+    for name, target in declared.items():
+        module, _, attribute = target.partition(":")
+        kind = getattr(importlib.import_module(module), attribute)
+        assert kind is unit_kinds.unit_kind(name) and kind.name == name
+    registry_source = (ROOT / "src" / "cosim" / "units" / "registry.py").read_text()
+    assert not any(f"import {t.partition(':')[0]}" in registry_source or f"from {t.partition(':')[0]} import"
+                   in registry_source for t in declared.values())
 
 
 def test_a_kind_installed_from_outside_runs_in_validate_run_and_sweep(tmp_path):
@@ -125,7 +144,7 @@ def test_a_kind_reports_its_own_problems_at_the_unit(tmp_path, capsys):
 
 
 def test_registering_checks_names():
-    create = unit_kinds.FMU.create
+    create = unit_kinds.unit_kind("fmu").create
     with pytest.raises(errors.InternalError, match="already registered"):
         register_unit_kind(UnitKind("fmu", {"fmu": {}}, create))
     with pytest.raises(errors.InternalError, match="common unit field"):

@@ -33,7 +33,8 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time the names come from
     from cosim.system.builder import System, build_system
     from cosim.units.protocol import Variable
     from cosim.units.python.unit import PythonUnit
-    from cosim.units.registry import UnitKind, register_unit_kind
+    from cosim.units.kind import UnitKind
+    from cosim.units.registry import register_unit_kind
 
 __version__ = "0.1.0"
 
@@ -45,7 +46,7 @@ _LAZY = {
     "Spec": "cosim.spec.loader", "load_spec": "cosim.spec.loader",
     "System": "cosim.system.builder", "build_system": "cosim.system.builder",
     "Variable": "cosim.units.protocol", "PythonUnit": "cosim.units.python.unit",
-    "UnitKind": "cosim.units.registry", "register_unit_kind": "cosim.units.registry",
+    "UnitKind": "cosim.units.kind", "register_unit_kind": "cosim.units.registry",
 }
 __all__ = sorted([*_LAZY, "__version__", "run", "sweep", "optimize", "sensitivity", "read_results", "pareto"])
 

@@ -57,7 +57,7 @@ def _with_fmi2_builtins(system: Any) -> Any:
     import dataclasses
 
     from cosim.system.builder import build_system
-    from cosim.units.registry import BUILTIN_PREFIX
+    from cosim.units.fmu.kind import BUILTIN_PREFIX
 
     def fmi2(unit: Any) -> Any:
         if unit.kind == "fmu" and unit.source.startswith(BUILTIN_PREFIX) and unit.source.endswith("_fmi3"):
@@ -74,7 +74,7 @@ def _warn_fmi3(system: Any, fmi: str | None) -> None:
     tools) refuse the whole archive, and nothing else would tell the user before they try."""
     import sys
 
-    from cosim.units.registry import BUILTIN_PREFIX
+    from cosim.units.fmu.kind import BUILTIN_PREFIX
 
     fmi3 = [name for name, unit in system.units.items() if unit.spec.kind == "fmu"
             and (getattr(unit.description, "fmi_version", "") or "").startswith("3")]

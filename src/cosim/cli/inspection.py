@@ -28,7 +28,7 @@ def unit_type_of(target: str) -> UnitType:
     from cosim.units.fmu.description import FmuUnitType
     from cosim.units.player import PlayerUnitType
     from cosim.units.python.unit import PythonUnitType
-    from cosim.units.registry import resolve_fmu_path
+    from cosim.units.fmu.kind import resolve_fmu_path
 
     suffix = Path(target).suffix.lower()
     try:

@@ -25,7 +25,7 @@ from cosim.master.loops import JACOBIANS as LOOP_JACOBIANS
 from cosim.master.loops import METHODS as LOOP_METHODS
 from cosim.master.loops import LoopSettings
 from cosim.master.observers import REDUCERS
-from cosim.units.registry import UnitSpec
+from cosim.units.kind import UnitSpec
 from cosim.util import limits
 from cosim.util.strict_json import read_spec_json  # strict JSON: no NaN, no key twice, bounded nesting
 

@@ -28,7 +28,8 @@ from cosim.system.value_checks import SETTABLE_AS_PARAMETER, SETTABLE_AS_START, 
 from cosim.units.fmu.description import FmuProblems
 from cosim.units.protocol import NUMERIC_TYPES, UnitDescription, UnitType
 from cosim.units.python.data_files import attach as attach_data_files
-from cosim.units.registry import UnitSpec, replaying_units, unit_kind
+from cosim.units.kind import UnitSpec
+from cosim.units.registry import replaying_units, unit_kind
 
 
 @dataclass(frozen=True)

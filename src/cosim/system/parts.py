@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from cosim.units.protocol import ElementRef, UnitDescription, UnitType, Variable
-from cosim.units.registry import UnitSpec
+from cosim.units.kind import UnitSpec
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import Any, Mapping
 
+from cosim.units.kind import UnitKind, UnitSpec
 from cosim.units.protocol import UnitDescription, UnitType, Variable
 from cosim.units.python.unit import PythonUnit
 
@@ -67,3 +68,27 @@ class SystemConnectorsType(UnitType):
 
     def instantiate(self, name: str) -> SystemConnectors:
         return self._unit_class()(name)
+
+
+def _create_connectors(spec: UnitSpec, folder: str) -> SystemConnectorsType:
+    return SystemConnectorsType(spec.source, spec.options.get("inputs"), spec.parameters)
+
+
+KIND = UnitKind("connectors", {
+    "connectors": {"type": "string", "description": "The system whose connectors the unit holds (an SSP's "
+                                                   "system, e.g. 'default.sub'): its inputs hold what is connected "
+                                                   "to them, its parameters constants; it computes nothing. Written "
+                                                   "by cosim for an SSP's system connectors."},
+    "inputs": {"type": "object", "additionalProperties": {"type": "string"},
+               "description": "connectors only: the connectors fed by a connection, each with its unit of measure "
+                              "('' for none)."},
+    "feeds": {"type": "object",
+              "additionalProperties": {"type": "array", "items": {
+                  "type": "object", "required": ["to"], "additionalProperties": False,
+                  "properties": {"to": {"type": "string"}, "factor": {"type": "number"},
+                                 "offset": {"type": "number"}}}},
+              "description": "connectors only: the unit parameters each parameter connector sets (an SSP's "
+                             "parameter connections): a value given to the connector by a design parameter or "
+                             "--set sets each 'to' to factor x value + offset (default 1 and 0)."},
+}, _create_connectors, example='"connectors": "default.sub"',
+    description="the connectors of an SSP's system, as signals of their own")

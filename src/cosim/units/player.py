@@ -38,6 +38,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from cosim.units.kind import UnitKind, UnitSpec
 from cosim.units.protocol import (
     ElementRef,
     Selection,
@@ -49,6 +50,7 @@ from cosim.units.protocol import (
     indexed_runs,
     parse_port,
 )
+from cosim.util.archive import MEMBER_SEPARATOR, member_file
 
 INTERPOLATIONS = ("linear", "hold", "nearest")
 
@@ -314,3 +316,38 @@ class PlayerUnit(Unit):
         if self.discrete.any():
             blended[self.discrete] = values[i][self.discrete]
         return blended
+
+
+# -- the player unit kind ------------------------------------------------------------------------------
+
+
+def _relative(source: str, folder: str) -> Path:
+    if MEMBER_SEPARATOR in source:  # a table inside an SSP archive (an SSP's CSV component), as resolve_fmu_path
+        return member_file(source)
+    path = Path(source)
+    return path if path.is_absolute() else Path(folder) / path
+
+
+def _create_player(spec: UnitSpec, folder: str) -> PlayerUnitType:
+    o = spec.options
+    return PlayerUnitType(_relative(spec.source, folder), o.get("columns"), o.get("interpolation", "linear"),
+                          o.get("extrapolation", "hold"), o.get("units"), unit_name=spec.name,
+                          all_real=o.get("all_real", False))
+
+
+KIND = UnitKind("player", {
+    "player": {"type": "string", "description": "A recorded table (.parquet or .csv, as written by 'cosim run "
+                                                "--out') played back as outputs."},
+    "columns": {"type": "array", "items": {"type": "string"},
+                "description": "player only: the columns to play (default: all but 'time')."},
+    "interpolation": {"enum": ["linear", "hold", "nearest"],
+                      "description": "player only: how values between samples are found."},
+    "extrapolation": {"enum": ["hold", "error"],
+                      "description": "player only: beyond the recorded time range, hold the end values or fail."},
+    "units": {"type": "object", "additionalProperties": {"type": "string"},
+              "description": "player only: unit of measure of played columns or arrays, e.g. {\"speed\": \"rpm\"}."},
+    "all_real": {"type": "boolean",
+                 "description": "player only: play every column as Real (interpolated), whatever its recorded type "
+                                "(a CSV column of whole numbers reads as Integer, held). An SSP's table component "
+                                "is played so."},
+}, _create_player, example='"player": "traces.parquet"', description="recorded signals played back", replays=True)

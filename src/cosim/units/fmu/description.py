@@ -26,7 +26,6 @@ from typing import Any, Sequence
 
 from cosim.errors import FmuProblems, Problem
 from cosim.units.protocol import Unit, UnitDescription, UnitType, Variable, indexed_runs, parse_port
-from cosim.units.registry import BUILTIN_PREFIX  # noqa: F401  (re-exported from its old place)
 from cosim.util.archive import ArchiveError, ExtractionCache, check_archive, extract_to_new_folder
 from cosim.util.digest import file_digest
 from cosim.util.quantities import fmi_unit_definitions
@@ -100,17 +99,6 @@ def model_identifier_problem(archive: str, identifier: Any) -> Problem | None:
 
 
 EXTRACTED = ExtractionCache("fmu", safe_extract)  # one unpacked copy of each FMU per process
-
-
-def resolve_fmu_path(reference: str, base_dir: str | Path | None = None) -> Path:
-    """The file an FMU reference points to; see :func:`cosim.units.registry.resolve_fmu_path`.
-
-    Kept here for callers of the old place: ``builtin:`` names are resolved
-    by the ``fmu`` unit kind, not by the FMU unit.
-    """
-    from cosim.units.registry import resolve_fmu_path as resolve
-
-    return resolve(reference, base_dir)
 
 
 CO_SIMULATION, MODEL_EXCHANGE = "co-simulation", "model-exchange"

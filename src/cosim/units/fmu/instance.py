@@ -15,7 +15,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from cosim.errors import Problem
+from cosim.errors import FmuProblems, Problem
 from cosim.units.protocol import ElementRef, Selection, Unit, UnitError
 
 STATUS_LABELS = ["OK", "Warning", "Discard", "Error", "Fatal", "Pending"]
@@ -27,8 +27,6 @@ def load_library(unit_type: Any, make_slave: Callable[[], Any]) -> Any:
     A library that cannot be loaded, or that lacks an FMI function, is the FMU's fault, not cosim's:
     raises FmuProblems (a user error) naming the FMU, the library and the missing function.
     """
-    from cosim.units.fmu.description import FmuProblems
-
     try:
         return make_slave()
     except AttributeError as exc:  # ctypes: "<library>: undefined symbol: fmi2DoStep"

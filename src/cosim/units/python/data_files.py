@@ -47,12 +47,11 @@ def attach(system: Any) -> None:
     Raises SpecError naming each data file or folder above the ``data_mb`` limit.
     """
     from cosim.errors import SpecError
-    from cosim.units.python.unit import PythonUnitType
 
     problems = []
     for name, system_unit in system.units.items():
         unit_type = system_unit.unit_type
-        if not isinstance(unit_type, PythonUnitType):
+        if not hasattr(unit_type, "data_paths"):  # a Python unit's type (PythonUnitType) has them; no other
             continue
         declared = set(unit_type.load_class().data_files)
         if not declared:

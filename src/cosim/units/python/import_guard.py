@@ -94,8 +94,8 @@ def import_in_child_first(what: str, target: str, base_dir: str | None, source_z
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if isinstance(p, str) and p))
     try:
         child = subprocess.Popen(
-            [sys.executable, "-c", "import sys; from cosim.units.python.import_guard import child_main; "
-             "child_main(*sys.argv[1:])", str(report_w), token, target, base_dir or "", source_zip or ""],
+            [sys.executable, "-c", "import sys; from cosim.units.python.unit import import_check_child; "
+             "import_check_child(*sys.argv[1:])", str(report_w), token, target, base_dir or "", source_zip or ""],
             pass_fds=(report_w,), env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
             stderr=subprocess.PIPE, start_new_session=True)  # its own group: a timeout kills what it started
     finally:
@@ -130,16 +130,8 @@ def _kill_group(child: subprocess.Popen) -> None:
     child.wait()
 
 
-def child_main(report_fd: str, token: str, target: str, base_dir: str, source_zip: str) -> None:
-    """In the child: import the unit's class, then write ``token`` to ``report_fd`` (whatever the import raised)."""
+def enter_checking_child() -> None:
+    """Called first in the child :func:`import_in_child_first` starts: it starts no child of its own, and sets
+    no timer (its parent keeps the time)."""
     global CHECK_IN_CHILD, _IN_CHECKING_CHILD
     CHECK_IN_CHILD, _IN_CHECKING_CHILD = False, True
-    from cosim.units.python.unit import PythonUnitType
-
-    unit_type = PythonUnitType(target, base_dir or None, source_zip or None)
-    try:
-        unit_type.load_class()
-    except Exception:  # noqa: BLE001 - an ordinary import error: the parent's own import reports it
-        pass
-    os.write(int(report_fd), token.encode())
-    os._exit(0)  # no exit hooks of the module: they may hang or exit otherwise

@@ -46,7 +46,8 @@ from cosim.units.protocol import (
     UnitType,
     Variable,
 )
-from cosim.units.python.import_guard import guarded_import, import_in_child_first
+from cosim.units.python.data_files import pack, unpack
+from cosim.units.python.import_guard import enter_checking_child, guarded_import, import_in_child_first
 
 
 class _AttributeSelection(Selection):
@@ -307,8 +308,6 @@ class PythonUnitType(UnitType):
         where units run.  The data files are those of ``data_paths``; a folder
         among them travels as a zip of its content (:func:`cosim.units.python.data_files.pack`).
         """
-        from cosim.units.python.data_files import pack
-
         return self._source_files() + [pack(p) if value in self.data_folders else Path(p)
                                        for value, p in self.data_paths.items()]
 
@@ -332,8 +331,6 @@ class PythonUnitType(UnitType):
         return top if (top / "__init__.py").is_file() else None
 
     def relocate(self, copies: Sequence[Path]) -> None:
-        from cosim.units.python.data_files import unpack
-
         data = list(copies)[len(copies) - len(self.data_paths):]
         self.data_paths = {value: str(unpack(copy, Path(path).name) if value in self.data_folders else copy)
                            for (value, path), copy in zip(self.data_paths.items(), data)}
@@ -489,3 +486,16 @@ def _builtin_module(module_name: str) -> str | None:
     except ModuleNotFoundError:  # a parent package of the name does not exist
         return None
     return canonical if found is not None else None
+
+
+def import_check_child(report_fd: str, token: str, target: str, base_dir: str, source_zip: str) -> None:
+    """In the child of :func:`~cosim.units.python.import_guard.import_in_child_first`: import the unit's class,
+    then write ``token`` to ``report_fd`` (whatever the import raised)."""
+    enter_checking_child()
+    unit_type = PythonUnitType(target, base_dir or None, source_zip or None)
+    try:
+        unit_type.load_class()
+    except Exception:  # noqa: BLE001 - an ordinary import error: the parent's own import reports it
+        pass
+    os.write(int(report_fd), token.encode())
+    os._exit(0)  # no exit hooks of the module: they may hang or exit otherwise
