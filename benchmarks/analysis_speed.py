@@ -23,12 +23,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from tests.test_analysis_table import make_sweep_table  # noqa: E402
+
 from cosim.analysis.pareto import pareto_mask  # noqa: E402
 from cosim.analysis.plots import new_figure, save, scatter_cloud  # noqa: E402
 from cosim.analysis.table import load_results  # noqa: E402
 from cosim.spec.design import DesignSpace  # noqa: E402
 from cosim.spec.loader import spec_from_dict  # noqa: E402
-from tests.test_analysis_table import make_sweep_table  # noqa: E402
 
 
 def median_time(action, repeat: int) -> float:

@@ -78,7 +78,7 @@ def ssp_of_connections(folder: Path, fmu: Path, size: int, wrong: bool = False) 
                               f'endConnector="u[{i}]"/>\n' for i in range(1, size + 1))
     ssd = ('<?xml version="1.0" encoding="UTF-8"?>\n<ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.'
            'org/SSP1/SystemStructureDescription" xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon" '
-           f'name="wide" version="2.0"><ssd:System name="Root">'
+           'name="wide" version="2.0"><ssd:System name="Root">'
            + (f"<ssd:Connectors>{connectors}</ssd:Connectors>" if connectors else "")
            + '<ssd:Elements><ssd:Component name="a" source="resources/wide.fmu"/>'
            '<ssd:Component name="b" source="resources/wide.fmu"/></ssd:Elements>'

@@ -17,8 +17,9 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from cosim.studies.optimize import Optimization  # noqa: E402
 from tests.conftest import python_unit  # noqa: E402
+
+from cosim.studies.optimize import Optimization  # noqa: E402
 
 
 class Formula:

@@ -115,7 +115,7 @@ def components(n: int = 1500) -> None:
     sel = selection(traj_unit, ["q_ref", "qd_ref", "qdd_ref"])
     t0 = time.perf_counter()
     for _ in range(n):
-        values = traj_unit.get(sel)
+        traj_unit.get(sel)
     t_get = (time.perf_counter() - t0) / n
     line = [f"trajectory do_step {t_traj * 1e6:.1f} us", f"PythonUnit.get of its 21 outputs {t_get * 1e6:.1f} us"]
     for cls, hook in ((PandaInverseDynamics, "compute_outputs"), (PandaExudyn, None)):

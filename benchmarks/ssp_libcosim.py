@@ -46,11 +46,11 @@ def main() -> None:
     from libcosimpy.CosimExecution import CosimExecution
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
     from libcosimpy.CosimObserver import CosimObserver
+    from tests.test_ssp_libcosim import RING
 
     from cosim.execution.run import Execution
     from cosim.export.ssp import export_ssp
     from cosim.system.validate import check_spec
-    from tests.test_ssp_libcosim import RING
 
     log_output_level(CosimLogLevel.ERROR)
     scratch = Path(tempfile.mkdtemp(prefix="cosim_bench_ssp_"))

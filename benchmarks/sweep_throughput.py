@@ -193,7 +193,7 @@ def part_bag(folder: Path, repeat: int, n_points: int) -> dict:
     spec = ode_spec(folder, n_points, fmu)
     values = [p.values["ode.a"] for p in DesignSpace.from_spec(load_spec(spec))]
     cosim_rates, bag_rates = [], []
-    with cluster(2) as c, Client(c) as client:
+    with cluster(2) as c, Client(c):
         timed_sweep(spec, c.scheduler_address, folder / "warm_bag")  # same spec: the workers keep its child
         db.from_sequence(values[:8], npartitions=2).map_partitions(bag_partition, fmu).compute()
         for _ in range(repeat):

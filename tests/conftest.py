@@ -13,6 +13,8 @@ from pathlib import Path
 
 import pytest
 
+from .sweep_fixtures import free_port, kill_group, wait_for_workers, worker_process_cluster
+
 TESTS = Path(__file__).resolve().parent
 
 
@@ -88,3 +90,50 @@ def panda_viewer():
     viewer = register_viewer(getattr(importlib.import_module(module), name))
     yield viewer
     unregister_viewer(viewer.name)
+
+
+# -- Dask clusters and processes shared by the sweep, study and room tests (helpers in sweep_fixtures.py) --------
+
+
+@pytest.fixture(scope="module")
+def local_cluster():
+    """A real distributed.LocalCluster: 2 worker processes, 1 thread each, on 127.0.0.1."""
+    from distributed import LocalCluster
+
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                           dashboard_address="127.0.0.1:0", silence_logs=40)
+    yield cluster.scheduler_address
+    cluster.close()
+
+
+@pytest.fixture
+def worker_processes():
+    """A fresh worker_process_cluster for one test."""
+    with worker_process_cluster() as address:
+        yield address
+
+
+@pytest.fixture(scope="module")
+def dask_processes(tmp_path_factory):
+    """`dask scheduler` and `dask worker` (2 processes) started as commands, workers in their own folder.
+
+    Yields (scheduler address, worker folder).
+    """
+    # `python -m dask` of this interpreter, not whatever `dask` is first on PATH: scheduler, workers and the
+    # client must be the same dask version (the minimum-versions run has another dask on PATH)
+    dask = [sys.executable, "-m", "dask"]
+    port = free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    worker_dir = tmp_path_factory.mktemp("worker_cwd")
+    scheduler = subprocess.Popen([*dask, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    workers = subprocess.Popen([*dask, "worker", address, "--nworkers", "2", "--nthreads", "1", "--no-dashboard",
+                                "--host", "127.0.0.1", "--local-directory", str(worker_dir)],
+                               cwd=worker_dir, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                               start_new_session=True)
+    try:
+        wait_for_workers(address, 2, seconds=60)
+        yield address, Path(worker_dir)
+    finally:
+        kill_group(workers)
+        kill_group(scheduler)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import matplotlib
 import numpy as np
-import pandas as pd
 import pytest
 
 from cosim.analysis.plots import new_figure, save, scatter_cloud

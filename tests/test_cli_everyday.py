@@ -14,8 +14,6 @@ import pytest
 from cosim import __version__
 from cosim.cli.main import main
 
-from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
-
 REPO = Path(__file__).resolve().parents[1]
 
 

@@ -23,8 +23,6 @@ from cosim.cli.main import main
 from cosim.parallel.cluster import ClusterFileError, read_cluster_file
 from cosim.studies.sweep import SweepError
 
-from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
-
 STOP = 0.5
 REPO = Path(__file__).resolve().parent.parent
 

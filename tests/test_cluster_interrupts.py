@@ -23,7 +23,6 @@ import pandas as pd
 import psutil
 import pytest
 
-from .sweep_fixtures import dask_processes  # noqa: F401  (fixture)
 from .test_hostile_files import _exact, _spec
 
 REPO = Path(__file__).resolve().parent.parent

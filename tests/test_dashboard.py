@@ -19,7 +19,7 @@ import cosim
 from cosim.parallel.dashboard import task_key
 
 from .conftest import TESTS
-from .sweep_fixtures import free_port, kill_group, local_cluster, wait_for_workers  # noqa: F401  (fixture)
+from .sweep_fixtures import free_port, kill_group, wait_for_workers
 
 
 def ode_spec(n: int) -> dict:

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from .sweep_fixtures import free_port, kill_group, local_cluster, wait_for_workers  # noqa: F401  (fixture)
+from .sweep_fixtures import free_port, kill_group, wait_for_workers
 
 ROOT = Path(__file__).resolve().parent.parent
 

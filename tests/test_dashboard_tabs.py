@@ -23,7 +23,6 @@ import pytest
 from cosim.parallel.dashboard import tab_closed_while_loading, web_server_tracebacks_as_lines
 
 from .test_hostile_files import _spec
-from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
 from .test_room_browser import browser  # noqa: F401  (fixture)
 
 SRC = Path(__file__).resolve().parent.parent / "src"

@@ -14,8 +14,6 @@ import pytest
 import cosim
 from cosim.cli.main import main
 
-from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
-
 SPRING = '''\
 from cosim import PythonUnit, Variable
 

@@ -25,7 +25,7 @@ from cosim.cli.main import main
 from cosim.units.player import PlayerUnitType
 from cosim.units.protocol import ElementRef
 
-from .test_record_events import E, G, STEP, STOP, _spec
+from .test_record_events import STEP, STOP, E, G, _spec
 
 matplotlib.use("Agg")
 HEIGHTS = (1.0, 2.0)  # both bounce a few times before STOP (from 0.5 m it comes to rest before 2 s)

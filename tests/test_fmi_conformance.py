@@ -245,7 +245,7 @@ def _without_dependencies(source: Path, target: Path) -> Path:
 
 def test_undeclared_dependencies_are_named_in_the_loop_message_and_can_be_declared(capsys, write_spec, built_fmu,
                                                                                    tmp_path):
-    gain = _without_dependencies(built_fmu("gain_array", 2), tmp_path / "gain.fmu")
+    _without_dependencies(built_fmu("gain_array", 2), tmp_path / "gain.fmu")  # written beside the spec
     spec = {"units": {"g1": {"fmu": "gain.fmu"}, "g2": {"fmu": "gain.fmu"}},
             "connections": [{"from": "g1.y", "to": "g2.u"}, {"from": "g2.y", "to": "g1.u"}],
             "experiment": {"stop": 0.3, "step": 0.1}}

@@ -11,7 +11,6 @@ import zipfile
 from pathlib import Path
 
 import fmpy
-import numpy as np
 import pytest
 from fmpy import read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException

@@ -3,15 +3,12 @@ and swapping the energy FMU for the Python unit with the same ports."""
 
 from __future__ import annotations
 
-import glob
 import os
-import tempfile
 
 import numpy as np
 import pytest
 
 import cosim
-from cosim import Execution, build_system, load_spec
 from cosim.units.fmu.description import EXTRACTED, FmuUnitType
 from cosim.units.protocol import resolve_port
 

@@ -18,8 +18,6 @@ import pytest
 
 from cosim.studies.sweep import OutputError, Sweep
 
-from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
-
 REPO = Path(__file__).resolve().parent.parent
 
 UNIT = """

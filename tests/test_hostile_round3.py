@@ -16,8 +16,6 @@ import pytest
 from cosim.fmus.build import ensure_built
 from cosim.fmus.conformance import ensure_built as ensure_conformance_built
 
-from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
-
 REPO = Path(__file__).resolve().parent.parent
 
 

@@ -18,8 +18,6 @@ import pytest
 from cosim.results.lock import FolderInUse, FolderLock
 from cosim.studies.sweep import Sweep, SweepError
 
-from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
-
 REPO = Path(__file__).resolve().parent.parent
 
 SCALE_UNIT = """

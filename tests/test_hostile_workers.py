@@ -9,13 +9,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
-
 from cosim.parallel.isolation import IsolatedRunner, make_payload
 from cosim.studies.sweep import Sweep
 from cosim.system.validate import check_spec
-
-from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -22,8 +22,6 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
-
 REPO = Path(__file__).resolve().parent.parent
 POINTS = 60
 PAUSE = 0.3

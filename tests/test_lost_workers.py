@@ -18,7 +18,7 @@ import pytest
 import cosim
 
 from .conftest import TESTS
-from .sweep_fixtures import worker_process_cluster, worker_processes  # noqa: F401  (fixture)
+from .sweep_fixtures import worker_process_cluster
 
 UNIT = f"{TESTS / 'units_for_cluster.py'}:SlowSquare"
 
@@ -84,8 +84,8 @@ def test_the_optimizers_evaluator_blames_only_the_killer(write_spec, worker_proc
     """cosim optimize evaluates through point_stream.Evaluator (the loop the sweep streams through): the same rule
     holds there."""
     from cosim.parallel.evaluator import dask_client
-    from cosim.parallel.point_stream import Evaluator
     from cosim.parallel.isolation import make_payload
+    from cosim.parallel.point_stream import Evaluator
     from cosim.system.validate import check_spec
 
     system = check_spec(write_spec(square_spec(6, 0.0, kill_at=3.0)))

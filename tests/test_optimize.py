@@ -22,7 +22,7 @@ from cosim.execution.point_row import PointRow
 from cosim.studies.optimize import Optimization
 
 from .conftest import python_unit
-from .sweep_fixtures import kill_group, local_cluster  # noqa: F401  (fixture)
+from .sweep_fixtures import kill_group
 
 REPO = Path(__file__).resolve().parents[1]
 

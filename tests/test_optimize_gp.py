@@ -20,7 +20,6 @@ from cosim.analysis.hypervolume import hypervolume, normalised_losses
 from cosim.analysis.pareto import pareto_mask
 from cosim.cli.main import main
 
-from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
 from .test_optimize import bowls_spec
 
 REPO = Path(__file__).resolve().parents[1]

@@ -16,7 +16,6 @@ import cosim
 from cosim.cli.main import main
 
 from .conftest import TESTS
-from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
 
 EXAMPLE = TESTS.parent / "examples" / "drive_energy"
 RANGES = {"energy.gear_ratio": {"min": 50.0, "max": 160.0}, "drive.duration": {"min": 1.0, "max": 2.0, "unit": "s"}}

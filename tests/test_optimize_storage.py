@@ -20,7 +20,6 @@ from cosim.analysis.pareto import pareto_mask
 from cosim.cli.main import main
 from cosim.studies.optuna_storage import shown_url
 
-from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
 from .test_optimize import REPO, FormulaEvaluator, bowls_spec
 
 

@@ -15,7 +15,6 @@ from distributed import KilledWorker
 import cosim
 from cosim.parallel.evaluator import RERUN_GROUP, Reruns
 
-from .sweep_fixtures import worker_processes  # noqa: F401  (fixture)
 from .test_lost_workers import square_spec
 
 

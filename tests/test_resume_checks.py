@@ -17,7 +17,6 @@ from cosim.cli.main import main
 from cosim.studies.optimize import Optimization
 from cosim.util.digest import file_digest, path_digest
 
-from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
 from .units_for_cluster import TABLE_GAIN_SOURCE
 
 

@@ -26,7 +26,6 @@ from cosim.analysis.room import browser as B
 from cosim.analysis.table import load_results
 
 from .conftest import python_unit, require_tool
-from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
 
 # -- the browser ------------------------------------------------------------------------------------------------
 
@@ -358,7 +357,9 @@ def test_a_large_table_is_drawn_as_bins_made_on_the_server(browser, studies, roo
         image = np.array(got["image"], dtype=np.uint32)
         h, w = image.shape
         edges = (np.linspace(got["y"], got["y"] + got["dh"], h + 1), np.linspace(got["x"], got["x"] + got["dw"], w + 1))
-        count = lambda rows, weights=None: np.histogram2d(y[rows], x[rows], bins=edges, weights=weights)[0]
+        def count(rows, weights=None):
+            return np.histogram2d(y[rows], x[rows], bins=edges, weights=weights)[0]
+
         kept_ok, kept_failed, dropped = count(kept & ok), count(kept & failed), count(~kept)
         mean = count(kept & ok, c[kept & ok]) / np.where(kept_ok > 0, kept_ok, 1)
         lo, hi = np.nanmin(c), np.nanmax(c)

@@ -6,7 +6,6 @@ from __future__ import annotations
 import cosim
 from cosim.cli.main import main
 
-from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
 from .test_hostile_files import _spec
 
 

@@ -15,7 +15,6 @@ from cosim.cli.main import main
 from cosim.studies.sensitivity import SensitivityStudy
 
 from .conftest import python_unit
-from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
 
 A, B = 7.0, 0.1
 

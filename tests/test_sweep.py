@@ -22,7 +22,6 @@ from cosim.spec.loader import load_spec
 from cosim.studies.sweep import Sweep, SweepError
 
 from .conftest import TESTS, python_unit
-from .sweep_fixtures import dask_processes, local_cluster  # noqa: F401  (fixtures)
 
 STOP = 0.5
 

@@ -14,7 +14,6 @@ from cosim.parallel.isolation import IsolatedRunner, make_payload
 from cosim.system.validate import check_spec
 
 from .conftest import TESTS
-from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
 
 TIMEOUT = 1.5
 EXPECTED = {0: ("ok", ""), 1: ("crashed", "SIGSEGV"), 2: ("timeout", f"timeout of {TIMEOUT:g} s"),

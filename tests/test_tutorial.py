@@ -42,5 +42,5 @@ def test_the_tutorial_runs_as_written_and_its_numbers_hold(tmp_path, monkeypatch
     again = pd.read_parquet(tmp_path / "results" / "from_ssp.parquet")
     np.testing.assert_allclose(again["mass.x"], one["mass.x"], rtol=0, atol=1e-12)
     assert (tmp_path / "results" / "spring_damper.fmu").stat().st_size > 0
-    assert "warning" not in outputs[next(l for l in lines if "--fmi 2" in l)].stderr
+    assert "warning" not in outputs[next(line for line in lines if "--fmi 2" in line)].stderr
     assert set(p.name for p in tmp_path.iterdir()) == {"spring_damper.py", "spec.json", "results"}

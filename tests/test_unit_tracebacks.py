@@ -16,8 +16,6 @@ from pathlib import Path
 import cosim
 from cosim.errors import UNIT_TRACEBACK_CHARS, UNIT_TRACEBACK_FRAMES, UnitError, unit_traceback
 
-from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
-
 REPO = Path(__file__).resolve().parents[1]
 
 UNIT_SOURCE = '''\

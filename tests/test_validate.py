@@ -101,7 +101,7 @@ def test_a_spec_with_many_mistakes_lists_each_with_its_path(tmp_path, capsys, bu
     ]
     for json_path, message in expected:
         line = f"{path}: {json_path}: "
-        assert any(l.startswith(f"- {line}") and message in l for l in text.splitlines()), (json_path, text)
+        assert any(t.startswith(f"- {line}") and message in t for t in text.splitlines()), (json_path, text)
     assert f"{len(expected)} problems found" in text
     assert "algebraic loop" not in text  # cosim solves loops of Real signals (tests/test_algebraic_loops.py)
     assert text.count("    fix: ") >= len(expected) - 1

@@ -24,7 +24,6 @@ from cosim.spec.loader import spec_from_dict
 from cosim.system.builder import build_system
 
 from .conftest import python_unit
-from .sweep_fixtures import local_cluster  # noqa: F401  (fixture)
 
 A0, B0, T_WARM, STOP, STEP = -1.0, 1.0, 1.0, 2.0, 0.01
 

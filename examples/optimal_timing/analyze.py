@@ -21,7 +21,6 @@ are the committed ones beside this file, or those of ``--tables DIR`` (where run
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import matplotlib

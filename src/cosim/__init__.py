@@ -31,9 +31,9 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time the names come from
     from cosim.execution.run import Execution, RunResult
     from cosim.spec.loader import Spec, load_spec
     from cosim.system.builder import System, build_system
+    from cosim.units.kind import UnitKind
     from cosim.units.protocol import Variable
     from cosim.units.python.unit import PythonUnit
-    from cosim.units.kind import UnitKind
     from cosim.units.registry import register_unit_kind
 
 __version__ = "0.1.0"
@@ -48,7 +48,10 @@ _LAZY = {
     "Variable": "cosim.units.protocol", "PythonUnit": "cosim.units.python.unit",
     "UnitKind": "cosim.units.kind", "register_unit_kind": "cosim.units.registry",
 }
-__all__ = sorted([*_LAZY, "__version__", "run", "sweep", "optimize", "sensitivity", "read_results", "pareto"])
+# the public names, written out for readers and linters (tests/test_public_api.py checks they match _LAZY)
+__all__ = ["CosimError", "Execution", "Problem", "PythonUnit", "RunResult", "Spec", "SpecError", "System",
+    "UnitError", "UnitKind", "UserError", "Variable", "__version__", "build_system", "load_spec", "optimize",
+    "pareto", "read_results", "register_unit_kind", "run", "run_point", "sensitivity", "sweep"]
 
 
 def __getattr__(name: str) -> Any:

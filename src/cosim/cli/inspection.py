@@ -26,9 +26,9 @@ def unit_type_of(target: str) -> UnitType:
     Raises UsageError when the target names nothing cosim can load, with what it expected.
     """
     from cosim.units.fmu.description import FmuUnitType
+    from cosim.units.fmu.kind import resolve_fmu_path
     from cosim.units.player import PlayerUnitType
     from cosim.units.python.unit import PythonUnitType
-    from cosim.units.fmu.kind import resolve_fmu_path
 
     suffix = Path(target).suffix.lower()
     try:

@@ -293,7 +293,6 @@ def run_lockstep(system: System, points: Sequence[Sequence[Assignment]], batches
     after resetting or re-instantiating the batches.
     """
     started = time.perf_counter()
-    exp = system.spec.experiment
     rows = next(iter(batches.values())).rows
     n = len(points)
     if not 0 < n <= rows:

@@ -44,6 +44,9 @@ from typing import Any, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
+from cosim.results.columns import STATUSES, TAIL_COLUMNS  # noqa: F401  (defined once, for writers and readers)
+from cosim.results.folder import default_folder  # noqa: F401  (its home before it needed no pandas)
+
 
 class _ImportedAtFirstUse:
     """A module imported when one of its attributes is first used.
@@ -66,8 +69,6 @@ pa: Any = _ImportedAtFirstUse("pyarrow")
 pa_csv: Any = _ImportedAtFirstUse("pyarrow.csv")
 pq: Any = _ImportedAtFirstUse("pyarrow.parquet")
 
-from cosim.results.columns import STATUSES, TAIL_COLUMNS  # noqa: F401  (defined once, for writers and readers)
-from cosim.results.folder import default_folder  # noqa: F401  (its home before it needed no pandas)
 
 _PART = re.compile(r"^part-(\d+)\.parquet$")
 _WRITING = re.compile(r"^tmp\w+\.tmp$")  # a part being written (tempfile.mkstemp's name in parts/), renamed when whole

@@ -19,12 +19,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping
 
 from cosim.errors import Problem, SpecError, did_you_mean, json_path
-from cosim.master.registry import ALGORITHMS as MASTER_ALGORITHMS
-from cosim.master.registry import DEFAULT_ALGORITHM
 from cosim.master.loops import JACOBIANS as LOOP_JACOBIANS
 from cosim.master.loops import METHODS as LOOP_METHODS
 from cosim.master.loops import LoopSettings
 from cosim.master.observers import REDUCERS
+from cosim.master.registry import ALGORITHMS as MASTER_ALGORITHMS
+from cosim.master.registry import DEFAULT_ALGORITHM
 from cosim.units.kind import UnitSpec
 from cosim.util import limits
 from cosim.util.strict_json import read_spec_json  # strict JSON: no NaN, no key twice, bounded nesting

@@ -13,10 +13,10 @@ Description/ssd:System[@name='root']/...``) and the fix.
 from __future__ import annotations
 
 import re
-from itertools import islice
-from typing import Any
 from functools import lru_cache
+from itertools import islice
 from pathlib import Path
+from typing import Any
 
 from lxml import etree
 

@@ -68,8 +68,16 @@ import numpy as np
 from cosim.analysis.hypervolume import progress_hypervolume
 from cosim.errors import OptimizeError, Problem, SpecError
 from cosim.execution.point_row import PointRow
-from cosim.studies.driver import (StudyFolder, now_utc, open_room, package_versions, results_writes,
-                                  run_metadata, say, study_cluster)
+from cosim.studies.driver import (
+    StudyFolder,
+    now_utc,
+    open_room,
+    package_versions,
+    results_writes,
+    run_metadata,
+    say,
+    study_cluster,
+)
 from cosim.studies.optuna_storage import default_study_name, open_storage_study, shown_url
 from cosim.studies.progress import StatusLine
 from cosim.studies.sampler_names import SAMPLERS

@@ -52,8 +52,7 @@ from cosim.parallel.evaluator import check_timeout
 from cosim.parallel.isolation import IsolatedRunner, make_payload, preload_spare_children, stop_spare_children
 from cosim.parallel.point_stream import BatchSizer, PointStream
 from cosim.spec.design import DesignSpace, Point
-from cosim.studies.driver import (StudyFolder, now_utc, open_room, results_writes, run_metadata, say,
-                                  study_cluster)
+from cosim.studies.driver import StudyFolder, now_utc, open_room, results_writes, run_metadata, say, study_cluster
 from cosim.studies.progress import StatusLine, duration
 
 if TYPE_CHECKING:

@@ -15,20 +15,20 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Mapping, Sequence
 
 from cosim.errors import Problem, SpecError, UserError, did_you_mean, json_path
+from cosim.master.loops import Coupling
 from cosim.spec.loader import Spec
 from cosim.system.connection_checks import check_connections
 from cosim.system.coupled_me import ModelExchangeCoupling, model_exchange_coupling
 from cosim.system.parts import Assignment, Connection, LoadedUnits, Signal, SystemUnit  # noqa: F401  (re-exported)
 from cosim.system.signals import add_recorded, resolve_signal, split_unit_name
-from cosim.master.loops import Coupling
 from cosim.system.stepping import check_algebraic_loops, feedthrough_coupling, stepping_order
 from cosim.system.study_checks import check_design, check_objective_expressions, fed_values
-from cosim.system.warm_start_checks import check_warm_start_design
 from cosim.system.value_checks import SETTABLE_AS_PARAMETER, SETTABLE_AS_START, assignment  # noqa: F401  (their old place)
+from cosim.system.warm_start_checks import check_warm_start_design
 from cosim.units.fmu.description import FmuProblems
+from cosim.units.kind import UnitSpec
 from cosim.units.protocol import NUMERIC_TYPES, UnitDescription, UnitType
 from cosim.units.python.data_files import attach as attach_data_files
-from cosim.units.kind import UnitSpec
 from cosim.units.registry import replaying_units, unit_kind
 
 

@@ -9,8 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from cosim.units.protocol import ElementRef, UnitDescription, UnitType, Variable
 from cosim.units.kind import UnitSpec
+from cosim.units.protocol import ElementRef, UnitDescription, UnitType, Variable
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ report every mistake at once.
 
 from __future__ import annotations
 
-from typing import Any, Collection, Mapping, Sequence
+from typing import Collection, Mapping, Sequence
 
 from cosim.errors import Problem, can_suggest, did_you_mean
 from cosim.system.parts import Signal, SystemUnit

@@ -14,7 +14,6 @@ import heapq
 from typing import Mapping
 
 from cosim.errors import Problem
-from cosim.master.registry import ALGORITHMS
 from cosim.master.loops import (  # noqa: F401  (strongly_connected re-exported: its old place)
     Coupling,
     Loop,
@@ -23,6 +22,7 @@ from cosim.master.loops import (  # noqa: F401  (strongly_connected re-exported:
     port_graph,
     strongly_connected,
 )
+from cosim.master.registry import ALGORITHMS
 from cosim.system.parts import Connection, SystemUnit
 from cosim.units.protocol import parse_port
 

@@ -12,7 +12,7 @@ import copy
 from pathlib import Path
 from typing import Any
 
-from cosim.errors import Problem, SpecError, suggestions_bounded
+from cosim.errors import SpecError, suggestions_bounded
 from cosim.spec.loader import build_spec, load_spec, read_raw, schema_problems, spec_schema
 from cosim.system.builder import System, build_system
 from cosim.util.collector import collector_paused

@@ -33,7 +33,7 @@ from importlib import metadata
 from typing import Any, Mapping
 
 from cosim.errors import InternalError, UserError
-from cosim.units.kind import UnitKind, UnitSpec
+from cosim.units.kind import UnitKind
 
 ENTRY_POINT_GROUP = "cosim.unit_kinds"
 

@@ -36,7 +36,6 @@ from bokeh.layouts import column, row
 from bokeh.models import MultiChoice, SaveTool, Select, TabPanel, Tabs, Toggle
 
 from cosim.analysis.decision import Decision
-from cosim.analysis.table import AnalysisError
 from cosim.analysis.ranking import METHODS
 from cosim.analysis.rerun import port_groups, rerun_rows
 from cosim.analysis.room import animation as A
@@ -45,6 +44,7 @@ from cosim.analysis.room import views as V
 from cosim.analysis.room.clouds import BinnedCloud, PointCloud
 from cosim.analysis.room.dimensions import Dimensions
 from cosim.analysis.room.live import LiveStudy
+from cosim.analysis.table import AnalysisError
 
 TOP = 20  # designs in the ranking table
 MAX_RERUN = 8  # designs re-run at once (one colour each)

@@ -11,9 +11,26 @@ from __future__ import annotations
 from typing import Any, Sequence
 
 import numpy as np
-from bokeh.models import (BooleanFilter, Button, CategoricalColorMapper, CDSView, ColorBar, ColumnDataSource,
-                          CustomJSHover, DataTable, Div, HoverTool, LinearColorMapper, NumberFormatter, Range1d,
-                          RangeSlider, Select, Slider, TableColumn, Whisker)
+from bokeh.models import (
+    BooleanFilter,
+    Button,
+    CategoricalColorMapper,
+    CDSView,
+    ColorBar,
+    ColumnDataSource,
+    CustomJSHover,
+    DataTable,
+    Div,
+    HoverTool,
+    LinearColorMapper,
+    NumberFormatter,
+    Range1d,
+    RangeSlider,
+    Select,
+    Slider,
+    TableColumn,
+    Whisker,
+)
 from bokeh.palettes import Category10_10, Viridis256
 from bokeh.plotting import figure
 

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import ctypes
 import operator
-from functools import partial
 from collections import deque
+from functools import partial
 from typing import Any, Callable, Sequence
 
 import numpy as np
