@@ -16,7 +16,8 @@ from pathlib import Path
 
 import pytest
 
-from cosim.studies.sweep import OutputError, Sweep
+from cosim.errors import OutputError
+from cosim.studies.sweep import Sweep
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -115,5 +115,8 @@ def test_the_old_name_still_imports_for_fmus_exported_before():
     """FMUs exported by earlier versions import orchestrator.unit: the alias maps it onto cosim's modules."""
     code = ("import orchestrator.unit as u, orchestrator.units.python as p, cosim.units.protocol as n; "
             "print(u is n, p.PythonUnit is __import__('cosim').PythonUnit, u.__name__)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    assert out.split() == ["True", "True", "cosim.units.protocol"]
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.split() == ["True", "True", "cosim.units.protocol"]
+    # ... and says, once, when the alias goes and what to do instead
+    assert done.stderr.count("FutureWarning") == 1, done.stderr
+    assert "will be removed on 2027-06-01 (release 0.3): import cosim instead" in done.stderr

@@ -6,7 +6,8 @@ import math
 
 import pandas as pd
 
-from cosim.results.store import DESIGN_INDEX, STATUSES, ResultsStore
+from cosim.results.columns import STATUSES
+from cosim.results.store import DESIGN_INDEX, ResultsStore
 
 
 def counts_by_status(df: pd.DataFrame) -> dict[str, int]:

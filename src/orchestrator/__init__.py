@@ -3,7 +3,8 @@
 ``cosim export-fmu`` used to write FMUs whose Python code imports ``orchestrator.unit`` (and user units written
 then import ``orchestrator.units.python``).  This package maps every old module name onto the module of the
 ``cosim`` package that now holds it, so those FMUs and units keep working.  New code imports ``cosim``; this
-alias will be removed in a later release (the README says when).
+alias will be removed on :data:`REMOVAL` (release 0.3), and importing it says so once (a FutureWarning, which
+Python shows by default).
 """
 
 from __future__ import annotations
@@ -12,9 +13,15 @@ import importlib
 import importlib.abc
 import importlib.util
 import sys
+import warnings
 from typing import Any
 
 import cosim
+
+REMOVAL = "2027-06-01"
+warnings.warn(f"'orchestrator' is the old name of 'cosim', kept for FMUs exported by cosim before 2026-11-23; it "
+              f"will be removed on {REMOVAL} (release 0.3): import cosim instead, and export such FMUs again with "
+              "'cosim export-fmu'", FutureWarning, stacklevel=2)
 
 # old module name (below orchestrator.) -> the cosim module that holds it now
 MOVED = {

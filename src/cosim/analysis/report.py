@@ -147,7 +147,7 @@ def _overview(table: ResultsTable, parameters: list[str], objectives: list[str])
 
 
 def _status_section(table: ResultsTable) -> str:
-    from cosim.results.store import STATUSES
+    from cosim.results.columns import STATUSES
 
     if "status" not in table.df.columns:
         return "<h2>Status</h2><p class='note'>The table has no status column; every row counts as ok.</p>"

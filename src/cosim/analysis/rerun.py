@@ -169,7 +169,7 @@ def find_table_for(spec_path: str | Path, given: str | Path | None, digest: str 
     """
     if given is not None:
         return Path(given)
-    from cosim.results.store import default_folder
+    from cosim.results.folder import default_folder
 
     default = default_folder(spec_path)
     candidates = [default / "results.parquet", Path(spec_path).resolve().parent / default / "results.parquet"]

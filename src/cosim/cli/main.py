@@ -16,9 +16,7 @@ import traceback
 from typing import Any, Sequence
 
 from cosim.cli.exit_codes import EXIT_INTERNAL, EXIT_OK, EXIT_RUN_FAILED, EXIT_USAGE, exit_code
-from cosim.cli.options import add_experiment_options, experiment_overrides  # noqa: F401  (their old place)
 from cosim.cli.problems import ALL_PROBLEMS, SHOWN, print_problems
-from cosim.cli.spec import cmd_inspect, cmd_run, cmd_validate, parse_assignment  # noqa: F401  (their old place)
 from cosim.errors import DEBUG_VARIABLE, UnitError, UsageError, UserError
 
 __all__ = ["EXIT_INTERNAL", "EXIT_OK", "EXIT_RUN_FAILED", "EXIT_USAGE", "UsageError", "main"]

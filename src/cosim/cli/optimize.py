@@ -56,7 +56,7 @@ def add_optimize_parser(sub: Any) -> None:
 def cmd_optimize(args: argparse.Namespace) -> int:
     """Run an optimisation; returns the exit code. SpecError, OptimizeError and UsageError reach cli.main."""
     from cosim.cli.sweep import print_not_ok, runs_recorded, say_the_dashboard_is_gone
-    from cosim.results.store import default_folder
+    from cosim.results.folder import default_folder
     from cosim.studies.optimize import Optimization
 
     for option in ("budget", "batch", "workers"):

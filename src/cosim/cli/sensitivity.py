@@ -39,7 +39,7 @@ def add_sensitivity_parser(sub: Any) -> None:
 
 def cmd_sensitivity(args: argparse.Namespace) -> int:
     """Sample, run, analyse; prints the indices. SpecError and UserErrors reach cli.main."""
-    from cosim.results.store import default_folder
+    from cosim.results.folder import default_folder
     from cosim.studies.sensitivity import FIGURE_NAME, TABLE_NAME, SensitivityStudy, unreliable_indices
 
     if args.n is not None and args.n < 2:

@@ -49,7 +49,8 @@ from cosim.master.observers import ObjectiveReducer, flatten_objectives
 from cosim.master.registry import ALGORITHMS, make_algorithm
 from cosim.master.transfers import Link
 from cosim.spec.expressions import evaluate_expressions
-from cosim.system.builder import Assignment, System
+from cosim.system.builder import System
+from cosim.system.parts import Assignment
 from cosim.units.fmu.instance import FmiInstance
 from cosim.units.protocol import NUMERIC_TYPES, Selection, Unit
 from cosim.units.python.batch import NotBatchable, batch_class_of

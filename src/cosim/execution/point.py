@@ -17,7 +17,8 @@ from cosim.errors import Problem, SpecError
 from cosim.execution.run import Execution, RunResult
 from cosim.execution.warm_up import warm_up
 from cosim.master.observers import Observer
-from cosim.system.builder import Assignment, System
+from cosim.system.builder import System
+from cosim.system.parts import Assignment
 from cosim.system.study_checks import converted
 from cosim.system.warm_start_checks import warm_start_problems
 from cosim.units.protocol import Unit

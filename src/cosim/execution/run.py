@@ -28,7 +28,8 @@ from cosim.master.observers import ExactColumns, Observer, StopCondition, StopWh
 from cosim.master.registry import make_algorithm
 from cosim.master.transfers import group_transfers
 from cosim.spec.expressions import evaluate_expressions
-from cosim.system.builder import Assignment, System
+from cosim.system.builder import System
+from cosim.system.parts import Assignment
 from cosim.units.protocol import SimulationEnded, Unit
 
 __all__ = ["Execution", "RunResult", "OK", "FAILED", "UNIT_FAILURE", "USER_FAILURE", "INTERNAL_FAILURE"]

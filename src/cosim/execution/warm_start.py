@@ -32,7 +32,8 @@ from cosim.errors import Problem, UserError
 from cosim.execution.probe import Probe
 from cosim.master.observers import ExactColumns, Observer
 from cosim.master.transfers import group_transfers
-from cosim.system.builder import Assignment, System
+from cosim.system.builder import System
+from cosim.system.parts import Assignment
 from cosim.units.protocol import Unit
 
 WARM_PATH = "$.experiment.warm_start"

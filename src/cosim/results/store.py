@@ -44,8 +44,7 @@ from typing import Any, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
-from cosim.results.columns import STATUSES, TAIL_COLUMNS  # noqa: F401  (defined once, for writers and readers)
-from cosim.results.folder import default_folder  # noqa: F401  (its home before it needed no pandas)
+from cosim.results.columns import STATUSES, TAIL_COLUMNS
 
 
 class _ImportedAtFirstUse:

@@ -45,7 +45,7 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
-from cosim.errors import OutputError, SweepError  # noqa: F401  (OutputError: imported from here too)
+from cosim.errors import SweepError
 from cosim.execution.point_row import PointRow
 from cosim.parallel.early_cluster import EarlyCluster
 from cosim.parallel.evaluator import check_timeout

@@ -19,11 +19,11 @@ from cosim.master.loops import Coupling
 from cosim.spec.loader import Spec
 from cosim.system.connection_checks import check_connections
 from cosim.system.coupled_me import ModelExchangeCoupling, model_exchange_coupling
-from cosim.system.parts import Assignment, Connection, LoadedUnits, Signal, SystemUnit  # noqa: F401  (re-exported)
+from cosim.system.parts import Assignment, Connection, LoadedUnits, Signal, SystemUnit
 from cosim.system.signals import add_recorded, resolve_signal, split_unit_name
 from cosim.system.stepping import check_algebraic_loops, feedthrough_coupling, stepping_order
 from cosim.system.study_checks import check_design, check_objective_expressions, fed_values
-from cosim.system.value_checks import SETTABLE_AS_PARAMETER, SETTABLE_AS_START, assignment  # noqa: F401  (their old place)
+from cosim.system.value_checks import assignment
 from cosim.system.warm_start_checks import check_warm_start_design
 from cosim.units.fmu.description import FmuProblems
 from cosim.units.kind import UnitSpec

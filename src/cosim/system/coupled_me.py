@@ -26,10 +26,10 @@ from dataclasses import dataclass
 from typing import Mapping, NamedTuple, Sequence
 
 from cosim.errors import Problem, json_path
-from cosim.master.loops import Coupling
+from cosim.master.loops import Coupling, strongly_connected
 from cosim.spec.loader import Spec
 from cosim.system.parts import Connection, SystemUnit
-from cosim.system.stepping import feedthrough_coupling, stepping_order, strongly_connected
+from cosim.system.stepping import feedthrough_coupling, stepping_order
 
 OPT_OUT = "coupled_model_exchange"  # the field, in "experiment" and on a unit
 

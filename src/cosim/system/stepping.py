@@ -14,7 +14,7 @@ import heapq
 from typing import Mapping
 
 from cosim.errors import Problem
-from cosim.master.loops import (  # noqa: F401  (strongly_connected re-exported: its old place)
+from cosim.master.loops import (
     Coupling,
     Loop,
     LoopSettings,

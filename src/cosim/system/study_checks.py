@@ -5,12 +5,12 @@ from __future__ import annotations
 from typing import Any
 
 from cosim.errors import Problem, did_you_mean, json_path
+from cosim.master.loops import strongly_connected
 from cosim.spec.design import range_problem, size_problems
 from cosim.spec.expressions import Expression, ExpressionError
 from cosim.spec.loader import Spec
 from cosim.system.parts import LoadedUnits
 from cosim.system.signals import split_unit_name
-from cosim.system.stepping import strongly_connected
 from cosim.system.value_checks import assignment
 from cosim.units.protocol import parse_port, resolve_port
 from cosim.units.registry import replaying_units
