@@ -168,7 +168,21 @@ def inspect_spec(path: str, experiment: dict[str, Any] | None = None, variant: s
     for group in groups:  # connected model-exchange units: one solver, one unit to the master
         print(f"integrated together (one solver): {group.name} = {', '.join(group.members)}")
     print_coupling(system)
+    print_bounds(system)
     return EXIT_OK
+
+
+def print_bounds(system: Any) -> None:
+    """Per objective, which way its value can move while a design runs (what --prune may rely on), and why."""
+    from cosim.spec.bounds import system_bounds
+
+    bounds = system_bounds(system)
+    if not bounds:
+        return
+    print("objective bounds while a design runs (--prune):")
+    width = max(len(name) for name in bounds)
+    for name, b in bounds.items():
+        print(f"  {name:<{width}}  {b.direction or 'unbounded':<15}  {b.why}")
 
 
 def print_units_that_load(path: str, raw: Any) -> None:

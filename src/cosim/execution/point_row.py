@@ -16,7 +16,7 @@ if TYPE_CHECKING:
     from cosim.execution.run import RunResult
 
 # a point's status: it ran; it failed in its run; it hung (killed at its timeout); it killed its process
-STATUSES = ("ok", "failed", "timeout", "crashed")
+STATUSES = ("ok", "failed", "timeout", "crashed")  # and "pruned" (cosim.execution.prune), counted only when it occurs
 TAIL_COLUMNS = ("status", "message", "run_time", "worker")  # a results table's last columns, in this order
 
 

@@ -44,6 +44,7 @@ class _Progress:
     stopped: str | None = None
     by_unit: bool = False  # a unit ended the run (SimulationEnded), not a stop condition
     status: str = OK  # what a stop condition made of the run
+    stopper: StopCondition | None = None  # the stop condition that ended it
 
 
 class Execution:
@@ -170,7 +171,7 @@ class Execution:
                 return
             for stop in stops:
                 if stop.reason is not None:
-                    progress.stopped, progress.status = stop.reason, stop.status
+                    progress.stopped, progress.status, progress.stopper = stop.reason, stop.status, stop
                     return
 
     def _outcome(self, objectives: Objectives, recording: Recording | None, algorithm: MasterAlgorithm,
@@ -182,6 +183,10 @@ class Execution:
         traces = recording.frame() if recording is not None else None
         row = dict(objectives=flat, traces=traces, elapsed=elapsed, steps=progress.steps, end_time=progress.t,
                    step_stats=algorithm.statistics())
+        stopper = progress.stopper
+        if progress.status != OK and hasattr(stopper, "objectives_at_stop"):  # e.g. pruned: its bound vector
+            row["objectives"] = stopper.objectives_at_stop(flat)  # type: ignore[union-attr]
+            return RunResult(progress.status, progress.stopped or "", **row)
         nan = [name for name, v in flat.items() if not math.isfinite(v)]
         if nan:
             return RunResult(FAILED, f"objective(s) not finite: {', '.join(nan)}", failure=UNIT_FAILURE, **row)

@@ -76,6 +76,9 @@ class ObjectiveSpec:
     unit: str | None = None
     sense: str | None = None
     description: str = ""
+    # "non-decreasing", "non-increasing" or "constant": the spec's word on the signal of a 'final' reduction,
+    # which pruning may rely on (checked at every step while it prunes; cosim.spec.bounds)
+    monotone: str | None = None
 
 
 @dataclass(frozen=True)
@@ -262,6 +265,11 @@ def _value_problems(raw: dict, file: str, seen: set[tuple[str, str]]) -> list[Pr
                     problems.append(Problem(file, json_path(["objectives", name, "reduce"]),
                                             f"unknown reduction '{reduce}'.{did_you_mean(reduce, REDUCTIONS)}",
                                             "use one of: " + ", ".join(REDUCTIONS)))
+            if isinstance(objective, dict) and "monotone" in objective and objective.get("reduce") != "final":
+                problems.append(Problem(file, json_path(["objectives", name, "monotone"]),
+                                        "'monotone' declares the signal of a 'final' reduction, and this objective "
+                                        f"has {'an expression' if 'expr' in objective else 'reduce ' + repr(objective.get('reduce'))}",
+                                        "remove 'monotone', or declare it on an objective with \"reduce\": \"final\""))
     units = raw.get("units")
     for name, unit in (units.items() if isinstance(units, dict) else ()):
         from cosim.units.registry import (
@@ -438,7 +446,8 @@ def build_spec(raw: dict, path: Path) -> Spec:
                                 warm_start=float(e["warm_start"]) if e.get("warm_start") is not None else None)
     objectives = tuple(
         ObjectiveSpec(name=n, signal=o.get("signal"), reduce=o.get("reduce"), expr=o.get("expr"),
-                      unit=o.get("unit"), sense=o.get("sense"), description=o.get("description", ""))
+                      unit=o.get("unit"), sense=o.get("sense"), description=o.get("description", ""),
+                      monotone=o.get("monotone"))
         for n, o in raw.get("objectives", {}).items())
     d = raw.get("design", {})
     design = DesignSpec(

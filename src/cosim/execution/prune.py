@@ -1,0 +1,317 @@
+"""Exact pruning inside a run: :class:`PruneBound` ends a design once a finished design strictly dominates
+everything it can still reach, or a constraint on a bounded objective is already broken.
+
+At each communication point the observer updates the partial reductions of the objectives (max, min, final,
+initial, integral, integral_abs: each in O(1) per sample), evaluates the expressions the pruned objectives need,
+and turns them into a *bound vector* through the directions of :mod:`cosim.spec.bounds`: for a minimized
+objective moving up (or fixed) the value so far is the best the design can still end with; for one that is
+unbounded the best is -inf, so it never prunes.  A front member ``f`` prunes the design when ``f <= b`` in every
+objective and ``f < b`` in one (both in minimizing form, an inexact bound less a relative margin): ties never
+prune.  The declarations bounds rely on (``monotone``, an integrand's declared sign) are checked on every sample;
+the first sample that breaks one leaves that objective (and expressions of it) unbounded for this design.
+
+A pruned run ends with status ``pruned``; its objectives are the bound vector (NaN where unbounded), and its
+message names the dominating design and the time it stopped (:meth:`PruneBound.objectives_at_stop`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+from cosim.execution.observers import columns_of
+from cosim.master.observers import StopCondition, flatten_objectives
+from cosim.spec.bounds import DOWN, FIXED, MARGIN, UP, Bound, system_bounds
+from cosim.spec.expressions import evaluate_expressions, parsed_expression
+
+PRUNED = "pruned"
+_COMPARE = {"<=", "<", ">=", ">"}
+
+
+@dataclass
+class Front:
+    """Finished designs to prune against: ``ids`` and ``values`` (rows, in the order of the objectives pruned on,
+    in minimizing form: a maximized objective negated).  ``refresh`` (optional) returns a newer Front or None;
+    the observer calls it at most every ``refresh_every`` steps."""
+
+    ids: list[str] = field(default_factory=list)
+    values: np.ndarray = field(default_factory=lambda: np.empty((0, 0)))
+    refresh: Callable[[], "Front | None"] | None = None
+    refresh_every: int = 50
+
+
+@dataclass(frozen=True)
+class PruneSettings:
+    """What to prune on: ``objectives`` ((flat name, 'minimize'|'maximize'), in the front's column order) and
+    ``constraints`` ((flat name, comparison, number): e.g. ('peak_tau_ratio', '<=', 1.0))."""
+
+    objectives: tuple[tuple[str, str], ...]
+    constraints: tuple[tuple[str, str, float], ...] = ()
+
+
+def parse_constraint(text: str) -> tuple[str, str, float] | None:
+    """('name', op, number) of a comparison ``name op number`` (or ``number op name``), else None: only such
+    constraints can be found broken by a bound."""
+    import ast
+
+    try:
+        node = ast.parse(text.strip(), mode="eval").body
+    except SyntaxError:
+        return None
+    if not (isinstance(node, ast.Compare) and len(node.ops) == 1):
+        return None
+    ops = {ast.Lt: "<", ast.LtE: "<=", ast.Gt: ">", ast.GtE: ">="}
+    op = ops.get(type(node.ops[0]))
+    left, right = node.left, node.comparators[0]
+    flip = {"<": ">", "<=": ">=", ">": "<", ">=": "<="}
+
+    def number(n: Any) -> float | None:
+        if isinstance(n, ast.Constant) and isinstance(n.value, (int, float)) and not isinstance(n.value, bool):
+            return float(n.value)
+        if isinstance(n, ast.UnaryOp) and isinstance(n.op, ast.USub):
+            inner = number(n.operand)
+            return None if inner is None else -inner
+        return None
+
+    if op is None:
+        return None
+    if number(right) is not None and not isinstance(left, ast.Constant):
+        return ast.unparse(left), op, number(right)  # type: ignore[return-value]
+    if number(left) is not None:
+        return ast.unparse(right), flip[op], number(left)  # type: ignore[return-value]
+    return None
+
+
+class _Partial:
+    """The running reduction of one signal objective, and the check of the declaration its bound relies on."""
+
+    def __init__(self, name: str, reduce: str, index: np.ndarray, bound: Bound):
+        self.name, self.reduce, self.index, self.bound = name, reduce, index, bound
+        self.value: np.ndarray | None = None
+        self.first: np.ndarray | None = None
+        self.last: np.ndarray | None = None
+        self.t: float = math.nan
+        self.broken: str | None = None
+
+    def start(self, t: float, x: np.ndarray) -> None:
+        self.first, self.last, self.t = x.copy(), x.copy(), t
+        self.value = np.zeros_like(x) if self.reduce in ("integral", "integral_abs") else x.copy()
+        self._check(t, x, None)
+
+    def add(self, t: float, x: np.ndarray) -> None:
+        if self.value is None:
+            self.start(t, x)
+            return
+        r, last = self.reduce, self.last
+        if r == "max":
+            np.maximum(self.value, x, out=self.value)
+        elif r == "min":
+            np.minimum(self.value, x, out=self.value)
+        elif r == "final":
+            self.value = x.copy()
+        elif r == "integral":
+            self.value = self.value + (t - self.t) * (x + last) / 2
+        elif r == "integral_abs":
+            self.value = self.value + (t - self.t) * (np.abs(x) + np.abs(last)) / 2
+        self._check(t, x, last)
+        self.last, self.t = x.copy(), t
+
+    def _check(self, t: float, x: np.ndarray, last: np.ndarray | None) -> None:
+        """Record the first sample that breaks the declaration the bound relies on."""
+        b = self.bound
+        if self.broken is not None or b.check is None or b.direction is None:
+            return
+        if b.check == "sign":
+            bad = np.any(x < 0) if b.direction == UP else np.any(x > 0)
+            if bad:
+                self.broken = f"a {'negative' if b.direction == UP else 'positive'} sample at t={t:g}"
+        elif last is not None:
+            if b.direction == UP and np.any(x < last):
+                self.broken = f"it decreased at t={t:g}"
+            elif b.direction == DOWN and np.any(x > last):
+                self.broken = f"it increased at t={t:g}"
+            elif b.direction == FIXED and np.any(x != self.first):
+                self.broken = f"it changed at t={t:g}"
+
+    def current(self) -> Any:
+        if self.value is None or self.reduce not in ("max", "min", "final", "initial", "integral", "integral_abs"):
+            return math.nan if self.value is None or len(self.value) == 1 else np.full(len(self.value), np.nan)
+        value = self.first if self.reduce == "initial" else self.value
+        return float(value[0]) if len(value) == 1 else value.copy()
+
+
+class PruneBound(StopCondition):
+    """A :class:`~cosim.master.observers.StopCondition` that ends a design proven unable to reach the front
+    (module docstring).  ``front`` is what it compares against (:class:`Front`), ``settings`` what it prunes on.
+
+    After a stop, :attr:`dominated_by` is the id of the dominating design (None for a broken constraint),
+    :attr:`stop_time` the time, :attr:`bound` the bound vector (flat name -> value, NaN where unbounded).
+    """
+
+    status = PRUNED
+
+    def __init__(self, system: Any, settings: PruneSettings, front: Front):
+        self.system, self.settings, self.front = system, settings, front
+        self.reason = None
+        self.dominated_by: str | None = None
+        self.stop_time: float | None = None
+        self.bound: dict[str, float] = {}
+        self.checks = 0
+
+    def attached(self, context: Any) -> None:
+        self.reason, self.dominated_by, self.stop_time, self.bound = None, None, None, {}
+        spec = self.system.spec
+        self._bounds = system_bounds(self.system)
+        wanted = {_base(n) for n, _ in self.settings.objectives} | {_base(n) for n, _, _ in self.settings.constraints}
+        needed = _closure(spec.objectives, wanted)
+        self._exprs = [o for o in spec.objectives if o.expr and o.name in needed]
+        columns = list(context.columns)
+        self._partials = [_Partial(o.name, o.reduce, np.array([columns.index(c) for c in
+                                                                 columns_of(self.system, o.signal)]),
+                                   self._bounds[o.name])
+                          for o in spec.objectives if o.signal and o.name in needed]
+        self._directions = self._flat_directions()
+        self._steps = 0
+
+    def _flat_directions(self) -> tuple[list[tuple[str | None, bool]], list[tuple[str | None, bool]]]:
+        """(direction, exact) of each pruned objective and each constraint's objective, as bounded now."""
+        def of(name: str) -> tuple[str | None, bool]:
+            b = self._bounds.get(_base(name))
+            return (b.direction, b.exact) if b is not None else (None, False)
+        return ([of(n) for n, _ in self.settings.objectives], [of(n) for n, _, _ in self.settings.constraints])
+
+    def initialized(self, t: float, values: np.ndarray) -> None:
+        for p in self._partials:
+            p.start(t, values[p.index])
+
+    def load(self, times: np.ndarray, values: np.ndarray) -> bool:
+        for i, t in enumerate(times):  # a warm start's replay: the samples one by one, as the run took them
+            (self.initialized if i == 0 else self._add)(float(t), values[i])
+        return True
+
+    def _add(self, t: float, values: np.ndarray) -> None:
+        for p in self._partials:
+            p.add(t, values[p.index])
+
+    def step(self, t: float, values: np.ndarray) -> None:
+        self._add(t, values)
+        self._steps += 1
+        front = self.front
+        if front.refresh is not None and self._steps % front.refresh_every == 0:
+            newer = front.refresh()
+            if newer is not None:
+                newer.refresh, newer.refresh_every = front.refresh, front.refresh_every
+                self.front = front = newer
+        if not len(front.ids) and not self.settings.constraints:
+            return  # nothing to compare with yet
+        if any(p.broken for p in self._partials):
+            self._forget_broken()
+        self.checks += 1
+        flat = self._partial_values()
+        reason = self._broken_constraint(flat) or self._dominated(flat)
+        if reason:
+            self.reason, self.stop_time = f"pruned at t={t:g}: {reason}", t
+
+    def _forget_broken(self) -> None:
+        """A declaration was found broken: its objective (and expressions of it) are unbounded from now on."""
+        from cosim.spec.bounds import objective_bounds
+
+        broken = {p.name: p.broken for p in self._partials if p.broken}
+        ports = {s.text: s.variable for s in self.system.probes}
+        self._bounds = objective_bounds(self.system.spec.objectives, lambda s: ports.get(s), broken)
+        for p in self._partials:
+            p.bound = self._bounds[p.name]
+        self._directions = self._flat_directions()
+
+    def _partial_values(self) -> dict[str, float]:
+        values = {p.name: p.current() for p in self._partials}
+        with np.errstate(all="ignore"):
+            try:
+                values = evaluate_expressions(self._exprs, values)
+            except Exception:  # an expression of partial values may not evaluate yet (e.g. 0/0): no bound now
+                return {}
+        return flatten_objectives(values)
+
+    def _bound_vector(self, flat: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray]:
+        """(bound, margin) in minimizing form: -inf where unbounded."""
+        b = np.full(len(self.settings.objectives), -np.inf)
+        margin = np.zeros(len(b))
+        for j, ((name, sense), (direction, exact)) in enumerate(zip(self.settings.objectives, self._directions[0])):
+            v = flat.get(name, math.nan)
+            if not math.isfinite(v) or direction is None:
+                continue
+            if sense == "minimize" and direction in (UP, FIXED):
+                b[j] = v
+            elif sense == "maximize" and direction in (DOWN, FIXED):
+                b[j] = -v
+            margin[j] = 0.0 if exact else MARGIN * abs(b[j])
+        return b, margin
+
+    def _dominated(self, flat: Mapping[str, float]) -> str | None:
+        b, margin = self._bound_vector(flat)
+        if not np.isfinite(b).any() or not len(self.front.ids):
+            return None
+        limit = b - margin
+        front = self.front.values
+        le = np.all(front <= limit, axis=1)
+        lt = np.any(front < limit, axis=1)
+        hits = np.flatnonzero(le & lt)
+        if not len(hits):
+            return None
+        self.dominated_by = self.front.ids[int(hits[0])]
+        self.bound = self._bound_record(flat)
+        return f"design {self.dominated_by} strictly dominates every value it can still reach"
+
+    def _broken_constraint(self, flat: Mapping[str, float]) -> str | None:
+        for (name, op, c), (direction, exact) in zip(self.settings.constraints, self._directions[1]):
+            v = flat.get(name, math.nan)
+            if direction is None or not math.isfinite(v):
+                continue
+            m = 0.0 if exact else MARGIN * abs(v)
+            if direction in (UP, FIXED) and ((op == "<=" and v - m > c) or (op == "<" and v - m >= c)):
+                broken = True
+            elif direction in (DOWN, FIXED) and ((op == ">=" and v + m < c) or (op == ">" and v + m <= c)):
+                broken = True
+            else:
+                continue
+            if broken:
+                self.bound = self._bound_record(flat)
+                return f"constraint {name} {op} {c:g} is already broken ({name} reached {v:.6g})"
+        return None
+
+    def _bound_record(self, flat: Mapping[str, float]) -> dict[str, float]:
+        """Flat name -> the bound of every objective pruned on or constrained (NaN where unbounded)."""
+        record: dict[str, float] = {}
+        names = [n for n, _ in self.settings.objectives] + [n for n, _, _ in self.settings.constraints]
+        directions = self._directions[0] + self._directions[1]
+        for name, (direction, _) in zip(names, directions):
+            record[name] = float(flat.get(name, math.nan)) if direction is not None else math.nan
+        return record
+
+    def objectives_at_stop(self, flat: Mapping[str, float]) -> dict[str, float]:
+        """The objective columns of a pruned row: the bound vector where bounded, NaN elsewhere."""
+        return {name: self.bound.get(name, math.nan) for name in flat}
+
+
+def _base(name: str) -> str:
+    """The objective of a flat column name: 'e_el[3]' -> 'e_el'."""
+    return name.split("[", 1)[0]
+
+
+def _closure(objectives: Sequence[Any], wanted: set[str]) -> set[str]:
+    """``wanted`` and every objective their expressions use, transitively."""
+    by_name = {o.name: o for o in objectives}
+    needed: set[str] = set()
+    todo = [n for n in wanted if n in by_name]
+    while todo:
+        name = todo.pop()
+        if name in needed:
+            continue
+        needed.add(name)
+        o = by_name[name]
+        if o.expr:
+            todo.extend(n for n in parsed_expression(o.expr).names if n in by_name)
+    return needed
