@@ -40,6 +40,10 @@ EXAMPLES: dict[str, list[tuple[str, str]]] = {
     "pareto": [(f"cosim pareto {TABLE} --min energy --min peak_power --csv {TABLE}/front.csv",
                 "the designs no other beats in both")],
     "report": [(f"cosim report {TABLE} -o {TABLE}/report.html", "one HTML page: table, front, figures")],
+    "surrogate": [(f"cosim surrogate {TABLE} --objective energy", "a surrogate of energy: Q², ranking, in "
+                   f"{TABLE}/surrogate/"),
+                  (f"cosim surrogate {TABLE} --predict {TABLE}/designs.csv -o {TABLE}/predicted.csv",
+                   "predictions and uncertainty for new designs")],
     "explore": [(f"cosim explore {TABLE}", "the decision room in the browser (prints its link)")],
 }
 

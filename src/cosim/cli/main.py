@@ -30,6 +30,7 @@ SUBCOMMAND_MODULES = (
     ("optimize", "add_optimize_parser"),  # optimize
     ("sensitivity", "add_sensitivity_parser"),  # sensitivity
     ("analysis", "add_analysis_parsers"),  # plot, pareto, report, explore
+    ("surrogate", "add_surrogate_parsers"),  # surrogate, export-surrogate
 )
 
 
