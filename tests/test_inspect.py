@@ -42,6 +42,22 @@ def test_a_python_unit_by_file_and_by_module(capsys):
     assert ports["u"][:3] == ["u", "input", "Real"] and ports["y"][:3] == ["y", "output", "Real"]
     text = inspect(capsys, "models.motor_gear_energy:MotorGearEnergy")
     assert "Python unit" in text and rows(text)["omega"][:5] == ["omega", "input", "Real", "7", "rad/s"]
+    # issue 39: a description longer than the column is cut at a word boundary ("max(electric p" before)
+    assert rows(text)["recuperation"][-1] == "false: the supply takes no power back, p_el =..."
+
+
+@pytest.mark.parametrize("text, width, expected", [
+    ("short enough", 60, "short enough"),
+    ("Signed motor speed omega * 60/(2 pi) * R", 21, "Signed motor speed..."),
+    ("Signed motor speed omega * 60/(2 pi) * R", 20, "Signed motor..."),
+    ("a, b; c", 6, "a..."),
+    ("Supercalifragilistic word", 10, "Superca..."),
+    ("two\n  lines", 60, "two lines"),
+])
+def test_shorten_cuts_between_words_only(text, width, expected):
+    from cosim.cli.inspection import shorten
+
+    assert shorten(text, width) == expected and len(shorten(text, width)) <= width
 
 
 def test_a_recorded_table_lists_what_a_player_offers(tmp_path, capsys):

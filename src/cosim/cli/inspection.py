@@ -68,8 +68,24 @@ def port_rows(description: UnitDescription, bound: dict[str, Any] | None = None)
         rng = "" if v.min is None and v.max is None else f"[{_fmt(v.min) or '-inf'}, {_fmt(v.max) or 'inf'}]"
         start = f"{_fmt(bound[v.name])} *" if v.name in bound else _fmt(v.start)
         rows.append((v.name, v.causality, v.fmi_type or v.type, shape, v.unit or "",
-                     start, rng, v.description[:60]))
+                     start, rng, shorten(v.description, DESCRIPTION_WIDTH)))
     return rows
+
+
+DESCRIPTION_WIDTH = 60  # the description column's width: a table row stays on one line of a wide terminal
+
+
+def shorten(text: str, width: int) -> str:
+    """``text`` on one line, at most ``width`` characters; a longer text is cut at the last word boundary that
+    fits and ends with "...", never in the middle of a word (issue 39: "the joint's torq" read as a typo).
+    A first word longer than ``width`` is the only one cut, since nothing shorter would say anything."""
+    text = " ".join(text.split())
+    if len(text) <= width:
+        return text
+    room = width - len("...")
+    cut = text.rfind(" ", 0, room + 1)
+    head = text[:cut] if cut > 0 else text[:room]
+    return head.rstrip(" ,;:.-") + "..."
 
 
 def print_table(rows: list[tuple[str, ...]], indent: str = "  ", out: Callable[[str], Any] = print) -> None:
