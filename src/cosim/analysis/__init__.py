@@ -7,6 +7,9 @@
 - :mod:`.report`: one self-contained HTML page.
 - :mod:`.rerun`: re-run one design point of a table with full traces.
 - :mod:`.explorer`: the interactive Tk window (state in a plain class, thin view).
+
+Offers: ``table.load_results`` (a ``ResultsTable``), ``pareto.pareto_mask``, ``hypervolume.hypervolume``,
+``report.write_report``, ``rerun.rerun``, ``decision.Decision``; ``room/`` (the web decision room).
 """
 
 from cosim.analysis.pareto import pareto_mask

@@ -9,7 +9,7 @@ leaves without dependencies).
 
 What such an FMU needs where it runs: pythonfmu's binary embeds the Python
 it was built with, so the target needs **the same Python version** with
-numpy, cosim (the ``orchestrator`` package: the unit's base class) and every
+numpy, cosim (the unit's base class, :class:`cosim.units.python.unit.PythonUnit`) and every
 package the unit imports installed.  A unit given as ``file.py:Class``, or as
 a module beside the spec, is packed into the FMU; an installed package
 (``models.trajectory:...``) is imported from the target's Python.  Such an FMU

@@ -5,6 +5,8 @@
 spec.json (see :mod:`.reader`); a spec.json with ``"system": "file.ssp"``
 gets that content merged under its own (:func:`merge_system`).
 :mod:`cosim.export.ssp` exports a spec as an SSP 2.0 archive.
+
+Offers: ``ssp_raw_spec`` (an SSP read into a spec's content), ``merge_system``.
 """
 
 from __future__ import annotations
