@@ -342,3 +342,17 @@ def test_the_project_cites_no_document_outside_it():
         if any(citation in text for citation in TEAM_NOTE_CITATIONS):
             offenders.append(name)
     assert offenders == []
+
+
+def test_no_documented_set_leaves_brackets_to_the_shell():
+    """Issue 39: ``--set traj.waypoints[9]=0`` unquoted is a glob pattern (zsh stops with "no matches found"; bash
+    passes it on only while no file matches): every documented ``--set`` whose value has brackets is quoted."""
+    unquoted = []
+    for path in sorted(REPO.rglob("*.md")):
+        if any(part in (".git", "results", "node_modules") or part.startswith(".") for part in
+               path.relative_to(REPO).parts):
+            continue
+        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+            unquoted += [f"{path.relative_to(REPO)}:{number}: {m}" for m in re.findall(r"--set +([^'\"\s]*\[\S*)",
+                                                                                      line)]
+    assert unquoted == []

@@ -329,6 +329,25 @@ def test_reference_check_script_on_our_own_fmus(tmp_path):
     assert clocks["result"] == "refused" and "scheduled execution (FMI 3.0 clocks) only" in clocks["detail"]
 
 
+def test_reference_check_stops_an_fmu_that_runs_too_long(tmp_path, capsys):
+    """Issue 39: docs/fmi-support.md's check command hung on the Reference FMU Roberts (a default experiment of
+    1e10 internal solver steps); each FMU now has --timeout seconds and is reported 'timed out', the rest go on."""
+    import time
+
+    from cosim.cli.reference_check import check_bounded
+    from cosim.cli.reference_check import main as reference_main
+
+    started = time.monotonic()
+    row = check_bounded(ensure_built("structural", 3), tmp_path, 1e5, 1e-3, 8.0)  # 1e8 steps: hours
+    assert time.monotonic() - started < 60
+    assert row["result"] == "timed out" and row["fmi"] == "3.0"
+    assert row["detail"] == ("no result within 8 s over --stop 100000, --step 0.001; give a shorter --stop "
+                             "(or a longer --timeout)")
+    # within the bound the same FMU is checked as before
+    assert reference_main([str(ensure_built("structural", 3)), "--timeout", "120"]) == 0
+    assert "exact" in capsys.readouterr().out
+
+
 @pytest.mark.parametrize("name, version", [(n, v) for n, versions in sorted(available().items()) for v in versions])
 def test_every_conformance_fmu_goes_through_cosim_inspect(capsys, name, version):
     code, text = cli(capsys, "inspect", str(ensure_built(name, version)))

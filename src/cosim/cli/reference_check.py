@@ -7,6 +7,11 @@ it with exit code 2); ``cosim run`` of a one-unit spec over the FMU's default ex
 is compared sample by sample with fmpy's ``simulate_fmu`` at the same step.  Prints one line (or Markdown table
 row) per FMU: whether it ran, where it ended, the largest difference from fmpy, or cosim's refusal message.
 
+Each FMU runs in a child process given ``--timeout`` seconds (default 120): an FMU whose default experiment
+is far longer than its internal solver can cover (the Reference FMU *Roberts*: stop time 1e7 with a fixed internal
+Euler step of 1e-3 s, about 1e10 steps) is reported as ``timed out`` with the experiment it was given, instead of
+the whole check hanging; ``--stop``/``--step`` run it over a shorter one.
+
 Nothing here is committed FMUs: build them from their public sources first (docs/fmi-support.md says how).
 """
 
@@ -77,16 +82,63 @@ def check(path: Path, work: Path, stop_override: float | None = None, step_overr
     return row
 
 
+def _check_in_child(connection, path: Path, work: Path, stop: float | None, step: float | None) -> None:
+    """The child's side of :func:`check_bounded`: ``check``'s row (or its error as a row) sent back."""
+    try:
+        row = check(path, work, stop, step)
+    except Exception as exc:  # reported as that FMU's row: the other FMUs are still checked
+        row = {"fmu": path.stem, "fmi": "?", "result": "error", "detail": f"{type(exc).__name__}: {exc}"}
+    connection.send(row)
+    connection.close()
+
+
+def check_bounded(path: Path, work: Path, stop: float | None, step: float | None, timeout: float) -> dict:
+    """``check`` in a child process that is stopped after ``timeout`` seconds: a row whose result is
+    ``timed out`` then, naming the experiment it ran (an FMU never hangs the whole check)."""
+    import multiprocessing
+
+    context = multiprocessing.get_context("spawn")  # no forked copy of this process's threads or FMUs
+    receiver, sender = context.Pipe(duplex=False)
+    child = context.Process(target=_check_in_child, args=(sender, path, work, stop, step), daemon=True)
+    child.start()
+    sender.close()
+    try:
+        if receiver.poll(timeout):
+            return receiver.recv()
+        given = ", ".join(f"--{k} {v:g}" for k, v in (("stop", stop), ("step", step)) if v is not None)
+        return {"fmu": path.stem, "fmi": _fmi_version(path), "result": "timed out",
+                "detail": f"no result within {timeout:g} s over "
+                          f"{'its default experiment' if not given else given}; give a shorter --stop (or a "
+                          f"longer --timeout)"}
+    finally:
+        if child.is_alive():
+            child.kill()
+        child.join()
+
+
+def _fmi_version(path: Path) -> str:
+    from fmpy import read_model_description
+
+    try:
+        return read_model_description(str(path), validate=False).fmiVersion
+    except Exception:  # the row still says which FMU timed out
+        return "?"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m cosim.cli.reference_check", description=__doc__)
     parser.add_argument("paths", nargs="+", type=Path, help=".fmu files or folders holding them")
     parser.add_argument("--markdown", action="store_true", help="print a Markdown table")
     parser.add_argument("--stop", type=float, help="stop time instead of the default experiment's")
     parser.add_argument("--step", type=float, help="communication step instead of the default experiment's")
+    parser.add_argument("--timeout", type=float, default=120.0,
+                        help="seconds one FMU may take before it is stopped and reported 'timed out' (default 120)")
     args = parser.parse_args(argv)
+    if args.timeout <= 0:
+        parser.error(f"--timeout {args.timeout:g}: give a positive number of seconds")
     fmus = [p for path in args.paths for p in (sorted(path.rglob("*.fmu")) if path.is_dir() else [path])]
     with tempfile.TemporaryDirectory() as tmp:
-        rows = [check(path, Path(tmp), args.stop, args.step) for path in fmus]
+        rows = [check_bounded(path, Path(tmp), args.stop, args.step, args.timeout) for path in fmus]
     if args.markdown:
         print("| FMU | FMI | cosim vs fmpy | detail |\n|---|---|---|---|")
         for r in rows:
