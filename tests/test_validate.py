@@ -190,3 +190,24 @@ def test_validate_refuses_the_design_a_sweep_refuses(tmp_path, capsys, design, p
     assert code == 2 and path in text and fragment in text, text
     assert main(["sweep", str(spec), "--dry-run"]) == 2  # the same problem, found by the sweep
     assert fragment in capsys.readouterr().err
+
+
+def test_a_misspelt_connection_end_is_suggested_only_what_it_may_be(tmp_path, capsys):
+    """Issue 39: 'energy.p_tota' as a connection's target was answered "Did you mean 'p_total'?", an output
+    that cannot be a target; 'to' is suggested inputs only, 'from' outputs only."""
+    spec = {
+        "units": {"energy": {"fmu": "builtin:motor_gear_energy_fmi3"},
+                  "drive": {"python": python_unit("Clock")}},
+        "connections": [{"from": "drive.time", "to": "energy.p_tota"},      # p_total is an output: no suggestion
+                        {"from": "drive.time", "to": "energy.omeg[1]"},     # omega is an input
+                        {"from": "energy.p_totl", "to": "energy.tau[1]"}],  # p_total is an output
+        "experiment": {"stop": 1.0, "step": 0.01},
+    }
+    path = tmp_path / "spec.json"
+    path.write_text(json.dumps(spec))
+    code, text = validate(capsys, path)
+    assert code == 2 and "Traceback" not in text
+    lines = {line.split(": ")[1]: line for line in text.splitlines() if line.startswith(f"- {path}")}
+    assert lines["$.connections[0].to"].endswith("unit 'energy' has no variable 'p_tota'.")
+    assert lines["$.connections[1].to"].endswith("unit 'energy' has no variable 'omeg[1]'. Did you mean 'omega'?")
+    assert lines["$.connections[2].from"].endswith("unit 'energy' has no variable 'p_totl'. Did you mean 'p_total'?")

@@ -24,8 +24,9 @@ def check_connections(spec: Spec, units: Mapping[str, SystemUnit], problems: lis
             continue  # the input of a unit now replayed by a player: the recording already has what it caused
         base = ["connections", c.index]
         where = json_path(base)  # f-strings below: json_path per end cost a tenth of the time of 10^5 connections
-        source = resolve_signal(c.source, units, problems, file, f"{where}.from")
-        target = resolve_signal(c.target, units, problems, file, f"{where}.to")
+        # a misspelt end is suggested only what it may be: an output for 'from', an input for 'to'
+        source = resolve_signal(c.source, units, problems, file, f"{where}.from", suggest=("output",))
+        target = resolve_signal(c.target, units, problems, file, f"{where}.to", suggest=("input",))
         if source is None or target is None:
             continue
         ok = True

@@ -34,15 +34,20 @@ def split_unit_name(text: str, *unit_names: Collection[str]) -> tuple[str, str, 
     return text.partition(".")
 
 
-def port_names(unit: SystemUnit) -> list[str]:
-    """The unit's variable names as the spec calls them (after the port mapping)."""
+def port_names(unit: SystemUnit, causalities: Collection[str] | None = None) -> list[str]:
+    """The unit's variable names as the spec calls them (after the port mapping); with ``causalities``, only
+    the variables of those causalities."""
     reverse = {v: k for k, v in unit.spec.ports.items()}
-    return [reverse.get(v.name, v.name) for v in unit.description.variables]
+    return [reverse.get(v.name, v.name) for v in unit.description.variables
+            if causalities is None or v.causality in causalities]
 
 
 def resolve_signal(text: str, units: Mapping[str, SystemUnit], problems: list[Problem], file: str,
-                    path: str) -> Signal | None:
-    """The Signal 'unit.port' or 'unit.port[i]' names, or None after adding a Problem at ``path``."""
+                    path: str, suggest: Collection[str] | None = None) -> Signal | None:
+    """The Signal 'unit.port' or 'unit.port[i]' names, or None after adding a Problem at ``path``.
+
+    ``suggest``: the causalities a "did you mean" may name for a port that does not exist (a connection's
+    target suggests inputs only: issue 39, 'p_tota' suggested the output 'p_total'); None suggests any."""
     unit_name, dot, port = split_unit_name(text, units, getattr(units, "failed", ()))
     if not dot or not port:
         problems.append(Problem(file, path, f"'{text}' is not 'unit.port'", "write 'unit.port' or 'unit.port[i]'"))
@@ -59,7 +64,7 @@ def resolve_signal(text: str, units: Mapping[str, SystemUnit], problems: list[Pr
     try:
         var, refs = resolve_port(unit.description, actual)
     except KeyError:  # the names only for a suggestion, which a huge unit does not get (per problem: quadratic)
-        names = port_names(unit) if can_suggest(len(unit.description.variables)) else ()
+        names = port_names(unit, suggest) if can_suggest(len(unit.description.variables)) else ()
         problems.append(Problem(file, path, f"unit '{unit_name}' has no variable '{port}'."
                                             f"{did_you_mean(base, names)}",
                                 f"run 'cosim inspect' on the spec to list the variables of '{unit_name}'"))
