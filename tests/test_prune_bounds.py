@@ -146,7 +146,7 @@ def test_a_design_on_the_front_runs_to_the_end(system):
     observer = PruneBound(system, SETTINGS, front)
     result = run_point(system, {**DESIGN, "energy.gear_ratio": 50}, observers=[observer])
     assert result.status == "ok" and result.objectives["peak_power"] == other["peak_power"]
-    assert observer.checks > 1000  # compared at every communication point
+    assert observer.checks >= 1  # compared as often as its share of the run's time allows (OVERHEAD_SHARE)
 
 
 def test_ties_never_prune(system):

@@ -34,6 +34,11 @@ def add_sweep_parser(sub: Any) -> None:
     p.add_argument("--explore", action="store_true",
                    help="serve the decision room of the results folder while the sweep runs (new points appear as "
                         "they are written; linked from the Dask dashboard's Cosim page); on loopback")
+    p.add_argument("--prune", action="store_true",
+                   help="stop a design as soon as a finished one strictly dominates every value it can still reach "
+                        "(objectives with a sense, or optimize.objectives; the constraints of optimize.constraints): "
+                        "the front stays the same; pruned rows have status 'pruned' and hold bounds "
+                        "(docs/pruning.md). Off by default")
     from cosim.cli.options import add_experiment_options
     add_experiment_options(p)
     p.add_argument("--dry-run", action="store_true",
@@ -74,7 +79,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
                   timeout=args.timeout,
                   resume=args.resume, batch_size=args.batch_size, csv=args.csv, experiment=experiment_overrides(args),
                   recompute=args.recompute, quiet=getattr(args, "quiet", False), explore=args.explore,
-                  start_early=True)  # the local cluster starts while the results folder and payload are prepared
+                  start_early=True, prune=getattr(args, "prune", False))  # the local cluster starts while the results folder and payload are prepared
     runs_before = runs_recorded(sweep.store)
     counts = sweep.run_to_disk()  # a huge sweep's table never sits in memory
     total = sum(counts.values())

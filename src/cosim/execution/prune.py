@@ -2,7 +2,9 @@
 everything it can still reach, or a constraint on a bounded objective is already broken.
 
 At each communication point the observer updates the partial reductions of the objectives (max, min, final,
-initial, integral, integral_abs: each in O(1) per sample), evaluates the expressions the pruned objectives need,
+initial, integral, integral_abs: each in O(1) per sample) and checks the declarations; as often as
+:data:`OVERHEAD_SHARE` of the run's time allows (every step of a slow model, every few of a cheap one: late is
+never wrong, a bound only moves away from the front) it evaluates the expressions the pruned objectives need
 and turns them into a *bound vector* through the directions of :mod:`cosim.spec.bounds`: for a minimized
 objective moving up (or fixed) the value so far is the best the design can still end with; for one that is
 unbounded the best is -inf, so it never prunes.  A front member ``f`` prunes the design when ``f <= b`` in every
@@ -17,6 +19,7 @@ message names the dominating design and the time it stopped (:meth:`PruneBound.o
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping, Sequence
 
@@ -28,6 +31,7 @@ from cosim.spec.bounds import DOWN, FIXED, MARGIN, UP, Bound, system_bounds
 from cosim.spec.expressions import evaluate_expressions, parsed_expression
 
 PRUNED = "pruned"
+OVERHEAD_SHARE = 0.05  # at most this share of a run's time goes to comparing its bound with the front
 _COMPARE = {"<=", "<", ">=", ">"}
 
 
@@ -50,6 +54,20 @@ class PruneSettings:
 
     objectives: tuple[tuple[str, str], ...]
     constraints: tuple[tuple[str, str, float], ...] = ()
+
+
+@dataclass(frozen=True)
+class PruneOrder:
+    """What a study's batch carries to the child process that runs its points (cosim.studies.pruning): the
+    settings and a snapshot of the front (ids, rows in minimizing form)."""
+
+    settings: PruneSettings
+    ids: tuple[str, ...]
+    values: tuple[tuple[float, ...], ...]
+
+    def front(self) -> Front:
+        k = len(self.settings.objectives)
+        return Front(list(self.ids), np.array(self.values, dtype=float).reshape(len(self.ids), k))
 
 
 def parse_constraint(text: str) -> tuple[str, str, float] | None:
@@ -86,61 +104,96 @@ def parse_constraint(text: str) -> tuple[str, str, float] | None:
 
 
 class _Partial:
-    """The running reduction of one signal objective, and the check of the declaration its bound relies on."""
+    """The running reduction of one signal objective, and the check of the declaration its bound relies on.
+
+    Its samples are numpy vectors (one element per signal element); a scalar signal, the usual case, takes a
+    path of Python floats, since per-sample numpy calls on one element would cost more than a cheap step."""
+
+    KINDS = ("max", "min", "final", "initial", "integral", "integral_abs")
 
     def __init__(self, name: str, reduce: str, index: np.ndarray, bound: Bound):
         self.name, self.reduce, self.index, self.bound = name, reduce, index, bound
-        self.value: np.ndarray | None = None
-        self.first: np.ndarray | None = None
-        self.last: np.ndarray | None = None
+        self.scalar = int(index[0]) if len(index) == 1 else None
+        self.value: Any = None
+        self.first: Any = None
+        self.last: Any = None
         self.t: float = math.nan
         self.broken: str | None = None
 
-    def start(self, t: float, x: np.ndarray) -> None:
-        self.first, self.last, self.t = x.copy(), x.copy(), t
-        self.value = np.zeros_like(x) if self.reduce in ("integral", "integral_abs") else x.copy()
+    def _sample(self, values: np.ndarray) -> Any:
+        return float(values[self.scalar]) if self.scalar is not None else values[self.index]
+
+    def start(self, t: float, values: np.ndarray) -> None:
+        x = self._sample(values)
+        self.first = self.last = x
+        self.t = t
+        zero = 0.0 if self.scalar is not None else np.zeros_like(x)
+        self.value = zero if self.reduce in ("integral", "integral_abs") else x
         self._check(t, x, None)
 
-    def add(self, t: float, x: np.ndarray) -> None:
+    def add(self, t: float, values: np.ndarray) -> None:
         if self.value is None:
-            self.start(t, x)
+            self.start(t, values)
             return
-        r, last = self.reduce, self.last
-        if r == "max":
-            np.maximum(self.value, x, out=self.value)
+        x, r, last = self._sample(values), self.reduce, self.last
+        if self.scalar is not None:
+            if r == "max":
+                self.value = x if x > self.value or x != x else self.value  # a NaN sample stays NaN
+            elif r == "min":
+                self.value = x if x < self.value or x != x else self.value
+            elif r == "final":
+                self.value = x
+            elif r == "integral":
+                self.value += (t - self.t) * (x + last) / 2
+            elif r == "integral_abs":
+                self.value += (t - self.t) * (abs(x) + abs(last)) / 2
+        elif r == "max":
+            self.value = np.maximum(self.value, x)
         elif r == "min":
-            np.minimum(self.value, x, out=self.value)
+            self.value = np.minimum(self.value, x)
         elif r == "final":
-            self.value = x.copy()
+            self.value = x
         elif r == "integral":
             self.value = self.value + (t - self.t) * (x + last) / 2
         elif r == "integral_abs":
             self.value = self.value + (t - self.t) * (np.abs(x) + np.abs(last)) / 2
-        self._check(t, x, last)
-        self.last, self.t = x.copy(), t
+        if self.bound.check is not None and self.broken is None:
+            if self.scalar is None or not self._holds(x, last):
+                self._check(t, x, last)
+        self.last, self.t = x, t
 
-    def _check(self, t: float, x: np.ndarray, last: np.ndarray | None) -> None:
+    def _holds(self, x: float, last: float) -> bool:
+        """The declaration's quick test on a scalar sample (True: nothing to look into)."""
+        d = self.bound.direction
+        if self.bound.check == "sign":
+            return x >= 0 if d == UP else x <= 0
+        return x >= last if d == UP else x <= last if d == DOWN else x == self.first
+
+    def _check(self, t: float, x: Any, last: Any) -> None:
         """Record the first sample that breaks the declaration the bound relies on."""
         b = self.bound
         if self.broken is not None or b.check is None or b.direction is None:
             return
         if b.check == "sign":
-            bad = np.any(x < 0) if b.direction == UP else np.any(x > 0)
+            bad = np.any(np.less(x, 0)) if b.direction == UP else np.any(np.greater(x, 0))
             if bad:
                 self.broken = f"a {'negative' if b.direction == UP else 'positive'} sample at t={t:g}"
         elif last is not None:
-            if b.direction == UP and np.any(x < last):
+            if b.direction == UP and np.any(np.less(x, last)):
                 self.broken = f"it decreased at t={t:g}"
-            elif b.direction == DOWN and np.any(x > last):
+            elif b.direction == DOWN and np.any(np.greater(x, last)):
                 self.broken = f"it increased at t={t:g}"
-            elif b.direction == FIXED and np.any(x != self.first):
+            elif b.direction == FIXED and np.any(np.not_equal(x, self.first)):
                 self.broken = f"it changed at t={t:g}"
 
     def current(self) -> Any:
-        if self.value is None or self.reduce not in ("max", "min", "final", "initial", "integral", "integral_abs"):
-            return math.nan if self.value is None or len(self.value) == 1 else np.full(len(self.value), np.nan)
+        if self.value is None or self.reduce not in self.KINDS:
+            n = 1 if self.scalar is not None else len(self.index)
+            return math.nan if n == 1 else np.full(n, np.nan)
         value = self.first if self.reduce == "initial" else self.value
-        return float(value[0]) if len(value) == 1 else value.copy()
+        if self.scalar is not None:
+            return value
+        return float(value[0]) if len(value) == 1 else np.array(value, dtype=float)
 
 
 class PruneBound(StopCondition):
@@ -175,6 +228,7 @@ class PruneBound(StopCondition):
                           for o in spec.objectives if o.signal and o.name in needed]
         self._directions = self._flat_directions()
         self._steps = 0
+        self._next_check = 0.0
 
     def _flat_directions(self) -> tuple[list[tuple[str | None, bool]], list[tuple[str | None, bool]]]:
         """(direction, exact) of each pruned objective and each constraint's objective, as bounded now."""
@@ -185,7 +239,7 @@ class PruneBound(StopCondition):
 
     def initialized(self, t: float, values: np.ndarray) -> None:
         for p in self._partials:
-            p.start(t, values[p.index])
+            p.start(t, values)
 
     def load(self, times: np.ndarray, values: np.ndarray) -> bool:
         for i, t in enumerate(times):  # a warm start's replay: the samples one by one, as the run took them
@@ -194,13 +248,23 @@ class PruneBound(StopCondition):
 
     def _add(self, t: float, values: np.ndarray) -> None:
         for p in self._partials:
-            p.add(t, values[p.index])
+            p.add(t, values)
 
     def step(self, t: float, values: np.ndarray) -> None:
         self._add(t, values)
         self._steps += 1
+        # The comparison costs more than a cheap step: it runs once the run has spent OVERHEAD_SHARE**-1 times
+        # its last cost since the last one.  Late is never wrong (a bound only moves away from the front), it
+        # only stops a design a few steps later; the declarations above are still checked on every sample.
+        now = time.perf_counter()
+        if now < self._next_check:
+            return
+        self._compare(t)
+        self._next_check = now + (time.perf_counter() - now) / OVERHEAD_SHARE
+
+    def _compare(self, t: float) -> None:
         front = self.front
-        if front.refresh is not None and self._steps % front.refresh_every == 0:
+        if front.refresh is not None and self.checks % front.refresh_every == 0:
             newer = front.refresh()
             if newer is not None:
                 newer.refresh, newer.refresh_every = front.refresh, front.refresh_every
@@ -213,7 +277,7 @@ class PruneBound(StopCondition):
         flat = self._partial_values()
         reason = self._broken_constraint(flat) or self._dominated(flat)
         if reason:
-            self.reason, self.stop_time = f"pruned at t={t:g}: {reason}", t
+            self.reason, self.stop_time = f"pruned at t={t:.12g}: {reason}", t
 
     def _forget_broken(self) -> None:
         """A declaration was found broken: its objective (and expressions of it) are unbounded from now on."""

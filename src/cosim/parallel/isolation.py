@@ -144,10 +144,12 @@ class PointRunner:
         self.system = system
         self.units: dict[str, Any] | None = None
 
-    def run(self, point_id: str, values: dict[str, Any]) -> PointRow:
-        """One row for one point: status ok or failed, its message, run_time and objectives."""
+    def run(self, point_id: str, values: dict[str, Any], prune: Any = None) -> PointRow:
+        """One row for one point: status ok, failed or (with ``prune``, a
+        :class:`~cosim.execution.prune.PruneOrder`) pruned, its message, run_time and objectives."""
         from cosim.errors import CosimError, SpecError
         from cosim.execution.point import run_point
+        from cosim.execution.prune import PruneBound
 
         started = time.perf_counter()
         try:
@@ -158,10 +160,11 @@ class PointRunner:
             cause = str(exc) if isinstance(exc, CosimError) else f"{type(exc).__name__}: {exc}"
             return _row(point_id, "failed", f"cannot instantiate the units: {cause}", started)
         try:
-            result = run_point(self.system, values, units=self.units)
+            observers = [PruneBound(self.system, prune.settings, prune.front())] if prune is not None else []
+            result = run_point(self.system, values, units=self.units, observers=observers)
         except SpecError as exc:  # raised before the units are touched: they stay fresh for the next point
             return _row(point_id, "failed", "; ".join(p.message for p in exc.problems), started)
-        if result.ok:
+        if result.ok or result.status == "pruned":  # a pruned run stopped cleanly at a communication point
             try:
                 for unit in self.units.values():
                     unit.reset()
@@ -271,9 +274,12 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
             if kind == "warm":  # the study's warm-up (cosim.execution.warm_start), once, before any point
                 outbox.send(("warm", _warm_up_here(runner.system)))
                 continue
-            if kind not in ("run", "run_each"):
+            if kind not in ("run", "run_each", "prune"):
                 return
-            if kind == "run":  # lock-step groups where the system allows (cosim.execution.lockstep)
+            if kind == "prune":  # one by one, each with the front that came with the batch (cosim.studies.pruning)
+                points, order = points
+                rows = (runner.run(point_id, values, prune=order) for point_id, values in points)
+            elif kind == "run":  # lock-step groups where the system allows (cosim.execution.lockstep)
                 from cosim.execution.lockstep import LockstepRunner
 
                 grouped = grouped or LockstepRunner(runner)
@@ -595,8 +601,9 @@ class IsolatedRunner:
         return spare._loading == self.key
 
     def run(self, points: Sequence[tuple[str, dict[str, Any]]], timeout: float | None = None,
-            on_row: Callable[[PointRow], None] | None = None) -> list[PointRow]:
-        """One row per point, in order; statuses ok, failed, timeout or crashed.
+            on_row: Callable[[PointRow], None] | None = None, prune: Any = None) -> list[PointRow]:
+        """One row per point, in order; statuses ok, failed, timeout or crashed (and pruned with ``prune``, a
+        :class:`~cosim.execution.prune.PruneOrder`: each point then runs alone, never in a lock-step group).
 
         Without ``timeout`` a point may run for the ``timeout_first_seconds``
         limit (COSIM_TIMEOUT_FIRST): no read of a child waits forever.
@@ -620,6 +627,8 @@ class IsolatedRunner:
 
         remaining = list(points)
         mode = "run"  # after a crash or timeout the rest runs one point at a time (no lock-step groups)
+        if prune is not None:
+            mode = "prune"
         while remaining:
             if _STOPPING.is_set():  # the study is being stopped: the rest of the batch does not run
                 keep(*(_row(pid, "failed", "not run: the study was stopped", time.perf_counter())
@@ -633,7 +642,7 @@ class IsolatedRunner:
                     keep(*(_row(pid, "failed", problem, time.perf_counter()) for pid, _ in remaining), made_here=True)
                     break
             try:
-                self._outbox.send((mode, remaining))
+                self._outbox.send((mode, (remaining, prune) if mode == "prune" else remaining))
             except OSError:
                 self.close()
                 continue
@@ -644,7 +653,7 @@ class IsolatedRunner:
                 received = self._channel.get(deadline)
                 if received is None:
                     self.close(force=True)
-                    mode = "run_each"
+                    mode = "prune" if prune is not None else "run_each"
                     if grouped:  # not this point's fault for sure: the group's points run again one by one
                         break
                     keep(_row(point_id, "timeout", f"no result within the timeout of {deadline:g} s; "
@@ -653,7 +662,7 @@ class IsolatedRunner:
                     break
                 kind, body = received
                 if kind == "eof":
-                    mode = "run_each"
+                    mode = "prune" if prune is not None else "run_each"
                     if grouped:  # as for a timeout: which point of the group killed the child is found alone
                         self.close()
                         break
@@ -668,7 +677,7 @@ class IsolatedRunner:
                 if kind != "row" or not _is_row_of(body, point_id):
                     why = body if kind == "junk" else "a message that is not this point's row"
                     self.close(force=True)  # its channel is out of step: trust nothing more from it
-                    mode = "run_each"
+                    mode = "prune" if prune is not None else "run_each"
                     if grouped:  # written by some point of the group: found when they run one by one
                         break
                     keep(_row(point_id, "crashed", "the process running this point wrote something "

@@ -153,7 +153,11 @@ class PointStream:
     """
 
     def __init__(self, client: Any, payload: dict[str, Any], n_workers: int, kind: str, name: str = "",
-                 timeout: float | None = None, adaptive_timeout: bool = False, board: Any = None):
+                 timeout: float | None = None, adaptive_timeout: bool = False, board: Any = None,
+                 prune: Any = None):
+        """``prune``: None, or a callable giving the :class:`~cosim.execution.prune.PruneOrder` (the current
+        front) each batch carries when it is submitted (:mod:`cosim.studies.pruning`)."""
+        self.prune = prune
         self.client, self.n_workers = client, max(1, n_workers)
         self.kind, self.name, self.board = kind, name, board
         self.timeout, self.adaptive_timeout = timeout, adaptive_timeout
@@ -260,7 +264,8 @@ class PointStream:
         key = task_key(self.kind, self.name, [p.index for p in batch], total if total is not None else len(batch),
                        run=self.board.run if self.board is not None else "")  # the dashboard's names
         future = self.client.submit(run_batch, self.payload.future(), PointBatch([(p.id, p.values) for p in batch]),
-                                    timeout, self.topic, pure=False, retries=0, key=key)
+                                    timeout, self.topic, self.prune() if self.prune is not None else None,
+                                    pure=False, retries=0, key=key)
         self._in_flight[future.key] = _Task(future, batch, alone)
         future.add_done_callback(lambda done: self._inbox.put(("done", done)))
 

@@ -59,13 +59,15 @@ def _point_batch(pickled: bytes) -> PointBatch:
 
 
 def run_batch(payload: dict[str, Any], points: PointBatch | Sequence[tuple[str, dict[str, Any]]],
-              timeout: float | None, rows_topic: str | None = None) -> list[PointRow]:
+              timeout: float | None, rows_topic: str | None = None, prune: Any = None) -> list[PointRow]:
     """Run ``points`` on this worker; one row per point (see IsolatedRunner.run), with the worker named.
 
     Runs on a Dask worker (or anywhere): the child process holding the system
     is kept for the next batch of the same payload.  ``rows_topic``: the rows
     of finished points are also sent to the client on that Dask event topic
     while the batch runs (:class:`RowSender`; :mod:`cosim.parallel.point_stream`).
+    ``prune``: a :class:`~cosim.execution.prune.PruneOrder` (the study's front) each point compares its bound
+    with while it runs (:mod:`cosim.studies.pruning`).
     Once a stop of this process began (:func:`cosim.parallel.isolation.kill_point_children_now`)
     the rows of points the stop cut short are left out: the result holds only finished points.
     """
@@ -89,7 +91,7 @@ def run_batch(payload: dict[str, Any], points: PointBatch | Sequence[tuple[str, 
             for old in _IDLE.pop(next(iter(_IDLE))):
                 old.close()
     try:
-        rows = runner.run(points, timeout, on_row=finished)
+        rows = runner.run(points, timeout, on_row=finished, prune=prune)
         cut = runner.cut_by_stop  # read before the runner goes back: another task may take it at once
     finally:
         with _IDLE_LOCK:

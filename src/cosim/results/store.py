@@ -287,6 +287,14 @@ class ResultsStore:
             ids.update(_read(path, ["point_id"]).column("point_id").to_pylist())
         return ids
 
+    def ids_with_status(self, status: str) -> set[str]:
+        """Ids of the points whose latest row has ``status`` (e.g. the pruned ones a resume without pruning
+        runs again)."""
+        table = self.read()
+        if not len(table) or "status" not in table.columns:
+            return set()
+        return set(table.loc[table["status"].astype(str) == status, "point_id"].astype(str))
+
     def read(self) -> pd.DataFrame:
         """All rows so far (compacted table and parts), each point once, the latest row winning."""
         frames = []

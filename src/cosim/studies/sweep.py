@@ -43,7 +43,7 @@ import shutil
 import sys
 import tempfile
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TextIO
+from typing import TYPE_CHECKING, Any, Sequence, TextIO
 
 from cosim.errors import SweepError
 from cosim.execution.point_row import PointRow
@@ -54,6 +54,7 @@ from cosim.parallel.point_stream import BatchSizer, PointStream
 from cosim.spec.design import DesignSpace, Point
 from cosim.studies.driver import StudyFolder, now_utc, open_room, results_writes, run_metadata, say, study_cluster
 from cosim.studies.progress import StatusLine, duration
+from cosim.studies.pruning import PRUNED, FrontKeeper, prune_settings, pruned_columns, pruning_order
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -115,7 +116,8 @@ class Sweep:
                  batch_size: int | None = None, csv: bool = False, progress: TextIO | None = None,
                  quiet: bool = False, experiment: dict | None = None, space_of: Any = None,
                  cluster: str | Path | None = None, recompute: bool = False, start_early: bool = False,
-                 explore: bool = False, kind: str = "sweep"):
+                 explore: bool = False, kind: str = "sweep", prune: bool = False,
+                 prune_objectives: Sequence[tuple[str, str]] | None = None, prune_constraints: Sequence[str] = ()):
         from cosim.parallel.cluster import read_cluster_file
         from cosim.system.validate import check_spec
 
@@ -133,6 +135,11 @@ class Sweep:
         self.spec = self.system.spec
         _refuse_design_of_players(self.spec)
         self.space = (space_of or DesignSpace.from_spec)(self.spec)
+        # exact pruning (cosim.studies.pruning): what to prune on, checked before any work
+        section = self.spec.raw.get("optimize") or {} if isinstance(self.spec.raw, dict) else {}
+        objectives = prune_objectives or list((section.get("objectives") or {}).items()) or None
+        self.prune = prune_settings(self.system, objectives, prune_constraints or section.get("constraints", ())
+                                    ) if prune else None
         self.workers = workers or os.cpu_count() or 1
         self.scheduler, self.timeout, self.resume = scheduler, timeout, resume
         self.batch_size, self.csv, self.quiet = batch_size, csv, quiet
@@ -179,9 +186,19 @@ class Sweep:
         say(text, self.quiet, self.progress_stream)
 
     def _metadata(self, client_info: dict[str, Any]) -> dict[str, Any]:
+        fields: dict[str, Any] = {}
+        if self.prune is not None:
+            fields["pruning"] = {
+                "objectives": [list(o) for o in self.prune.objectives],
+                "constraints": [f"{n} {op} {c:g}" for n, op, c in self.prune.constraints],
+                "order": getattr(self, "_order_note", None),
+                "pruned_rows": "status 'pruned': the objective columns hold BOUNDS (the best value the design could "
+                               "still reach when it stopped; NaN where unbounded), not results; pruned_by names "
+                               "the finished design that strictly dominated the bound (empty for a broken "
+                               "constraint), pruned_at the time it stopped"}
         return run_metadata(self.store, self.system, client_info, kind=self.kind,
                             unit_checksums=self.folder.checksums, data_file_checksums=self.folder.data_checksums,
-                            points=len(self.space), design_method=self.space.method)
+                            points=len(self.space), design_method=self.space.method, **fields)
 
     def run(self) -> pd.DataFrame:
         """Evaluate every missing point; returns the whole table (every point once, in design order).
@@ -220,6 +237,8 @@ class Sweep:
 
         started = now_utc()
         done = self.store.done_ids() if self.resume else set()
+        if done and self.prune is None:  # a pruned design is done for a pruned study only: run it now
+            done -= self.store.ids_with_status(PRUNED)
         total = len(self.space)
         todo = total - len(done & {p.id for p in self.space}) if done else total
         if todo == 0:
@@ -233,6 +252,7 @@ class Sweep:
                            early=self._early) as (client, n_workers, link):
             info = {"started": started, "scheduler": client.scheduler.address, "workers": n_workers,
                     "timeout": self.timeout}
+            self._client_info = info
             self.folder.write_metadata(self._metadata(info))
             room = open_room(self.out) if self.explore else None
             board = open_board(client, self.kind, self.spec.name, total, before=total - todo, dashboard=link,
@@ -265,23 +285,39 @@ class Sweep:
     def _evaluate(self, client: Any, done: set[str], todo: int, n_workers: int, board: Any = None) -> None:
         """Run the points not in ``done`` through the one evaluate loop; each row is stored as its point finishes."""
         progress = Progress(todo, self.progress_stream) if not self.quiet else None
+        points: Any = (p for p in self.space if p.id not in done)
+        keeper = None
+        if self.prune is not None:
+            keeper = FrontKeeper(self.prune)
+            if done:  # a resumed pruned study: the designs finished before prune from the start
+                for _, row in self.store.read().iterrows():
+                    if row.get("status") == "ok":
+                        keeper.add(str(row["point_id"]), row.to_dict())
+            points, self._order_note = pruning_order(list(points))
+            self.folder.write_metadata(self._metadata(self._client_info))
 
         def store(pairs: list[tuple[Point, PointRow]]) -> None:
+            if keeper is not None:
+                for p, r in pairs:
+                    if r.ok:
+                        keeper.add(p.id, r.objectives)
             with results_writes(self.out):
                 self.store.append([self._row(p, r) for p, r in pairs])
             if progress is not None:
                 progress.update(len(pairs), sum(not r.ok for _, r in pairs))
 
         with PointStream(client, self.payload, n_workers, self.kind, self.spec.name, timeout=self.timeout,
-                         adaptive_timeout=True, board=board) as stream:
-            stream.run((p for p in self.space if p.id not in done), BatchSizer(todo, n_workers, self.batch_size),
-                       store, total=len(self.space))
+                         adaptive_timeout=True, board=board, prune=keeper.order if keeper else None) as stream:
+            stream.run(points, BatchSizer(todo, n_workers, self.batch_size), store, total=len(self.space))
         if progress is not None:
             progress.close()
 
     def _row(self, point: Point, row: PointRow) -> dict[str, Any]:
         # the design index is only in part files (cosim.results.store)
-        return row.to_dict({self.store.INDEX_COLUMN: point.index, **self.space.columns(point.values)})
+        columns = {self.store.INDEX_COLUMN: point.index, **self.space.columns(point.values)}
+        if self.prune is not None:
+            columns.update(pruned_columns(row))
+        return row.to_dict(columns)
 
     def sample_runs(self, n: int = 3) -> list[PointRow]:
         """Run ``n`` points spread over the space locally (in a child process, so a crash cannot hit the caller)."""
