@@ -185,3 +185,19 @@ def test_dry_run_estimate_counts_the_few_slow_points(write_spec, capsys):
     true_total = steps * (9 * fast + 3 * slow)  # the sleeps alone (the 1e-4 apart: each value once)
     assert 0.9 * true_total <= 12 * per_point <= 2.0 * true_total, (per_point, text)
     assert "about" in text and "on 1 worker(s)" in text and "differ more than 3x" in text
+
+
+def test_a_spec_without_a_design_space_says_it_sweeps_one_point(write_spec, tmp_path, capsys, local_cluster):
+    """Issue 39: a spec with no 'design' swept one point without a word; the sweep and its dry run say so."""
+    spec = {key: value for key, value in ode_spec().items() if key != "design"}
+    path = str(write_spec(spec, "single.json"))
+    assert main(["sweep", path, "--out", str(tmp_path / "single"), "--scheduler", local_cluster]) == 0
+    captured = capsys.readouterr()
+    assert "1 points: 1 ok" in captured.out
+    assert ("the spec has no design space (no 'design.parameters'): the sweep runs one point, the spec's values as "
+            "written") in captured.err
+    assert main(["sweep", path, "--dry-run"]) == 0
+    assert capsys.readouterr().out.startswith("ode_sweep: 1 point: the spec has no design space")
+    # a spec with a design space says nothing of the kind
+    assert main(["sweep", str(write_spec(ode_spec(), "ten.json")), "--dry-run"]) == 0
+    assert "no design space" not in capsys.readouterr().out

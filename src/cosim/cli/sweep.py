@@ -145,8 +145,13 @@ def _dry_run(args: argparse.Namespace) -> int:
         sweep = Sweep(args.spec, workers=args.workers, out=scratch, timeout=args.timeout, quiet=True,
                       experiment=experiment_overrides(args))
         total = len(sweep.space)
-        print(f"{sweep.spec.name}: {total} points ({sweep.space.method}; parameters: "
-              f"{', '.join(sweep.space.targets) or 'none'})")
+        if not sweep.space.targets:
+            from cosim.studies.sweep import NO_DESIGN_SPACE
+
+            print(f"{sweep.spec.name}: 1 point: {NO_DESIGN_SPACE}")
+        else:
+            print(f"{sweep.spec.name}: {total} points ({sweep.space.method}; parameters: "
+                  f"{', '.join(sweep.space.targets)})")
         for point in sweep.space.head(5):
             print(f"  {point.id}  " + ", ".join(f"{k}={v}" for k, v in point.values.items()))
         if total > 5:

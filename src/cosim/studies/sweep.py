@@ -90,6 +90,11 @@ class Progress:
         self._line.close()
 
 
+# said when a spec without design parameters is swept (issue 39: it ran one point without saying so)
+NO_DESIGN_SPACE = ("the spec has no design space (no 'design.parameters'): the sweep runs one point, the spec's "
+                   "values as written; add 'design.parameters' to sweep more (docs/spec.md), or use 'cosim run'")
+
+
 class Sweep:
     """A prepared sweep of the spec at ``spec_path`` (see the module docstring).
 
@@ -144,6 +149,8 @@ class Sweep:
         self.scheduler, self.timeout, self.resume = scheduler, timeout, resume
         self.batch_size, self.csv, self.quiet = batch_size, csv, quiet
         self.progress_stream, self.kind = progress, kind
+        if kind == "sweep" and not self.space.targets:
+            self._say(NO_DESIGN_SPACE)
         self._temporary = out is None
         self.explore = explore
         if explore and out is None:
