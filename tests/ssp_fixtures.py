@@ -105,3 +105,97 @@ def table_ssd() -> str:
     ssd = oms3_ssd().replace('      <ssd:System name="sub">', TABLE_COMPONENT + '      <ssd:System name="sub">', 1)
     return ssd.replace('startElement="A" startConnector="y" endElement="sub"',
                        'startElement="setpoint" startConnector="speed" endElement="sub"')
+
+
+_DC_MOTOR = """<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
+    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon"
+    xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues" name="{root}" version="1.0">
+  <ssd:System name="{root}">
+    <ssd:Connectors>
+      <ssd:Connector name="{phi}" kind="output"><ssc:Real/></ssd:Connector>
+      <ssd:Connector name="{gain}" kind="parameter"><ssc:Real/></ssd:Connector>
+    </ssd:Connectors>
+    <ssd:ParameterBindings>
+      <ssd:ParameterBinding>
+        <ssd:ParameterValues>
+          <ssv:ParameterSet version="1.0" name="{root}">
+            <ssv:Parameters>
+              <ssv:Parameter name="stimuli.a"><ssv:Real value="0"/></ssv:Parameter>
+              <ssv:Parameter name="stimuli.b"><ssv:Real value="0"/></ssv:Parameter>
+              <ssv:Parameter name="stimuli.x0"><ssv:Real value="2"/></ssv:Parameter>
+              <ssv:Parameter name="{sub}.{machine}.a"><ssv:Real value="0"/></ssv:Parameter>
+              <ssv:Parameter name="{sub}.{machine}.x0"><ssv:Real value="0"/></ssv:Parameter>
+              <ssv:Parameter name="{sub}.{mass}.a"><ssv:Real value="0"/></ssv:Parameter>
+              <ssv:Parameter name="{sub}.{mass}.b"><ssv:Real value="0.5"/></ssv:Parameter>
+              <ssv:Parameter name="{sub}.{mass}.x0"><ssv:Real value="1"/></ssv:Parameter>
+              <ssv:Parameter name="{gain}"><ssv:Real value="1"/></ssv:Parameter>
+            </ssv:Parameters>
+          </ssv:ParameterSet>
+        </ssd:ParameterValues>
+      </ssd:ParameterBinding>
+    </ssd:ParameterBindings>
+    <ssd:Elements>
+      <ssd:Component name="stimuli" type="application/x-fmu-sharedlibrary" source="resources/linear_ode.fmu">
+        <ssd:Connectors><ssd:Connector name="y" kind="output"><ssc:Real/></ssd:Connector></ssd:Connectors>
+      </ssd:Component>
+      <ssd:System name="{sub}">
+        <ssd:Connectors>
+          <ssd:Connector name="{tau}" kind="input"><ssc:Real/></ssd:Connector>
+          <ssd:Connector name="{phi}" kind="output"><ssc:Real/></ssd:Connector>
+          <ssd:Connector name="{gain}" kind="parameter"><ssc:Real/></ssd:Connector>
+        </ssd:Connectors>
+        <ssd:Elements>
+          <ssd:Component name="{machine}" type="application/x-fmu-sharedlibrary" source="resources/linear_ode.fmu">
+            <ssd:Connectors>
+              <ssd:Connector name="u" kind="input"><ssc:Real/></ssd:Connector>
+              <ssd:Connector name="b" kind="parameter"><ssc:Real/></ssd:Connector>
+              <ssd:Connector name="y" kind="output"><ssc:Real/></ssd:Connector>
+            </ssd:Connectors>
+          </ssd:Component>
+          <ssd:Component name="{mass}" type="application/x-fmu-sharedlibrary" source="resources/linear_ode.fmu">
+            <ssd:Connectors>
+              <ssd:Connector name="u" kind="input"><ssc:Real/></ssd:Connector>
+              <ssd:Connector name="y" kind="output"><ssc:Real/></ssd:Connector>
+            </ssd:Connectors>
+          </ssd:Component>
+        </ssd:Elements>
+        <ssd:Connections>
+          <ssd:Connection startConnector="{tau}" endElement="{machine}" endConnector="u"/>
+          <ssd:Connection startConnector="{gain}" endElement="{machine}" endConnector="b"/>
+          <ssd:Connection startElement="{machine}" startConnector="y" endElement="{mass}" endConnector="u"/>
+          <ssd:Connection startElement="{mass}" startConnector="y" endConnector="{phi}"/>
+        </ssd:Connections>
+      </ssd:System>
+    </ssd:Elements>
+    <ssd:Connections>
+      <ssd:Connection startElement="stimuli" startConnector="y" endElement="{sub}" endConnector="{tau}"/>
+      <ssd:Connection startConnector="{gain}" endElement="{sub}" endConnector="{gain}"/>
+      <ssd:Connection startElement="{sub}" startConnector="{phi}" endConnector="{phi}"/>
+    </ssd:Connections>
+  </ssd:System>
+  <ssd:DefaultExperiment startTime="0" stopTime="1"/>
+</ssd:SystemStructureDescription>
+"""
+
+DC_MOTOR_NAMES = {"root": "DC-Motor", "sub": "SuT", "machine": "emachine_model", "mass": "edrive_mass",
+                  "phi": "phiB", "tau": "tau", "gain": "gain"}
+
+
+def dc_motor_ssd(**names: str) -> str:
+    """A DC motor as Dymola exports it (issue 33): root system 'DC-Motor' with an output connector and a
+    parameter connector bound inline, a stimuli FMU, a nested system 'SuT' holding 'emachine_model' and
+    'edrive_mass' (linear_ode each) with system connectors of its own. ``names`` replaces any of
+    :data:`DC_MOTOR_NAMES` (a hyphen, space, dot or non-ASCII letter where SSP allows one)."""
+    return _DC_MOTOR.format(**{**DC_MOTOR_NAMES, **names})
+
+
+def dc_motor_expected(t_end: float, step: float, gain: float = 1.0) -> dict[str, float]:
+    """The DC motor's final values under jacobi, from its equations (not by cosim): stimuli y = 2;
+    emachine_model: b = gain (the parameter connector), u = 2, so y += step * 2 * gain; edrive_mass: b = 0.5,
+    x0 = 1, u = the machine's y at the start of each step."""
+    machine, mass = 0.0, 1.0
+    for _ in range(round(t_end / step)):
+        mass += step * 0.5 * machine
+        machine += step * 2.0 * gain
+    return {"machine": machine, "mass": mass}

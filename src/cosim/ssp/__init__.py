@@ -18,6 +18,7 @@ from typing import Any, Mapping
 
 from cosim.errors import Problem, SpecError
 from cosim.ssp.archive import is_ssp
+from cosim.ssp.names import rename_prefix
 from cosim.ssp.reader import SspSystem, read_ssp
 from cosim.ssp.system_connectors import ConnectorSignal, connector_units
 from cosim.units.registry import unit_kinds
@@ -175,6 +176,8 @@ def _name_connectors(spec: dict, system: SspSystem, file: str, implied: list[Con
         return any(text.startswith(u + ".") for u in units)
 
     def resolve(text: Any, where: str) -> Any:
+        if isinstance(text, str):  # the SSP's own spelling ('DC-Motor.SuT.phiB') -> cosim's (cosim.ssp.names)
+            text = rename_prefix(text, system.renamed)
         if not isinstance(text, str) or names_unit(text):
             return text
         if text in signals:
@@ -198,6 +201,7 @@ def _name_connectors(spec: dict, system: SspSystem, file: str, implied: list[Con
         """A design parameter naming a system connector: a parameter connector is a parameter of its system's
         ``connectors`` unit, which sets the FMU parameters the connector feeds; one fed by a component output
         (an output, or an input of a sub-system) has no value to set before the run: a problem."""
+        key = rename_prefix(key, system.renamed)
         if names_unit(key):
             return key
         if key not in signals:

@@ -4,7 +4,6 @@ component gets when the system is flattened."""
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 from typing import Any
 
@@ -26,10 +25,9 @@ from cosim.ssp.model import (
     Node,
     variable_of,
 )
+from cosim.ssp.names import cosim_path
 from cosim.ssp.reading import Reading
 from cosim.ssp.xml import short_name, tag
-
-_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
 def read_system(reading: Reading, element: Any, path: tuple[str, ...]) -> Node:
@@ -87,17 +85,14 @@ def components(reading: Reading) -> list[Node]:
 
 
 def unit_names(reading: Reading) -> dict[tuple[str, ...], str]:
-    """The unit name of every component (its path below the root system, characters other than letters, digits
-    and ``_`` made ``_``, with a note); a problem when two flatten to one name."""
+    """The unit name of every component (its path below the root system renamed by
+    :func:`~cosim.ssp.names.cosim_path`, with a note); a problem when two flatten to one name."""
     names: dict[tuple[str, ...], str] = {}
     seen: dict[str, tuple[str, ...]] = {}
     for node in components(reading):
-        # a component's own name may hold dots (an SSP exported from a flattened system)
-        parts = [p if _NAME_RE.match(p) else re.sub(r"\W", "_", p if p[:1].isalpha() or p[:1] == "_" else f"_{p}")
-                 for p in ".".join(node.path).split(".")]
-        name = ".".join(parts)
+        name = cosim_path(node.path)  # a component's own name may hold dots (exported from a flattened system)
         if name != ".".join(node.path):
-            reading.alike.add("renamed", f"component '{'.'.join(node.path)}' is called '{name}' (names keep "
+            reading.alike.add("renamed", f"component '{'.'.join(node.path)}' is called '{name}' (names keep ASCII "
                               "letters, digits, _)", f"'{name}'", "more components renamed likewise")
         if name in seen:
             reading.problem(node.element, f"two components flatten to the same unit name '{name}'",

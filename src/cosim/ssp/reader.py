@@ -34,9 +34,10 @@ from cosim.ssp.elements import components, read_system, unit_names
 from cosim.ssp.experiment import note_unread, read_experiment
 from cosim.ssp.measures import read_unit_definitions
 from cosim.ssp.model import FMU_TYPES, TABLE_TYPES, Node
+from cosim.ssp.names import cosim_name, cosim_part, cosim_path
 from cosim.ssp.reading import Reading
 from cosim.ssp.system_connectors import ConnectorSignal, connector_signals
-from cosim.ssp.xml import forget_positions, tag
+from cosim.ssp.xml import element_path, forget_positions, tag
 
 __all__ = ["FMU_TYPES", "TABLE_TYPES", "SspSystem", "read_ssp"]
 
@@ -54,6 +55,12 @@ class SspSystem:
     root_system: str = ""
     # 'Root.sub.connector' of every system connector of kind output, in document order (recorded by a run)
     output_connectors: list[str] = field(default_factory=list)
+    # the SSP's own dotted names of renamed systems, components and system connectors -> their cosim names
+    # (with and without the root system's name; see cosim.ssp.names)
+    renamed: dict[str, str] = field(default_factory=dict)
+    # unit name (a component's, a system's connectors unit's) -> (file label, element path) of its SSD element,
+    # where a problem of the flattened spec is reported (see cosim.ssp.locate)
+    elements: dict[str, tuple[str, str]] = field(default_factory=dict)
 
 
 def read_ssp(path: str | Path, variant: str | None = None) -> SspSystem:
@@ -91,13 +98,49 @@ def _read(reading: Reading) -> SspSystem:
            "experiment": experiment, "record": [f"{name}.*" for name in units]}
     if root.get("description"):
         raw["description"] = root.get("description")
-    root_name = system.get("name", "")
-    connectors = [".".join((root_name, *n.path, c)) for n in reading.nodes.values() if n.kind == "system"
-                  for c in n.connectors]
-    outputs = [".".join((root_name, *n.path, name)) for n in reading.nodes.values() if n.kind == "system"
-               for name, c in n.connectors.items() if c.kind == "output"]
+    root_name = cosim_name(system.get("name", ""))
+    renamed = _renamed(reading, system.get("name", ""), root_name)
+    connectors = [f"{cosim_path((root_name, *n.path))}.{cosim_part(c)}" for n in reading.nodes.values()
+                  if n.kind == "system" for c in n.connectors]
+    outputs = [f"{cosim_path((root_name, *n.path))}.{cosim_part(name)}" for n in reading.nodes.values()
+               if n.kind == "system" for name, c in n.connectors.items() if c.kind == "output"]
     signals = connector_signals(reading, flow, bindings, names, root_name)
-    return SspSystem(reading.files, raw, reading.notes, connectors, signals, root_name, outputs)
+    elements = {names[n.path]: (reading.label, element_path(n.element)) for n in components(reading)}
+    elements.update({cosim_path((root_name, *n.path)) if root_name else cosim_path(n.path):
+                     (reading.label, element_path(n.element)) for n in reading.nodes.values() if n.kind == "system"})
+    elements[""] = (reading.label, element_path(system))
+    return SspSystem(reading.files, raw, reading.notes, connectors, signals, root_name, outputs, renamed, elements)
+
+
+def _renamed(reading: Reading, root: str, root_name: str) -> dict[str, str]:
+    """Every system, component and system connector whose SSP name is not its cosim name, by its dotted SSP
+    name with and without the root system's -> its cosim name; a note per renamed system or connector (the
+    components' notes are :func:`~cosim.ssp.elements.unit_names`')."""
+    renamed: dict[str, str] = {}
+    if root != root_name:
+        renamed[root] = root_name
+        reading.alike.add("renamed system", f"system '{root}' is called '{root_name}' (names keep ASCII letters, "
+                          "digits, _)", f"'{root_name}'", "more systems renamed likewise")
+    for node in reading.nodes.values():
+        if not node.path:
+            names = [((c,), (cosim_part(c),)) for c in node.connectors] if node.kind == "system" else []
+        else:
+            names = [(node.path, tuple(cosim_name(p) for p in node.path))]
+            if node.kind == "system":
+                names += [((*node.path, c), (*names[0][1], cosim_part(c))) for c in node.connectors]
+        for path, cosim in names:
+            ssp, new = ".".join(path), ".".join(cosim)
+            if ssp == new:
+                continue
+            renamed[ssp] = new
+            if root:
+                renamed[f"{root}.{ssp}"] = f"{root_name}.{new}"
+            if node.kind == "system" and path[-1] != cosim[-1]:  # a connector of a renamed system keeps its name
+                what = "system" if path == node.path else "connector"
+                full, new_full = ".".join((root, *path)), ".".join((root_name, *cosim))
+                reading.alike.add(f"renamed {what}", f"{what} '{full}' is called '{new_full}' (names keep ASCII "
+                                  "letters, digits, _)", f"'{new_full}'", f"more {what}s renamed likewise")
+    return renamed
 
 
 def _raise_problems(reading: Reading) -> None:

@@ -16,6 +16,7 @@ from typing import Any
 from cosim.ssp.bindings import Bindings
 from cosim.ssp.connections import Flow
 from cosim.ssp.model import variable_of
+from cosim.ssp.names import cosim_part, cosim_path
 from cosim.ssp.reading import Reading
 
 
@@ -46,7 +47,8 @@ class ConnectorSignal:
 
 def connector_signals(reading: Reading, flow: Flow, bindings: Bindings, unit_names: dict,
                       root_name: str) -> dict[str, ConnectorSignal]:
-    """What every system connector carries, by its name with and without the root system's name.
+    """What every system connector carries, by its cosim name (:mod:`cosim.ssp.names`) with and without the
+    root system's (``root_name``, a cosim name already).
 
     A connector fed (through a chain) by a component output carries factor x that output + offset (the
     chain's conversions and transformations); one holding a bound value (or fed by a connector that holds one)
@@ -72,24 +74,25 @@ def connector_signals(reading: Reading, flow: Flow, bindings: Bindings, unit_nam
     for node in reading.nodes.values():
         if node.kind != "system":
             continue
-        system = ".".join((root_name, *node.path))
+        system = cosim_path((root_name, *node.path)) if root_name else cosim_path(node.path)
         for name in node.connectors:
             end = (node.path, name)
+            port = cosim_part(name)  # one port of the system's connectors unit: a dot in its name becomes _
             carried: ConnectorSignal | None = None
             if end in flow.into:
                 chain = flow.chain(end)
                 start = chain[0].start
                 if reading.nodes[start[0]].kind == "component" and start[0] in unit_names:
                     factor, offset = flow.compose(chain, flow.unit_of(start))
-                    carried = ConnectorSignal(system, name, f"{unit_names[start[0]]}.{start[1]}", factor, offset,
+                    carried = ConnectorSignal(system, port, f"{unit_names[start[0]]}.{start[1]}", factor, offset,
                                               unit=flow.unit_after(chain, flow.unit_of(start))[0])
                 elif start in system_values:
-                    carried = ConnectorSignal(system, name, value=constant(start, chain))
+                    carried = ConnectorSignal(system, port, value=constant(start, chain))
             elif end in system_values:
-                carried = ConnectorSignal(system, name, value=constant(end), feeds=feeds.get(end, ()))
+                carried = ConnectorSignal(system, port, value=constant(end), feeds=feeds.get(end, ()))
             if carried is not None:
-                signals[".".join((root_name, *node.path, name))] = carried
-                signals.setdefault(".".join((*node.path, name)), carried)
+                signals[carried.name] = carried
+                signals.setdefault(f"{cosim_path(node.path)}.{port}" if node.path else port, carried)
     reading.problems[:] = problems  # a chain only named here (no FMU input at its end) reports nothing new
     return signals
 

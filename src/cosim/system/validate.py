@@ -30,7 +30,16 @@ def check_spec(path: str | Path, experiment: dict | None = None, variant: str | 
     """
     # millions of small acyclic objects for 10^5 connections (see cosim.util.collector); as many problems
     with collector_paused(), suggestions_bounded():
-        return _check_spec(path, experiment, variant)
+        try:
+            return _check_spec(path, experiment, variant)
+        except SpecError as exc:
+            from cosim.ssp import is_ssp
+            from cosim.ssp.locate import at_ssd_elements
+
+            if not is_ssp(Path(path)):
+                raise
+            # an SSP run alone: its problems name SSD elements, not JSON paths of a spec the user never wrote
+            raise SpecError(at_ssd_elements(exc.problems, path, variant)) from None
 
 
 def _check_spec(path: str | Path, experiment: dict | None, variant: str | None) -> System:
