@@ -179,6 +179,7 @@ def inspect_spec(path: str, experiment: dict[str, Any] | None = None, variant: s
     stop = "(no stop time: give --stop to run)" if "stop" in missing else f"{exp.stop:g} s"
     step = "(none: give --step to run)" if "step" in missing else f"{exp.step:g} s"
     print(f"experiment: {exp.start:g} .. {stop}, step {step}, {exp.algorithm}")
+    print(f"kernel: {system.kernel.describe()}")  # native (compiled loop) or python, and why not native
     groups = system.model_exchange.groups
     print(f"stepping order: {' -> '.join(system.model_exchange.order if groups else system.order)}")
     for group in groups:  # connected model-exchange units: one solver, one unit to the master

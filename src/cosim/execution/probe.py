@@ -42,6 +42,8 @@ class Probe:
                 positions.setdefault(signal.unit, []).append(len(self.columns))
                 per_unit.setdefault(signal.unit, []).append(ref)
                 self.columns.append(column)
+        # per unit: its probed elements and their columns (what the native kernel reads itself)
+        self.layout = [(name, tuple(refs), list(positions[name])) for name, refs in per_unit.items()]
         self._exact_reads = [(units[name].select(refs), units[name]) for name, refs in exact.items()]
         self.values = np.zeros(len(self.columns))
         self._reads = []

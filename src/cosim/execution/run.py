@@ -19,12 +19,14 @@ from typing import Mapping, Sequence
 
 from cosim.errors import UnitError, UserError
 from cosim.execution.observers import Objectives, Recording, RunContext
+from cosim.execution.native import drive_native, takes_bulk
 from cosim.execution.probe import Probe
 from cosim.execution.result import FAILED, INTERNAL_FAILURE, OK, UNIT_FAILURE, USER_FAILURE, RunResult
 from cosim.execution.warm_start import WarmSamples, WarmState, refuse_unsaveable, restore_warm, warm_steps
 from cosim.master.contract import MasterAlgorithm, StepGrid
 from cosim.master.coupled_me import integrate_together
 from cosim.master.observers import ExactColumns, Observer, StopCondition, StopWhen, flatten_objectives
+from cosim.master.native.algorithm import NativeFixedStep
 from cosim.master.registry import make_algorithm
 from cosim.master.transfers import group_transfers
 from cosim.spec.expressions import evaluate_expressions
@@ -88,8 +90,7 @@ class Execution:
                 for name, system_unit in self.system.units.items():
                     units[name] = system_unit.unit_type.instantiate(name)
             context, progress.t = self._prepared(units)
-            algorithm = self.algorithm or make_algorithm(self.system.spec.experiment.algorithm,
-                                                         self.system.spec.experiment)
+            algorithm = self.algorithm or self._default_algorithm()
             algorithm.bind(context.view)
             objectives, recording, keeper = Objectives(self.system), self._recording(), self._keeper()
             observers = [o for o in (recording, objectives, keeper) if o is not None]
@@ -129,6 +130,13 @@ class Execution:
         exact = ExactColumns(probe.exact_columns, probe.read_exact) if probe.exact_columns else None
         return RunContext(self.system, units, view, probe, exact), t
 
+    def _default_algorithm(self) -> MasterAlgorithm:
+        """The spec's algorithm, stepped by the native kernel where the system's check chose it."""
+        exp = self.system.spec.experiment
+        if self.system.kernel.kernel == "native":
+            return NativeFixedStep(exp, exp.algorithm)
+        return make_algorithm(exp.algorithm, exp)
+
     def _recording(self) -> Recording | None:
         if not self.record:
             return None
@@ -147,6 +155,9 @@ class Execution:
         observers at every communication point, until a unit ends the run or a stop condition holds."""
         exp = self.system.spec.experiment
         t_end = StepGrid.of(exp).time(warm_steps(exp)) if self.save_warm else exp.stop
+        if isinstance(algorithm, NativeFixedStep) and self.warm is None and takes_bulk(observers):
+            drive_native(algorithm, context, observers, progress, t_end)
+            return
         algorithm.start(progress.t)  # e.g. algebraic loops solved at the start time
         if self.warm is not None:  # the observers see the warm-up's samples, as if this run had taken its steps
             self.warm.replay(observers, context.exact)

@@ -63,6 +63,7 @@ class ExperimentSpec:
     adaptive: tuple[tuple[str, Any], ...] = ()
     coupled_model_exchange: bool = True  # connected model-exchange units integrated together (system/coupled_me)
     warm_start: float | None = None  # run once to this time, save, start every point there (execution/warm_start)
+    kernel: str = "auto"  # what steps the system: "auto", "native" or "python" (system/kernel_choice.py)
 
 
 @dataclass(frozen=True)
@@ -443,7 +444,8 @@ def build_spec(raw: dict, path: Path) -> Spec:
                                 early_stop=e.get("early_stop", "ok"), loop_solver=_loop_settings(e.get("loop_solver", {})),
                                 adaptive=tuple(sorted((e.get("adaptive") or {}).items())),
                                 coupled_model_exchange=e.get("coupled_model_exchange", True),
-                                warm_start=float(e["warm_start"]) if e.get("warm_start") is not None else None)
+                                warm_start=float(e["warm_start"]) if e.get("warm_start") is not None else None,
+                                kernel=e.get("kernel", "auto"))
     objectives = tuple(
         ObjectiveSpec(name=n, signal=o.get("signal"), reduce=o.get("reduce"), expr=o.get("expr"),
                       unit=o.get("unit"), sense=o.get("sense"), description=o.get("description", ""),

@@ -19,6 +19,7 @@ from cosim.master.loops import Coupling
 from cosim.spec.loader import Spec
 from cosim.system.connection_checks import check_connections
 from cosim.system.coupled_me import ModelExchangeCoupling, model_exchange_coupling
+from cosim.system.kernel_choice import KernelChoice, kernel_choice, why_not_native
 from cosim.system.parts import Assignment, Connection, LoadedUnits, Signal, SystemUnit
 from cosim.system.signals import add_recorded, resolve_signal, split_unit_name
 from cosim.system.stepping import check_algebraic_loops, feedthrough_coupling, stepping_order
@@ -52,6 +53,8 @@ class System:
     design_conversions: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     # the saved warm-up of a spec with experiment.warm_start (cosim.execution.warm_start.WarmState), once made
     warm_start: Any = None
+    # which master steps it: the native kernel or the Python master, and why not native (system/kernel_choice.py)
+    kernel: KernelChoice = KernelChoice()
 
     def signal(self, text: str) -> Signal:
         """Resolve a 'unit.port' text against this system; raises SpecError if it does not fit."""
@@ -170,12 +173,20 @@ def build_system(spec: Spec, broken_units: frozenset[str] = frozenset()) -> Syst
     check_objective_expressions(spec, problems)
     design_conversions = check_design(spec, units, problems)
     check_warm_start_design(spec, units, problems)
+    kernel = KernelChoice()
+    if not problems:
+        why_not = why_not_native(spec, units, connections, coupling, model_exchange, tuple(probes.values()))
+        kernel = kernel_choice(spec, why_not)
+        if spec.experiment.kernel == "native" and kernel.kernel != "native":
+            problems.append(Problem(file, "$.experiment.kernel", f"the native kernel cannot step this system: "
+                                    f"{kernel.reason}", "set \"kernel\": \"auto\" (the Python master steps what "
+                                    "the kernel cannot) or change what the reason names"))
     if problems:
         raise SpecError(problems)
     system = System(spec=spec, units=dict(units), connections=tuple(connections), order=tuple(order),
                     init_order=tuple(init_order), assignments=tuple(assignments), probes=tuple(probes.values()),
                     recorded=tuple(recorded), coupling=coupling, model_exchange=model_exchange,
-                    design_conversions=design_conversions)
+                    design_conversions=design_conversions, kernel=kernel)
     attach_data_files(system)  # files named by a unit's data-file parameters: read from the spec's folder, shipped
     return system
 

@@ -96,6 +96,12 @@ class Fmi2Unit(FmiInstance):
         self.time = t
         self.generation += 1
         status = self._do_step(self._component, t, h, no_set_prior)
+        if status > 1:
+            self.step_outcome(status)
+
+    def step_outcome(self, status: int) -> None:
+        """Raise for fmi2DoStep's ``status`` above fmi2Warning: SimulationEnded for fmi2Discard with
+        fmi2Terminated (the FMU ends the simulation), else the UnitError naming the status and the FMU's log."""
         if status == 2 and self._terminated():  # fmi2Discard + fmi2Terminated: the FMU ends the simulation
             end = self._guard("fmi2GetRealStatus", lambda: self._slave.getRealStatus(fmi2LastSuccessfulTime))
             raise SimulationEnded(self.name, float(end), "ended the simulation (fmi2DoStep: fmi2Discard, "
