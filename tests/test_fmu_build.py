@@ -22,7 +22,7 @@ from cosim.fmus.build import FmuBuildError, build_fmu, ensure_built
 from cosim.fmus.testing import FmuInstance
 
 REPO = Path(__file__).resolve().parents[1]
-MODELS = ["algebraic", "bouncing_ball", "fault", "gain_array", "linear_ode", "mass_spring", "motor_gear_energy",
+MODELS = ["algebraic", "bouncing_ball", "counter", "fault", "gain_array", "linear_ode", "mass_spring", "motor_gear_energy",
           "panda_inverse_dynamics", "square_lag"]
 # tests/test_fmu_model_exchange.py runs them (mass_spring: tests/test_coupled_model_exchange.py)
 MODEL_EXCHANGE_ONLY = {"bouncing_ball", "mass_spring", "square_lag"}

@@ -18,15 +18,15 @@ from dataclasses import dataclass
 from typing import Mapping, Sequence
 
 from cosim.errors import UnitError, UserError
-from cosim.execution.observers import Objectives, Recording, RunContext
 from cosim.execution.native import drive_native, takes_bulk
+from cosim.execution.observers import Objectives, Recording, RunContext
 from cosim.execution.probe import Probe
 from cosim.execution.result import FAILED, INTERNAL_FAILURE, OK, UNIT_FAILURE, USER_FAILURE, RunResult
 from cosim.execution.warm_start import WarmSamples, WarmState, refuse_unsaveable, restore_warm, warm_steps
 from cosim.master.contract import MasterAlgorithm, StepGrid
 from cosim.master.coupled_me import integrate_together
-from cosim.master.observers import ExactColumns, Observer, StopCondition, StopWhen, flatten_objectives
 from cosim.master.native.algorithm import NativeFixedStep
+from cosim.master.observers import ExactColumns, Observer, StopCondition, StopWhen, flatten_objectives
 from cosim.master.registry import make_algorithm
 from cosim.master.transfers import group_transfers
 from cosim.spec.expressions import evaluate_expressions

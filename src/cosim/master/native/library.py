@@ -34,8 +34,8 @@ def _digest() -> str:
 def library_path() -> Path:
     """Path of the compiled kernel, built on first use; safe when several processes build at once (each
     compiles into a temporary file renamed into place).  Raises KernelUnavailable."""
-    from cosim.fmus.build import c_compiler, cache_dir
     from cosim.errors import FmuBuildError
+    from cosim.fmus.build import c_compiler, cache_dir
 
     target = cache_dir() / f"native-kernel-{_digest()[:20]}" / LIBRARY
     if target.is_file():
