@@ -31,7 +31,7 @@ from cosim.analysis.pareto import pareto_mask
 from cosim.analysis.ranking import METHODS, rank_order, scores, utilities
 from cosim.analysis.table import AnalysisError, ResultsTable
 
-NOT_OK = ("failed", "timeout", "crashed")  # the statuses a row other than 'ok' can have
+NOT_OK = ("failed", "timeout", "crashed", "pruned")  # the statuses a row other than 'ok' can have (pruned: bounds)
 
 
 class Decision:

@@ -157,7 +157,14 @@ def _status_section(table: ResultsTable) -> str:
     text = "<h2>Status</h2>" + _table(["status", "rows", "share"],
                                        [(s, int(counts.get(s, 0)), f"{100 * counts.get(s, 0) / total:.1f} %")
                                         for s in order])
-    bad = table.df[table.df["status"].astype(str) != "ok"]
+    pruned = int(counts.get("pruned", 0))
+    if pruned:  # their own class: proven off the front, not failures (docs/pruning.md)
+        text += (f"<p class='pruned'>{pruned} pruned row(s): each was stopped once a finished design strictly "
+                 "dominated every value it could still reach, so it cannot be on the front. Their objective "
+                 "columns hold those <em>bounds</em>, not results (NaN where unbounded); <code>pruned_by</code> "
+                 "names the dominating design. They are left out of every statistic and front below, like rows "
+                 "not ok; <code>cosim run --point ID</code> runs one to its end.</p>")
+    bad = table.df[~table.df["status"].astype(str).isin(["ok", "pruned"])]
     if len(bad) and "message" in bad.columns:
         common = bad["message"].astype(str).str.slice(0, 160).value_counts().head(5)
         text += "<p>Most common messages of rows not ok:</p>" + _table(

@@ -115,13 +115,26 @@ def cmd_plot(args: argparse.Namespace) -> int:
             table.check_column(column)
     rows = table.ok_mask() if args.only_ok else None
     active = table.where(args.where)
+    pruned = _pruned_mask(table)
+    active = active & ~pruned  # a pruned row's values are bounds, not results: drawn greyed, never coloured
     fig = new_figure(7.5, 6.0 if args.z else 5.0)
     _, counts = scatter_cloud(fig, table, args.x, args.y, args.z, args.color, active=active, rows=rows,
                               title=args.title)
     save(fig, out)
     extra = f", {counts.missing} without a value" if counts.missing else ""
+    if pruned.any() and not args.only_ok:
+        extra += f" ({int(pruned.sum())} pruned rows among the greyed: their values are bounds)"
     print(f"{out}: {counts.coloured} points coloured, {counts.greyed} greyed{extra}")
     return EXIT_OK
+
+
+def _pruned_mask(table: Any) -> Any:
+    """True for the rows a pruned study stopped (status 'pruned': their objective columns are bounds)."""
+    import numpy as np
+
+    if "status" not in table.df.columns:
+        return np.zeros(len(table.df), dtype=bool)
+    return (table.df["status"].astype(str) == "pruned").to_numpy()
 
 
 def cmd_pareto(args: argparse.Namespace) -> int:
@@ -146,6 +159,9 @@ def cmd_pareto(args: argparse.Namespace) -> int:
     rows = rows.sort_values(names[0], ascending=objectives[0][1] == "min", kind="stable")
     senses = ", ".join(f"{s} {n}" for n, s in objectives)
     print(f"Pareto front ({senses}): {int(front.sum())} of {int(considered.sum())} rows")
+    pruned = _pruned_mask(table)
+    if pruned.any():  # proven off the front by a pruned study: not considered, and no loss (docs/pruning.md)
+        print(f"{int(pruned.sum())} pruned rows: proven dominated while running (their values are bounds)")
     with pd.option_context("display.max_rows", 200, "display.width", 160, "display.max_columns", 20):
         print(rows.to_string(index=False))
     if args.csv:

@@ -86,7 +86,11 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     summary = ", ".join(f"{n} {s}" for s, n in sorted(counts.items()) if n)
     print(f"{total} points: {summary or 'none'}; table: {sweep.store.table_path}")
     say_the_dashboard_is_gone(args, sweep.store, runs_before, out)
-    not_ok = total - counts.get("ok", 0)
+    pruned = counts.get("pruned", 0)  # proven off the front (docs/pruning.md): a result, not a failure
+    if pruned:
+        print(f"{pruned} pruned: proven off the front; their objective columns hold bounds, not results "
+              "(cosim run --point ID runs one to its end)")
+    not_ok = total - counts.get("ok", 0) - pruned
     if not_ok:
         print_not_ok(sweep.store.table_path, 5)
         if not_ok > 5:
@@ -126,12 +130,13 @@ def print_not_ok(table: Path, n: int) -> None:
 
 
 def first_not_ok(table: Path, n: int) -> list[dict]:
-    """The first ``n`` rows whose status is not ok, reading only three columns (also for ``cosim optimize``)."""
+    """The first ``n`` rows whose status is neither ok nor pruned, reading only three columns (also for ``cosim optimize``)."""
     import pyarrow.compute as pc
     import pyarrow.parquet as pq
 
     rows = pq.read_table(table, columns=["point_id", "status", "message"])
-    return rows.filter(pc.not_equal(rows.column("status"), "ok")).slice(0, n).to_pylist()
+    failed = pc.and_(pc.not_equal(rows.column("status"), "ok"), pc.not_equal(rows.column("status"), "pruned"))
+    return rows.filter(failed).slice(0, n).to_pylist()
 
 
 def _dry_run(args: argparse.Namespace) -> int:

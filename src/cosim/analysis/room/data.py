@@ -19,7 +19,8 @@ import pandas as pd
 from cosim.analysis.decision import Decision
 from cosim.analysis.table import ResultsTable
 
-STATUS_COLOURS = {"failed": "#d62728", "timeout": "#ff7f0e", "crashed": "#9467bd"}  # 'ok' rows use the colour map
+STATUS_COLOURS = {"failed": "#d62728", "timeout": "#ff7f0e", "crashed": "#9467bd",
+                  "pruned": "#8c8c8c"}  # 'ok' rows use the colour map; pruned: proven off the front (bounds)
 OTHER_STATUS = "#8c564b"  # a status cosim does not write (a foreign table)
 SIZE_PX = (4.0, 16.0)  # marker sizes when sized by a column; 6 px otherwise
 PLAIN_SIZE = 6.0
