@@ -97,7 +97,9 @@ def test_a_sweep_row_keeps_the_units_frames(tmp_path, local_cluster):  # noqa: F
     rows = {row["split.parts"]: row for _, row in df.iterrows()}
     assert rows[2]["status"] == "ok" and rows[2]["y"] == 0.5
     assert rows[0]["status"] == "failed"
-    _assert_the_units_frames(rows[0]["message"], None)
+    # issue 39: the frames name the user's file, not the worker's temporary copy of it
+    _assert_the_units_frames(rows[0]["message"], tmp_path.resolve())
+    assert "cosim_worker_" not in rows[0]["message"] and "payload_" not in rows[0]["message"]
     stored = cosim.read_results(tmp_path / "out")  # the table on disk, as report and explore read it
     assert stored.set_index("split.parts").loc[0, "message"] == rows[0]["message"]
 

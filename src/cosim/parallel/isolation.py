@@ -93,7 +93,10 @@ def _plain_payload(system: Any, key_suffix: str = "") -> dict[str, Any]:
     from cosim.util.limits import settings
 
     # the client's limits hold in every worker child, wherever it runs (cosim.util.limits)
-    return {"key": h.hexdigest()[:16] + key_suffix, "system": blob, "files": files, "limits": settings()}
+    # where each file came from: a message the child writes names the user's file, not the child's copy
+    origins = {name: [str(Path(p).resolve()) for p in system.units[name].unit_type.files()] for name in files}
+    return {"key": h.hexdigest()[:16] + key_suffix, "system": blob, "files": files, "limits": settings(),
+            "origins": origins}
 
 
 def warm_up_isolated(payload: dict[str, Any], system: Any) -> Any:
@@ -119,19 +122,36 @@ def warm_up_isolated(payload: dict[str, Any], system: Any) -> Any:
     return state
 
 
-def load_payload(payload: dict[str, Any], folder: str) -> Any:
-    """The System of ``payload``, its unit files written under ``folder`` and used from there."""
+def load_payload(payload: dict[str, Any], folder: str, origins: dict[str, str] | None = None) -> Any:
+    """The System of ``payload``, its unit files written under ``folder`` and used from there.
+
+    ``origins``, when given, is filled with each copy's path -> the path of the file it was copied from on the
+    client (for :func:`named_for_the_user`)."""
     system = pickle.loads(payload["system"])
     for name, unit_files in payload["files"].items():
         copies = []
+        sources = payload.get("origins", {}).get(name, [])
         for i, (file_name, data) in enumerate(unit_files):
             unit_folder = Path(folder) / name / str(i)  # one folder per unit and file: names may repeat
             unit_folder.mkdir(parents=True, exist_ok=True)
             local = unit_folder / file_name
             local.write_bytes(data)
             copies.append(local)
+            if origins is not None and i < len(sources):
+                origins[str(local)] = sources[i]
         system.units[name].unit_type.relocate(copies)
     return system
+
+
+def named_for_the_user(row: PointRow, origins: dict[str, str]) -> PointRow:
+    """``row`` with the paths of the child's copies of unit files in its message replaced by the user's own
+    paths (issue 39: a unit's traceback named /tmp/cosim_worker_*/payload_*/b/0/unit.py, a file the user never
+    saw and which is gone when the sweep ends)."""
+    message = row.message
+    for local, original in origins.items():
+        if local in message:
+            message = message.replace(local, original)
+    return row if message == row.message else replace(row, message=message)
 
 
 # -- the child ------------------------------------------------------------------------
@@ -260,8 +280,9 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
         from cosim.execution import lockstep, point  # noqa: F401
 
         kind, payload = inbox.recv()
+        origins: dict[str, str] = {}
         try:
-            runner = PointRunner(load_payload(payload, folder))
+            runner = PointRunner(load_payload(payload, folder, origins))
             outbox.send(("ready", None))
         except Exception as exc:
             outbox.send(("error", f"cannot load the system on this worker: {type(exc).__name__}: {exc}"))
@@ -287,6 +308,7 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
             else:  # after a crash or timeout: one by one, so the row names the point that caused it
                 rows = (runner.run(point_id, values) for point_id, values in points)
             for row in rows:
+                row = named_for_the_user(row, origins)
                 served += 1
                 reason = _recycle_reason(served)  # not None: the parent starts a fresh child for the rest
                 outbox.send(("row", (row, reason)))
