@@ -25,6 +25,7 @@ import numpy as np
 
 from cosim.errors import Problem, SpecError
 from cosim.execution.prune import PruneOrder, PruneSettings, parse_constraint
+from cosim.parallel.point_stream import BatchSizer
 from cosim.spec.bounds import system_bounds
 
 PRUNED = "pruned"
@@ -102,6 +103,20 @@ class FrontKeeper:
 
     def order(self) -> PruneOrder:
         return PruneOrder(self.settings, tuple(self.ids), tuple(tuple(float(x) for x in r) for r in self.values))
+
+
+class FreshFronts(BatchSizer):
+    """Batches for a pruned study: the front travels with each batch, so a batch's points all compare with the
+    front as it was when the batch left.  The first tasks hold one point each (otherwise a quarter of the study
+    would leave with an empty front), and a task lasts about PRUNE_TASK_SECONDS at most."""
+
+    PRUNE_TASK_SECONDS = 0.1
+
+    def __init__(self, todo: int, n_workers: int, size: int | None = None):
+        super().__init__(todo, n_workers, size)
+        if size is None:
+            self.first = 1
+            self.TASK_SECONDS = self.PRUNE_TASK_SECONDS
 
 
 def first_count(total: int) -> int:

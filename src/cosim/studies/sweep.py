@@ -54,7 +54,7 @@ from cosim.parallel.point_stream import BatchSizer, PointStream
 from cosim.spec.design import DesignSpace, Point
 from cosim.studies.driver import StudyFolder, now_utc, open_room, results_writes, run_metadata, say, study_cluster
 from cosim.studies.progress import StatusLine, duration
-from cosim.studies.pruning import PRUNED, FrontKeeper, prune_settings, pruned_columns, pruning_order
+from cosim.studies.pruning import PRUNED, FreshFronts, FrontKeeper, prune_settings, pruned_columns, pruning_order
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -315,7 +315,8 @@ class Sweep:
 
         with PointStream(client, self.payload, n_workers, self.kind, self.spec.name, timeout=self.timeout,
                          adaptive_timeout=True, board=board, prune=keeper.order if keeper else None) as stream:
-            stream.run(points, BatchSizer(todo, n_workers, self.batch_size), store, total=len(self.space))
+            sizer = (FreshFronts if keeper is not None else BatchSizer)(todo, n_workers, self.batch_size)
+            stream.run(points, sizer, store, total=len(self.space))
         if progress is not None:
             progress.close()
 
