@@ -241,15 +241,40 @@ def test_the_rooms_trace_legend_has_one_entry_per_design_beside_the_plot(robot_r
     from cosim.analysis.room import views as V
 
     result, values = robot_run
-    runs = [Rerun(0, "p0", values, result), Rerun(1, "p1", values, result)]
+    units = {"robot.q": "rad"}
+    runs = [Rerun(0, "p0", values, result, units), Rerun(1, "p1", values, result, units)]
     recorded = [c for c in result.traces.columns if c != "time"]
     figures = {f.name: f for f in V.trace_figures(port_groups(recorded), runs)}
     fig = figures["trace:robot.q"]
     [legend] = fig.legend
     assert legend in fig.right and legend not in fig.center
-    assert [item.label.value for item in legend.items] == ["p0", "p1"]
+    # issue 39: the designs, then the elements by name; the y axis carries the unit
+    elements = [f"robot.q[{i}]" for i in range(1, 8)]
+    assert [item.label.value for item in legend.items] == ["p0", "p1", *elements]
     for item, design in zip(legend.items, ("p0", "p1")):
         assert sorted(r.name for r in item.renderers) == sorted(f"trace:robot.q[{i}]:{design}" for i in range(1, 8))
+    for item, element in zip(legend.items[2:], elements):
+        assert [r.name for r in item.renderers] == [f"trace:{element}:p0", f"trace:{element}:p1"]
     assert legend.click_policy == "hide"
+    assert fig.yaxis[0].axis_label == "robot.q [rad]"
+    # each element its own dash and shade within its design's colour family; the designs' families differ
+    lines = {r.name: r.glyph for r in fig.renderers}
+    styles = {(lines[f"trace:{e}:p0"].line_color, str(lines[f"trace:{e}:p0"].line_dash)) for e in elements}
+    assert len(styles) == 7
+    assert lines["trace:robot.q[1]:p0"].line_color == V.Category10_10[0]
+    assert lines["trace:robot.q[1]:p1"].line_color == V.Category10_10[1]
+    assert lines["trace:robot.q[7]:p0"].line_color != lines["trace:robot.q[7]:p1"].line_color
     [hover] = [t for t in fig.tools if isinstance(t, HoverTool)]
     assert ("line", "$name") in hover.tooltips
+
+
+def test_port_units_names_each_ports_unit_as_the_spec_calls_it():
+    """The units the room's trace axes carry (issue 39): the drive_energy example's FMU and Python unit."""
+    from cosim.analysis.rerun import port_units
+    from cosim.spec.loader import load_spec
+    from cosim.system.builder import build_system
+
+    system = build_system(load_spec(Path(__file__).resolve().parents[1] / "examples" / "drive_energy" / "spec.json"))
+    units = port_units(system)
+    assert units["energy.tau"] == "N.m" and units["energy.e_total"] == "J" and units["energy.omega"] == "rad/s"
+    assert "energy.tau[1]" not in units  # the port, not its elements

@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 import re
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -114,6 +114,21 @@ class Rerun:
     point_id: str
     values: dict[str, Any]
     result: Any
+    units: dict[str, str] = field(default_factory=dict)  # port ('robot.tau') -> its unit ('N.m'), where declared
+
+
+def port_units(system: Any) -> dict[str, str]:
+    """Each port of ``system`` that declares a unit, as the spec names it ('unit.port', after the spec's port
+    mapping) -> that unit; an array's elements ('unit.port[i]') give their unit to the port too."""
+    units: dict[str, str] = {}
+    for name, system_unit in system.units.items():
+        reverse = {actual: port for port, actual in system_unit.spec.ports.items()}
+        for variable in system_unit.description.variables:
+            if variable.unit:
+                port = reverse.get(variable.name, variable.name)
+                base = _ELEMENT.sub(r"\1", port)  # 'tau[3]' (an FMI 2.0 array's element) -> 'tau'
+                units.setdefault(f"{name}.{base}", variable.unit)
+    return units
 
 
 def rerun_rows(table: ResultsTable, rows: Sequence[int], spec_path: str | Path | None = None) -> list[Rerun]:
@@ -132,11 +147,12 @@ def rerun_rows(table: ResultsTable, rows: Sequence[int], spec_path: str | Path |
         system = system.recording_all_outputs()
     targets = [p.target for p in spec.design.parameters]
     ids = table.df["point_id"].astype(str).to_numpy() if "point_id" in table.df.columns else None
+    units = port_units(system)
     out = []
     for row in rows:
         values = point_values(table, int(row), targets)
         result = run_point(system, values, record=True)
-        out.append(Rerun(int(row), str(ids[row]) if ids is not None else str(row), values, result))
+        out.append(Rerun(int(row), str(ids[row]) if ids is not None else str(row), values, result, units))
     return out
 
 

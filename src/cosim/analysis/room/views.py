@@ -22,6 +22,8 @@ from bokeh.models import (
     DataTable,
     Div,
     HoverTool,
+    Legend,
+    LegendItem,
     LinearColorMapper,
     NumberFormatter,
     Range1d,
@@ -201,36 +203,62 @@ def radar_columns(data: dict[str, Any], ids: Sequence[str]) -> dict[str, list]:
             "colour": [Category10_10[k % 10] for k in range(len(ids))]}
 
 
-def trace_figures(groups: list[tuple[str, list[str]]], runs: Sequence[Any], backend: str = "canvas") -> list:
-    """One figure per port (``trace:<port>``), a line per design and element, designs in their own colour,
-    x ranges linked; drawn through ``backend`` ("canvas", or "svg" for a save button that writes SVG).
+# an array port's elements within a design's colour: a dash each, and a lighter shade the later the element
+ELEMENT_DASHES = ("solid", "dashed", "dotted", "dotdash", "dashdot", [8, 3, 2, 3], [2, 6])
 
-    The legend, beside the plot, has one entry per design (a click hides its lines); the hover names the
-    element of an array port's line."""
+
+def element_style(design: int, element: int, elements: int) -> dict[str, Any]:
+    """Line colour and dash of element ``element`` (0-based) of ``elements`` in design ``design``'s colour
+    family: the design's Category10 colour, mixed with white up to 55 % for the last element, and a dash of
+    its own (issue 39: seven joints in one colour could not be told apart)."""
+    base = Category10_10[design % 10]
+    share = 0.55 * element / max(elements - 1, 1)
+    rgb = [int(base[i:i + 2], 16) for i in (1, 3, 5)]
+    mixed = "#" + "".join(f"{round(c + (255 - c) * share):02x}" for c in rgb)
+    return {"color": mixed, "line_dash": ELEMENT_DASHES[element % len(ELEMENT_DASHES)]}
+
+
+def trace_figures(groups: list[tuple[str, list[str]]], runs: Sequence[Any], backend: str = "canvas") -> list:
+    """One figure per port (``trace:<port>``), a line per design and element, x ranges linked; drawn through
+    ``backend`` ("canvas", or "svg" for a save button that writes SVG).
+
+    Each design has its own colour; the elements of an array port are drawn in that colour's family, each
+    with its own shade and dash (:func:`element_style`).  The y axis names the port and its unit
+    (``robot.tau [N.m]``, from the runs' ``units``).  The legend, beside the plot, has an entry per design (a
+    click hides its lines) and, for an array port, one per element named as recorded (``robot.tau[3]``: a
+    click hides that element in every design); the hover names the line."""
+    units: dict[str, str] = {}
+    for run in runs:
+        units.update(getattr(run, "units", None) or {})
     figures: list = []
     for port, columns in groups:
         linked = {"x_range": figures[0].x_range} if figures else {}
-        fig = figure(name=f"trace:{port}", width=WIDTH, height=200, x_axis_label="time [s]", y_axis_label=port,
+        label = f"{port} [{units[port]}]" if units.get(port) else port
+        fig = figure(name=f"trace:{port}", width=WIDTH, height=200, x_axis_label="time [s]", y_axis_label=label,
                      tools="pan,wheel_zoom,box_zoom,reset,save", output_backend=backend, **linked)
-        fig.add_tools(HoverTool(tooltips=[("line", "$name"), ("t [s]", "$x"), (port, "$y")],
+        fig.add_tools(HoverTool(tooltips=[("line", "$name"), ("t [s]", "$x"), (label, "$y")],
                                 line_policy="nearest"))
+        by_design: dict[str, list] = {}
+        by_element: dict[str, list] = {}
         for k, run in enumerate(runs):
             traces = run.result.traces
             if traces is None or not len(traces):
                 continue
             t = traces["time"].to_numpy(dtype=float)
-            for column in columns:
-                if column not in traces.columns:
-                    continue
-                fig.line(t, traces[column].to_numpy(dtype=float), color=Category10_10[k % 10], line_width=1.5,
-                         legend_label=run.point_id, name=f"trace:{column}:{run.point_id}")
+            drawn = [c for c in columns if c in traces.columns]
+            for i, column in enumerate(drawn):
+                style = element_style(k, i, len(drawn)) if len(drawn) > 1 else {"color": Category10_10[k % 10]}
+                line = fig.line(t, traces[column].to_numpy(dtype=float), line_width=1.5,
+                                name=f"trace:{column}:{run.point_id}", **style)
+                by_design.setdefault(run.point_id, []).append(line)
+                by_element.setdefault(column, []).append(line)
         if fig.renderers:
-            # beside the plot, not over its curves: an entry per design, however many elements the port has
-            legend = fig.legend[0]
-            fig.center = [r for r in fig.center if r is not legend]  # bokeh 3.4 would keep it inside too
+            # beside the plot, not over its curves: the designs, then (an array port) its elements by name
+            items = [LegendItem(label=design, renderers=lines) for design, lines in by_design.items()]
+            if len(by_element) > 1:
+                items += [LegendItem(label=column, renderers=lines) for column, lines in by_element.items()]
+            legend = Legend(items=items, label_text_font_size="8pt", click_policy="hide")
             fig.add_layout(legend, "right")
-            legend.label_text_font_size = "8pt"
-            legend.click_policy = "hide"
             figures.append(fig)
     return figures
 
