@@ -165,8 +165,8 @@ def _load_entry_points() -> None:
 
 # -- the schema of a unit ------------------------------------------------------------------
 
-COMMON_FIELDS = ("parameters", "start", "ports", "feedthrough")  # fields of every unit, whatever its kind
-COMMON_OPTIONS = ("feedthrough",)  # the common fields kept in UnitSpec.options
+COMMON_FIELDS = ("parameters", "start", "ports", "feedthrough", "reuse")  # fields of every unit, whatever its kind
+COMMON_OPTIONS = ("feedthrough", "reuse")  # the common fields kept in UnitSpec.options
 _unit_schema_cache: dict[str, dict] = {}
 
 
