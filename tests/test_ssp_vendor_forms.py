@@ -212,14 +212,16 @@ def test_every_path_form_reads_the_same_system(tmp_path, monkeypatch):
 # --- item 9: notes only for what is really missing; units in brackets ---------------------------------------
 
 
-def test_no_note_about_a_missing_step_when_the_command_line_gives_it(tmp_path, capsys):
+def test_no_note_about_a_missing_step_when_the_command_line_gives_it(tmp_path, capsys, caplog):
     ssd = oms3_ssd().replace('fixedStepSize="0.1"', 'fixedStep_removed="0.1"')
     path = write_archive(tmp_path / "nostep.ssp", oms3_files(ssd))
     assert main(["validate", str(path), "--step", "0.1", "--stop", "1"]) == 0
     captured = capsys.readouterr()
     assert "step size" not in captured.err and "stop time" not in captured.err
-    assert main(["validate", str(path)]) == 2
-    assert "the SSP gives no step size" in capsys.readouterr().err
+    # without --step: OMSimulator's default step (issue 33 item 3), said once
+    assert main(["validate", str(path)]) == 0
+    err = "\n".join(r.getMessage() for r in caplog.records)
+    assert err.count("the SSP gives no step size") == 1 and "run with OMSimulator's defaults, step 0.001 s" in err
 
 
 def test_a_unit_in_brackets_is_refused_with_the_plain_name_as_fix(tmp_path):
@@ -266,7 +268,7 @@ def test_inspect_reads_every_ssp_form_without_stop_or_step_and_shows_the_bound_v
         # sub.B's own binding says b = 0.05; the root's k = -0.5 reaches it through the parameter connection
         assert ports["sub.B"]["b"][:2] == ["b", "parameter"] and ports["sub.B"]["b"][4] == "-0.5 *", out
         assert ports["A"]["x0"][4] == "2 *" and ports["A"]["u"][4] == "0"  # u: the FMU's own start, unmarked
-        assert "experiment: 0 .. (no stop time: give --stop to run), step (none: give --step to run)" in out
+        assert "experiment: 0 .. 1 s, step 0.001 s" in out  # OMSimulator's defaults (issue 33 item 3)
         assert "note: 'sub.B.b': -0.5 from system connector 'k'" in out
     assert main(["inspect", ".", "--stop", "2", "--step", "0.5"]) == 0
     assert "experiment: 0 .. 2 s, step 0.5 s" in capsys.readouterr().out
@@ -805,9 +807,9 @@ def test_inspect_of_a_spec_on_an_ssp_without_stop_or_step(tmp_path, capsys):
     (tmp_path / "spec.json").write_text(json.dumps({"system": "x.ssp"}))
     assert main(["inspect", str(tmp_path / "spec.json")]) == 0
     out = capsys.readouterr().out
-    assert "experiment: 0 .. (no stop time: give --stop to run), step (none: give --step to run)" in out
+    assert "experiment: 0 .. 1 s, step 0.001 s" in out  # OMSimulator's defaults (issue 33 item 3)
     assert _port_rows(out)["sub.B"]["b"][4] == "-0.5 *"
-    assert main(["validate", str(tmp_path / "spec.json")]) == 2  # running needs them
+    assert main(["validate", str(tmp_path / "spec.json")]) == 0
 
 
 # --- `cosim run x.ssp` records the output connectors of the root system and its sub-systems ------------------

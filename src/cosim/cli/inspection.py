@@ -132,7 +132,7 @@ def inspect_spec(path: str, experiment: dict[str, Any] | None = None, variant: s
     raw = ssp.raw if ssp is not None else read_raw(path, None, variant)
     known = raw.get("experiment") if isinstance(raw, dict) else None
     missing: list[str] = []
-    if isinstance(known, dict):
+    if isinstance(known, dict) and ssp is None:  # an SSP alone runs with OMSimulator's defaults (cosim.ssp)
         given = {**known, **experiment}
         missing = [k for k in ("stop", "step") if k not in given]
         start = given.get("start", 0.0)

@@ -161,7 +161,7 @@ def read_raw(path: str | Path, experiment: Mapping[str, Any] | None = None, vari
                                  f"{{\"ssp\": \"x.ssp\", \"variant\": \"{variant}\"}}")])
     raw = read_spec_json(path)
     if isinstance(raw, dict) and isinstance(raw.get("system"), (str, dict)):
-        raw = merge_system(raw, path)
+        raw = merge_system(raw, path, experiment)
     if experiment and isinstance(raw, dict):
         raw["experiment"] = {**(raw.get("experiment") or {}), **experiment}
     return raw

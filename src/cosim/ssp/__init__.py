@@ -18,6 +18,7 @@ from typing import Any, Mapping
 
 from cosim.errors import Problem, SpecError
 from cosim.ssp.archive import is_ssp
+from cosim.ssp.experiment import with_tool_defaults
 from cosim.ssp.names import rename_prefix
 from cosim.ssp.reader import SspSystem, read_ssp
 from cosim.ssp.system_connectors import ConnectorSignal, connector_units
@@ -35,8 +36,8 @@ def ssp_raw_spec(path: str | Path, experiment: Mapping[str, Any] | None = None, 
     (``Root.sub.connector``: a ``connectors`` unit per system, see :mod:`.system_connectors`, whose inputs are
     fed by the component outputs the connectors carry, scaled as their chains scale them).  An SSP with no
     component runs the constants its system connectors hold, recording them.  Raises SpecError for every problem
-    of the SSP, when it has neither a component nor a constant, and when it gives no stop time or step size and
-    ``experiment`` does not either.
+    of the SSP and when it has neither a component nor a constant; a stop time or step size that neither the SSP
+    nor ``experiment`` gives is OMSimulator's default (:func:`~cosim.ssp.experiment.with_tool_defaults`).
     """
     system = read_ssp(path, variant)
     raw = system.raw
@@ -53,16 +54,7 @@ def ssp_raw_spec(path: str | Path, experiment: Mapping[str, Any] | None = None, 
         raw["connections"].extend(connections)
         raw["record"].extend(c.name for c in outputs)
     raw["experiment"].update(experiment or {})
-    missing = [k for k in ("stop", "step") if k not in raw["experiment"]]
-    if missing:
-        what = {"stop": "stop time (ssd:DefaultExperiment stopTime)",
-                "step": "step size (OMSimulator FixedStepMaster or oms_ma fixedStepSize, or OSP FixedStepAlgorithm "
-                         "annotation)"}
-        raise SpecError([Problem(system.files.label(system.files.ssd), "/ssd:SystemStructureDescription",
-                                 f"the SSP gives no {what[k]}",
-                                 f"pass --{k} on the command line, or name the SSP in a spec.json "
-                                 f"(\"system\": \"{Path(path).name}\") with \"experiment\": {{\"{k}\": ...}}")
-                         for k in missing])
+    raw["experiment"] = with_tool_defaults(raw["experiment"], str(path))  # as OMSimulator runs it, with a note
     return raw
 
 
@@ -93,14 +85,15 @@ def _nothing_to_run(system: SspSystem) -> Problem:
                    "SSP as \"system\" in a spec.json that adds units")
 
 
-def merge_system(spec: dict, spec_path: Path) -> dict:
+def merge_system(spec: dict, spec_path: Path, overrides: Mapping[str, Any] | None = None) -> dict:
     """A spec.json whose ``"system"`` names an SSP (a path, or ``{"ssp": path, "variant": name}``), with the
     SSP's units and connections merged in.
 
     The spec's own entries win: a unit of the same name has its fields
     replaced (``parameters`` and ``start`` merged value by value), a spec
     connection into an input the SSP already feeds replaces the SSP's, and
-    the spec's experiment fields override the SSP's.  The spec's connections
+    the spec's experiment fields override the SSP's (and ``overrides``, the command line's, override both; a stop
+    time or step size none gives is OMSimulator's default).  The spec's connections
     come first, so JSON paths of problems in them match the spec file.
     Raises SpecError for problems of the SSP.
     """
@@ -143,7 +136,13 @@ def merge_system(spec: dict, spec_path: Path) -> dict:
     own_connections = list(spec.get("connections") or [])
     fed = {c.get("to") for c in own_connections if isinstance(c, dict)}
     merged["connections"] = own_connections + [c for c in ssp["connections"] if c["to"] not in fed]
-    merged["experiment"] = {**ssp["experiment"], **(spec.get("experiment") or {})}
+    own_experiment = spec.get("experiment")
+    if isinstance(own_experiment, dict) or own_experiment is None:
+        # what neither the spec, the command line nor the SSP gives: OMSimulator's defaults, with a note
+        merged["experiment"] = with_tool_defaults({**ssp["experiment"], **(own_experiment or {}),
+                                                   **(overrides or {})}, given)
+    else:  # not an object: the spec's problem, reported at its JSON path
+        merged["experiment"] = own_experiment
     implied: list[ConnectorSignal] = []
     if "record" not in spec and units:  # recorded as the SSP alone records: its units' ports and output connectors
         implied = recorded_outputs(system, units)

@@ -9,7 +9,7 @@ from typing import Any
 from cosim.errors import AnnotationNumberError
 from cosim.master.registry import ALGORITHMS
 from cosim.ssp.annotations import json_scalar, number, unread_annotation_types
-from cosim.ssp.reading import Reading
+from cosim.ssp.reading import Reading, log_once
 from cosim.ssp.xml import tag
 
 # cosim's experiment settings an SSP has no place for, in its org.cosim annotation (cosim.export.ssp writes them):
@@ -17,12 +17,34 @@ from cosim.ssp.xml import tag
 COSIM_EXPERIMENT_FLAGS = ("coupled_model_exchange", "early_stop", "warm_start")
 COSIM_EXPERIMENT_GROUPS = ("adaptive", "loop_solver")
 
+# What OMSimulator runs an SSP with when it gives no ssd:DefaultExperiment and no step size: its command-line
+# flags' defaults --startTime 0, --stopTime 1, --stepSize 1e-3 (src/OMSimulatorLib/Flags.h), which Model.cpp
+# also takes for a DefaultExperiment without startTime/stopTime and System.cpp for a system's step size
+OMSIMULATOR_DEFAULTS = {"start": 0.0, "stop": 1.0, "step": 1e-3}
+
+
+def with_tool_defaults(experiment: dict, given: str) -> dict:
+    """``experiment`` with the stop time and step size it lacks taken from :data:`OMSIMULATOR_DEFAULTS`, as
+    OMSimulator runs such an SSP, and one note (logged once per SSP ``given``) naming the values and the
+    options that change them; ``experiment`` itself (a new dict) when it lacks neither."""
+    missing = [k for k in ("stop", "step") if k not in experiment]
+    if not missing:
+        return dict(experiment)
+    filled = {**experiment, **{k: OMSIMULATOR_DEFAULTS[k] for k in missing}}
+    what = {"stop": "stop time (ssd:DefaultExperiment stopTime)",
+            "step": "step size (OMSimulator FixedStepMaster or oms_ma fixedStepSize, OSP FixedStepAlgorithm)"}
+    values = ", ".join(f"{k} {OMSIMULATOR_DEFAULTS[k]:g} s" for k in missing)
+    log_once(given, f"the SSP gives no {' and no '.join(what[k] for k in missing)}: run with OMSimulator's "
+                    f"defaults, {values}; {' / '.join('--' + k for k in missing)} (or a spec's \"experiment\") "
+                    "change them")
+    return filled
+
 
 def read_experiment(reading: Reading, root: Any) -> dict:
     """The spec's ``experiment`` from the SSD ``root``: what it gives of start, stop, step and algorithm.
 
     No note for a missing stop time or step size: the spec or the command line may give them, and
-    ``ssp_raw_spec`` reports them when neither does.
+    :func:`with_tool_defaults` fills in OMSimulator's when neither does.
     """
     experiment: dict[str, Any] = {}
     default = root.find(tag("ssd", "DefaultExperiment"))

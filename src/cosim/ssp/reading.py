@@ -25,6 +25,14 @@ log = logging.getLogger("cosim.ssp")
 _LOGGED: set[tuple[str, str]] = set()
 
 
+def log_once(given: str, text: str) -> None:
+    """Log the note ``text`` about the SSP ``given`` once per process (an SSP is often read twice: validate,
+    then run; a spec naming it, then the SSP alone)."""
+    if (given, text) not in _LOGGED:
+        _LOGGED.add((given, text))
+        log.warning("%s: %s", given, text)
+
+
 class Reading:
     """The state of reading one SSP: shared by the reader's steps."""
 
@@ -45,9 +53,7 @@ class Reading:
     def note(self, text: str) -> None:
         """Keep a note for the user; log it once per SSP and process (an SSP is often read twice)."""
         self.notes.append(text)
-        if (self.files.given, text) not in _LOGGED:  # an SSP is often read twice (validate, then run)
-            _LOGGED.add((self.files.given, text))
-            log.warning("%s: %s", self.files.given, text)
+        log_once(self.files.given, text)
 
     def flush_alike(self) -> None:
         """Turn the notes kept in :attr:`alike` into one note per kind (at the end of a reading)."""
