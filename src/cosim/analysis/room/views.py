@@ -257,7 +257,9 @@ def trace_figures(groups: list[tuple[str, list[str]]], runs: Sequence[Any], back
             items = [LegendItem(label=design, renderers=lines) for design, lines in by_design.items()]
             if len(by_element) > 1:
                 items += [LegendItem(label=column, renderers=lines) for column, lines in by_element.items()]
-            legend = Legend(items=items, label_text_font_size="8pt", click_policy="hide")
+            # compact rows: two designs and seven elements fit beside a 240 px plot without a cut
+            legend = Legend(items=items, label_text_font_size="8pt", click_policy="hide", spacing=0, padding=4,
+                            label_height=12, glyph_height=12, label_standoff=4, margin=2)
             fig.add_layout(legend, "right")
             figures.append(fig)
     return figures
