@@ -64,3 +64,22 @@ def test_run_point_runs_a_pruned_design_to_its_end(pruned_study, capsys, tmp_pat
     trace = pd.read_csv(tmp_path / "trace.csv")
     assert trace["time"].iloc[-1] == pytest.approx(2.5)  # to its end, not to where it was pruned
     assert row["pruned_at"] < 2.5
+
+
+def test_optimize_prune_tells_pruned_trials_to_optuna_as_pruned(pruned_study, tmp_path):
+    import optuna
+
+    from cosim.studies.optimize import Optimization
+
+    storage = f"sqlite:///{tmp_path / 'optuna.db'}"
+    counts = Optimization(pruned_study / "spec.json", tmp_path / "opt", budget=12, batch=4, sampler="nsga2", seed=3,
+                       workers=2, quiet=True, prune=True, storage=storage, study_name="s").run()
+    table = pd.read_parquet(tmp_path / "opt" / "results.parquet")
+    assert sum(counts.values()) == len(table) == 12
+    study = optuna.load_study(study_name="s", storage=storage)
+    states = {t.user_attrs["point_id"]: t.state for t in study.trials}
+    for _, row in table.iterrows():
+        expected = optuna.trial.TrialState.PRUNED if row["status"] == "pruned" else optuna.trial.TrialState.COMPLETE
+        assert states[row["point_id"]] == expected
+    assert set(table["status"]) <= {"ok", "pruned"}
+    assert (table["status"] == "pruned").sum() > 0, "batches after the first prune against its front"

@@ -40,6 +40,9 @@ def add_optimize_parser(sub: Any) -> None:
     p.add_argument("--explore", action="store_true",
                    help="serve the decision room of the results folder while the optimisation runs (new evaluations "
                         "appear as they are written; linked from the Dask dashboard's Cosim page); on loopback")
+    p.add_argument("--prune", action="store_true",
+                   help="stop a design once a finished one strictly dominates every value it can still reach; its "
+                        "trial is told to Optuna as PRUNED (docs/pruning.md). Off by default")
     p.add_argument("--seed", type=int, metavar="S", help="sampler seed (default: optimize.seed, or a random one)")
     p.add_argument("--resume", action="store_true", help="continue the optimisation stored in --out to the budget")
     p.add_argument("--workers", type=int, metavar="N", help="local workers, each running points in a child process (default: one per core)")
@@ -68,7 +71,8 @@ def cmd_optimize(args: argparse.Namespace) -> int:
     run = Optimization(args.spec, out, objectives=objectives, budget=args.budget, sampler=args.sampler, batch=args.batch,
                        seed=args.seed, resume=args.resume, workers=args.workers, scheduler=args.scheduler,
                        cluster=args.cluster, timeout=args.timeout, quiet=getattr(args, "quiet", False),
-                       storage=args.storage, study_name=args.study_name, explore=args.explore)
+                       storage=args.storage, study_name=args.study_name, explore=args.explore,
+                       prune=getattr(args, "prune", False))
     runs_before = runs_recorded(run.store)
     counts = run.run()
     total = sum(counts.values())

@@ -351,9 +351,10 @@ class Evaluator:
     streams_rows = True  # evaluate() takes on_rows (cosim.studies.optimize stores rows as they come)
 
     def __init__(self, client: Any, payload: dict[str, Any], n_workers: int, timeout: float | None = None,
-                 study: str = "", board: Any = None):
+                 study: str = "", board: Any = None, prune: Any = None):
         self.n_workers = max(1, n_workers)
-        self.stream = PointStream(client, payload, n_workers, "optimize", study, timeout=timeout, board=board)
+        self.stream = PointStream(client, payload, n_workers, "optimize", study, timeout=timeout, board=board,
+                                  prune=prune)
 
     def __enter__(self) -> "Evaluator":
         return self

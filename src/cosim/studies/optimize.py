@@ -80,6 +80,7 @@ from cosim.studies.driver import (
 )
 from cosim.studies.optuna_storage import default_study_name, open_storage_study, shown_url
 from cosim.studies.progress import StatusLine
+from cosim.studies.pruning import PRUNED, FrontKeeper, prune_settings, pruned_columns
 from cosim.studies.sampler_names import SAMPLERS
 
 DEFAULT_BUDGET = 200
@@ -346,7 +347,9 @@ class Optimization:
                  batch: int | None = None, seed: int | None = None, resume: bool = False, workers: int | None = None,
                  scheduler: str | None = None, timeout: float | None = None, progress: TextIO | None = None,
                  quiet: bool = False, cluster: str | Path | None = None, storage: str | None = None,
-                 study_name: str | None = None, explore: bool = False):
+                 study_name: str | None = None, explore: bool = False, prune: bool = False):
+        """``prune``: stop a design once a finished one strictly dominates its bound (docs/pruning.md); its
+        trial is told to Optuna as PRUNED (see :meth:`_tell`)."""
         import os
 
         from cosim.parallel.cluster import read_cluster_file
@@ -381,6 +384,9 @@ class Optimization:
         if self.settings.seed is None:  # a resume must replay the same proposals: the seed is chosen and kept
             self.settings.seed = random.SystemRandom().randrange(2**31)
         self.constraints = output_constraints(self.spec, self.space, self.settings.constraints)
+        self.prune = prune_settings(self.system, list(self.settings.objectives.items()),
+                                    self.settings.constraints) if prune else None
+        self.keeper = FrontKeeper(self.prune) if self.prune is not None else None
         self.workers, self.scheduler, self.timeout = workers or os.cpu_count() or 1, scheduler, timeout
         self.quiet, self.progress_stream = quiet, progress
         # the trials also in an Optuna storage, for Optuna's tools (see cosim.studies.optuna_storage)
@@ -401,6 +407,8 @@ class Optimization:
                                "trial": trial, "batch": batch, "sampler": self._sampler_label}
         values, violations = self._outcome({**out, "status": row.status})  # as before the tail is added
         out["feasible"] = values is not None and all(v <= 0 for v in violations)
+        if self.prune is not None:
+            out.update(pruned_columns(row))
         out.update(row.tail())
         return out
 
@@ -429,6 +437,14 @@ class Optimization:
         if row is not None:  # which row of the table the trial is, in an Optuna storage's tools
             trial.set_user_attr("point_id", row.get("point_id"))
             trial.set_user_attr("status", row.get("status"))
+        if row is not None and row.get("status") == PRUNED:
+            # Proven dominated, with no final values: Optuna's multi-objective samplers take a PRUNED trial without
+            # values (NSGA-II and GP leave it out of their populations like a failed one; TPE ranks it below every
+            # complete trial). Its bounds are optimistic, so telling them as values would mislead the sampler.
+            study.tell(trial, state=TrialState.PRUNED)
+            return
+        if self.keeper is not None and values is not None:
+            self.keeper.add(str(row.get("point_id")), row)  # type: ignore[union-attr]
         if values is None:
             study.tell(trial, state=TrialState.FAIL)
             return
@@ -487,7 +503,8 @@ class Optimization:
                       + (f"; decision room: {room.link}" if room else ""))
             try:
                 with Evaluator(client, self.payload, n_workers, self.timeout, study=self.spec.name,
-                               board=board) as evaluator, board.running():
+                               board=board, prune=self.keeper.order if self.keeper else None) as evaluator, \
+                        board.running():
                     self._loop(study, dists, evaluator, stored)
             finally:
                 if room is not None:
@@ -632,6 +649,8 @@ class Optimization:
             if len(params) != len(dists):
                 continue  # a row without all dimensions (another design space): nothing to tell
             state = optuna.trial.TrialState.COMPLETE if values is not None else optuna.trial.TrialState.FAIL
+            if row.get("status") == PRUNED:
+                state = optuna.trial.TrialState.PRUNED
             trial = optuna.trial.create_trial(params=params, distributions=dists, values=values, state=state)
             for constraint, violation in zip(self.constraints, violations or []):
                 trial.set_constraint(constraint.text, violation)
