@@ -240,6 +240,8 @@ class PruneBound(StopCondition):
     def initialized(self, t: float, values: np.ndarray) -> None:
         for p in self._partials:
             p.start(t, values)
+        if any(p.broken is not None for p in self._partials):  # e.g. a negative first sample of an integrand
+            self._forget_broken()
 
     def load(self, times: np.ndarray, values: np.ndarray) -> bool:
         for i, t in enumerate(times):  # a warm start's replay: the samples one by one, as the run took them
@@ -247,8 +249,12 @@ class PruneBound(StopCondition):
         return True
 
     def _add(self, t: float, values: np.ndarray) -> None:
+        broke = False
         for p in self._partials:
             p.add(t, values)
+            broke = broke or (p.broken is not None and p.bound.direction is not None)
+        if broke:  # at once, not at the next comparison: what the observer reports is what it relies on
+            self._forget_broken()
 
     def step(self, t: float, values: np.ndarray) -> None:
         self._add(t, values)
@@ -271,8 +277,6 @@ class PruneBound(StopCondition):
                 self.front = front = newer
         if not len(front.ids) and not self.settings.constraints:
             return  # nothing to compare with yet
-        if any(p.broken for p in self._partials):
-            self._forget_broken()
         self.checks += 1
         flat = self._partial_values()
         reason = self._broken_constraint(flat) or self._dominated(flat)
