@@ -68,8 +68,11 @@ def add_analysis_parsers(sub: Any) -> None:
     p.add_argument("table", help="results.parquet, a .csv, or a results folder (sweep, optimize, sensitivity)")
     _spec_option(p)
     p.add_argument("--host", default="127.0.0.1",
-                   help="address to serve on (default 127.0.0.1: this machine only; another address puts a token "
-                        "in the link)")
+                   help="address to serve on (default 127.0.0.1: this machine only); the printed link carries a "
+                        "token on every address")
+    p.add_argument("--no-token", action="store_true",
+                   help="serve without a token: anyone who reaches the address (on loopback: every user of this "
+                        "machine) can read the study and re-run its designs")
     p.add_argument("--port", type=int, default=0, help="port to serve on (default 0: a free one)")
     p.add_argument("--tk", action="store_true", help="open the Tk point-cloud window instead (needs a display)")
     p.set_defaults(handler=cmd_explore)
@@ -211,7 +214,7 @@ def cmd_explore(args: argparse.Namespace) -> int:
         # a folder is watched: the rows a running (or resumed) study writes appear in the page as they arrive
         study = LiveStudy(args.table, spec_path=args.spec) if Path(args.table).is_dir() else \
             Study(table, spec_path=args.spec)
-        serve(study, host=args.host, port=args.port)
+        serve(study, host=args.host, port=args.port, no_token=args.no_token)
         return EXIT_OK
     try:
         from cosim.analysis.explorer import run_explorer

@@ -25,9 +25,11 @@ sample-major: ``time``, ``x``, ``y``, ``z``).
 
 from __future__ import annotations
 
+import html
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 from bokeh.events import Pan
@@ -37,7 +39,12 @@ from bokeh.palettes import Category10_10
 from bokeh.plotting import figure
 
 from cosim.analysis.room import projection as P
-from cosim.analysis.viewers import LinkFrames, rows_evenly_in_time, trace_times, viewer_for
+from cosim.analysis.viewers import (
+    LinkFrames,
+    rows_evenly_in_time,
+    trace_times,
+    viewer_for,
+)
 
 MAX_FRAMES = 300  # samples of a design's run sent to the page at most
 TICK_MS = 50  # the play toggle's step: the slider advances by this much run time per tick (real time)
@@ -293,5 +300,6 @@ class LinkView:
 
 
 def note(text: str) -> Div:
-    """A line of the Selection tab saying why there is no 3-D view."""
-    return Div(text=f"<i>{text}</i>", name="arm-note", width=760)
+    """A line of the Selection tab saying why there is no 3-D view (``text`` is plain: a viewer's message may
+    quote a spec or an FMU, so it is escaped)."""
+    return Div(text=f"<i>{html.escape(text)}</i>", name="arm-note", width=760)

@@ -114,9 +114,9 @@ class Room:
 
         # -- Decide: the choosers are cheap; the table and the radar are built with the tab
         senses = dict(self.decision.objectives)
-        self.minimise = MultiChoice(title="minimise", options=list(columns), name="minimise", width=360,
+        self.minimise = MultiChoice(title="minimise", options=V.choices(columns), name="minimise", width=360,
                                     value=[c for c, s in senses.items() if s == "min"])
-        self.maximise = MultiChoice(title="maximise", options=list(columns), name="maximise", width=360,
+        self.maximise = MultiChoice(title="maximise", options=V.choices(columns), name="maximise", width=360,
                                     value=[c for c, s in senses.items() if s == "max"])
         self.method = Select(title="ranking", value="weighted_sum", options=list(METHODS.items()), name="method",
                              width=200)
@@ -338,7 +338,7 @@ class Room:
         self._refresh_selection()
         self.count.text = (f"<b>{active}</b> of {len(self.study.ids)} designs kept by the filters; "
                            f"{front} on the Pareto front of "
-                           + (", ".join(f"{s} {c}" for c, s in self.decision.objectives) or "no objective")
+                           + (", ".join(f"{s} {html.escape(c)}" for c, s in self.decision.objectives) or "no objective")
                            + self._live_note())
 
     def _live_note(self) -> str:
@@ -367,7 +367,7 @@ class Room:
         data = D.ranking_rows(self.study, self.decision, TOP)
         columns = [c.field for c in self.ranking.columns]
         if columns != ["rank", "point_id", "score", *[f"o{k}" for k in range(len(self.decision.objectives))]] \
-                or [c.title for c in self.ranking.columns[3:]] != [f"{n} ({s})" for n, s in self.decision.objectives]:
+                or [c.title for c in self.ranking.columns[3:]] != [V.objective_title(n, s) for n, s in self.decision.objectives]:
             self.ranking.columns = V.ranking_table(self.decision.objectives, data).columns  # objectives changed
         # emptied first: bokeh 3.9 does not redraw a DataTable whose source's data is replaced by as many rows
         # as before (bokeh/bokeh#15328); a new source would make bokeh walk the whole document again

@@ -43,6 +43,7 @@ from bokeh.plotting import figure
 from cosim.analysis.decision import Decision
 from cosim.analysis.room import data as D
 from cosim.analysis.room import projection as P
+from cosim.analysis.room import views as V
 from cosim.analysis.room.views import GREY, PLAIN, SELECTED
 
 MAX_COLUMNS = 6
@@ -63,7 +64,7 @@ class Dimensions:
         self.kept = np.ones(len(self.rows), dtype=bool)
         self.selection: list[int] = []
         self.chooser = MultiChoice(title=f"columns (2 to {MAX_COLUMNS}; the first three are the 3-D view's axes)",
-                                   value=columns[:MAX_COLUMNS], options=list(decision.filters.columns),
+                                   value=columns[:MAX_COLUMNS], options=V.choices(decision.filters.columns),
                                    name="dimensions", width=760)
         self.note = Div(text=self._note(), name="dimensions-note", width=760)
         self.layout = column(self.chooser, self.note, name="dimensions-tab")
@@ -83,7 +84,7 @@ class Dimensions:
         self.rows = P.sample(len(study.ids))
         self.kept = np.ones(len(self.rows), dtype=bool)
         self.selection = []
-        self.chooser.options = list(decision.filters.columns)
+        self.chooser.options = V.choices(decision.filters.columns)
         self.note.text = self._note()
         if len(self.columns) >= 2:
             self.matrix_source.selected.indices = []

@@ -8,7 +8,9 @@ in the page): ``cloud``, ``count``, ``filter-column`` and ``filter`` (the range 
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+import html
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from bokeh.models import (
@@ -145,6 +147,12 @@ def axis_choosers(columns: Sequence[str], x: str, y: str, colour: str | None) ->
             "size": Select(title="size", value=NONE, options=[NONE, *options], name="choose-size", width=180)}
 
 
+def choices(columns: Sequence[str]) -> list[tuple[str, str]]:
+    """The options of a MultiChoice: (column, its name escaped).  Its list (Choices.js) shows an option's label
+    as HTML, unlike a Select's, so a column named ``<img onerror=...>`` would run in the page."""
+    return [(c, html.escape(c)) for c in columns]
+
+
 def range_filter(state: dict[str, Any]) -> RangeSlider:
     """The one range filter (``filter``): the app sets its column (``tags[0]``), bounds and range."""
     return RangeSlider(name="filter", width=300, format="0[.]0000", **state)
@@ -167,10 +175,16 @@ def ranking_table(objectives: Sequence[tuple[str, str]], data: dict[str, list]) 
     number = NumberFormatter(format="0.[0000]")
     columns = [TableColumn(field="rank", title="#", width=40), TableColumn(field="point_id", title="design"),
                TableColumn(field="score", title="score", formatter=NumberFormatter(format="0.0000"))]
-    columns += [TableColumn(field=f"o{k}", title=f"{name} ({sense})", formatter=number)
+    columns += [TableColumn(field=f"o{k}", title=objective_title(name, sense), formatter=number)
                 for k, (name, sense) in enumerate(objectives)]
     return DataTable(source=ColumnDataSource(data), columns=columns, name="ranking", width=WIDTH, height=330,
                      index_position=None, selectable=True)
+
+
+def objective_title(name: str, sense: str) -> str:
+    """The ranking's title of an objective's column, escaped: a DataTable shows its titles as HTML (its cells
+    as text)."""
+    return html.escape(f"{name} ({sense})")
 
 
 def weight_sliders(weights: dict[str, float]) -> list[Slider]:
