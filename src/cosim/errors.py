@@ -70,12 +70,13 @@ class UserError(CosimError):
         self.problems: list[Problem] = list(problems)
         super().__init__("\n".join(str(p) for p in self.problems))
 
-    def __reduce__(self):  # picklable across Dask and child processes whatever the subclass's signature
+    # picklable across Dask and child processes whatever the subclass's signature
+    def __reduce__(self) -> tuple[Any, ...]:
         return _rebuild_user_error, (type(self), self.problems, self.__dict__)
 
 
-def _rebuild_user_error(cls: type, problems: list[Problem], state: dict) -> UserError:
-    error = UserError.__new__(cls)
+def _rebuild_user_error(cls: type[UserError], problems: list[Problem], state: dict[str, Any]) -> UserError:
+    error: UserError = UserError.__new__(cls)
     UserError.__init__(error, problems)
     error.__dict__.update(state)
     return error
@@ -165,7 +166,7 @@ class UnitError(CosimError):
         """The one-line message, then the unit's frames when its Python code raised (what a row keeps)."""
         return f"{self}\n{self.traceback}" if self.traceback else str(self)
 
-    def __reduce__(self):
+    def __reduce__(self) -> tuple[Any, ...]:
         return type(self), (self.unit, self.message, self.time, self.traceback)
 
 

@@ -28,9 +28,9 @@ from typing import Any, Mapping
 import numpy as np
 import pandas as pd
 
-from cosim.errors import AnalysisError, did_you_mean
+from cosim.errors import AnalysisError, ExpressionError, did_you_mean
 from cosim.results.columns import TAIL_COLUMNS
-from cosim.spec.expressions import COMPARISONS, Expression, ExpressionError, identifier
+from cosim.spec.expressions import COMPARISONS, Expression, identifier
 
 TAIL = TAIL_COLUMNS  # the old name
 

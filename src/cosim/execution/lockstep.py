@@ -42,6 +42,7 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
+from cosim.execution.observers import reduction_of
 from cosim.execution.point_row import PointRow
 from cosim.execution.result import FAILED, OK, UNIT_FAILURE, RunResult
 from cosim.master.contract import MasterAlgorithm, SystemView
@@ -173,7 +174,7 @@ def can_run_in_lockstep(system: System) -> bool:
                for s in system.probes)
 
 
-class Batches(dict):
+class Batches(dict[str, Any]):
     """Unit name -> live batch (a twin or an :class:`InstanceBatch`), with the wiring between them built
     once (transfers, probe, selections): the batches are reused group after group."""
 
@@ -187,7 +188,7 @@ def instantiate(system: System, rows: int) -> Batches:
         for name, system_unit in system.units.items():
             unit_type = system_unit.unit_type
             twin = batch_class_of(unit_type.load_class()) if isinstance(unit_type, PythonUnitType) else None
-            if twin is not None:
+            if twin is not None and isinstance(unit_type, PythonUnitType):  # twin implies a Python unit
                 batches[name] = twin(unit_type.load_class(), name, rows)
             else:
                 batches[name] = InstanceBatch([unit_type.instantiate(name) for _ in range(rows)])
@@ -220,7 +221,8 @@ class _Transfer:
 
     def read(self) -> np.ndarray:
         values = self.source.get(self.source_selection)
-        return values if self.factor is None else values * self.factor + self.offset
+        converted: np.ndarray = values if self.factor is None else values * self.factor + self.offset
+        return converted
 
     def write(self, values: np.ndarray) -> None:
         self.target.set(self.target_selection, values)
@@ -246,7 +248,7 @@ class _BatchProbe:
 
     def __init__(self, system: System, batches: Mapping[str, Any], columns: Sequence[str], keep: set[str]):
         index = {c: i for i, c in enumerate(columns)}
-        per_unit: dict[str, tuple[list, list[int]]] = {}
+        per_unit: dict[str, tuple[list[Any], list[int]]] = {}
         for signal in system.probes:
             for ref, column in zip(signal.refs, signal.columns):
                 refs, where = per_unit.setdefault(signal.unit, ([], []))
@@ -389,7 +391,7 @@ class _Wiring:
 
     def __init__(self, system: System, batches: Mapping[str, Any]):
         self.system, self.batches = system, batches
-        into: dict[str, list] = {}
+        into: dict[str, list[Any]] = {}
         for connection in system.init_order:
             into.setdefault(connection.target.unit, []).append(connection)
         self.into = [(batches[name], _transfers(batches, into.get(name, []))) for name in system.order]
@@ -399,9 +401,9 @@ class _Wiring:
         self.probe = _BatchProbe(system, batches, self.columns, set(self.columns) - end_only)
         self.end_probe = _BatchProbe(system, batches, self.columns, end_only)
         self.algorithm = _bind_algorithm(system, batches)
-        self.reducer = ObjectiveReducer(self.columns, [(o.name, o.reduce, _columns_of(system, o.signal))
+        self.reducer = ObjectiveReducer(self.columns, [(o.name, reduction_of(o), _columns_of(system, o.signal))
                                                        for o in system.spec.objectives if o.signal])
-        self._selections: dict[tuple[str, tuple], Any] = {}
+        self._selections: dict[tuple[str, tuple[Any, ...]], Any] = {}
 
     def initialize(self, points: Sequence[Sequence[Assignment]]) -> None:
         """As :meth:`Execution._initialize`, for every row: the spec's assignments, then each point's overrides."""
@@ -497,12 +499,13 @@ class LockstepRunner:
         from cosim.execution.point import assignments_for
 
         results = None
+        overrides: list[list[Assignment]] | None
         try:
             overrides = [assignments_for(self.system, values) for _, values in group]
             batches = self._batches.pop(len(group), None) or instantiate(self.system, len(group))
         except Exception:  # a value that does not fit, a unit that cannot be instantiated: the single path reports it
             overrides = batches = None
-        if batches is not None:
+        if batches is not None and overrides is not None:  # both made, or neither
             try:
                 if self._announce is not None:
                     self._announce(len(group))

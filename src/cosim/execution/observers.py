@@ -13,6 +13,7 @@ from typing import Any, Mapping
 from cosim.execution.probe import Probe
 from cosim.master.contract import SystemView
 from cosim.master.observers import ExactColumns, ObjectiveReducer, TraceRecorder
+from cosim.spec.loader import ObjectiveSpec
 from cosim.system.builder import System
 from cosim.units.protocol import Unit
 
@@ -52,6 +53,14 @@ def columns_of(system: System, signal: str | None) -> list[str]:
     raise KeyError(signal)
 
 
+def reduction_of(objective: ObjectiveSpec) -> str:
+    """The reduction of an objective that reduces a signal (the spec's schema requires one with every signal);
+    raises KeyError without one, as looking the reduction up would."""
+    if objective.reduce is None:
+        raise KeyError(objective.reduce)
+    return objective.reduce
+
+
 class Objectives(ObjectiveReducer):
     """The spec's objectives with a signal, reduced at the end of the run (:class:`ObjectiveReducer`, its columns
     taken from the run's probe when attached)."""
@@ -60,7 +69,7 @@ class Objectives(ObjectiveReducer):
         self.system = system
 
     def attached(self, context: Any) -> None:
-        super().__init__(context.columns, [(o.name, o.reduce, columns_of(self.system, o.signal))
+        super().__init__(context.columns, [(o.name, reduction_of(o), columns_of(self.system, o.signal))
                                            for o in self.system.spec.objectives if o.signal])
 
 

@@ -62,5 +62,5 @@ class PointRow:
         else the study records of it), the objectives, and the :data:`TAIL_COLUMNS`."""
         return {"point_id": self.point_id, **(columns or {}), **self.objectives, **self.tail()}
 
-    def __reduce__(self) -> tuple[Any, tuple]:
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
         return PointRow, (self.point_id, self.status, self.message, self.run_time, self.objectives, self.worker)

@@ -22,9 +22,9 @@ class Probe:
         self.columns: list[str] = []
         self.types: dict[str, tuple[str, str | None]] = {}
         self.units: dict[str, str] = {}  # column -> unit of measure, for the recorded table's metadata
-        per_unit: dict[str, list] = {}
+        per_unit: dict[str, list[Any]] = {}
         positions: dict[str, list[int]] = {}
-        exact: dict[str, list] = {}
+        exact: dict[str, list[Any]] = {}
         self.exact_columns: list[str] = []
         for signal in system.probes:
             for ref, column in zip(signal.refs, signal.columns):
@@ -47,7 +47,7 @@ class Probe:
         self._exact_reads = [(units[name].select(refs), units[name]) for name, refs in exact.items()]
         self.values = np.zeros(len(self.columns))
         self._reads = []
-        self._reads_of: dict[str, tuple] = {}  # unit name -> its read, for read_units
+        self._reads_of: dict[str, tuple[Any, ...]] = {}  # unit name -> its read, for read_units
         for name, refs in per_unit.items():
             where = np.array(positions[name], dtype=int)
             contiguous = bool(np.all(np.diff(where) == 1))

@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 from cosim.errors import UnitError, UserError
 from cosim.execution.native import drive_native, takes_bulk
@@ -192,8 +192,8 @@ class Execution:
         exp = self.system.spec.experiment
         flat = flatten_objectives(evaluate_expressions(self.system.spec.objectives, objectives.results()))
         traces = recording.frame() if recording is not None else None
-        row = dict(objectives=flat, traces=traces, elapsed=elapsed, steps=progress.steps, end_time=progress.t,
-                   step_stats=algorithm.statistics())
+        row: dict[str, Any] = dict(objectives=flat, traces=traces, elapsed=elapsed, steps=progress.steps,
+                                   end_time=progress.t, step_stats=algorithm.statistics())
         stopper = progress.stopper
         if progress.status != OK and hasattr(stopper, "objectives_at_stop"):  # e.g. pruned: its bound vector
             row["objectives"] = stopper.objectives_at_stop(flat)  # type: ignore[union-attr]
@@ -223,7 +223,7 @@ class Execution:
         # Units leave initialization in stepping order, each after receiving the
         # initial outputs of its sources, so a unit's initialize() sees
         # consistent inputs (e.g. a robot starts where its trajectory starts).
-        into: dict[str, list] = {}
+        into: dict[str, list[Any]] = {}
         for connection in self.system.init_order:
             into.setdefault(connection.target.unit, []).append(connection)
         for name in self.system.order:
@@ -238,7 +238,7 @@ def _failed(exc: Exception, progress: _Progress, elapsed: float) -> RunResult:
     """The row of a run that raised: a unit's failure (its own frames kept in the message, where the user
     looks), a user's file found unusable only while running, or an orchestrator bug (still a row, never a lost
     point)."""
-    where = dict(elapsed=elapsed, steps=progress.steps, end_time=progress.t)
+    where: dict[str, Any] = dict(elapsed=elapsed, steps=progress.steps, end_time=progress.t)
     if isinstance(exc, UnitError):
         return RunResult(FAILED, exc.with_traceback_text(), failure=UNIT_FAILURE, **where)
     if isinstance(exc, UserError):  # e.g. an FMU archive found unsafe when it is extracted

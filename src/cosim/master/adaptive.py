@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping, Sequence, TypeGuard
 
 import numpy as np
 
@@ -119,7 +119,7 @@ def option_problems(options: Mapping[str, Any]) -> list[tuple[str, str, str]]:
     return problems
 
 
-def _number(value: Any) -> bool:
+def _number(value: Any) -> TypeGuard[int | float]:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
@@ -299,7 +299,8 @@ def _factor(ratio: float, order: int) -> float:
     like ``h**order``: toward ``SAFETY`` times the allowance, at most by GROW or SHRINK at once."""
     if ratio == 0:
         return GROW
-    return min(GROW, max(SHRINK, SAFETY * ratio ** (-1.0 / order)))
+    scale: float = ratio ** (-1.0 / order)  # float ** float is typed Any (it may be complex)
+    return min(GROW, max(SHRINK, SAFETY * scale))
 
 
 def _largest_ratio(estimate: np.ndarray, allowance: np.ndarray) -> float:

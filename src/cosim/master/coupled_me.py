@@ -31,9 +31,12 @@ class Group(Protocol):
     their values are carried (the system's :class:`~cosim.system.coupled_me.CoupledGroup`; its ``coupling``, when
     not empty, orders them instead: feed-through blocks and loops solved inside the group)."""
 
-    name: str
-    members: tuple[str, ...]
-    links: tuple[Link, ...]
+    @property
+    def name(self) -> str: ...
+    @property
+    def members(self) -> tuple[str, ...]: ...
+    @property
+    def links(self) -> Sequence[Link]: ...
 
 
 @dataclass(frozen=True)
@@ -120,12 +123,13 @@ class _SolveInGroup:
     __slots__ = ("_solver", "_now", "_last")
 
     def __init__(self, solver: LoopSolver, now: Callable[[], float]):
-        self._solver, self._now, self._last = solver, now, None
+        self._solver, self._now = solver, now
+        self._last: np.ndarray | None = None
 
     def run(self) -> bool:
         self._solver.solve(self._now())
         x = self._solver.solution
-        changed = self._last is None or not np.array_equal(x, self._last)
+        changed = self._last is None or x is None or not np.array_equal(x, self._last)
         self._last = x
         return changed
 
@@ -137,7 +141,7 @@ class _SolveInGroup:
 GROUP_LOOP_TOLERANCE = 1e-12
 
 
-def _carry_plan(links: Sequence[Link], coupling: Coupling) -> Callable[[Mapping[str, Any], Callable[[], float]], list]:
+def _carry_plan(links: Sequence[Link], coupling: Coupling) -> Callable[[Mapping[str, Any], Callable[[], float]], list[Any]]:
     """How a group with loops among its members carries its links: the feed-through blocks and loops of
     ``coupling`` (indices into ``links``) in dependency order, each loop by a :class:`LoopSolver` on the members
     (to :data:`GROUP_LOOP_TOLERANCE`, or the spec's tolerance if tighter), then the links into inputs that feed
@@ -169,9 +173,9 @@ def _renumbered(coupling: Coupling, renumbered: dict[int, int]) -> Coupling:
         if isinstance(block, Loop) and not all(i in renumbered for i in (*block.links, *block.torn)):
             continue  # a loop inside a group: the group solves it (never a loop partly inside one)
         if isinstance(block, Loop):
-            blocks.append(Loop(block.units, *(tuple(renumbered[i] for i in part)
-                                              for part in (block.links, block.torn, block.entries)),
-                               block.ports, block.tearing))
+            links, torn, entries = (tuple(renumbered[i] for i in part)
+                                    for part in (block.links, block.torn, block.entries))
+            blocks.append(Loop(block.units, links, torn, entries, block.ports, block.tearing))
         elif all(i in renumbered for i in block):
             blocks.append(tuple(renumbered[i] for i in block))
     return Coupling(tuple(blocks), coupling.settings)

@@ -221,7 +221,10 @@ def _loop(members: set[Node], links: Sequence[Link], feedthrough: Sequence[tuple
         if (unit, inp) in members and (unit, out) in members:
             ft[(unit, inp)].add((unit, out))
     link_nodes = {i: (_source(links[i]), _target(links[i])) for i in inner}
-    key = lambda n: (rank.get(n[0], len(rank)), n[0], n[1])  # noqa: E731  (spec order, then names)
+
+    def key(n: Node) -> tuple[int, str, str]:  # spec order, then names
+        return rank.get(n[0], len(rank)), n[0], n[1]
+
     order = sorted(members, key=key)
     cut: set[int] = set()
 
@@ -377,7 +380,8 @@ class LoopSolver:
         t0, x0 = self._solutions[0]
         return x1 + (x1 - x0) * ((t - t1) / (t1 - t0)) if t1 != t0 else x1.copy()
 
-    def _newton(self, x: np.ndarray, g: np.ndarray, r: np.ndarray, best: tuple[float, np.ndarray]):
+    def _newton(self, x: np.ndarray, g: np.ndarray, r: np.ndarray, best: tuple[float, np.ndarray]
+                ) -> tuple[bool, np.ndarray, np.ndarray, int, tuple[float, np.ndarray]]:
         """Newton on r(x) = G(x) - x from ``x``; (converged, x, r, iterations, best (residual, x) seen)."""
         jacobian, fresh = self._jacobian, False
         iterations, self.newton_stop = 0, "iteration limit"
@@ -426,7 +430,7 @@ class LoopSolver:
         self.jacobians += 1
         if self.derivatives is None:
             return self._finite_differences(x, g)
-        if self._at is not x and not np.array_equal(self._at, x):
+        if self._at is None or (self._at is not x and not np.array_equal(self._at, x)):
             self._evaluate(x)
         return self.derivatives.jacobian(len(x)) - np.eye(len(x))
 
@@ -442,7 +446,8 @@ class LoopSolver:
         jacobian -= np.eye(n)
         return jacobian
 
-    def _fixed_point(self, x: np.ndarray, best: tuple[float, np.ndarray]):
+    def _fixed_point(self, x: np.ndarray, best: tuple[float, np.ndarray]
+                     ) -> tuple[bool, np.ndarray, int, tuple[float, np.ndarray]]:
         """x <- G(x) from ``x``; (converged, the last x, iterations, best (residual, x) seen)."""
         g = self._evaluate(x)
         for iterations in range(1, self.settings.max_iterations + 1):
@@ -543,7 +548,8 @@ class LoopDerivatives:
                 local[unit] = self._local(unit)
             inputs = self._inputs.get(unit, [])
             below = np.array([rows.get((unit, r), zero) for r in inputs]).reshape(len(inputs), n)
-            return local[unit][self._outputs[unit][ref]] @ below
+            row: np.ndarray = local[unit][self._outputs[unit][ref]] @ below
+            return row
 
         for i in self._loop.links:  # evaluation order: an input's row is set before its unit's outputs are used
             link = self._links[i]

@@ -21,17 +21,20 @@ import numpy as np
 
 
 def _integral(t: np.ndarray, x: np.ndarray) -> np.ndarray:
-    return np.trapezoid(x, t, axis=0) if len(t) > 1 else np.zeros(x.shape[1])
+    integral: np.ndarray = np.trapezoid(x, t, axis=0) if len(t) > 1 else np.zeros(x.shape[1])
+    return integral
 
 
 def _time_average(t: np.ndarray, x: np.ndarray) -> np.ndarray:
     duration = t[-1] - t[0]
-    return _integral(t, x) / duration if duration > 0 else x[-1]
+    average: np.ndarray = _integral(t, x) / duration if duration > 0 else x[-1]
+    return average
 
 
 def _rms(t: np.ndarray, x: np.ndarray) -> np.ndarray:
     duration = t[-1] - t[0]
-    return np.sqrt(_integral(t, x * x) / duration) if duration > 0 else np.abs(x[-1])
+    rms: np.ndarray = np.sqrt(_integral(t, x * x) / duration) if duration > 0 else np.abs(x[-1])
+    return rms
 
 
 # The reductions an objective may name ("reduce"): each maps the sample times t

@@ -19,8 +19,12 @@ from cosim.units.protocol import ElementRef, Unit
 class Port(Protocol):
     """One end of a link: a unit's name and the elements of its port."""
 
-    unit: str
-    refs: tuple[ElementRef, ...]
+    # read-only properties: the system's ports and links are frozen dataclasses, which a protocol's plain
+    # (settable) attribute would not accept
+    @property
+    def unit(self) -> str: ...
+    @property
+    def refs(self) -> tuple[ElementRef, ...]: ...
 
 
 class Link(Protocol):
@@ -30,10 +34,14 @@ class Link(Protocol):
     nothing else of a system, so they can be bound to any units and links.
     """
 
-    source: Port
-    target: Port
-    factor: float
-    offset: float
+    @property
+    def source(self) -> Port: ...
+    @property
+    def target(self) -> Port: ...
+    @property
+    def factor(self) -> float: ...
+    @property
+    def offset(self) -> float: ...
 
 
 class Transfer:
@@ -67,7 +75,7 @@ class Transfer:
         self.write(self.read())
 
 
-def _converting(read: Callable[[], Sequence], connections: Sequence[Link],
+def _converting(read: Callable[[], Sequence[Any]], connections: Sequence[Link],
                 as_list: bool = True) -> Callable[[], Any]:
     """``read`` followed by each element's unit conversion ``factor * x + offset`` (one multiply-add, no drift);
     a list, or with ``as_list=False`` a numpy array."""

@@ -93,7 +93,8 @@ class ResultsStore:
         self.table_path = self.folder / "results.parquet"
         self.metadata_path = self.folder / "metadata.json"
         self.folder.mkdir(parents=True, exist_ok=True)
-        self._next = max((int(_PART.match(p.name).group(1)) for p in self._part_files()), default=-1) + 1
+        matches = (_PART.match(p.name) for p in self._part_files())  # every one matches: _part_files picks them
+        self._next = max((int(m.group(1)) for m in matches if m), default=-1) + 1
         self._parts_written = 0
         # what made the rows (spec digest, kind, unit and data-file checksums): written into every file of rows
         # by the driver that sets it, read back by row_identities()

@@ -46,8 +46,8 @@ from typing import Any, Iterator, Sequence
 
 import numpy as np
 
-from cosim.errors import Problem, SpecError, json_path
-from cosim.spec.expressions import Expression, ExpressionError, identifier
+from cosim.errors import ExpressionError, Problem, SpecError, json_path
+from cosim.spec.expressions import Expression, identifier
 from cosim.spec.loader import DesignParameterSpec, Spec
 from cosim.util import limits
 
@@ -151,6 +151,7 @@ class _Dimension:
         """Map u in [0, 1) onto this dimension."""
         if self.values is not None and self.lo is None:
             return self.values[min(int(u * len(self.values)), len(self.values) - 1)]
+        assert self.lo is not None and self.hi is not None  # a dimension is either values or a range
         x = self.lo + u * (self.hi - self.lo)
         if self.step is not None:
             # snap to the grid of the range, staying inside it
@@ -274,13 +275,15 @@ class DesignSpace:
         if self.method == "lhs":
             from scipy.stats import qmc
 
-            return qmc.LatinHypercube(d, rng=seed).random(n)
+            design: np.ndarray = qmc.LatinHypercube(d, rng=seed).random(n)
+            return design
         if self.method == "sobol":
             from scipy.stats import qmc
 
             with warnings.catch_warnings():  # scipy warns when n is not a power of two; still a valid design
                 warnings.simplefilter("ignore")
-                return qmc.Sobol(d, scramble=True, rng=seed).random(n)
+                design = qmc.Sobol(d, scramble=True, rng=seed).random(n)
+                return design
         return np.random.default_rng(seed).random((n, d))
 
     def _constraint(self, text: str | None) -> tuple[Expression | None, dict[str, str]]:
@@ -325,7 +328,11 @@ class DesignSpace:
             for row in self._samples:
                 yield tuple(dim.sample(u) for dim, u in zip(self._dims, row))
         else:
-            yield from itertools.product(*(dim.values for dim in self._dims))
+            grids: list[list[Any]] = []
+            for dim in self._dims:
+                assert dim.values is not None  # without samples, every dimension is a grid of values
+                grids.append(dim.values)
+            yield from itertools.product(*grids)
 
     def _values(self, flat: tuple[Any, ...]) -> dict[str, Any]:
         values, i = {}, 0
@@ -395,7 +402,7 @@ class DesignSpace:
         if total <= n:
             return list(self)
         wanted = sorted({round(k * (total - 1) / (n - 1)) for k in range(n)}) if n > 1 else [0]
-        picked = []
+        picked: list[Point] = []
         for point in self:
             if point.index == wanted[len(picked)]:
                 picked.append(point)

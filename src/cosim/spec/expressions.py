@@ -29,7 +29,7 @@ import functools
 import math
 import operator
 import re
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Callable, Literal, Mapping, Sequence
 
 import numpy as np
 
@@ -64,9 +64,9 @@ _ARITY.update(min=(1, None), max=(1, None))
 MAX_LITERAL = 1e308  # number literals beyond a float's range are refused
 CONSTANTS = {"pi": np.pi, "e": np.e, "true": True, "false": False, "True": True, "False": False}
 
-_BINARY = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul, ast.Div: operator.truediv,
+_BINARY: dict[type[ast.operator], Callable[[Any, Any], Any]] = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul, ast.Div: operator.truediv,
            ast.FloorDiv: operator.floordiv, ast.Mod: operator.mod, ast.Pow: operator.pow}
-_UNARY = {ast.USub: operator.neg, ast.UAdd: operator.pos, ast.Not: np.logical_not}
+_UNARY: dict[type[ast.unaryop], Callable[[Any], Any]] = {ast.USub: operator.neg, ast.UAdd: operator.pos, ast.Not: np.logical_not}
 COMPARISONS = {ast.Lt: operator.lt, ast.LtE: operator.le, ast.Gt: operator.gt, ast.GtE: operator.ge,
             ast.Eq: operator.eq, ast.NotEq: operator.ne}
 
@@ -188,7 +188,7 @@ class Expression:
         an operation.  With ``strict``, float division by zero and invalid
         operations (``0/0``, ``sqrt(-1)``) are errors too instead of inf/NaN.
         """
-        mode = "raise" if strict else "ignore"
+        mode: Literal["raise", "ignore"] = "raise" if strict else "ignore"
         try:
             with np.errstate(divide=mode, invalid=mode, over=mode):
                 return self._eval(self._tree, values)
@@ -291,7 +291,7 @@ def evaluate_expressions(objectives: Sequence[Any], values: Mapping[str, Any]) -
     """
     result = dict(values)
     pending = [o for o in objectives if o.expr]
-    parsed = {o.name: parsed_expression(o.expr) for o in pending}  # type: ignore[arg-type]
+    parsed = {o.name: parsed_expression(o.expr) for o in pending}
     names = {o.name for o in objectives}
     while pending:
         ready = [o for o in pending if parsed[o.name].names & names <= result.keys()]

@@ -179,12 +179,12 @@ def spec_from_dict(raw: Any, path: str | Path = "spec.json") -> Spec:
     return build_spec(raw, path)
 
 
-def spec_schema() -> dict:
+def spec_schema() -> dict[str, Any]:
     """The JSON Schema of a spec: spec.schema.json (beside this module) with the fields of every registered unit kind."""
     from cosim.units.registry import unit_schema
 
     package, name = SCHEMA_RESOURCE
-    schema = json.loads(importlib.resources.files(package).joinpath(name).read_text(encoding="utf-8"))
+    schema: dict[str, Any] = json.loads(importlib.resources.files(package).joinpath(name).read_text(encoding="utf-8"))
     schema["$defs"]["unit"] = unit_schema(schema["$defs"]["unit"])
     algorithm = schema["$defs"]["experiment"]["properties"]["algorithm"]
     algorithm.update(enum=list(ALGORITHMS), default=DEFAULT_ALGORITHM)  # the file repeats them for editors
@@ -223,7 +223,7 @@ def schema_problems(raw: Any, file: str) -> list[Problem]:
     return problems
 
 
-def _without_plain_connections(raw: Any, schema: dict) -> tuple[Any, list[int] | None]:
+def _without_plain_connections(raw: Any, schema: dict[str, Any]) -> tuple[Any, list[int] | None]:
     """``raw`` with the connections that plainly fit the schema left out, and the places of those kept.
 
     jsonschema takes about half a millisecond per connection; an SSP or a generated spec with 10^5
@@ -254,7 +254,7 @@ def _without_plain_connections(raw: Any, schema: dict) -> tuple[Any, list[int] |
     return {**raw, "connections": [connections[i] for i in kept]}, kept
 
 
-def _value_problems(raw: dict, file: str, seen: set[tuple[str, str]]) -> list[Problem]:
+def _value_problems(raw: dict[str, Any], file: str, seen: set[tuple[str, str]]) -> list[Problem]:
     """Rules the schema does not express well: reductions, experiment times."""
     problems = []
     objectives = raw.get("objectives")
@@ -283,7 +283,10 @@ def _value_problems(raw: dict, file: str, seen: set[tuple[str, str]]) -> list[Pr
                                     f"remove it, or make the unit a {kinds} unit"))
     experiment = raw.get("experiment")
     if isinstance(experiment, dict):
-        start, stop, step = experiment.get("start", 0), experiment.get("stop"), experiment.get("step")
+        # Any: the checks below find out what the file holds
+        start: Any = experiment.get("start", 0)
+        stop: Any = experiment.get("stop")
+        step: Any = experiment.get("step")
         numbers = {k: v for k, v in (("start", start), ("stop", stop), ("step", step))
                    if isinstance(v, (int, float)) and not isinstance(v, bool)}
         for key, value in numbers.items():
@@ -304,7 +307,7 @@ def _value_problems(raw: dict, file: str, seen: set[tuple[str, str]]) -> list[Pr
     return [p for p in problems if (p.path, p.message) not in seen]
 
 
-def _adaptive_problems(experiment: dict, file: str) -> list[Problem]:
+def _adaptive_problems(experiment: dict[str, Any], file: str) -> list[Problem]:
     """``experiment.adaptive``: options that cannot work together, or given without the adaptive algorithm."""
     from cosim.master.adaptive import option_problems
 
@@ -319,7 +322,7 @@ def _adaptive_problems(experiment: dict, file: str) -> list[Problem]:
                     message, fix) for key, message, fix in option_problems(options)]
 
 
-def _warm_start_problems(experiment: dict, numbers: dict, file: str) -> list[Problem]:
+def _warm_start_problems(experiment: dict[str, Any], numbers: dict[str, Any], file: str) -> list[Problem]:
     """``experiment.warm_start``: inside (start, stop), on the step grid, with a fixed-step algorithm."""
     warm = experiment.get("warm_start")
     if not isinstance(warm, (int, float)) or isinstance(warm, bool) or len(numbers) < 3 or not math.isfinite(warm):
@@ -348,7 +351,7 @@ _ONE_OF_HINTS = {  # the unit's hint names the registered kinds (cosim.units.reg
 }
 
 
-def _explain(error: jsonschema.ValidationError, schema: dict, file: str) -> list[Problem]:
+def _explain(error: jsonschema.ValidationError, schema: dict[str, Any], file: str) -> list[Problem]:
     path = json_path(error.absolute_path)
     validator = error.validator
     if validator == "additionalProperties":
@@ -403,14 +406,15 @@ def _pattern_fix(parts: Any) -> str:
     return "see specs/README.md"
 
 
-def _def_name(sub_schema: dict, schema: dict) -> str:
-    for name, definition in schema.get("$defs", {}).items():
+def _def_name(sub_schema: dict[str, Any], schema: dict[str, Any]) -> str:
+    definitions: dict[str, Any] = schema.get("$defs", {})
+    for name, definition in definitions.items():
         if definition is sub_schema or definition == sub_schema:
             return name
     return ""
 
 
-def _loop_settings(raw: dict) -> LoopSettings:
+def _loop_settings(raw: dict[str, Any]) -> LoopSettings:
     """experiment.loop_solver (its form already checked) as LoopSettings; a missing field keeps its default."""
     default = LoopSettings()
     return LoopSettings(method=raw.get("method", default.method),
@@ -419,7 +423,7 @@ def _loop_settings(raw: dict) -> LoopSettings:
                         jacobian=raw.get("jacobian", default.jacobian))
 
 
-def build_spec(raw: dict, path: Path) -> Spec:
+def build_spec(raw: dict[str, Any], path: Path) -> Spec:
     """The Spec of a parsed spec whose form is already checked (see :func:`spec_from_dict`).
 
     Relative paths resolve against ``path``'s folder.  Entries set to None
@@ -431,6 +435,7 @@ def build_spec(raw: dict, path: Path) -> Spec:
     units = []
     for name, u in raw["units"].items():
         kind = kind_of(u)  # the schema check made sure there is exactly one
+        assert kind is not None
         options = {k: u[k] for k in (*kind.options, *COMMON_OPTIONS) if k in u}
         units.append(UnitSpec(name=name, kind=kind.name, source=u[kind.name], parameters=dict(u.get("parameters", {})),
                               start=dict(u.get("start", {})), ports=dict(u.get("ports", {})), options=options))

@@ -130,7 +130,8 @@ def _read_component(reading: Reading, element: Any, path: tuple[str, ...]) -> No
     if not _choose_interface(reading, node):
         return node
     node.options = cosim_unit_options(element)
-    from cosim.units.fmu.description import FmuProblems, FmuUnitType
+    from cosim.errors import FmuProblems
+    from cosim.units.fmu.description import FmuUnitType
 
     try:
         description = FmuUnitType(fmu, reference=source, interface=node.interface).describe()

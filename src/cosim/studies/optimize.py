@@ -183,7 +183,8 @@ class OutputConstraint:
     """
 
     def __init__(self, text: str, names: set[str], file: str, path: str):
-        from cosim.spec.expressions import Expression, ExpressionError
+        from cosim.errors import ExpressionError
+        from cosim.spec.expressions import Expression
 
         self.text = text
         fix = "write one comparison such as 'peak_tau_ratio <= 1' (names: objectives and parameters)"

@@ -339,7 +339,7 @@ class Sweep:
 
 def _refuse_design_of_players(spec: Any) -> None:
     """A design parameter of a unit replaced by a player varies nothing: SweepError naming it and the fix."""
-    from cosim.system.builder import split_unit_name
+    from cosim.system.signals import split_unit_name
     from cosim.units.registry import replaying_units
 
     players = {u.name: u.source for u in spec.units if u.name in replaying_units(spec.units)}

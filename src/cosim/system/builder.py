@@ -14,7 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Any, Mapping, Sequence
 
-from cosim.errors import Problem, SpecError, UserError, did_you_mean, json_path
+from cosim.errors import FmuProblems, Problem, SpecError, UserError, did_you_mean, json_path
 from cosim.master.loops import Coupling
 from cosim.spec.loader import Spec
 from cosim.system.connection_checks import check_connections
@@ -26,7 +26,6 @@ from cosim.system.stepping import check_algebraic_loops, feedthrough_coupling, s
 from cosim.system.study_checks import check_design, check_objective_expressions, fed_values
 from cosim.system.value_checks import assignment
 from cosim.system.warm_start_checks import check_warm_start_design
-from cosim.units.fmu.description import FmuProblems
 from cosim.units.kind import UnitSpec
 from cosim.units.protocol import NUMERIC_TYPES, UnitDescription, UnitType
 from cosim.units.python.data_files import attach as attach_data_files

@@ -70,7 +70,7 @@ class Assignment:
     values: tuple[Any, ...]
 
 
-class LoadedUnits(dict):
+class LoadedUnits(dict[str, Any]):
     """Units that loaded, and the names of those that did not (already reported,
     so references to them are not reported again)."""
 

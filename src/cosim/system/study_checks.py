@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from cosim.errors import Problem, did_you_mean, json_path
+from cosim.errors import ExpressionError, Problem, did_you_mean, json_path
 from cosim.master.loops import strongly_connected
 from cosim.spec.design import range_problem, size_problems
-from cosim.spec.expressions import Expression, ExpressionError
+from cosim.spec.expressions import Expression
 from cosim.spec.loader import Spec
 from cosim.system.parts import LoadedUnits
 from cosim.system.signals import split_unit_name

@@ -22,7 +22,7 @@ from cosim.util.collector import collector_paused
 _ENTRY_DEPTH = {"units": 2, "connections": 2, "record": 2, "objectives": 2}
 
 
-def check_spec(path: str | Path, experiment: dict | None = None, variant: str | None = None) -> System:
+def check_spec(path: str | Path, experiment: dict[str, Any] | None = None, variant: str | None = None) -> System:
     """Load and check the spec (or SSP) at ``path``; returns the System when it is usable.
 
     ``experiment`` fields override the file's (see :func:`load_spec`); ``variant`` chooses an SSP's variant.
@@ -42,7 +42,7 @@ def check_spec(path: str | Path, experiment: dict | None = None, variant: str | 
             raise SpecError(at_ssd_elements(exc.problems, path, variant)) from None
 
 
-def _check_spec(path: str | Path, experiment: dict | None, variant: str | None) -> System:
+def _check_spec(path: str | Path, experiment: dict[str, Any] | None, variant: str | None) -> System:
     try:
         return build_system(load_spec(path, experiment, variant))
     except SpecError as first:
@@ -73,12 +73,12 @@ def check_design(system: System) -> None:
     DesignSpace.from_spec(system.spec).check()
 
 
-def _set_aside_broken_entries(raw: Any, file: str) -> tuple[dict, set[str]]:
+def _set_aside_broken_entries(raw: Any, file: str) -> tuple[dict[str, Any], set[str]]:
     import jsonschema
 
     sanitized = copy.deepcopy(raw)
     broken_units: set[str] = set()
-    removals: set[tuple] = set()
+    removals: set[tuple[Any, ...]] = set()
     validator = jsonschema.Draft202012Validator(spec_schema())
     for error in validator.iter_errors(raw):
         parts = list(error.absolute_path)

@@ -41,7 +41,7 @@ class SystemConnectorsType(UnitType):
         self.constants = dict(constants or {})
         self._class: type[SystemConnectors] | None = None
 
-    def __getstate__(self) -> dict:
+    def __getstate__(self) -> dict[str, Any]:
         return {"system": self.system, "inputs": self.inputs, "constants": self.constants, "_class": None}
 
     def _variables(self) -> tuple[Variable, ...]:

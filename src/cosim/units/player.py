@@ -134,7 +134,7 @@ class PlayerUnitType(UnitType):
         self._kinds: list[str] = []
         self._aliases: dict[str, str] | None = None
 
-    def __getstate__(self) -> dict:
+    def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)
         state["_table"] = state["_aliases"] = None
         return state

@@ -26,7 +26,7 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
-from cosim.errors import UnitError  # also re-exported: units raise it from here
+from cosim.errors import UnitError as UnitError  # re-exported: units raise it from here
 
 _ELEMENT_RE = re.compile(r"^(?P<base>.+?)\[(?P<index>\d+)\]$")
 
@@ -130,7 +130,7 @@ class UnitDescription:
             object.__setattr__(self, "_by_name", cached)  # frozen: a cache, not a field (eq, replace ignore it)
         return cached
 
-    def __getstate__(self) -> dict:
+    def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)
         state.pop("_by_name", None)  # rebuilt where it is needed; a mapping proxy does not pickle
         return state

@@ -167,10 +167,10 @@ def _load_entry_points() -> None:
 
 COMMON_FIELDS = ("parameters", "start", "ports", "feedthrough", "reuse")  # fields of every unit, whatever its kind
 COMMON_OPTIONS = ("feedthrough", "reuse")  # the common fields kept in UnitSpec.options
-_unit_schema_cache: dict[str, dict] = {}
+_unit_schema_cache: dict[str, dict[str, Any]] = {}
 
 
-def unit_schema(base: Mapping[str, Any]) -> dict:
+def unit_schema(base: Mapping[str, Any]) -> dict[str, Any]:
     """The JSON Schema of one unit: ``base`` (the spec schema's ``$defs.unit``) with every kind's fields.
 
     A unit has exactly one kind key; the fields of all kinds are known names

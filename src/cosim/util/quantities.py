@@ -156,7 +156,7 @@ def _parse_expression(text: str, definitions: Mapping[str, UnitDefinition], whol
         else:
             m = _FACTOR_RE.match(part)
             named = (definitions.get(m.group("name")) or _named(m.group("name"))) if m else None
-            if named is None:
+            if named is None or m is None:  # no match gives no name either
                 raise UnknownUnit(f"'{whole}' is not a unit cosim knows ('{part}' is not understood); write it "
                                   "in the FMI/Modelica unit syntax, e.g. 'rad/s', 'N.m', 'm/s2', 'kg.m2', 'degC'")
             power = int(m.group("exp")) if m.group("exp") else 1

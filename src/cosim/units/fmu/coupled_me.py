@@ -49,10 +49,15 @@ class InternalLink(Protocol):
     """A connection between two members (the system's connections have this form):
     ``target = factor * source + offset``, element by element."""
 
-    source: Any  # .unit (member name), .refs (ElementRefs of the member)
-    target: Any
-    factor: float
-    offset: float
+    # read-only properties: the system's connections are frozen dataclasses
+    @property
+    def source(self) -> Any: ...  # .unit (member name), .refs (ElementRefs of the member)
+    @property
+    def target(self) -> Any: ...
+    @property
+    def factor(self) -> float: ...
+    @property
+    def offset(self) -> float: ...
 
 
 class _Propagation:

@@ -136,7 +136,7 @@ class FmuUnitType(UnitType):
         self._elements: dict[str, list[FmiElement]] = {}
         self._digest: str | None = None
 
-    def __getstate__(self) -> dict:
+    def __getstate__(self) -> dict[str, Any]:
         return {"path": self.path, "reference": self.reference, "structural": self.structural,
                 "requested_interface": self.requested_interface, "_solver_settings": self._solver_settings,
                 "_md": None, "_description": None, "_elements": {}, "_digest": self._digest}

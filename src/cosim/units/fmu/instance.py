@@ -73,7 +73,7 @@ class FmiSelection(Selection):
         # array, so the others are read first (read-modify-write).
         self.partial_arrays = partial_arrays
         self.plain = False
-        self.pick: Callable[[Any], tuple] | None = None  # fast reader for one numeric group
+        self.pick: Callable[[Any], tuple[Any, ...]] | None = None  # fast reader for one numeric group
 
 
 class FmuState:
@@ -112,7 +112,7 @@ class FmiInstance(Unit):
         # the FMU, since FMI values change only through such calls.  So an output read by a transfer and
         # again by the probe after the same step costs one get call.
         self.generation = 0
-        self._readers: dict[tuple, Callable[[], Sequence[Any]]] = {}
+        self._readers: dict[tuple[Any, ...], Callable[[], Sequence[Any]]] = {}
 
     # Logging and errors ---------------------------------------------------
 

@@ -311,7 +311,7 @@ class _ModelExchangeStepping(EventLoop):
         self._nx = md.numberOfContinuousStates
         self._needs_step_call = bool(getattr(md.modelExchange, "needsCompletedIntegratorStep", True))
         self._next_event: float | None = None
-        self._last_set: dict[int, tuple[Selection, tuple]] = {}
+        self._last_set: dict[int, tuple[Selection, tuple[Any, ...]]] = {}
         self.group: Any = None  # the group integrating this unit together with others (join), or None
 
     # -- lifecycle -----------------------------------------------------------
@@ -419,7 +419,7 @@ class _ModelExchangeStepping(EventLoop):
     # provided per FMI version
     _update_call = "updateDiscreteStates"
 
-    def _update_discrete_states(self) -> tuple:
+    def _update_discrete_states(self) -> tuple[Any, ...]:
         raise NotImplementedError
 
     def _get_derivatives(self) -> Callable[..., Any]:
@@ -448,7 +448,7 @@ class Fmi2ModelExchangeUnit(_ModelExchangeStepping, Fmi2Unit):
         self._guard("fmi2SetupExperiment", lambda: self._slave.setupExperiment(
             tolerance=self._settings.tolerance, startTime=start_time, stopTime=stop_time))
 
-    def _update_discrete_states(self) -> tuple:
+    def _update_discrete_states(self) -> tuple[Any, ...]:
         return self._slave.newDiscreteStates()
 
     def _get_derivatives(self) -> Callable[..., Any]:
@@ -466,7 +466,7 @@ class Fmi3ModelExchangeUnit(_ModelExchangeStepping, Fmi3Unit):
         self._guard("fmi3EnterInitializationMode", lambda: self._slave.enterInitializationMode(
             tolerance=self._settings.tolerance, startTime=self._start_time, stopTime=self._stop_time))
 
-    def _update_discrete_states(self) -> tuple:
+    def _update_discrete_states(self) -> tuple[Any, ...]:
         return self._slave.updateDiscreteStates()
 
     def _get_derivatives(self) -> Callable[..., Any]:

@@ -122,7 +122,7 @@ def import_in_child_first(what: str, target: str, base_dir: str | None, source_z
                               "in native code)")
 
 
-def _kill_group(child: subprocess.Popen) -> None:
+def _kill_group(child: subprocess.Popen[bytes]) -> None:
     try:
         os.killpg(child.pid, signal.SIGKILL)
     except ProcessLookupError:

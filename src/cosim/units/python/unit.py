@@ -58,7 +58,7 @@ class _AttributeSelection(Selection):
 
     def __init__(self, refs: Sequence[ElementRef], array_names: set[str]):
         self.refs = tuple(refs)
-        runs: list[list] = []  # [name, first offset, last offset + 1] or [name, None, None]
+        runs: list[list[Any]] = []  # [name, first offset, last offset + 1] or [name, None, None]
         for r in refs:
             if r.variable not in array_names:
                 runs.append([r.variable, None, None])
@@ -295,7 +295,7 @@ class PythonUnitType(UnitType):
         self.data_paths: dict[str, str] = {}
         self.data_folders: set[str] = set()  # those values of data_paths that name a folder (travel as a zip)
 
-    def __getstate__(self) -> dict:
+    def __getstate__(self) -> dict[str, Any]:
         return {"target": self.target, "base_dir": self.base_dir, "_source_zip": self._source_zip, "_cls": None,
                 "data_paths": self.data_paths, "data_folders": self.data_folders}
 
