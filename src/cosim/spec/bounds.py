@@ -51,7 +51,7 @@ class Bound:
 
 
 def _flip(direction: str | None) -> str | None:
-    return {UP: DOWN, DOWN: UP}.get(direction, direction)  # type: ignore[arg-type]
+    return {UP: DOWN, DOWN: UP}.get(direction, direction) if direction is not None else None
 
 
 def _combine(a: str | None, b: str | None) -> str | None:
@@ -110,8 +110,8 @@ class _Directions:
         if isinstance(node, (ast.Name, ast.Attribute)):
             name = ast.unparse(node)
             if name in self.bounds:
-                b = self.bounds[name]
-                return b.direction, b.exact
+                bound = self.bounds[name]
+                return bound.direction, bound.exact
             return FIXED, True  # a constant (pi) or a design parameter: known from the start
         if isinstance(node, ast.Subscript):
             return self.of(node.value)

@@ -50,7 +50,7 @@ def why_not_native(spec: Spec, units: Mapping[str, SystemUnit], connections: Seq
         d = unit.description
         if d.kind != "fmu" or d.fmi_version not in ("2.0", "3.0"):
             return f"unit '{name}' is not an FMI 2.0/3.0 FMU ({d.kind})"
-        if unit.unit_type.interface != "co-simulation":
+        if getattr(unit.unit_type, "interface", None) != "co-simulation":  # an FMU unit type's
             return f"unit '{name}' runs as model exchange"
     if model_exchange.groups:
         return "model-exchange units are integrated together"

@@ -88,7 +88,7 @@ class NativeFixedStep(FixedStep):
         if self.base == "jacobi" and view.coupling.direct:
             raise ValueError("the native kernel does not propagate direct feed-through under jacobi")
         transfers: list[lib.KTransfer] = []
-        plan_start, plan = [0], []
+        plan_start, plan = [0], list[int]()
         if jacobi:
             transfers = self._transfers(view.links)
         else:
@@ -185,7 +185,7 @@ class NativeFixedStep(FixedStep):
         kernel = self._kernel
         table, keep = [], []
         for name, refs, columns in probes:
-            by_type: dict[int, tuple[list, list]] = {}
+            by_type: dict[int, tuple[list[ElementRef], list[int]]] = {}
             for ref, column in zip(refs, columns):
                 e = self.view.units[name].elements[ref.variable][ref.offset]
                 by_type.setdefault(TYPE_CODES.get(e.fmi_type, -1), ([], []))
@@ -198,6 +198,8 @@ class NativeFixedStep(FixedStep):
                 table.append(lib.KProbe(port, where))
         kernel.n_probes, kernel.probes = len(table), (lib.KProbe * max(len(table), 1))(*table)
         kernel.n_columns, kernel.stop_column = n_columns, stop_column
+        if self.grid is None:
+            raise ValueError("the native algorithm was made without an experiment: it has no steps to run")
         capacity = self.grid.steps - self.grid.index(t) + 1
         values = np.empty((capacity, n_columns))
         times = np.empty(capacity)

@@ -15,6 +15,7 @@ import subprocess
 import tempfile
 from functools import lru_cache
 from pathlib import Path
+from typing import Callable
 
 SOURCE = Path(__file__).resolve().parent / "kernel.c"
 CFLAGS = ("-shared", "-fPIC", "-O2", "-std=c99", "-ffp-contract=off", "-Wall", "-Wextra")
@@ -95,7 +96,7 @@ RUN_DONE, RUN_STOPPED, RUN_FAILED, RUN_ENDED = 0, 1, 2, 3
 
 
 @lru_cache(maxsize=1)
-def run_function() -> ctypes._CFuncPtr:
+def run_function() -> Callable[..., int]:  # restype c_int: ctypes gives a Python int
     """``cosim_kernel_run`` with its ctypes signature (the library built first if needed)."""
     lib = ctypes.CDLL(str(library_path()))
     run = lib.cosim_kernel_run
