@@ -224,14 +224,19 @@ def test_no_note_about_a_missing_step_when_the_command_line_gives_it(tmp_path, c
     assert err.count("the SSP gives no step size") == 1 and "run with OMSimulator's defaults, step 0.001 s" in err
 
 
-def test_a_unit_in_brackets_is_refused_with_the_plain_name_as_fix(tmp_path):
-    ssd = oms3_ssd().replace('<ssv:Real value="-0.5"/>', '<ssv:Real value="-0.5" unit="[1/s]"/>')
+def test_a_unit_in_brackets_is_read_without_them_with_one_note(tmp_path):
+    # issue 33 item 4: OMSimulator sets the value and keeps the unit as written; cosim reads '[1/min]' as 1/min
+    # and converts to the connector's 1/s: -30 1/min = -0.5 1/s, the value oms3.ssd binds itself
+    ssd = oms3_ssd().replace('<ssv:Real value="-0.5"/>', '<ssv:Real value="-30" unit="[1/min]"/>')
     ssd = ssd.replace('<ssd:Connector name="k" kind="parameter">\n        <ssc:Real/>',
                       '<ssd:Connector name="k" kind="parameter">\n        <ssc:Real unit="1/s"/>')
-    [problem] = _problems(write_archive(tmp_path / "brackets.ssp", oms3_files(ssd)))
-    assert "unit '[1/s]' is written in brackets" in problem.message
-    assert problem.fix == 'write unit="1/s"'
-    assert problem.path.endswith("ssv:Parameter[@name='k']/ssv:Real")
+    path = write_archive(tmp_path / "brackets.ssp", oms3_files(ssd))
+    notes = [n for n in read_ssp(path).notes if "written in brackets" in n]
+    assert len(notes) == 1 and notes[0].endswith(
+        "ssv:Parameter[@name='k']/ssv:Real: unit '[1/min]' is written in brackets (as tools show units); SSP and "
+        "FMI write '1/min': read as such"), notes
+    result = _run(path)
+    assert _final(result, "sub.B.y") == pytest.approx(oms3_expected(1.0)["sub.B.y"], rel=1e-12)
 
 
 # --- item 6: inspect of every SSP form, without stop time or step size, showing the bound values ------------
@@ -366,8 +371,8 @@ def test_two_parameter_bindings_and_annotations_first_are_read_in_the_schemas_or
     assert system.raw["units"]["A"]["parameters"]["x0"] == 6.0  # the .ssv comes later: it wins over inline 2.0
     [two] = [n for n in system.notes if "ssd:ParameterBindings;" in n]
     assert "ssd:Component[@name='A'] has 2 ssd:ParameterBindings; SSP allows one" in two
-    [order] = [n for n in system.notes if "deprecated order" in n]
-    assert "ssd:System[@name='default'] has its children in a deprecated order (ssd:Annotations before " \
+    [order] = [n for n in system.notes if "order the schema does not give" in n]
+    assert "ssd:System[@name='default'] has its children in an order the schema does not give (ssd:Annotations before " \
            "ssd:Connectors); SSP 2.0 expects Connectors, ElementGeometry, ParameterBindings" in order
     assert all(n.startswith(f"{path}:SystemStructure.ssd: ") for n in (two, order))
     result = _run(path)

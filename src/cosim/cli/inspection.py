@@ -121,6 +121,13 @@ def inspect_unit(target: str) -> int:
 def inspect_spec(path: str, experiment: dict[str, Any] | None = None, variant: str | None = None) -> int:
     """Print a spec's (or an SSP's) units with their ports, its connections and stepping order; returns the exit
     code. ``experiment`` overrides the experiment's fields (what an SSP often lacks)."""
+    from cosim.ssp.reading import held_notes
+
+    with held_notes() as notes:  # printed below as note: lines, each once (logged, they would show twice)
+        return _inspect_spec(path, experiment, variant, notes)
+
+
+def _inspect_spec(path: str, experiment: dict[str, Any] | None, variant: str | None, notes: list[str]) -> int:
     from cosim.spec.loader import read_raw
     from cosim.ssp import is_ssp, read_ssp
     from cosim.system.validate import check_spec
@@ -152,7 +159,7 @@ def inspect_spec(path: str, experiment: dict[str, Any] | None = None, variant: s
     if ssp is not None and len(ssp.files.variants) > 1:
         print("variants: " + ", ".join(f"{name} ({Path(p).name}{', shown' if name == ssp.files.variant else ''})"
                                        for name, p in ssp.files.variants.items()))
-    for note in (ssp.notes if ssp is not None else []):
+    for note in dict.fromkeys([*(ssp.notes if ssp is not None else []), *notes]):
         print(f"note: {note}")
     marked = False
     for name, unit in system.units.items():

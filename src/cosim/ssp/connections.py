@@ -57,6 +57,11 @@ def read_connection(reading: Reading, element: Any, system: Node) -> None:
     reading.edges.append(Edge(ends[0], ends[1], f, o, suppress, element))
 
 
+def _end_text(end: End) -> str:
+    """'valve.p1' for a connection end (a system's own connector: its bare name)."""
+    return ".".join((*end[0], end[1]))
+
+
 class Flow:
     """Which connection feeds every connector (a problem for a connector fed twice), and the chains back."""
 
@@ -64,11 +69,26 @@ class Flow:
         self.reading = reading
         self.into: dict[End, Edge] = {}  # connection end -> the connection feeding it
         for edge in reading.edges:
-            if edge.end in self.into:
-                reading.problem(edge.element, f"connector '{edge.end[1]}' of '{'.'.join(edge.end[0])}' is "
-                                "already fed by another connection", "an input takes exactly one source")
-                continue
-            self.into[edge.end] = edge
+            first = self.into.get(edge.end)
+            if first is None:
+                self.into[edge.end] = edge
+            elif (first.start, first.factor, first.offset, first.suppress) == \
+                    (edge.start, edge.factor, edge.offset, edge.suppress):  # the same connection written twice
+                reading.alike.add(("duplicate connection", reading.label),
+                                  f"{reading.label}: {element_path(edge.element)} repeats the connection "
+                                  f"{_end_text(edge.start)} -> {_end_text(edge.end)} of "
+                                  f"{element_path(first.element)}: read once", _end_text(edge.end),
+                                  "more connections repeated, read once")
+            else:  # two sources: which one the connector holds would depend on the order of evaluation
+                reading.problem(edge.element, f"connector '{edge.end[1]}' of "
+                                f"'{'.'.join(edge.end[0]) or 'the root system'}' is fed by "
+                                f"{_end_text(edge.start)} here and already by {_end_text(first.start)} "
+                                f"({element_path(first.element)}): a connector holds one value, and which of the two "
+                                "it would hold depends on the order a tool evaluates them (OMSimulator refuses a "
+                                "second connection into a connector of one system: 'Connector ... is already "
+                                "connected to ...')",
+                                "remove one of the two connections, or feed the second source to a connector of "
+                                "its own")
 
     def unit_of(self, end: End) -> tuple[str | None, dict]:
         return unit_of(self.reading.nodes, *end)

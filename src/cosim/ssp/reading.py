@@ -7,10 +7,11 @@ reported at once; the reader raises them as one SpecError.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import urllib.parse
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 from cosim.errors import AnnotationNumberError, Problem
 from cosim.ssp.annotations import Solvers
@@ -25,12 +26,35 @@ log = logging.getLogger("cosim.ssp")
 _LOGGED: set[tuple[str, str]] = set()
 
 
+_HELD: list[list[str]] = []  # notes held by held_notes() instead of logged, innermost last
+
+
 def log_once(given: str, text: str) -> None:
     """Log the note ``text`` about the SSP ``given`` once per process (an SSP is often read twice: validate,
-    then run; a spec naming it, then the SSP alone)."""
-    if (given, text) not in _LOGGED:
-        _LOGGED.add((given, text))
+    then run; a spec naming it, then the SSP alone); inside :func:`held_notes`, keep it there instead."""
+    if (given, text) in _LOGGED:
+        return
+    _LOGGED.add((given, text))
+    if _HELD:
+        _HELD[-1].append(text)
+    else:
         log.warning("%s: %s", given, text)
+
+
+@contextlib.contextmanager
+def held_notes() -> Iterator[list[str]]:
+    """The notes of the SSPs read inside, each once, in a list (for a command that prints them itself, e.g.
+    ``cosim inspect``: logged as well they would show twice).  Logged after all when the block raises."""
+    held: list[str] = []
+    _HELD.append(held)
+    try:
+        yield held
+    except BaseException:
+        for text in held:
+            log.warning("%s", text)
+        raise
+    finally:
+        _HELD.remove(held)
 
 
 class Reading:
@@ -49,6 +73,7 @@ class Reading:
         self.edges: list[Edge] = []
         self.solvers = Solvers()
         self.hints: list[str] = []  # OSP step size hints, for one note
+        self.bracketed: set[str] = set()  # where a unit in brackets was noted (a value is converted repeatedly)
 
     def note(self, text: str) -> None:
         """Keep a note for the user; log it once per SSP and process (an SSP is often read twice)."""

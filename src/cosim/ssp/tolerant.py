@@ -10,8 +10,9 @@ line with a count, see :mod:`.notes`):
 - two ``ssd:ParameterBindings`` on one element (OMSimulator 3 writes inline
   values and .ssv references as siblings): merged into the first, in document
   order, so later bindings still win;
-- the children of an ``ssd:System``, ``ssd:Component`` or the root in an older
-  order (OMSimulator 2 put ``ssd:Annotations`` first): put in the schema's order.
+- the children of an ``ssd:System``, ``ssd:Component`` or the root in another
+  order than the schema's (OMSimulator 2 put ``ssd:Annotations`` first, Dymola
+  ``ssd:Connectors`` after other children): put in the schema's order.
 
 The reader uses the copy only when the original breaks the schema and the copy
 does not, so that problems always point at the user's own file otherwise.
@@ -105,5 +106,5 @@ def _reorder(element: Any) -> list[str]:
     for child in children:
         element.remove(child)
     element.extend(ordered)
-    return [(f"has its children in a deprecated order ({short_name(moved.tag)} before {short_name(before.tag)}); "
+    return [(f"has its children in an order the schema does not give ({short_name(moved.tag)} before {short_name(before.tag)}); "
              f"SSP 2.0 expects {_STANDARD_ORDER[element.tag]}: read as if so")]
