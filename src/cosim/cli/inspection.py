@@ -61,7 +61,7 @@ def listed_variables(description: UnitDescription) -> list:
 def port_rows(description: UnitDescription, bound: dict[str, Any] | None = None) -> list[tuple[str, ...]]:
     """One row per port (HEADER's columns); a port in ``bound`` (the value a spec or SSP sets) shows that
     value, marked ``*``, in the start column instead of the unit's own start."""
-    rows = []
+    rows: list[tuple[str, ...]] = []
     bound = bound or {}
     for v in listed_variables(description):
         shape = "x".join(map(str, v.shape)) if v.shape else "scalar"
@@ -97,21 +97,22 @@ def print_table(rows: list[tuple[str, ...]], indent: str = "  ", out: Callable[[
 
 def inspect_unit(target: str) -> int:
     """Print the ports of one unit; returns the exit code."""
+    from cosim.units.fmu.description import FmuUnitType, offered_interfaces  # imported when used: fmpy is heavy
+
     unit_type = unit_type_of(target)
     d = unit_type.describe()
-    offered: list[str] = []
-    if d.kind == "fmu":
-        from cosim.units.fmu.description import offered_interfaces
-
-        offered = offered_interfaces(unit_type.model_description())
+    offered: tuple[str, ...] = ()
+    fmu_type = unit_type if isinstance(unit_type, FmuUnitType) else None  # an FMU's (d.kind == "fmu")
+    if fmu_type is not None:
+        offered = offered_interfaces(fmu_type.model_description())
     kind = {"fmu": f"FMI {d.fmi_version} {' and '.join(offered)} FMU", "python": "Python unit",
             "player": "player of a recorded table"}.get(d.kind, d.kind)
     print(f"{target}: {d.name}, {kind}" + (f", default step {d.default_step:g} s" if d.default_step else ""))
-    if len(offered) > 1:
-        print(f"  runs as {unit_type.interface} unless the spec's unit sets \"interface\": \"model-exchange\"")
+    if fmu_type is not None and len(offered) > 1:
+        print(f"  runs as {fmu_type.interface} unless the spec's unit sets \"interface\": \"model-exchange\"")
     if d.description:
         print(f"  {d.description}")
-    if d.kind == "fmu" and getattr(unit_type.model_description().coSimulation, "needsExecutionTool", False):
+    if fmu_type is not None and getattr(fmu_type.model_description().coSimulation, "needsExecutionTool", False):
         print("  needsExecutionTool: the FMU drives its exporting tool, which must be installed and licensed "
               "on every machine that runs it (also every Dask worker)")
     print_table(port_rows(d))
@@ -165,7 +166,7 @@ def _inspect_spec(path: str, experiment: dict[str, Any] | None, variant: str | N
     for name, unit in system.units.items():
         d = unit.description
         kind = f"FMI {d.fmi_version}" if d.kind == "fmu" else d.kind
-        if d.kind == "fmu" and unit.unit_type.interface == "model-exchange":
+        if d.kind == "fmu" and getattr(unit.unit_type, "interface", None) == "model-exchange":  # an FMU type's
             kind += " model-exchange"  # co-simulation, the usual case, goes without saying
         ports = listed_variables(d)  # FMI 2.0 scalars x[1]..x[n] count once, as their array x
         inputs = sum(v.causality == "input" for v in ports)

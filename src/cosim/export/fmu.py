@@ -186,6 +186,7 @@ def _complete_model_description(fmu: Path, description, out: Path) -> None:
         members = {name: zf.read(name) for name in zf.namelist()}
     root = ElementTree.fromstring(members["modelDescription.xml"])
     variables = root.find("ModelVariables")
+    assert variables is not None  # pythonfmu writes every model description with one
     index_of = {sv.get("name"): i + 1 for i, sv in enumerate(variables)}
     units = sorted({v.unit for v in description.variables if v.unit and v.type == "Real"})
     if units:  # UnitDefinitions come first among the model description's elements
@@ -199,12 +200,13 @@ def _complete_model_description(fmu: Path, description, out: Path) -> None:
         if variable.unit and variable.type == "Real":
             for name in variable.element_names():
                 sv = variables[index_of[name] - 1] if name in index_of else None
-                if sv is not None and sv.find("Real") is not None:
-                    sv.find("Real").set("unit", variable.unit)
+                real = sv.find("Real") if sv is not None else None
+                if real is not None:
+                    real.set("unit", variable.unit)
     outputs = root.find("ModelStructure/Outputs")
     if outputs is not None:
         for unknown in outputs:
-            name = variables[int(unknown.get("index")) - 1].get("name")
+            name = variables[int(unknown.attrib["index"]) - 1].attrib["name"]
             base = name.split("[")[0]
             inputs = description.depends_on(base)
             indices = [index_of[e] for i in inputs for e in description.variable(i).element_names() if e in index_of]

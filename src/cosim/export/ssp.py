@@ -187,8 +187,8 @@ def _ssd(system: System, fmus: dict[str, tuple[str, str]], resources: Path) -> A
     elements = _e(top, "ssd", "Elements")
     values = _unit_values(system)
     for target in fed_parameters(system):  # set by a connection from the system connector feeding it
-        unit, _, port = target.rpartition(".")
-        values[unit] = [entry for entry in values.get(unit, []) if entry[0] != port]
+        fed_unit, _, port = target.rpartition(".")
+        values[fed_unit] = [entry for entry in values.get(fed_unit, []) if entry[0] != port]
     solvers = _cvode_solvers(system)
     for name, unit in system.units.items():
         if name not in fmus:

@@ -97,6 +97,8 @@ def merge_system(spec: dict, spec_path: Path, overrides: Mapping[str, Any] | Non
     come first, so JSON paths of problems in them match the spec file.
     Raises SpecError for problems of the SSP.
     """
+    given: Any
+    variant: Any
     given, variant, where = spec["system"], None, "$.system"
     if isinstance(given, dict):  # {"ssp": "x.ssp", "variant": "Variant-B"}
         given, variant, where = given.get("ssp"), given.get("variant"), "$.system.ssp"

@@ -70,12 +70,13 @@ def open_ssp(path: str | Path, variant: str | None = None) -> SspFiles:
     variants, notes = variants_of(files)
     chosen = files.ssd.resolve()
     if variant is not None:
-        chosen = variants.get(variant) or next((p for p in variants.values() if p.stem == variant), None)
-        if chosen is None:
+        picked = variants.get(variant) or next((p for p in variants.values() if p.stem == variant), None)
+        if picked is None:
             listed = ", ".join(f"{name} ({files.label(p)})" for name, p in variants.items())
             raise SpecError([Problem(files.given, "/", f"the SSP has no variant '{variant}'; its variants: {listed}."
                                      + did_you_mean(variant, list(variants)),
                                      "give --variant (or \"variant\" in the spec's \"system\") one of these names")])
+        chosen = picked
     name = next((n for n, p in variants.items() if p == chosen), None)
     return SspFiles(files.given, files.root.resolve(), chosen, files.beside, files.archive, variants, name,
                     tuple(notes))

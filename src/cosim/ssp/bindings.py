@@ -179,7 +179,7 @@ class Bindings:
             root = reading.checked_inline(root, label, "ssm")
             if root is None:
                 return None
-        mapping = {}
+        mapping: dict[Any, list[tuple[Any, Any]]] = {}  # as the file (checked by the schema) gives them
         for entry in root.findall(tag("ssm", "MappingEntry")):
             linear = entry.find(tag("ssc", "LinearTransformation"))
             transform = (float(linear.get("factor", 1.0)), float(linear.get("offset", 0.0))) \

@@ -19,7 +19,7 @@ from cosim.util.quantities import (
 
 def read_unit_definitions(root: Any) -> dict[str, UnitDefinition]:
     """The ssd:Units (or ssv:Units) definitions: SI value = factor * value + offset."""
-    units = {}
+    units: dict[str, UnitDefinition] = {}
     container = root.find(tag("ssd", "Units"))
     if container is None:
         container = root.find(tag("ssv", "Units"))

@@ -122,6 +122,7 @@ def _renamed(reading: Reading, root: str, root_name: str) -> dict[str, str]:
         reading.alike.add("renamed system", f"system '{root}' is called '{root_name}' (names keep ASCII letters, "
                           "digits, _)", f"'{root_name}'", "more systems renamed likewise")
     for node in reading.nodes.values():
+        names: list[tuple[tuple[str, ...], tuple[str, ...]]]
         if not node.path:
             names = [((c,), (cosim_part(c),)) for c in node.connectors] if node.kind == "system" else []
         else:
@@ -157,5 +158,6 @@ def _raw_unit(reading: Reading, node: Node) -> dict:
         if node.connectors:
             unit["columns"] = list(node.connectors)
         return unit
+    assert node.fmu is not None  # a component is a table or an FMU
     return {"fmu": files.reference(node.fmu), **({"interface": node.interface} if node.interface else {}),
             **node.settings, **node.options}
