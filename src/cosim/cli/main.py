@@ -52,12 +52,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "handler", None):
         parser.print_help()
         return EXIT_USAGE
-    from cosim.parallel.interrupts import restore_signals, stop_cleanly_on_signals
+    from cosim.parallel.interrupts import raise_if_stopped, restore_signals, stop_cleanly_on_signals
     previous = stop_cleanly_on_signals()
     stdout = sys.stdout
     sys.stdout = _ReaderMayLeave(stdout)  # `cosim sweep ... | head`: the command goes on and says how it ended
     try:
-        return args.handler(args)
+        code = args.handler(args)
+        raise_if_stopped()  # a stop whose KeyboardInterrupt was swallowed on its way never ends as success
+        return code
     except BrokenPipeError:  # written past the wrapper: the command did not finish, so it did not succeed
         _discard_stdout()
         print("cosim: standard output was closed before the command finished", file=sys.stderr)

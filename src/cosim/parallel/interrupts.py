@@ -38,6 +38,13 @@ from typing import Any, Iterator
 WORKER_PRELOAD = __name__  # the module name given to Dask's ``preload`` for the processes cosim starts
 # Dask's preload settings, as the environment variables through which processes started here read them: a
 # `dask spec` process (SubprocessCluster) reads its configuration from its environment, not from this process
+# The signals of the stops begun in this command (stop_cleanly_on_signals).  The handler raises KeyboardInterrupt
+# wherever the main thread is, also inside a finaliser (a __del__, a weakref callback, which Python runs during
+# any allocation): Python prints and swallows an exception raised there (and a stop hushes that print), so the
+# command went on and could end with exit 0 and a study marked complete (issue 38.4: 4 of ~45 early
+# SIGTERM/SIGHUP at load 6-10).  What is recorded here is checked where a stop must not be missed.
+_STOPS: list[int] = []
+
 PRELOAD_VARIABLES = {"distributed.scheduler.preload": "DASK_DISTRIBUTED__SCHEDULER__PRELOAD",
                      "distributed.nanny.preload": "DASK_DISTRIBUTED__NANNY__PRELOAD",
                      "distributed.worker.preload": "DASK_DISTRIBUTED__WORKER__PRELOAD"}
@@ -53,6 +60,7 @@ def stop_cleanly_on_signals() -> dict[int, Any]:
     nothing outside the main thread (signal handlers can only be set there).
     """
     def stop(signum: int, frame: Any) -> None:
+        _STOPS.append(signum)  # first: the KeyboardInterrupt below may be swallowed (see _STOPS)
         import logging
 
         for name in ("distributed", "asyncio"):  # asyncio reports tasks of workers that never started
@@ -65,8 +73,23 @@ def stop_cleanly_on_signals() -> dict[int, Any]:
 
     if threading.current_thread() is not threading.main_thread():
         return {}
+    _STOPS.clear()  # a new command (main called again in one process: tests, notebooks)
     stopping = [signal.SIGTERM, signal.SIGINT] + ([signal.SIGHUP] if hasattr(signal, "SIGHUP") else [])
     return {signum: signal.signal(signum, stop) for signum in stopping}
+
+
+def stop_requested() -> int | None:
+    """The signal of the first stop begun in this command (SIGINT, SIGTERM or SIGHUP), None when there was none."""
+    return _STOPS[0] if _STOPS else None
+
+
+def raise_if_stopped() -> None:
+    """Raise KeyboardInterrupt when a stop has begun, even one whose own KeyboardInterrupt was swallowed.
+
+    Called where going on would misreport a stop: the point stream's loop (no new points after a stop), before
+    a study is marked complete, and when a command returns (its exit code)."""
+    if _STOPS:
+        raise KeyboardInterrupt
 
 
 def scheduler_gone(client: Any) -> bool:

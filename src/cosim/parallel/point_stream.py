@@ -39,6 +39,7 @@ from typing import Any, Callable, Iterable, Iterator, Sequence
 
 from cosim.execution.point_row import PointRow
 from cosim.parallel.evaluator import Reruns, ScatteredPayload, lost_rows, release_futures
+from cosim.parallel.interrupts import raise_if_stopped
 from cosim.spec.design import Point
 from cosim.util import limits
 
@@ -231,6 +232,7 @@ class PointStream:
 
         fill()
         while in_flight:
+            raise_if_stopped()  # a stop whose KeyboardInterrupt a finaliser swallowed (interrupts._STOPS)
             kind, body = self._inbox.get()
             if kind == "rows":
                 self._take_streamed(body, sizer)

@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping, TextIO
 
 from cosim.errors import OutputError, UserError
+from cosim.parallel.interrupts import raise_if_stopped
 
 # The distributions whose versions can change a row's numbers (cosim's own is fmi-cosim: "cosim" on the index
 # is another project): the FMI runtime, the built-in units' physics and code generation (pin, exudyn, casadi,
@@ -296,6 +297,7 @@ class StudyFolder:
         Raises ``error`` when a part was damaged while the study ran (it is set aside): its message names
         the part and ends with ``missing``, which may use ``{rows}`` (the rows in the table).
         """
+        raise_if_stopped()  # a stop never ends as a complete study (issue 38.4), even one swallowed on its way
         with results_writes(self.out):  # a full disk during the final merge loses nothing (see compact)
             aside = self.store.set_aside_damaged()  # a part damaged while the study ran: its points are missing
             counts = self.store.compact(order=order, csv=csv)

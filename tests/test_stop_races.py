@@ -1,0 +1,104 @@
+"""A stop at any moment ends a sweep as interrupted, never as a complete study with exit 0 (issue 38.4).
+
+The race: the stop handler raises KeyboardInterrupt wherever the main thread is, also inside a finaliser
+(``__del__``, a weakref callback), where Python swallows it; the sweep went on and could end with exit 0 and a
+study marked complete.  The first test makes that happen on purpose (a finaliser that sends SIGTERM to its own
+process once the sweep runs); the second is a bounded stress loop of real ``cosim sweep`` processes with
+SIGTERM, SIGHUP and SIGINT at several offsets from the start, including before the cluster is up.  Either the
+sweep finished before the signal (exit 0, every point, metadata ``ended``) or it is interrupted (exit 130, no
+``ended`` in its metadata, ``--resume`` finishes it exactly).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+
+from .test_hostile_files import REPO, _cosim, _exact, _spec
+
+SWALLOWED = """
+import os, signal, sys
+from cosim.cli.main import main
+from cosim.studies import sweep as S
+
+class Finaliser:
+    # a stop arriving while Python runs a finaliser: its KeyboardInterrupt is swallowed there
+    def __del__(self):
+        os.kill(os.getpid(), signal.SIGTERM)
+        sum(range(1000))  # bytecodes for the handler to run in, inside this finaliser
+
+evaluate = S.Sweep._evaluate
+def evaluate_after_a_swallowed_stop(self, *args, **kwargs):
+    Finaliser()
+    return evaluate(self, *args, **kwargs)
+S.Sweep._evaluate = evaluate_after_a_swallowed_stop
+sys.argv = ["cosim", "sweep", sys.argv[1], "--out", sys.argv[2], "--workers", "1"]
+sys.exit(main())
+"""
+
+
+def _env() -> dict:
+    return dict(os.environ, PYTHONPATH=str(REPO / "src"))
+
+
+def _metadata(out: Path) -> dict:
+    path = out / "metadata.json"
+    return json.loads(path.read_text()) if path.exists() else {}
+
+
+def test_a_stop_swallowed_by_a_finaliser_still_ends_the_sweep_as_interrupted(tmp_path):
+    spec = _spec(tmp_path, 12, pause=0.2)
+    out = tmp_path / "out"
+    done = subprocess.run([sys.executable, "-c", SWALLOWED, str(spec), str(out)], capture_output=True, text=True,
+                          env=_env(), timeout=300)
+    assert done.returncode == 130, (done.returncode, done.stdout[-2000:], done.stderr[-2000:])
+    assert done.stderr.strip().splitlines()[-1] == "cosim: interrupted", done.stderr
+    assert _metadata(out).get("ended") is None and _metadata(out).get("counts") is None  # not complete
+    resumed = _cosim("sweep", str(spec), "--out", str(out), "--resume", "--workers", "1", timeout=300)
+    assert resumed.returncode == 0, resumed.stderr
+    _exact(pd.read_parquet(out / "results.parquet"), 12)
+
+
+# (signal, seconds after the start): before Dask is imported, while the cluster starts, while points run
+OFFSETS = [(signal.SIGTERM, 0.3), (signal.SIGHUP, 0.8), (signal.SIGTERM, 1.5), (signal.SIGHUP, 2.5),
+           (signal.SIGINT, 1.0), (signal.SIGTERM, 4.0)]
+
+
+def test_signals_at_several_offsets_never_end_as_a_complete_study(tmp_path):
+    points = 16
+    spec = _spec(tmp_path, points, pause=0.3)
+    outcomes = []
+    for k, (signum, after) in enumerate(OFFSETS):
+        out = tmp_path / f"out{k}"
+        proc = subprocess.Popen([sys.executable, "-m", "cosim.cli.main", "sweep", str(spec), "--out", str(out),
+                                 "--workers", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                env=_env(), start_new_session=True)
+        time.sleep(after)
+        os.killpg(proc.pid, signum)
+        try:
+            _, err = proc.communicate(timeout=180)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            raise
+        meta = _metadata(out)
+        outcomes.append((signal.Signals(signum).name, after, proc.returncode))
+        if proc.returncode == 0:  # it finished before the signal: then every point is there
+            assert meta.get("ended"), (outcomes, err)
+            _exact(pd.read_parquet(out / "results.parquet"), points)
+        elif proc.returncode in (-signum, -signal.SIGINT):
+            # before cosim's handlers were set (Python starting: the signal's default action), or a stop raised
+            # outside the command (Python ends an uncaught KeyboardInterrupt by SIGINT): never success either
+            assert meta.get("ended") is None, (outcomes, meta)
+        else:
+            assert proc.returncode == 130, (outcomes, err)
+            assert meta.get("ended") is None and meta.get("counts") is None, (outcomes, meta)
+            assert err.strip().splitlines()[-1] == "cosim: interrupted", err
+            assert "Traceback" not in err, err
+    print("outcomes:", outcomes)
