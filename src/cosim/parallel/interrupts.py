@@ -108,6 +108,7 @@ def restore_signals(previous: dict[int, Any]) -> None:
     """Put back the handlers :func:`stop_cleanly_on_signals` replaced (and let point children start again)."""
     for signum, handler in previous.items():
         signal.signal(signum, handler)
+    _STOPS.clear()  # the command is over: a study run later from Python is not stopped by its signal
     if previous:
         from cosim.parallel.isolation import allow_point_children
 
