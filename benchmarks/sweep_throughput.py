@@ -13,6 +13,9 @@
    step), on one 2-worker LocalCluster, alternating, in one run: ratio = rate(cosim) / rate(bag).
 4. pickplace: runs/s of the pick-and-place coarse grid (273 points) at both robot fidelity levels
    (examples/pick_and_place/spec_coarse.json and spec_coarse_exudyn.json) on 1 and 2 workers.
+5. kernel: designs/s of ``cosim sweep`` of a 2-FMU linear_ode ring (10^3 steps a point) on 2 workers with
+   ``experiment.kernel`` python and native, alternating on one cluster (issue 35: >= 5x; the issue's 10^5 designs
+   via ``--points``).
 """
 
 from __future__ import annotations
@@ -209,6 +212,39 @@ def part_bag(folder: Path, repeat: int, n_points: int) -> dict:
     return {"bag": bag_rates, "cosim": cosim_rates, "ratio": ratio}
 
 
+def ring_spec(folder: Path, n_points: int, kernel: str) -> Path:
+    """Two linear_ode FMUs in a feedback ring, 10^3 steps, ``n_points`` designs of one.a; ``kernel`` as asked."""
+    fmu = "builtin:linear_ode_fmi2"
+    spec = {
+        "name": f"ring_{kernel}", "units": {"one": {"fmu": fmu}, "two": {"fmu": fmu, "parameters": {"a": -2.0}}},
+        "connections": [{"from": "one.y", "to": "two.u"}, {"from": "two.y", "to": "one.u"}],
+        "experiment": {"stop": 1.0, "step": 1e-3, "kernel": kernel},
+        "objectives": {"y_end": {"signal": "one.y", "reduce": "final"},
+                       "y_int": {"signal": "two.y", "reduce": "integral"}},
+        "design": {"parameters": {"one.a": {"min": -3.0, "max": -1.0}},
+                   "method": "lhs", "samples": n_points, "seed": 1},
+    }
+    path = folder / f"ring_{kernel}_{n_points}.json"
+    path.write_text(json.dumps(spec))
+    return path
+
+
+def part_kernel(folder: Path, repeat: int, n_points: int) -> dict:
+    rates: dict[str, list[float]] = {"python": [], "native": []}
+    specs = {k: ring_spec(folder, n_points, k) for k in rates}
+    with cluster(2) as c:
+        for kernel, spec in specs.items():  # warm up: worker children loaded, kernel compiled
+            timed_sweep(ring_spec(folder, 8, kernel), c.scheduler_address, folder / f"warm_{kernel}")
+        for _ in range(repeat):
+            for kernel, spec in specs.items():
+                elapsed, n = timed_sweep(spec, c.scheduler_address, folder / f"k_{kernel}")
+                rates[kernel].append(n / elapsed)
+                print(f"  {kernel}: {n} designs in {elapsed:.1f} s, {n / elapsed:.0f} designs/s", flush=True)
+    ratio = statistics.median(b / a for a, b in zip(rates["python"], rates["native"]))
+    print(f"  native / python designs per second: {ratio:.1f}x (median of {repeat} interleaved pairs)")
+    return {"rates": rates, "ratio": ratio}
+
+
 def part_pickplace(repeat: int) -> dict:
     specs = {"inverse dynamics": ROOT / "examples" / "pick_and_place" / "spec_coarse.json",
              "Exudyn": ROOT / "examples" / "pick_and_place" / "spec_coarse_exudyn.json"}
@@ -231,7 +267,7 @@ def part_pickplace(repeat: int) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--part", choices=["efficiency", "memory", "bag", "pickplace", "all"], default="all")
+    parser.add_argument("--part", choices=["efficiency", "memory", "bag", "pickplace", "kernel", "all"], default="all")
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--points", type=int, default=200, help="FMU points for efficiency and bag")
     parser.add_argument("--sizes", default="10000,100000", help="point counts for the memory part")
@@ -255,6 +291,9 @@ def main() -> None:
         if args.part in ("pickplace", "all"):
             print("pick-and-place coarse grid:")
             part_pickplace(args.repeat)
+        if args.part in ("kernel", "all"):
+            print(f"native kernel vs python master, 2-FMU ring, 10^3 steps, 2 workers, load {os.getloadavg()[0]:.1f}:")
+            part_kernel(folder, args.repeat, args.points)
 
 
 if __name__ == "__main__":
