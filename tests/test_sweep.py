@@ -201,3 +201,21 @@ def test_a_spec_without_a_design_space_says_it_sweeps_one_point(write_spec, tmp_
     # a spec with a design space says nothing of the kind
     assert main(["sweep", str(write_spec(ode_spec(), "ten.json")), "--dry-run"]) == 0
     assert "no design space" not in capsys.readouterr().out
+
+
+def test_sweep_takes_set_like_run(write_spec, tmp_path, capsys, local_cluster):
+    """Issue 39: `cosim sweep --set UNIT.PARAM=VALUE` fixes a parameter for every point, as `cosim run --set`
+    does for one: here x0 (a design parameter of 2 values) is set to 3, leaving the 5 values of a."""
+    path = str(write_spec(ode_spec()))
+    out = tmp_path / "set"
+    assert main(["sweep", path, "--out", str(out), "--scheduler", local_cluster, "--set", "ode.x0=3", "-q"]) == 0
+    table = pd.read_parquet(out / "results.parquet")
+    assert len(table) == 5 and (table["status"] == "ok").all() and (table["ode.x0"] == 3.0).all()
+    expected = [3.0 * math.exp(a * STOP) for a in table["ode.a"]]
+    assert table["y_end"].tolist() == pytest.approx(expected, rel=1e-3)
+    assert main(["sweep", path, "--set", "ode.x0=3", "--dry-run"]) == 0
+    assert "5 points" in capsys.readouterr().out
+    # a bad assignment is the user's mistake: exit 2, the fix named, no traceback
+    assert main(["sweep", path, "--out", str(tmp_path / "bad"), "--set", "x0"]) == 2
+    err = capsys.readouterr().err
+    assert "--set 'x0': write UNIT.PARAM=VALUE" in err and "Traceback" not in err

@@ -41,6 +41,9 @@ def add_sweep_parser(sub: Any) -> None:
                         "(docs/pruning.md). Off by default")
     from cosim.cli.options import add_experiment_options
     add_experiment_options(p)
+    p.add_argument("--set", dest="sets", action="append", default=[], metavar="UNIT.PARAM=VALUE",
+                   help="fix a parameter for every point (VALUE as JSON: 2.5, true, [1,2,3]; a design parameter "
+                        "of that one value, in place of its range if the design has one); repeatable, as for run")
     p.add_argument("--dry-run", action="store_true",
                    help="print the number of points, the first few and a time estimate from sample runs of "
                         "points spread over the whole space (the first, the last and between)")
@@ -76,7 +79,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if args.dry_run:
         return _dry_run(args)
     sweep = Sweep(args.spec, workers=args.workers, out=out, scheduler=args.scheduler, cluster=args.cluster,
-                  timeout=args.timeout,
+                  timeout=args.timeout, fixed=fixed_values(args),
                   resume=args.resume, batch_size=args.batch_size, csv=args.csv, experiment=experiment_overrides(args),
                   recompute=args.recompute, quiet=getattr(args, "quiet", False), explore=args.explore,
                   start_early=True, prune=getattr(args, "prune", False))  # the local cluster starts while the results folder and payload are prepared
@@ -96,6 +99,13 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         if not_ok > 5:
             print(f"  ... and {not_ok - 5} more (see the 'message' column)", file=sys.stderr)
     return EXIT_OK if not_ok == 0 else EXIT_RUN_FAILED
+
+
+def fixed_values(args: argparse.Namespace) -> dict[str, Any] | None:
+    """The ``--set UNIT.PARAM=VALUE`` options as {target: value} (None without any); UsageError for a bad one."""
+    from cosim.cli.spec import parse_assignment
+
+    return dict(parse_assignment(text) for text in args.sets) or None
 
 
 def runs_recorded(store: Any) -> int:
@@ -148,7 +158,7 @@ def _dry_run(args: argparse.Namespace) -> int:
 
     with tempfile.TemporaryDirectory(prefix="cosim_dry_") as scratch:
         sweep = Sweep(args.spec, workers=args.workers, out=scratch, timeout=args.timeout, quiet=True,
-                      experiment=experiment_overrides(args))
+                      experiment=experiment_overrides(args), fixed=fixed_values(args))
         total = len(sweep.space)
         if not sweep.space.targets:
             from cosim.studies.sweep import NO_DESIGN_SPACE

@@ -129,7 +129,8 @@ class Spec:
         raise KeyError(name)
 
 
-def load_spec(path: str | Path, experiment: Mapping[str, Any] | None = None, variant: str | None = None) -> Spec:
+def load_spec(path: str | Path, experiment: Mapping[str, Any] | None = None, variant: str | None = None,
+              fixed: Mapping[str, Any] | None = None) -> Spec:
     """Read and check a spec: a spec.json, or an SSP (see :mod:`cosim.ssp`).
 
     ``experiment`` fields (e.g. ``{"step": 0.01}`` from the command line)
@@ -138,23 +139,45 @@ def load_spec(path: str | Path, experiment: Mapping[str, Any] | None = None, var
     does not allow (NaN, Infinity), keys given twice, too deep nesting, missing
     or unknown fields, wrong types, bad reduction or algorithm names, and every
     problem of an SSP the spec names.  ``variant`` chooses an SSP's variant (one of its SSDs) when ``path`` is
-    an SSP.
+    an SSP.  ``fixed`` (``cosim sweep --set``): see :func:`read_raw`.
     """
-    return spec_from_dict(read_raw(path, experiment, variant), path)
+    return spec_from_dict(read_raw(path, experiment, variant, fixed), path)
 
 
-def read_raw(path: str | Path, experiment: Mapping[str, Any] | None = None, variant: str | None = None) -> Any:
+def read_raw(path: str | Path, experiment: Mapping[str, Any] | None = None, variant: str | None = None,
+             fixed: Mapping[str, Any] | None = None) -> Any:
     """The content of a spec as parsed JSON, not yet checked.
 
     An SSP (``.ssp``, ``.ssd`` or a folder with SystemStructure.ssd) becomes
     the spec of its flattened system; a spec.json with ``"system"`` gets that
-    SSP's units and connections merged under its own.  Raises SpecError.
+    SSP's units and connections merged under its own.  ``fixed`` (``{'unit.port': value}``, from
+    ``cosim sweep --set``) makes each target a design parameter of that one value (in place of the design's
+    own range for it, if any): every point runs with it, and the table has its column.  Raises SpecError.
     """
-    from cosim.ssp import is_ssp, merge_system, ssp_raw_spec
+    from cosim.ssp import is_ssp, ssp_raw_spec
 
     path = Path(path)
     if is_ssp(path):
-        return ssp_raw_spec(path, experiment, variant)
+        return _with_fixed(ssp_raw_spec(path, experiment, variant), fixed)
+    return _with_fixed(_read_raw_json(path, experiment, variant), fixed)
+
+
+def _with_fixed(raw: Any, fixed: Mapping[str, Any] | None) -> Any:
+    """``raw`` with each of ``fixed`` as a one-value design parameter (see :func:`read_raw`)."""
+    if not fixed or not isinstance(raw, dict):
+        return raw
+    design = dict(raw.get("design") or {}) if isinstance(raw.get("design") or {}, dict) else {}
+    parameters = design.get("parameters") or {}
+    parameters = dict(parameters) if isinstance(parameters, dict) else {}
+    for target, value in fixed.items():
+        parameters[target] = {"values": [value]}
+    return {**raw, "design": {**design, "parameters": parameters}}
+
+
+def _read_raw_json(path: Path, experiment: Mapping[str, Any] | None, variant: str | None) -> Any:
+    """A spec.json's content (see :func:`read_raw`), its SSP system merged and ``experiment`` applied."""
+    from cosim.ssp import merge_system
+
     if variant is not None:
         raise SpecError([Problem(str(path), "$.system", f"--variant {variant} chooses a variant of an SSP, and "
                                  f"{path.name} is a spec.json", "name the variant in the spec: \"system\": "

@@ -122,7 +122,8 @@ class Sweep:
                  quiet: bool = False, experiment: dict | None = None, space_of: Any = None,
                  cluster: str | Path | None = None, recompute: bool = False, start_early: bool = False,
                  explore: bool = False, kind: str = "sweep", prune: bool = False,
-                 prune_objectives: Sequence[tuple[str, str]] | None = None, prune_constraints: Sequence[str] = ()):
+                 prune_objectives: Sequence[tuple[str, str]] | None = None, prune_constraints: Sequence[str] = (),
+                 fixed: dict[str, Any] | None = None):
         from cosim.parallel.cluster import read_cluster_file
         from cosim.system.validate import check_spec
 
@@ -136,7 +137,8 @@ class Sweep:
             read_cluster_file(cluster)  # a bad cluster file is reported before any work (ClusterFileError)
         if scheduler is not None:
             check_scheduler_address(scheduler)
-        self.system = check_spec(spec_path, experiment)  # experiment: command-line overrides
+        # experiment: command-line overrides; fixed: parameters set for every point (cosim sweep --set)
+        self.system = check_spec(spec_path, experiment, fixed=fixed)
         self.spec = self.system.spec
         _refuse_design_of_players(self.spec)
         self.space = (space_of or DesignSpace.from_spec)(self.spec)

@@ -22,16 +22,18 @@ from cosim.util.collector import collector_paused
 _ENTRY_DEPTH = {"units": 2, "connections": 2, "record": 2, "objectives": 2}
 
 
-def check_spec(path: str | Path, experiment: dict[str, Any] | None = None, variant: str | None = None) -> System:
+def check_spec(path: str | Path, experiment: dict[str, Any] | None = None, variant: str | None = None,
+               fixed: dict[str, Any] | None = None) -> System:
     """Load and check the spec (or SSP) at ``path``; returns the System when it is usable.
 
-    ``experiment`` fields override the file's (see :func:`load_spec`); ``variant`` chooses an SSP's variant.
+    ``experiment`` fields override the file's (see :func:`load_spec`); ``variant`` chooses an SSP's variant;
+    ``fixed`` (``cosim sweep --set``) makes design parameters of one value (:func:`~cosim.spec.loader.read_raw`).
     Raises SpecError with every problem of form and fit found.
     """
     # millions of small acyclic objects for 10^5 connections (see cosim.util.collector); as many problems
     with collector_paused(), suggestions_bounded():
         try:
-            return _check_spec(path, experiment, variant)
+            return _check_spec(path, experiment, variant, fixed)
         except SpecError as exc:
             from cosim.ssp import is_ssp
             from cosim.ssp.locate import at_ssd_elements
@@ -42,14 +44,15 @@ def check_spec(path: str | Path, experiment: dict[str, Any] | None = None, varia
             raise SpecError(at_ssd_elements(exc.problems, path, variant)) from None
 
 
-def _check_spec(path: str | Path, experiment: dict[str, Any] | None, variant: str | None) -> System:
+def _check_spec(path: str | Path, experiment: dict[str, Any] | None, variant: str | None,
+                fixed: dict[str, Any] | None = None) -> System:
     try:
-        return build_system(load_spec(path, experiment, variant))
+        return build_system(load_spec(path, experiment, variant, fixed))
     except SpecError as first:
         problems = list(first.problems)
         if any("malformed JSON" in p.message or p.path == "$" for p in problems):
             raise
-        raw = read_raw(path, experiment, variant)
+        raw = read_raw(path, experiment, variant, fixed)
         if not schema_problems(raw, str(path)):
             raise  # the spec's form is fine: these already are all the problems
         sanitized, broken_units = _set_aside_broken_entries(raw, str(path))
