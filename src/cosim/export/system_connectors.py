@@ -73,12 +73,21 @@ def export_problems(system: Any) -> list[Problem]:
     return problems
 
 
+def unit_feeds(system: Any, unit: Any) -> dict[str, list[dict]]:
+    """The ``feeds`` of a ``connectors`` unit into unit parameters; feeds into another ``connectors`` unit's
+    constant (a nested connector taking its value from this one) are left out: the export writes that constant
+    with its own value."""
+    others = connectors_units(system)
+    return {connector: [f for f in feeds if f["to"].rpartition(".")[0] not in others]
+            for connector, feeds in (unit.spec.options.get("feeds") or {}).items()}
+
+
 def fed_parameters(system: Any) -> dict[str, tuple[str, str, float, float]]:
     """The unit parameters the ``connectors`` units feed: 'unit.param' -> (connectors unit, its parameter,
     factor, offset)."""
     fed = {}
     for name, unit in connectors_units(system).items():
-        for connector, feeds in (unit.spec.options.get("feeds") or {}).items():
+        for connector, feeds in unit_feeds(system, unit).items():
             for feed in feeds:
                 fed[feed["to"]] = (name, connector, float(feed.get("factor", 1.0)), float(feed.get("offset", 0.0)))
     return fed
@@ -155,7 +164,7 @@ def _tree(system: Any, element_names: Callable) -> _System:
             for depth in range(1, len(path)):
                 systems[depth].connectors.append((via[depth - 1], "input", "Real", measure or None))
                 systems[depth].connections.append(("", via[depth - 1], path[depth], via[depth], None))
-        feeds = unit.spec.options.get("feeds") or {}
+        feeds = unit_feeds(system, unit)
         for constant, value in unit_type.constants.items():
             kind = next(t for python, t in _TYPES if isinstance(value, python))
             target.connectors.append((constant, "parameter", kind, None))

@@ -32,6 +32,8 @@ def ssp_raw_spec(path: str | Path, experiment: Mapping[str, Any] | None = None, 
     """The spec content of the SSP at ``path`` (its ``variant``, if given), with ``experiment`` fields (command
     line) on top.
 
+    Every system connector holding a value (a parameter connector, bound) is a parameter of its system's
+    ``connectors`` unit, feeding what its parameter connections feed (``--set Root.k=V`` sets them all).
     The run records every component's outputs and the output connectors of the root system and its sub-systems
     (``Root.sub.connector``: a ``connectors`` unit per system, see :mod:`.system_connectors`, whose inputs are
     fed by the component outputs the connectors carry, scaled as their chains scale them).  An SSP with no
@@ -49,7 +51,10 @@ def ssp_raw_spec(path: str | Path, experiment: Mapping[str, Any] | None = None, 
         raw["record"] = [c.name for c in constants]
     else:
         outputs = recorded_outputs(system, raw["units"])
-        units, connections = connector_units(outputs)
+        # every connector holding a value is a parameter of its system's connectors unit too, so that --set
+        # (and an explore re-run) can set it, and with it the FMU parameters it feeds; recorded: the outputs
+        constants = [c for c in _constants(system) if c.system not in raw["units"]]
+        units, connections = connector_units(outputs + constants)
         raw["units"].update(units)
         raw["connections"].extend(connections)
         raw["record"].extend(c.name for c in outputs)

@@ -34,6 +34,9 @@ class ConnectorSignal:
     unit: str | None = None  # of measure, of a scaled port's value as the connector carries it
     # a parameter connector's parameter connections: (unit.variable, factor, offset) it sets, as 'feeds' says
     feeds: tuple[tuple[str, float, float], ...] = ()
+    # a constant taken from another connector (a parameter connection between systems): that connector's name
+    # and the chain's factor and offset, so a value set on it reaches this one too (as the tool shows it)
+    via: tuple[str, float, float] | None = None
 
     @property
     def name(self) -> str:
@@ -70,11 +73,14 @@ def connector_signals(reading: Reading, flow: Flow, bindings: Bindings, unit_nam
                 value = factor * value + offset
         return value
 
+    def system_name(path: tuple[str, ...]) -> str:
+        return cosim_path((root_name, *path)) if root_name else cosim_path(path)
+
     feeds = _parameter_feeds(reading, flow, bindings, unit_names)
     for node in reading.nodes.values():
         if node.kind != "system":
             continue
-        system = cosim_path((root_name, *node.path)) if root_name else cosim_path(node.path)
+        system = system_name(node.path)
         for name in node.connectors:
             end = (node.path, name)
             port = cosim_part(name)  # one port of the system's connectors unit: a dot in its name becomes _
@@ -87,7 +93,10 @@ def connector_signals(reading: Reading, flow: Flow, bindings: Bindings, unit_nam
                     carried = ConnectorSignal(system, port, f"{unit_names[start[0]]}.{start[1]}", factor, offset,
                                               unit=flow.unit_after(chain, flow.unit_of(start))[0])
                 elif start in system_values:
-                    carried = ConnectorSignal(system, port, value=constant(start, chain))
+                    factor, offset = flow.compose(chain, flow.unit_of(start))
+                    source = f"{system_name(start[0])}.{cosim_part(start[1])}"
+                    carried = ConnectorSignal(system, port, value=constant(start, chain),
+                                              via=(source, factor, offset))
             elif end in system_values:
                 carried = ConnectorSignal(system, port, value=constant(end), feeds=feeds.get(end, ()))
             if carried is not None:
@@ -123,7 +132,8 @@ def _parameter_feeds(reading: Reading, flow: Flow, bindings: Bindings,
 def connector_units(signals: list[ConnectorSignal]) -> tuple[dict[str, dict], list[dict]]:
     """The ``connectors`` units (one per system, named by it) and the connections feeding them that make
     ``signals`` ports of their own: a scaled connector an input fed with its factor and offset, a constant a
-    parameter."""
+    parameter (which ``feeds`` the FMU parameters its parameter connections set, and the constants among
+    ``signals`` that take their value from it)."""
     units: dict[str, dict] = {}
     connections: list[dict] = []
     for signal in signals:
@@ -143,4 +153,11 @@ def connector_units(signals: list[ConnectorSignal]) -> tuple[dict[str, dict], li
         if not signal.unchanged:
             connection.update(factor=signal.factor, offset=signal.offset)
         connections.append(connection)
+    for signal in signals:  # a constant taken from a connector that is a port too: a value set there reaches it
+        if signal.port is None and signal.via is not None:
+            source, factor, offset = signal.via
+            system, _, connector = source.rpartition(".")
+            if connector in (units.get(system) or {}).get("parameters", {}):
+                units[system].setdefault("feeds", {}).setdefault(connector, []).append(
+                    {"to": signal.name, "factor": factor, "offset": offset})
     return units, connections
