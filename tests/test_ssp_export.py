@@ -387,3 +387,17 @@ def test_a_parameter_connector_a_design_names_is_exported_with_its_parameter_con
     assert ("$.units.sub.B.parameters.b: 'sub.B.b' is 5.0 here, but the system connector 'default.k' feeds it "
             "-0.9: an SSP holds one of them") in err
     assert not (tmp_path / "other.ssp").exists()
+
+
+def test_a_spec_without_connections_is_exported_without_an_empty_connections_element(tmp_path, capsys):
+    """examples/bouncing_ball (one unit, nothing connected): the export wrote an empty ssd:Connections, which the
+    SSP schema refuses (one Connection at least), and ended in a RuntimeError traceback (issue 38.7)."""
+    spec = Path(__file__).resolve().parent.parent / "examples" / "bouncing_ball" / "spec.json"
+    out = tmp_path / "ball.ssp"
+    assert main(["export", str(spec), "-o", str(out)]) == 0, capsys.readouterr().err
+    with zipfile.ZipFile(out) as archive:
+        ssd = etree.fromstring(archive.read("SystemStructure.ssd"))
+    assert ssd.find(".//ssd:Connections", NS) is None
+    assert len(ssd.findall(".//ssd:Component", NS)) == 1
+    again, first = _traces(companion_spec_path(out)), _traces(spec)
+    assert again.traces.equals(first.traces)  # the same FMU, the same master: the same numbers

@@ -232,6 +232,8 @@ def _ssd(system: System, fmus: dict[str, tuple[str, str]], resources: Path) -> A
             if c.transforms:
                 _e(connection, "ssc", "LinearTransformation", factor=c.factor, offset=c.offset)
     write_system_connectors(system, top, elements, connections, _e, _element_names)
+    if not len(connections):  # the schema wants one Connection at least: a system without any has no Connections
+        top.remove(connections)
     exp = spec.experiment
     annotations = _e(top, "ssd", "Annotations")
     oms_annotations = _e(_e(annotations, "ssc", "Annotation", type="org.openmodelica"), "oms", "Annotations")
