@@ -55,6 +55,7 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from cosim.execution.point_row import PointRow
+from cosim.parallel.leftovers import mark, remove_leftovers
 from cosim.units.python import import_guard
 from cosim.util.limits import LIMITS, limit
 
@@ -258,6 +259,9 @@ class PointRunner:
 def _row(point_id: str, status: str, message: str, started: float) -> PointRow:
     """The row of a point that gave no result (it failed before running, hung or crashed)."""
     return PointRow(point_id, status, message, time.perf_counter() - started)
+
+
+_leftovers_removed = False  # whether this process removed the cosim_worker_* folders killed ones left
 
 
 def _remove_own_folder() -> None:
@@ -611,7 +615,12 @@ class IsolatedRunner:
         from_child_r, from_child_w = os.pipe()
         # The child's temporary files (payload, extracted FMUs) go into a folder this
         # process owns and removes, also when the child had to be killed.
+        global _leftovers_removed
+        if not _leftovers_removed:  # those of a cosim killed with its whole process group (kill -9): issue 38.8
+            _leftovers_removed = True
+            remove_leftovers()
         self._folder = tempfile.mkdtemp(prefix="cosim_worker_")
+        mark(self._folder)  # whose it is: removed by a later start if this process is killed
         env = dict(os.environ, TMPDIR=self._folder)
         for setting in LIMITS.values():  # the limits of the client that made the payload, not this worker's
             env.pop(setting.env, None)
