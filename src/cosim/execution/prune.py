@@ -96,10 +96,11 @@ def parse_constraint(text: str) -> tuple[str, str, float] | None:
 
     if op is None:
         return None
-    if number(right) is not None and not isinstance(left, ast.Constant):
-        return ast.unparse(left), op, number(right)  # type: ignore[return-value]
-    if number(left) is not None:
-        return ast.unparse(right), flip[op], number(left)  # type: ignore[return-value]
+    right_value, left_value = number(right), number(left)
+    if right_value is not None and not isinstance(left, ast.Constant):
+        return ast.unparse(left), op, right_value
+    if left_value is not None:
+        return ast.unparse(right), flip[op], left_value
     return None
 
 

@@ -195,8 +195,8 @@ class Execution:
         row: dict[str, Any] = dict(objectives=flat, traces=traces, elapsed=elapsed, steps=progress.steps,
                                    end_time=progress.t, step_stats=algorithm.statistics())
         stopper = progress.stopper
-        if progress.status != OK and hasattr(stopper, "objectives_at_stop"):  # e.g. pruned: its bound vector
-            row["objectives"] = stopper.objectives_at_stop(flat)  # type: ignore[union-attr]
+        if progress.status != OK and stopper is not None:  # its own verdict (pruned: the bound vector)
+            row["objectives"] = stopper.objectives_at_stop(flat)
             return RunResult(progress.status, progress.stopped or "", **row)
         nan = [name for name, v in flat.items() if not math.isfinite(v)]
         if nan:

@@ -86,6 +86,12 @@ class StopCondition(Observer):
     status = "ok"
     reason: str | None = None
 
+    def objectives_at_stop(self, objectives: dict[str, float]) -> dict[str, float]:
+        """The objective columns of a run this condition stopped with a status other than ``"ok"``, from the
+        values reduced so far (``objectives``): these as they are, unless the condition knows better (a pruned
+        design's bound vector)."""
+        return objectives
+
 
 class StopWhen(StopCondition):
     """Ends the run at the first communication point where the probed column ``column`` is non-zero (the
