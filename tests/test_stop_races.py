@@ -102,3 +102,26 @@ def test_signals_at_several_offsets_never_end_as_a_complete_study(tmp_path):
             assert err.strip().splitlines()[-1] == "cosim: interrupted", err
             assert "Traceback" not in err, err
     print("outcomes:", outcomes)
+
+
+STOPPED_BEFORE_ANY_ROW = """
+import sys
+from cosim.cli.main import main
+from cosim.studies import sweep as S
+
+def evaluate_stopped_at_once(self, *args, **kwargs):
+    raise KeyboardInterrupt  # a stop as the first point is submitted: no row written
+S.Sweep._evaluate = evaluate_stopped_at_once
+sys.argv = ["cosim", "sweep", sys.argv[1], "--out", sys.argv[2], "--workers", "1"]
+sys.exit(main())
+"""
+
+
+def test_a_sweep_stopped_before_any_row_does_not_say_its_rows_are_in_the_folder(tmp_path):
+    spec = _spec(tmp_path, 4)
+    out = tmp_path / "out"
+    done = subprocess.run([sys.executable, "-c", STOPPED_BEFORE_ANY_ROW, str(spec), str(out)], capture_output=True,
+                          text=True, env=_env(), timeout=300)
+    assert done.returncode == 130, done.stderr
+    assert f"interrupted before any row was written: {out} holds none yet" in done.stderr + done.stdout
+    assert "rows so far" not in done.stderr + done.stdout

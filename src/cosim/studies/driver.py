@@ -327,6 +327,19 @@ def study_cluster(workers: int, scheduler: str | None, cluster: str | None, erro
         raise
 
 
+def interrupted_note(store: Any, out: Path, go_on: str) -> str:
+    """What an interrupted study says about its folder: how many rows it holds, or that it holds none yet
+    (it said "the rows so far are in DIR" when there were none: issue 38.7).  ``go_on`` ends the sentence."""
+    try:
+        rows = len(store.done_ids())
+    except Exception:  # noqa: BLE001 - a part half written as the stop came: the count is not worth a traceback
+        rows = -1
+    if rows == 0:
+        return f"interrupted before any row was written: {out} holds none yet; run the same command again to start"
+    held = f"the {rows} row(s) so far are" if rows > 0 else "the rows so far are"
+    return f"interrupted: {held} in {out}; run again with --resume (or resume=True from Python) to {go_on}"
+
+
 def open_room(folder: Path) -> Any:
     """The decision room of ``folder`` served on loopback from a thread while the study writes it (``--explore``):
     a :class:`cosim.analysis.room.server.RoomServer` with its ``link``; stopped by the caller.  Raises

@@ -70,6 +70,7 @@ from cosim.errors import OptimizeError, Problem, SpecError
 from cosim.execution.point_row import PointRow
 from cosim.studies.driver import (
     StudyFolder,
+    interrupted_note,
     now_utc,
     open_room,
     package_versions,
@@ -513,8 +514,7 @@ class Optimization:
         return self._finish()
 
     def _interrupted(self) -> None:
-        self._say(f"interrupted: the rows so far are in {self.out}; run again with --resume (or resume=True "
-                  "from Python) to go on")
+        self._say(interrupted_note(self.store, self.out, "go on"))
 
     def _loop(self, study: Any, dists: dict[str, Any], evaluator: Any, stored: dict[str, dict]) -> None:
         s = self.settings

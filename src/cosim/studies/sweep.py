@@ -52,7 +52,16 @@ from cosim.parallel.evaluator import check_timeout
 from cosim.parallel.isolation import IsolatedRunner, make_payload, preload_spare_children, stop_spare_children
 from cosim.parallel.point_stream import BatchSizer, PointStream
 from cosim.spec.design import DesignSpace, Point
-from cosim.studies.driver import StudyFolder, now_utc, open_room, results_writes, run_metadata, say, study_cluster
+from cosim.studies.driver import (
+    StudyFolder,
+    interrupted_note,
+    now_utc,
+    open_room,
+    results_writes,
+    run_metadata,
+    say,
+    study_cluster,
+)
 from cosim.studies.progress import StatusLine, duration
 from cosim.studies.pruning import PRUNED, FreshFronts, FrontKeeper, prune_settings, pruned_columns, pruning_order
 
@@ -278,8 +287,7 @@ class Sweep:
         return self._finish()
 
     def _interrupted(self) -> None:
-        self._say(f"interrupted: the rows so far are in {self.out}; run again with --resume (or resume=True "
-                  "from Python) to finish")
+        self._say(interrupted_note(self.store, self.out, "finish"))
 
     def _note(self, text: str) -> None:
         """A note that matters even with ``quiet`` (a file of rows set aside): always on stderr."""
