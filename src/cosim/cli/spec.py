@@ -43,6 +43,8 @@ def add_parsers(sub: Any) -> None:
     add_variant_option(p)
     p.add_argument("--set", dest="sets", action="append", default=[], metavar="UNIT.PARAM=VALUE",
                    help="set a parameter (VALUE as JSON: 2.5, true, [1,2,3]); repeatable")
+    p.add_argument("--input", metavar="TABLE", help="an FMU run alone: play this .csv/.parquet table (a 'time' "
+                   "column, one column per input) into the FMU's inputs")
     p.add_argument("--out", help="write the recorded signals to this .parquet or .csv file")
     p.add_argument("--point", metavar="ID", help="re-run this design point of a sweep, recording every output")
     p.add_argument("--results", help="the sweep's results.parquet or folder for --point (default: results/<name>/)")
@@ -95,6 +97,19 @@ def parse_assignment(text: str) -> tuple[str, Any]:
         return target.strip(), value
 
 
+def _fmu_with_input(args: argparse.Namespace) -> Any:
+    """``cosim run model.fmu --input signals.csv``: the FMU alone with the table played into its inputs."""
+    from cosim.spec.fmu_alone import fmu_raw_spec, is_fmu
+    from cosim.spec.loader import spec_from_dict
+    from cosim.system.builder import build_system
+
+    path = Path(args.spec)
+    if not is_fmu(path):
+        raise UsageError(f"--input {args.input}: plays a table into an FMU run alone (cosim run model.fmu "
+                         "--input signals.csv); a spec connects a player unit instead")
+    return build_system(spec_from_dict(fmu_raw_spec(path, experiment_overrides(args), Path(args.input)), path))
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     """``cosim run spec.json``: run one point, print objectives, optionally write traces.
 
@@ -107,7 +122,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if out is not None and out.suffix.lower() not in (".parquet", ".csv"):
         raise UsageError(f"--out {out}: use a .parquet or .csv file name")
     sets = dict(parse_assignment(text) for text in args.sets)
-    system = check_spec(args.spec, experiment_overrides(args), args.variant)
+    system = _fmu_with_input(args) if args.input else check_spec(args.spec, experiment_overrides(args), args.variant)
     values: dict[str, Any] = {}
     if args.point:  # values from the sweep's table; traces by default to <results>/points/<ID>.parquet
         from cosim.analysis.rerun import prepare_point_run

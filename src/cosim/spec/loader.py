@@ -149,16 +149,19 @@ def read_raw(path: str | Path, experiment: Mapping[str, Any] | None = None, vari
     """The content of a spec as parsed JSON, not yet checked.
 
     An SSP (``.ssp``, ``.ssd`` or a folder with SystemStructure.ssd) becomes
-    the spec of its flattened system; a spec.json with ``"system"`` gets that
+    the spec of its flattened system; an FMU the spec of it alone (:mod:`cosim.spec.fmu_alone`); a spec.json with ``"system"`` gets that
     SSP's units and connections merged under its own.  ``fixed`` (``{'unit.port': value}``, from
     ``cosim sweep --set``) makes each target a design parameter of that one value (in place of the design's
     own range for it, if any): every point runs with it, and the table has its column.  Raises SpecError.
     """
+    from cosim.spec.fmu_alone import fmu_raw_spec, is_fmu
     from cosim.ssp import is_ssp, ssp_raw_spec
 
     path = Path(path)
     if is_ssp(path):
         return _with_fixed(ssp_raw_spec(path, experiment, variant), fixed)
+    if is_fmu(path):  # an FMU alone: one unit, its default experiment, every output recorded
+        return _with_fixed(fmu_raw_spec(path, experiment), fixed)
     return _with_fixed(_read_raw_json(path, experiment, variant), fixed)
 
 
