@@ -44,6 +44,8 @@ EXAMPLES: dict[str, list[tuple[str, str]]] = {
                    f"{TABLE}/surrogate/"),
                   (f"cosim surrogate {TABLE} --predict {TABLE}/designs.csv -o {TABLE}/predicted.csv",
                    "predictions and uncertainty for new designs")],
+    "export-surrogate": [(f"cosim export-surrogate {TABLE} -o {TABLE}/energy.fmu",
+                          "the surrogates as an FMI 2.0 FMU in C: a cheap stand-in unit")],
     "explore": [(f"cosim explore {TABLE}", "the decision room in the browser (prints its link)")],
 }
 

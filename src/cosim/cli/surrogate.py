@@ -39,6 +39,7 @@ def add_surrogate_parsers(sub: Any) -> None:
     p.add_argument("-o", "--out", metavar="PREDICTED.csv",
                    help="with --predict: the table to write (the designs, each objective and OBJ_std)")
     p.set_defaults(handler=cmd_surrogate)
+    add_export_surrogate_parser(sub)
 
 
 def cmd_surrogate(args: argparse.Namespace) -> int:
@@ -114,4 +115,34 @@ def _predict(args: argparse.Namespace) -> int:
     predicted.to_parquet(out, index=False) if out.suffix.lower() == ".parquet" else predicted.to_csv(out, index=False)
     print(f"written: {out}: {len(predicted)} designs, {', '.join(wanted)} with their standard deviation (_std)"
           + (" and p_fail" if "p_fail" in predicted.columns else ""))
+    return EXIT_OK
+
+
+def add_export_surrogate_parser(sub: Any) -> None:
+    """Register ``export-surrogate`` on the ``cosim`` subparsers ``sub``."""
+    p = sub.add_parser("export-surrogate", help="the surrogates of DIR/surrogate/ as an FMI co-simulation FMU in "
+                                                "C (parameters: the design; outputs: predictions, uncertainty)")
+    p.add_argument("table", help="the results folder whose surrogate/ holds models.json (cosim surrogate DIR)")
+    p.add_argument("-o", "--out", required=True, metavar="OBJECTIVE.fmu", help="the FMU to write")
+    p.add_argument("--objective", action="append", metavar="OBJ",
+                   help="only this objective's surrogate (repeatable; default: all)")
+    p.add_argument("--fmi", choices=("2", "3"), default="2", help="FMI version (default 2)")
+    p.set_defaults(handler=cmd_export_surrogate)
+
+
+def cmd_export_surrogate(args: argparse.Namespace) -> int:
+    """``cosim export-surrogate DIR -o objective.fmu``."""
+    from cosim.analysis.surrogate import read, surrogate_folder
+    from cosim.errors import UsageError
+    from cosim.export.surrogate_fmu import export_surrogate_fmu, output_names, parameter_name
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".fmu":
+        raise UsageError(f"-o {out}: name the FMU '*.fmu'")
+    surrogates = read(surrogate_folder(args.table))  # checks the file is ours before anything is built
+    export_surrogate_fmu(surrogates.to_json(), out, args.objective, int(args.fmi))
+    chosen = args.objective or list(surrogates.objectives)
+    print(f"{out}: FMI {args.fmi}.0 co-simulation FMU (C, no Python at run time); parameters "
+          f"{', '.join(parameter_name(p) for p in surrogates.parameters)}; outputs "
+          f"{', '.join(n for o in chosen for n in output_names(o))}")
     return EXIT_OK

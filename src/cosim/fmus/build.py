@@ -148,7 +148,29 @@ def build_fmu(name: str, fmi_version: int, out_dir: str | os.PathLike,
     """
     _check_version(fmi_version)
     folder = _model_dir(name)
-    digest = source_digest(name, fmi_version, interfaces)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    return build_model_folder(folder, fmi_version, out / fmu_filename(name, fmi_version), interfaces,
+                              digest=source_digest(name, fmi_version, interfaces))
+
+
+def build_model_folder(folder: Path, fmi_version: int, target: Path, interfaces: tuple[str, ...] | None = None,
+                       digest: str = "", extra_sources: tuple[Path, ...] = ()) -> Path:
+    """Compile the model in ``folder`` (``model.json``, ``model.c``; it need not lie in ``fmus/``) into the FMU
+    ``target``, with ``extra_sources`` (C files; their folders are on the include path) compiled in too.
+
+    ``digest`` goes into the instantiation token (default: one of the folder's files).  This is how a model
+    written elsewhere (``cosim export-surrogate``'s generated one) reuses the framework in ``common/``.
+    Raises :class:`FmuBuildError` as :func:`build_fmu` does; the model's name must be its folder's.
+    """
+    folder = Path(folder)
+    name = folder.name
+    if not digest:
+        h = hashlib.sha256()
+        for path in sorted(folder.iterdir()):
+            if path.is_file():
+                h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+        digest = h.hexdigest()
     try:
         model = load_model(folder / "model.json", digest=digest)
         offered = model.offers(tuple(interfaces) if interfaces is not None else None)
@@ -159,19 +181,20 @@ def build_fmu(name: str, fmi_version: int, out_dir: str | os.PathLike,
     cc = c_compiler()
     include = fmi_headers_folder()
     platform_folder, suffix = binaries_platform(fmi_version)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    target = out / fmu_filename(name, fmi_version)
+    target = Path(target)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    extra_includes = sorted({f"-I{Path(p).resolve().parent}" for p in extra_sources})
 
-    with tempfile.TemporaryDirectory(prefix=f"build-{name}-", dir=out) as tmp:
+    with tempfile.TemporaryDirectory(prefix=f"build-{name}-", dir=target.parent) as tmp:
         work = Path(tmp)
         (work / "model_generated.h").write_text(generated_header(model, offered))
         (work / "model_generated.c").write_text(generated_source(model))
         xml = fmi2_model_description(model, offered) if fmi_version == 2 else fmi3_model_description(model, offered)
         library = work / f"{name}{suffix}"
         sources = [COMMON_DIR / "framework.c", COMMON_DIR / f"fmi{fmi_version}.c", COMMON_DIR / "model_exchange.c",
-                   COMMON_DIR / f"fmi{fmi_version}_me.c", folder / "model.c", work / "model_generated.c"]
-        command = [cc, *CFLAGS, f"-I{work}", f"-I{COMMON_DIR}", f"-I{folder}", f"-I{include}",
+                   COMMON_DIR / f"fmi{fmi_version}_me.c", folder / "model.c", work / "model_generated.c",
+                   *map(Path, extra_sources)]
+        command = [cc, *CFLAGS, f"-I{work}", f"-I{COMMON_DIR}", f"-I{folder}", *extra_includes, f"-I{include}",
                    *map(str, sources), "-o", str(library), "-lm"]
         result = subprocess.run(command, capture_output=True, text=True)
         if result.returncode != 0:
@@ -180,7 +203,7 @@ def build_fmu(name: str, fmi_version: int, out_dir: str | os.PathLike,
         with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:
             zf.writestr("modelDescription.xml", xml)
             zf.write(library, f"binaries/{platform_folder}/{name}{suffix}")
-        os.replace(partial, target)  # atomic on one file system: tmp is inside out_dir
+        os.replace(partial, target)  # atomic on one file system: tmp is beside the target
     return target
 
 
