@@ -114,6 +114,14 @@ def test_command_fits_predicts_and_refuses_bad_input(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "quadratic" in out and "poly 2" in out and "u.c" in out and "balanced accuracy" in out
     assert (folder / "surrogate" / "models.json").is_file() and (folder / "surrogate" / "summary.csv").is_file()
+    # cosim report shows them: Q², ranking, the predicted-vs-simulated figure
+    stored = read(folder / "surrogate").objectives["quadratic"]
+    assert main(["report", str(folder), "-o", str(tmp_path / "report.html")]) == 0
+    page = (tmp_path / "report.html").read_text()
+    section = page[page.index("<h2>Surrogates and their prognosis quality</h2>"):]
+    assert f"<td class='l'>quadratic</td><td class=''>poly 2</td><td class=''>{stored.fitted.q2:.6g}</td>" in section
+    assert "u.a " in section and "alt='figure'" in section.split("<h2>")[1]
+    assert len(stored.fitted.simulated) == len(stored.fitted.cross_validated) == stored.rows
     designs = tmp_path / "designs.csv"
     pd.DataFrame({"u.a": [0.2, 0.5], "u.b": [1.0, 0.5], "u.c": [0.0, 0.3]}).to_csv(designs, index=False)
     predicted = tmp_path / "predicted.csv"

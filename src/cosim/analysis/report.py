@@ -26,6 +26,7 @@ from cosim.analysis.pareto import pareto_mask
 from cosim.analysis.plots import draw_front, new_figure, scatter_cloud
 from cosim.analysis.sensitivity import influences
 from cosim.analysis.table import ResultsTable
+from cosim.errors import AnalysisError
 
 MAX_CLOUDS = 6
 MAX_FRONT_ROWS = 50
@@ -102,7 +103,7 @@ def build_report(table: ResultsTable) -> str:
              _sobol_section(table), _optimization_section(table),
              _status_section(table), _objective_section(table, parameters, objectives, ok),
              _pareto_section(table, parameters, ok & table.feasible_mask()),
-             _sensitivity_section(table, parameters, objectives, ok),
+             _sensitivity_section(table, parameters, objectives, ok), _surrogate_section(table),
              _figure_section(table, parameters, objectives, ok), "</body></html>"]
     return "\n".join(parts)
 
@@ -288,6 +289,49 @@ def _sobol_section(table: ResultsTable) -> str:
         text += f"<figure><img alt='indices' src='data:image/png;base64,{data}'><figcaption>Indices with " \
                 "their confidence intervals.</figcaption></figure>"
     return text
+
+
+def _surrogate_section(table: ResultsTable) -> str:
+    """The surrogates ``cosim surrogate`` stored beside the table: Q² per objective, the parameters ranked by
+    their total Sobol index, and each objective's simulated values against their k-fold predictions."""
+    from cosim.analysis.surrogate import read, surrogate_folder
+
+    head = "<h2>Surrogates and their prognosis quality</h2>"
+    folder = surrogate_folder(table.path.parent)
+    if not (folder / "models.json").is_file():
+        return head + ("<p class='note'>None fitted yet: <code>cosim surrogate DIR</code> fits one per objective "
+                       "and the next report shows them here.</p>")
+    try:
+        surrogates = read(folder)
+    except AnalysisError as exc:
+        return head + f"<p class='warn'>{html.escape(str(exc))}</p>"
+    text = head + ("<p>Q² (coefficient of prognosis) is 1 - the squared error of each design's prediction by the "
+                   "surrogate fitted without it (5-fold cross-validation) / the objective's variance: 1 is a "
+                   "perfect prognosis, 0 no better than the mean. Parameters are ranked by the total Sobol index "
+                   "of the surrogate (its variance due to the parameter with all its interactions).</p>")
+    rows = [[name, s.fitted.candidate, s.fitted.q2, s.fitted.rmse, s.rows,
+             ", ".join(f"{i.parameter} {i.total:.2f}" for i in s.ranking)] for name, s in surrogates.objectives.items()]
+    text += _table(["objective", "surrogate", "Q²", "RMSE", "designs", "ranking (total Sobol index)"], rows)
+    if surrogates.failures is not None:
+        f = surrogates.failures
+        text += (f"<p>Failed designs: {f.failed} of {f.total}; the classifier of where they fail has a 5-fold "
+                 f"balanced accuracy of {f.balanced_accuracy:.3f} (0.5: guessing).</p>")
+    figures = []
+    for name, s in list(surrogates.objectives.items())[:MAX_CLOUDS]:
+        if not s.fitted.simulated:
+            continue
+        fig = new_figure(4.5, 4.0)
+        ax = fig.add_subplot(1, 1, 1)
+        simulated, predicted = np.asarray(s.fitted.simulated), np.asarray(s.fitted.cross_validated)
+        ax.scatter(simulated, predicted, s=8, alpha=0.6)
+        low, high = float(min(simulated.min(), predicted.min())), float(max(simulated.max(), predicted.max()))
+        ax.plot([low, high], [low, high], color="grey", linewidth=1)
+        ax.set_xlabel(f"simulated {table.label(name)}")
+        ax.set_ylabel("predicted (5-fold)")
+        ax.set_title(f"{name}: Q² {s.fitted.q2:.4f}")
+        figures.append(f"<figure>{png_base64(fig)}<figcaption>{html.escape(name)}: simulated against the "
+                       "prediction of the surrogate fitted without the design.</figcaption></figure>")
+    return text + "".join(figures)
 
 
 def _sensitivity_section(table: ResultsTable, parameters: list[str], objectives: list[str], ok: np.ndarray) -> str:

@@ -9,7 +9,7 @@ regularisation) and keeps the one with the highest Q²; the chosen one is then r
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -32,6 +32,8 @@ class Fitted:
     rmse: float  # k-fold root-mean-square error, in the objective's unit
     candidate: str  # e.g. "gp matern52", "poly 3"
     tried: dict[str, float]  # candidate -> its k-fold Q²
+    simulated: list[float] = field(default_factory=list)  # the fitted designs' objective values ...
+    cross_validated: list[float] = field(default_factory=list)  # ... and their k-fold predictions (Q²'s plot)
 
 
 def scaling_of(x: np.ndarray, y: np.ndarray) -> Scaling:
@@ -135,7 +137,8 @@ def fit_objective(x: np.ndarray, y: np.ndarray, method: str = "auto", folds: int
     model = fit_candidate(name, x, y, seed)
     if isinstance(model, Polynomial):
         model.error = float(np.sqrt(np.mean((y - predicted) ** 2))) / model.scaling.y_scale
-    return Fitted(model, q, float(np.sqrt(np.mean((y - predicted) ** 2))), name, tried)
+    return Fitted(model, q, float(np.sqrt(np.mean((y - predicted) ** 2))), name, tried, y.tolist(),
+                  predicted.tolist())
 
 
 def _terms(d: int, degree: int) -> int:

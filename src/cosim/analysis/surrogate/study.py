@@ -73,6 +73,8 @@ class SurrogateSet:
                 "notes": self.notes,
                 "objectives": {name: {"model": s.fitted.model.to_json(), "q2": s.fitted.q2, "rmse": s.fitted.rmse,
                                       "candidate": s.fitted.candidate, "tried": s.fitted.tried, "rows": s.rows,
+                                      "simulated": s.fitted.simulated,
+                                      "cross_validated": s.fitted.cross_validated,
                                       "ranking": [vars(i) for i in s.ranking]}
                                for name, s in self.objectives.items()},
                 "failures": self.failures.to_json() if self.failures is not None else None}
@@ -162,7 +164,8 @@ def read(folder: str | Path) -> SurrogateSet:
     objectives = {}
     for name, entry in data["objectives"].items():
         fitted = Fitted(model_from_json(entry["model"]), float(entry["q2"]), float(entry["rmse"]),
-                        str(entry["candidate"]), dict(entry["tried"]))
+                        str(entry["candidate"]), dict(entry["tried"]), list(entry.get("simulated", [])),
+                        list(entry.get("cross_validated", [])))
         objectives[name] = ObjectiveSurrogate(name, fitted, [Influence(**i) for i in entry["ranking"]],
                                               int(entry["rows"]))
     failures = FailureModel.from_json(data["failures"]) if data.get("failures") else None
