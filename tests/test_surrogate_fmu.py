@@ -96,3 +96,16 @@ def test_export_surrogate_refuses_bad_input(study, tmp_path, capsys):
         err = capsys.readouterr().err
         assert "Traceback" not in err and all(w in err for w in words), err
     assert not (tmp_path / "x.fmu").exists()
+
+
+def test_fmi3_build_validates_and_predicts_the_same(study, tmp_path):
+    from fmpy import simulate_fmu
+
+    surrogates = read(study / "surrogate")
+    fmu = export_surrogate_fmu(surrogates.to_json(), tmp_path / "objective3.fmu", ["smooth"], fmi_version=3)
+    assert read_model_description(str(fmu)).fmiVersion == "3.0"
+    assert validate_fmu(str(fmu)) == []
+    result = simulate_fmu(str(fmu), stop_time=0.02, output_interval=0.01,
+                          start_values={"u_a": 0.4, "u_b": 0.7, "u_c": -0.2}, output=["smooth", "smooth_std"])
+    mean, std = surrogates.objectives["smooth"].fitted.model.predict(np.array([[0.4, 0.7, -0.2]]))
+    assert result["smooth"][-1] == mean[0] and result["smooth_std"][-1] == std[0]

@@ -21,6 +21,7 @@ GP_SHAPES = ("matern32", "matern52")
 POLY_DEGREES = (1, 2, 3, 4, 5, 6)
 RIDGE_ALPHAS = tuple(10.0 ** np.arange(-10, 3))
 FOLDS = 5
+RESTARTS = 2  # more optimiser starts from random hyper-parameters: each costs a whole fit
 
 
 @dataclass
@@ -45,7 +46,7 @@ def scaling_of(x: np.ndarray, y: np.ndarray) -> Scaling:
 
 
 def fit_gp(x: np.ndarray, y: np.ndarray, shape: str, seed: int = 0) -> GaussianProcess:
-    """A Gaussian process with an anisotropic kernel, hyper-parameters by maximum likelihood (3 restarts)."""
+    """A Gaussian process with an anisotropic kernel, hyper-parameters by maximum likelihood (RESTARTS restarts)."""
     from sklearn.gaussian_process import GaussianProcessRegressor
     from sklearn.gaussian_process.kernels import RBF, ConstantKernel, Matern, WhiteKernel
 
@@ -57,7 +58,7 @@ def fit_gp(x: np.ndarray, y: np.ndarray, shape: str, seed: int = 0) -> GaussianP
         Matern(np.full(d, 0.5), bounds, nu=1.5 if shape == "matern32" else 2.5)
     # the noise floor keeps the kernel matrix well conditioned (its Cholesky factor goes into the model)
     kernel = ConstantKernel(1.0, (1e-3, 1e3)) * shape_kernel + WhiteKernel(1e-6, (1e-10, 1e-1))
-    gp = GaussianProcessRegressor(kernel, alpha=0.0, normalize_y=False, n_restarts_optimizer=3, random_state=seed)
+    gp = GaussianProcessRegressor(kernel, alpha=0.0, normalize_y=False, n_restarts_optimizer=RESTARTS, random_state=seed)
     with warnings.catch_warnings():  # a hyper-parameter at its bound is reported by Q², not by a warning
         warnings.simplefilter("ignore")
         gp.fit(z, t)
@@ -123,6 +124,14 @@ def fit_objective(x: np.ndarray, y: np.ndarray, method: str = "auto", folds: int
     if len(y) < folds + 1:
         raise AnalysisError(f"{len(y)} designs with a value: a surrogate with {folds}-fold cross-validation needs "
                             f"at least {folds + 1}")
+    from threadpoolctl import threadpool_limits
+
+    # the matrices are small (hundreds): BLAS threads only spin, and cost twice the CPU on a shared machine
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _fit_best(x, y, method, folds, seed)
+
+
+def _fit_best(x: np.ndarray, y: np.ndarray, method: str, folds: int, seed: int) -> Fitted:
     tried: dict[str, float] = {}
     best: tuple[float, str, np.ndarray] | None = None
     for name in candidates(method):
