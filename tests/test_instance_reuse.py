@@ -4,7 +4,10 @@ first point and turns reuse off; ``"reuse": false`` makes one unit anew for ever
 
 from __future__ import annotations
 
+import logging
 import struct
+
+import pytest
 
 from cosim import Execution, build_system, load_spec
 from cosim.execution.point import run_point
@@ -14,6 +17,13 @@ from cosim.units.protocol import ElementRef
 
 POINTS = [{"a.a": -1.0 - 0.3 * i, "b.a": -2.0 + 0.1 * i} for i in range(5)]
 
+
+
+@pytest.fixture(autouse=True)
+def _cosim_notes_reach_caplog(caplog):
+    """cosim's notes are INFO records of the 'cosim' loggers; an in-process `cosim` command run earlier in this
+    worker may have set that logger's level higher (cli.main does, for its own terminal): set it for each test."""
+    caplog.set_level(logging.INFO, logger="cosim")
 
 def system_of(write_spec, version: int = 2, reuse_a: bool = True):
     ode = str(ensure_built("linear_ode", version))

@@ -91,3 +91,10 @@ def test_one_cli_entry_dispatches_to_subcommand_modules_that_never_import_it():
                 names = {a.name for a in node.names}
                 assert module not in (".main", "cosim.cli.main"), path
                 assert not (module in ("cosim.cli", ".") and "main" in names), path
+
+
+def test_the_surrogate_command_offers_the_library_s_methods_and_row_limit():
+    from cosim.analysis.surrogate import fit, study
+    from cosim.cli import surrogate
+
+    assert surrogate.METHODS == fit.METHODS and surrogate.MAX_ROWS == study.MAX_ROWS

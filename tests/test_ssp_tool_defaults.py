@@ -6,6 +6,7 @@ DefaultExperiment and oms_ma step removed, around linear_ode built from src/cosi
 from __future__ import annotations
 
 import json
+import logging
 import re
 
 import pandas as pd
@@ -15,6 +16,12 @@ from cosim.cli.main import main
 
 from .ssp_fixtures import oms3_expected, oms3_files, oms3_ssd, write_archive
 
+
+@pytest.fixture(autouse=True)
+def _cosim_notes_reach_caplog(caplog):
+    """cosim's notes are INFO records of the 'cosim' loggers; an in-process `cosim` command run earlier in this
+    worker may have set that logger's level higher (cli.main does, for its own terminal): set it for each test."""
+    caplog.set_level(logging.INFO, logger="cosim")
 
 def _bare_ssd() -> str:
     ssd = re.sub(r"<ssd:DefaultExperiment.*?</ssd:DefaultExperiment>", "", oms3_ssd(), flags=re.S)

@@ -351,3 +351,7 @@ class AnnotationNumberError(ValueError):
 
 class UnitImportError(ImportError):
     """A unit's module exited or hung while being imported."""
+
+
+class KernelUnavailable(RuntimeError):
+    """The kernel cannot be built here (no C compiler, a compile error); the message says why."""

@@ -13,14 +13,15 @@ from typing import Any
 
 from cosim.cli.exit_codes import EXIT_OK
 
+# cosim.analysis.surrogate.fit.METHODS and study.MAX_ROWS, written here because importing cosim.analysis imports
+# pandas, which `cosim --help` must not (tests/test_single_sources.py checks the two stay equal)
+METHODS = ("auto", "gp", "poly")
+MAX_ROWS = 500
 TRUST_BELOW = 0.8  # a Q² under this is said aloud: the surrogate explains too little to decide on
 
 
 def add_surrogate_parsers(sub: Any) -> None:
     """Register ``surrogate`` and ``export-surrogate`` on the ``cosim`` subparsers ``sub``."""
-    from cosim.analysis.surrogate.fit import METHODS
-    from cosim.analysis.surrogate.study import MAX_ROWS
-
     p = sub.add_parser("surrogate", help="fit a surrogate of each objective (Q², parameter ranking) into "
                                          "DIR/surrogate/, or predict new designs with it")
     p.add_argument("table", help="results folder (or its results.parquet / a .csv with --spec)")

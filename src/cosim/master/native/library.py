@@ -17,13 +17,11 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Callable
 
+from cosim.errors import KernelUnavailable
+
 SOURCE = Path(__file__).resolve().parent / "kernel.c"
 CFLAGS = ("-shared", "-fPIC", "-O2", "-std=c99", "-ffp-contract=off", "-Wall", "-Wextra")
 LIBRARY = "libcosim_kernel.so"
-
-
-class KernelUnavailable(RuntimeError):
-    """The kernel cannot be built here (no C compiler, a compile error); the message says why."""
 
 
 def _digest() -> str:
