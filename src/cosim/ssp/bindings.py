@@ -239,10 +239,10 @@ class Bindings:
             node = nodes[end[0]]
             if node.kind != "component" or node.fmu is None or variable_of(node, end[1]) is None:
                 continue
-            chain = flow.chain(end)
-            start = chain[0].start
-            if start not in system_values:
+            chain = self.valued_chain(flow.chain(end))
+            if chain is None:
                 continue
+            start = chain[0].start
             depth, order, value, unit, extra, label = system_values[start]
             via = f"system connector '{'.'.join((*start[0], start[1]))}' (parameter connection)"
             direct = chosen.get(end)
@@ -271,6 +271,20 @@ class Bindings:
                 self._assign(units, unit_names, target, value, unit, extra, label, node)
         for end, (value, extra, label) in fed.items():
             self._assign(units, unit_names, end, value, None, extra, label, nodes[end[0]])
+
+    def valued_chain(self, chain: list) -> list | None:
+        """The part of a connection ``chain`` (as :meth:`Flow.chain` gives it) from the system connector whose
+        bound value reaches its end: the one bound by the highest system (SSP: a higher level wins), the
+        upstream one at one level (a connection feeds the connector it ends at).  A connector bound by nobody
+        passes the value of one further down through, so a root connector without a value, connected to a
+        sub-system's bound connector, leaves that binding in force.  None when no connector of the chain
+        holds a value.  Valid after :meth:`apply` chose ``system_values``."""
+        best: int | None = None
+        for i, edge in enumerate(chain):
+            value = self.system_values.get(edge.start)
+            if value is not None and (best is None or value[0] < self.system_values[chain[best].start][0]):
+                best = i
+        return None if best is None else chain[best:]
 
     def converted(self, value: float, unit: str | None, extra: tuple, label: str, target_unit: tuple) -> float:
         """A bound Real value in the target's unit: the .ssv unit converted (unless the mapping suppresses it),

@@ -85,20 +85,23 @@ def connector_signals(reading: Reading, flow: Flow, bindings: Bindings, unit_nam
             end = (node.path, name)
             port = cosim_part(name)  # one port of the system's connectors unit: a dot in its name becomes _
             carried: ConnectorSignal | None = None
-            if end in flow.into:
-                chain = flow.chain(end)
+            chain = flow.chain(end) if end in flow.into else []
+            if chain and reading.nodes[chain[0].start[0]].kind == "component":
                 start = chain[0].start
-                if reading.nodes[start[0]].kind == "component" and start[0] in unit_names:
+                if start[0] in unit_names:
                     factor, offset = flow.compose(chain, flow.unit_of(start))
                     carried = ConnectorSignal(system, port, f"{unit_names[start[0]]}.{start[1]}", factor, offset,
                                               unit=flow.unit_after(chain, flow.unit_of(start))[0])
-                elif start in system_values:
-                    factor, offset = flow.compose(chain, flow.unit_of(start))
+            else:  # a constant: fed by a connector holding a value, or bound here (the higher binding wins)
+                valued, own = bindings.valued_chain(chain), system_values.get(end)
+                if valued is not None and (own is None or system_values[valued[0].start][0] <= own[0]):
+                    start = valued[0].start
+                    factor, offset = flow.compose(valued, flow.unit_of(start))
                     source = f"{system_name(start[0])}.{cosim_part(start[1])}"
-                    carried = ConnectorSignal(system, port, value=constant(start, chain),
+                    carried = ConnectorSignal(system, port, value=constant(start, valued),
                                               via=(source, factor, offset))
-            elif end in system_values:
-                carried = ConnectorSignal(system, port, value=constant(end), feeds=feeds.get(end, ()))
+                elif own is not None:
+                    carried = ConnectorSignal(system, port, value=constant(end), feeds=feeds.get(end, ()))
             if carried is not None:
                 signals[carried.name] = carried
                 signals.setdefault(f"{cosim_path(node.path)}.{port}" if node.path else port, carried)
@@ -121,9 +124,12 @@ def _parameter_feeds(reading: Reading, flow: Flow, bindings: Bindings,
         if variable is None or variable.causality not in ("parameter", "structuralParameter"):
             continue
         chain = flow.chain(end)
-        start = chain[0].start
-        if nodes[start[0]].kind != "system":
+        if nodes[chain[0].start[0]].kind != "system":
             continue
+        # the connector whose value reaches the variable (a connector bound by nobody passes one further down
+        # through); a chain holding no value at all still feeds from its first connector
+        chain = bindings.valued_chain(chain) or chain
+        start = chain[0].start
         factor, offset = flow.compose(chain, flow.unit_of(start))
         feeds.setdefault(start, []).append((f"{unit_names[end[0]]}.{end[1]}", factor, offset))
     return {start: tuple(targets) for start, targets in feeds.items()}
