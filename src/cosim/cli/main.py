@@ -25,6 +25,7 @@ __all__ = ["EXIT_INTERNAL", "EXIT_OK", "EXIT_RUN_FAILED", "EXIT_USAGE", "UsageEr
 # parser; this module only builds the parser from them, dispatches, and maps outcomes to exit codes.
 SUBCOMMAND_MODULES = (
     ("spec", "add_parsers"),  # validate, run, inspect
+    ("new", "add_new_parser"),  # new
     ("export", "add_export_parsers"),  # export, export-fmu
     ("sweep", "add_sweep_parser"),  # sweep
     ("optimize", "add_optimize_parser"),  # optimize
