@@ -137,3 +137,25 @@ def dask_processes(tmp_path_factory):
     finally:
         kill_group(workers)
         kill_group(scheduler)
+
+
+@pytest.fixture(autouse=True)
+def _native_runs_twinned_on_the_python_master(request, monkeypatch):
+    """In the modules of kernel_twins.TWIN_MODULES every run on the native kernel is repeated on the Python
+    master and must give the same bits (kernel_twins.py)."""
+    from . import kernel_twins
+
+    if request.module.__name__.rsplit(".", 1)[-1] in kernel_twins.TWIN_MODULES:
+        from cosim.execution.run import Execution
+
+        monkeypatch.setattr(Execution, "run", kernel_twins.twinned_run(Execution.run, request.node.nodeid))
+    yield
+
+
+
+def pytest_terminal_summary(terminalreporter):
+    from . import kernel_twins
+
+    if kernel_twins.compared:
+        terminalreporter.write_line(f"native kernel: {len(kernel_twins.compared)} runs of "
+                                    f"{len(set(kernel_twins.compared))} tests repeated on the Python master, equal")

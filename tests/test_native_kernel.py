@@ -20,6 +20,7 @@ from cosim.fmus.build import ensure_built
 from cosim.master.native.algorithm import NativeFixedStep
 
 from .conftest import python_unit
+from .kernel_twins import assert_identical
 
 ALGORITHMS = ("gauss-seidel", "jacobi", "jacobi-delayed")
 REDUCTIONS = ("final", "initial", "min", "max", "mean", "integral", "integral_abs", "rms", "time_of_max", "time_of_min")
@@ -65,19 +66,6 @@ def both(write_spec, spec: dict, record: bool = True):
         systems.append(system)
         results.append(Execution(system, record=record).run())
     return results[0], results[1], systems[0]
-
-
-def assert_identical(native, python) -> None:
-    assert (native.status, native.message, native.steps, native.end_time) == \
-        (python.status, python.message, python.steps, python.end_time)
-    assert list(native.objectives) == list(python.objectives)
-    for name, value in native.objectives.items():  # bit for bit, NaN included
-        assert np.float64(value).tobytes() == np.float64(python.objectives[name]).tobytes(), name
-    if python.traces is None:
-        assert native.traces is None
-    else:
-        assert native.traces.equals(python.traces)
-        assert list(native.traces.dtypes) == list(python.traces.dtypes)
 
 
 @pytest.mark.parametrize("version", [2, 3])
@@ -221,3 +209,119 @@ def test_an_observer_watching_step_by_step_sees_the_same_rows(write_spec, algori
     assert_identical(native, python)
     for (t1, v1), (t2, v2) in zip(rows_native, rows_python):
         assert t1 == t2 and v1.tobytes() == v2.tobytes()
+
+
+# players, system connectors and FMI 3.0 arrays: run as data inside the kernel ----------------------------------
+
+def _table(tmp_path, fmt: str):
+    """A recorded table: irregular times, a repeated time (an event), Real, Integer and Boolean columns, ending
+    before the run does (the end values are held)."""
+    import pandas as pd
+
+    t = [0.0, 0.05, 0.13, 0.13, 0.3, 0.41, 0.5, 0.77]
+    frame = pd.DataFrame({"time": t, "u": [0.5, -1.0, 2.0, 0.25, 3.5, -0.75, 1.0, 0.0],
+                          "n": [1, 2, 2, 5, -3, 4, 4, 7],
+                          "flag": [True, False, True, True, False, True, False, True]})
+    path = tmp_path / f"rec.{fmt}"
+    frame.to_parquet(path) if fmt == "parquet" else frame.to_csv(path, index=False)
+    return path
+
+
+def player_spec(table, version: int, algorithm: str, interpolation: str) -> dict:
+    ode, counter = fmu("linear_ode", version), fmu("counter", version)
+    return {"units": {"p": {"player": str(table), "interpolation": interpolation},
+                      "a": {"fmu": ode, "parameters": {"a": -1.5, "x0": 0.2}},
+                      "c": {"fmu": counter}},
+            "connections": [{"from": "p.u", "to": "a.u", "factor": 0.5, "offset": 1.0},
+                            {"from": "p.n", "to": "c.increment"}, {"from": "p.flag", "to": "c.enable"},
+                            {"from": "a.y", "to": "c.u"}],
+            "record": ["p.u", "p.n", "p.flag", "a.y", "a.u", "c.count", "c.y", "c.enable", "c.increment"],
+            "objectives": {r: {"signal": "c.y", "reduce": r} for r in REDUCTIONS}
+            | {"pu": {"signal": "p.u", "reduce": "integral"}, "pn": {"signal": "p.n", "reduce": "max"}},
+            "experiment": {"stop": 1.0, "step": 0.03, "algorithm": algorithm}}
+
+
+@pytest.mark.parametrize("interpolation", ["linear", "hold", "nearest"])
+@pytest.mark.parametrize("algorithm", ALGORITHMS)
+def test_a_player_is_played_by_the_kernel_bit_for_bit(write_spec, tmp_path, interpolation, algorithm):
+    spec = player_spec(_table(tmp_path, "parquet"), 3 if algorithm == "jacobi" else 2, algorithm, interpolation)
+    native, python, system = both(write_spec, spec)
+    assert system.kernel.kernel == "native" and native.status == "ok", native.message
+    assert_identical(native, python)
+    traces = native.traces
+    assert traces["p.n"].dtype == np.int64 and set(traces["p.n"]) >= {1, 7}  # played, held at the end
+    assert traces["p.u"].nunique() > 5 and traces["p.u"].iloc[-1] == 0.0
+    if interpolation == "linear":  # between samples the player blends: a value no sample has
+        assert not set(traces["p.u"]) <= {0.5, -1.0, 2.0, 0.25, 3.5, -0.75, 1.0, 0.0}
+
+
+def test_a_csv_player_runs_natively_too(write_spec, tmp_path):
+    native, python, system = both(write_spec, player_spec(_table(tmp_path, "csv"), 3, "gauss-seidel", "linear"))
+    assert system.kernel.kernel == "native"
+    assert_identical(native, python)
+
+
+@pytest.mark.parametrize("algorithm", ALGORITHMS)
+def test_system_connectors_hold_what_the_kernel_gives_them(write_spec, algorithm):
+    spec = transfer_spec("plain", 2, algorithm)
+    spec["units"]["Root.sub"] = {"connectors": "Root.sub", "inputs": {"speed": "", "other": ""},
+                                 "parameters": {"k": -0.5, "n": 3, "on": True}}
+    spec["connections"] += [{"from": "a.y", "to": "Root.sub.speed", "factor": 2.0, "offset": -0.25},
+                            {"from": "b.y", "to": "Root.sub.other"}]
+    spec["record"] += ["Root.sub.speed", "Root.sub.other", "Root.sub.k", "Root.sub.n", "Root.sub.on"]
+    spec["objectives"]["speed"] = {"signal": "Root.sub.speed", "reduce": "rms"}
+    native, python, system = both(write_spec, spec)
+    assert system.kernel.kernel == "native" and native.status == "ok", native.message
+    assert_identical(native, python)
+    traces = native.traces
+    np.testing.assert_allclose(traces["Root.sub.speed"], 2.0 * traces["a.y"] - 0.25, rtol=1e-15)
+    assert (traces["Root.sub.k"] == -0.5).all() and (traces["Root.sub.n"] == 3).all() and traces["Root.sub.on"].all()
+
+
+def array_spec(version: int, algorithm: str) -> dict:
+    """An ODE into one element of an FMI 3.0 array (the others keep their values: the array is read before it
+    is set), a whole array converted into another, an element of it back into the ODE."""
+    ode, gain = fmu("linear_ode", version), fmu("gain_array", version)
+    return {"units": {"a": {"fmu": ode, "parameters": {"a": -1.0, "x0": 1.0}},
+                      "g1": {"fmu": gain, "parameters": {"k": 2.0}, "start": {"u": [0.5, 0.0, -0.5]}},
+                      "g2": {"fmu": gain, "parameters": {"k": -0.7}}},
+            "connections": [{"from": "a.y", "to": "g1.u[2]"},
+                            {"from": "g1.y", "to": "g2.u", "factor": 1.5, "offset": 0.1},
+                            {"from": "g2.y[3]", "to": "a.u"}],
+            "record": ["a.y", "a.u", "g1.u", "g1.y", "g2.y"],
+            "objectives": {"g2": {"signal": "g2.y", "reduce": "integral"}, "g1": {"signal": "g1.y", "reduce": "max"},
+                           "last": {"signal": "g2.y[2]", "reduce": "final"}},
+            "experiment": {"stop": 1.0, "step": 0.03, "algorithm": algorithm}}
+
+
+@pytest.mark.parametrize("version", [2, 3])
+@pytest.mark.parametrize("algorithm", ["gauss-seidel", "jacobi-delayed"])
+def test_arrays_are_carried_by_the_kernel_bit_for_bit(write_spec, version, algorithm):
+    native, python, system = both(write_spec, array_spec(version, algorithm))
+    assert system.kernel.kernel == "native" and native.status == "ok", native.message
+    assert_identical(native, python)
+    traces = native.traces
+    assert (traces["g1.u[1]"] == 0.5).all() and (traces["g1.u[3]"] == -0.5).all()  # kept by the partial set
+    assert traces["g1.u[2]"].nunique() > 20 and "g2[3]" in native.objectives
+
+
+def test_arrays_under_jacobi_keep_the_python_master_for_their_feed_through(write_spec):
+    spec = array_spec(3, "jacobi")
+    system = build_system(load_spec(write_spec(spec)))
+    assert system.kernel.kernel == "python" and "direct feed-through" in system.kernel.reason
+
+
+def test_arrays_are_stepped_natively_one_step_at_a_time_too(write_spec):
+    from cosim.master.observers import Observer
+
+    spec = array_spec(3, "gauss-seidel")
+    seen = []
+    for kernel in ("native", "python"):
+        spec["experiment"]["kernel"] = kernel
+        system = build_system(load_spec(write_spec(spec, f"{kernel}.json")))
+        watcher = type("W", (_Watcher, Observer), {})()
+        result = Execution(system, record=True, observers=[watcher]).run()
+        seen.append((result, watcher.rows))
+    (native, rows_native), (python, rows_python) = seen
+    assert_identical(native, python)
+    assert [v.tobytes() for _, v in rows_native] == [v.tobytes() for _, v in rows_python]

@@ -1,5 +1,6 @@
 """A run driven by the native kernel in one call: every step taken in C, the probed rows handed to the
-observers at once (``Observer.load``), so a run costs a few Python calls, not a few per step.
+observers at once (``Observer.load``) and the objectives reduced in C (:mod:`cosim.master.native.reducers`),
+so a run costs a few Python calls, not a few per step.
 
 The observers see what the Python drive loop (:meth:`cosim.execution.run.Execution._drive`) shows them: the
 same rows, the same end time and step count, ``stop_when`` at the same step, a unit ending the run with one
@@ -13,7 +14,8 @@ from typing import Any, Sequence
 import numpy as np
 
 from cosim.master.native.algorithm import NativeFixedStep
-from cosim.master.observers import Observer, StopCondition, StopWhen, TraceRecorder
+from cosim.master.native.reducers import reduce_rows
+from cosim.master.observers import ObjectiveReducer, Observer, StopCondition, StopWhen, TraceRecorder
 
 
 def takes_bulk(observers: Sequence[Observer]) -> bool:
@@ -49,6 +51,9 @@ def drive_native(algorithm: NativeFixedStep, context: Any, observers: Sequence[O
         times = np.append(times, run.ended.time)
         values = np.vstack([values, probe.read()])
     for observer in observers:
+        if isinstance(observer, ObjectiveReducer) and type(observer).results is ObjectiveReducer.results:
+            observer.load_reduced(reduce_rows(times, values, observer.objectives, observer.kept, observer.slices))
+            continue
         if not observer.load(times, values):  # stop_when: it sees each row, as in the step-by-step drive
             observer.initialized(times[0], values[0])
             for t, row in zip(times[1:], values[1:]):

@@ -2,9 +2,11 @@
 
 It implements the master contract (``advance`` takes one step in C), and :meth:`NativeFixedStep.run` takes
 every step of a run in one call, recording the probed columns into a preallocated array that the run hands to
-its observers in bulk (``Observer.load``).  It steps only FMI 2.0 / 3.0 co-simulation instances whose links
-and probes are Real, Integer or Boolean scalars (:func:`cosim.system.kernel_choice.kernel_choice` decides
-which systems qualify); the values are the Python master's bit for bit.
+its observers in bulk (``Observer.load``).  It steps FMI 2.0 / 3.0 co-simulation instances, players (their
+tables, played by kernel.c as PlayerUnit plays them) and system connectors (values kernel.c holds, written back
+to the unit after a run), whose links and probes are Real, Integer or Boolean, scalars or FMI 3.0 arrays
+(:func:`cosim.system.kernel_choice.kernel_choice` decides which systems qualify); the values are the Python
+master's bit for bit.
 """
 
 from __future__ import annotations
@@ -41,14 +43,22 @@ class KernelRun:
 
 
 def _version(unit: Any) -> int:
+    """kernel.c's KUnit.version of ``unit``: 2 or 3 (FMI co-simulation), PLAYER or STORE; raises ValueError."""
+    from cosim.units.connectors import SystemConnectors
     from cosim.units.fmu.fmi2 import Fmi2Unit
     from cosim.units.fmu.fmi3 import Fmi3Unit
+    from cosim.units.player import PlayerUnit
 
     if type(unit) is Fmi2Unit:
         return 2
     if type(unit) is Fmi3Unit:
         return 3
-    raise ValueError(f"unit '{getattr(unit, 'name', unit)}' is not an FMI 2.0/3.0 co-simulation instance")
+    if type(unit) is PlayerUnit:
+        return lib.PLAYER
+    if isinstance(unit, SystemConnectors):
+        return lib.STORE
+    raise ValueError(f"unit '{getattr(unit, 'name', unit)}' is not an FMI 2.0/3.0 co-simulation instance, a "
+                     "player or system connectors")
 
 
 def _address(function: Any) -> int:
@@ -77,8 +87,11 @@ class NativeFixedStep(FixedStep):
     def bind(self, view: SystemView) -> None:
         self.view = view
         self._units = [view.units[n] for n in view.order]
+        self._fmus = [u for u in self._units if _version(u) >= 2]
         self._index = {n: i for i, n in enumerate(view.order)}
         self._keep: list[Any] = []  # every ctypes array the kernel points into
+        self._clocks: dict[str, Any] = {}  # player name -> the time the kernel keeps for it
+        self._stores: dict[str, tuple[list[str], np.ndarray]] = {}  # connectors: their slots' names and values
         units = (lib.KUnit * len(self._units))()
         for i, unit in enumerate(self._units):
             self._describe_unit(units[i], unit)
@@ -111,11 +124,15 @@ class NativeFixedStep(FixedStep):
         self._kernel = kernel
 
     def _describe_unit(self, into: Any, unit: Any) -> None:
+        version = _version(unit)
+        into.version = version
+        if version == lib.PLAYER:
+            return self._describe_player(into, unit)
+        if version == lib.STORE:
+            return self._describe_store(into, unit)
         from cosim.units.fmu.fmpy_internals import library
 
-        version = _version(unit)
         dll = library(unit._slave)
-        into.version = version
         component = unit._component
         into.component = getattr(component, "value", component)
         prefix = f"fmi{version}"
@@ -127,17 +144,74 @@ class NativeFixedStep(FixedStep):
             into.event, into.terminate = ctypes.addressof(unit._event), ctypes.addressof(unit._terminate)
             into.early, into.last_time = ctypes.addressof(unit._early), ctypes.addressof(unit._last_time)
 
-    def _port(self, unit_name: str, refs: Sequence[ElementRef]) -> tuple[lib.KPort, list[str]]:
+    def _describe_player(self, into: Any, unit: Any) -> None:
+        """The player's table as kernel.c plays it; its ``current`` becomes the array the kernel writes."""
+        times = np.ascontiguousarray(unit.time_points, dtype=float)
+        values = np.ascontiguousarray(unit.values, dtype=float)
+        discrete = np.ascontiguousarray(unit.discrete, dtype=np.uint8)
+        unit.current = np.array(unit.current, dtype=float)  # the player's values at its time, kept by the kernel
+        clock = ctypes.c_double(unit.t)
+        into.n_samples, into.n_columns = len(times), values.shape[1]
+        into.mode = lib.MODES[unit.unit_type.interpolation]
+        into.times, into.values, into.discrete = times.ctypes.data, values.ctypes.data, discrete.ctypes.data
+        into.current, into.time = unit.current.ctypes.data, ctypes.addressof(clock)
+        self._keep += [times, values, discrete, unit.current, clock]
+        self._clocks[unit.name] = clock
+
+    def _describe_store(self, into: Any, unit: Any) -> None:
+        """System connectors: one slot per numeric scalar, the kernel's ``current``; written back after a run."""
+        names = [v.name for v in unit.description.variables if v.type in ("Real", "Integer", "Boolean")
+                 and not v.is_array]
+        held = np.array([float(getattr(unit, n)) for n in names], dtype=float)
+        into.current = held.ctypes.data
+        self._keep.append(held)
+        self._stores[unit.name] = (names, held)
+
+    def _element(self, unit_name: str, ref: ElementRef) -> tuple[int, int, int, int]:
+        """(type code, value reference or slot, values of its call, index in them) of one element; raises
+        ValueError for a type the kernel does not carry."""
         unit = self.view.units[unit_name]
-        elements = [unit.elements[r.variable][r.offset] for r in refs]
-        for e in elements:
-            if e.size != 1 or e.fmi_type not in TYPE_CODES:
-                raise ValueError(f"'{unit_name}.{e.name if hasattr(e, 'name') else ''}' is a {e.fmi_type} "
-                                 f"of {e.size} values: the native kernel carries Real, Integer and Boolean scalars")
-        vrs = (ctypes.c_uint * len(elements))(*[e.value_reference for e in elements])
-        self._keep.append(vrs)
-        port = lib.KPort(self._index[unit_name], TYPE_CODES[elements[0].fmi_type], len(elements), vrs)
-        return port, [e.fmi_type for e in elements]
+        version = _version(unit)
+        if version == lib.PLAYER:
+            column = unit.unit_type.column_index(ref)
+            return TYPE_CODES[unit.unit_type.kinds()[column]], column, 1, 0
+        if version == lib.STORE:
+            names, _ = self._stores[unit_name]
+            if ref.variable not in names:
+                raise ValueError(f"'{unit_name}.{ref.variable}' is not a number the native kernel holds")
+            kind = unit.description.variable(ref.variable).type
+            return TYPE_CODES[kind], names.index(ref.variable), 1, 0
+        e = unit.elements[ref.variable][ref.offset]
+        if e.fmi_type not in TYPE_CODES or (version == 3 and e.fmi_type == "Enumeration"):
+            raise ValueError(f"'{unit_name}.{ref.variable}' is a {e.fmi_type}: the native kernel carries Real, "
+                             "Integer and Boolean values (FMI 3.0: Float64, Int32, Boolean)")
+        return TYPE_CODES[e.fmi_type], e.value_reference, e.size, e.index
+
+    def _port(self, unit_name: str, refs: Sequence[ElementRef]) -> lib.KPort:
+        """One call's port over ``refs`` (all of one type), laid out as FmiInstance.select lays it out: value
+        references in first-seen order, an array's values all read, an array partly set read first."""
+        elements = [self._element(unit_name, r) for r in refs]
+        sizes: dict[int, int] = {}
+        for _, vr, size, _ in elements:
+            sizes.setdefault(vr, size)
+        offsets, start = {}, 0
+        for vr, size in sizes.items():
+            offsets[vr] = start
+            start += size
+        positions = [offsets[vr] + index for _, vr, _, index in elements]
+        covered: dict[int, set[int]] = {}
+        for _, vr, _, index in elements:
+            covered.setdefault(vr, set()).add(index)
+        partial = any(len(covered[vr]) < size for vr, size in sizes.items())
+        plain = positions == list(range(start)) and len(positions) == start
+        vrs = (ctypes.c_uint * len(sizes))(*sizes)
+        pos = (ctypes.c_int * len(positions))(*positions)
+        self._keep += [vrs, pos]
+        return lib.KPort(self._index[unit_name], elements[0][0], len(elements), vrs, len(sizes), start,
+                         None if plain else pos, int(partial))
+
+    def _type_of(self, unit_name: str, ref: ElementRef) -> int:
+        return self._element(unit_name, ref)[0]
 
     def _transfers(self, links: Sequence[Any]) -> list[lib.KTransfer]:
         """One transfer per (source unit, target unit, type), in the order Python's group_transfers meets them;
@@ -151,13 +225,12 @@ class NativeFixedStep(FixedStep):
             by_type: dict[int, list[tuple[ElementRef, ElementRef, float, float]]] = {}
             for c in group:
                 for s, t in zip(c.source.refs, c.target.refs):
-                    e = self.view.units[source].elements[s.variable][s.offset]
-                    by_type.setdefault(TYPE_CODES.get(e.fmi_type, -1), []).append((s, t, c.factor, c.offset))
+                    by_type.setdefault(self._type_of(source, s), []).append((s, t, c.factor, c.offset))
             for code, items in by_type.items():
                 if convert and code != 0:
                     raise ValueError("a factor or offset on a link that is not Real")
-                sport, _ = self._port(source, [s for s, _, _, _ in items])
-                tport, _ = self._port(target, [t for _, t, _, _ in items])
+                sport = self._port(source, [s for s, _, _, _ in items])
+                tport = self._port(target, [t for _, t, _, _ in items])
                 if sport.type != tport.type:
                     raise ValueError(f"a link from {source} to {target} changes the value's type")
                 factor = (ctypes.c_double * len(items))(*[f for _, _, f, _ in items])
@@ -187,12 +260,11 @@ class NativeFixedStep(FixedStep):
         for name, refs, columns in probes:
             by_type: dict[int, tuple[list[ElementRef], list[int]]] = {}
             for ref, column in zip(refs, columns):
-                e = self.view.units[name].elements[ref.variable][ref.offset]
-                by_type.setdefault(TYPE_CODES.get(e.fmi_type, -1), ([], []))
-                by_type[TYPE_CODES.get(e.fmi_type, -1)][0].append(ref)
-                by_type[TYPE_CODES.get(e.fmi_type, -1)][1].append(column)
+                chosen = by_type.setdefault(self._type_of(name, ref), ([], []))
+                chosen[0].append(ref)
+                chosen[1].append(column)
             for code, (rs, cs) in by_type.items():
-                port, _ = self._port(name, rs)
+                port = self._port(name, rs)
                 where = (ctypes.c_int * len(cs))(*cs)
                 keep.append(where)
                 table.append(lib.KProbe(port, where))
@@ -220,9 +292,16 @@ class NativeFixedStep(FixedStep):
     def _after(self, outcome: int, fail: Any, t: float) -> None:
         """Every unit's values may have changed (no cached read may be handed out again), and the failure of a
         step raised as the Python master raises it."""
-        for unit in self._units:
+        for unit in self._fmus:
             unit.generation += 1
             unit.time = fail.t if outcome in (lib.RUN_FAILED, lib.RUN_ENDED) else t - fail.h
+        for name, clock in self._clocks.items():
+            self.view.units[name].t = clock.value
+        for name, (names, held) in self._stores.items():  # what the connections gave the inputs, as set() keeps it
+            unit = self.view.units[name]
+            for slot, variable in enumerate(names):
+                if unit.description.variable(variable).causality == "input":
+                    setattr(unit, variable, float(held[slot]))
         if outcome == -1:
             raise MemoryError("the native kernel could not allocate its buffers")
         if outcome == lib.RUN_ENDED:

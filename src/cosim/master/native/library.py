@@ -59,12 +59,20 @@ class KUnit(ctypes.Structure):
     _fields_ = [("version", ctypes.c_int), ("component", ctypes.c_void_p), ("do_step", ctypes.c_void_p),
                 ("get", ctypes.c_void_p * 3), ("set", ctypes.c_void_p * 3),
                 ("event", ctypes.c_void_p), ("terminate", ctypes.c_void_p), ("early", ctypes.c_void_p),
-                ("last_time", ctypes.c_void_p)]
+                ("last_time", ctypes.c_void_p),
+                ("n_samples", ctypes.c_int), ("n_columns", ctypes.c_int), ("mode", ctypes.c_int),
+                ("times", ctypes.c_void_p), ("values", ctypes.c_void_p), ("discrete", ctypes.c_void_p),
+                ("current", ctypes.c_void_p), ("time", ctypes.c_void_p)]
+
+
+PLAYER, STORE = 0, 1  # KUnit.version of a table player and of a store (system connectors); 2, 3: FMI
+MODES = {"linear": 0, "hold": 1, "nearest": 2}
 
 
 class KPort(ctypes.Structure):
     _fields_ = [("unit", ctypes.c_int), ("type", ctypes.c_int), ("n", ctypes.c_int),
-                ("vrs", ctypes.POINTER(ctypes.c_uint))]
+                ("vrs", ctypes.POINTER(ctypes.c_uint)), ("n_vrs", ctypes.c_int), ("n_values", ctypes.c_int),
+                ("pos", ctypes.POINTER(ctypes.c_int)), ("partial", ctypes.c_int)]
 
 
 class KTransfer(ctypes.Structure):
@@ -103,6 +111,17 @@ def run_function() -> Callable[..., int]:  # restype c_int: ctypes gives a Pytho
                     ctypes.POINTER(KFail)]
     run.restype = ctypes.c_int
     return run
+
+
+@lru_cache(maxsize=1)
+def reduce_function() -> Callable[..., int]:
+    """``cosim_reduce_all`` (kernel.c: the objective reducers over recorded rows) with its ctypes signature."""
+    lib = ctypes.CDLL(str(library_path()))
+    reduce = lib.cosim_reduce_all
+    reduce.argtypes = [ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_long,
+                       ctypes.c_int, ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
+    reduce.restype = ctypes.c_int
+    return reduce
 
 
 def available() -> str | None:
