@@ -16,7 +16,7 @@ from cosim.system.kernel_choice import KernelChoice
 # the modules whose runs are twinned (tests/test_native_kernel.py compares its own runs explicitly)
 TWIN_MODULES = {"test_algorithms", "test_coupled_fmus", "test_record_events", "test_units_of_measure",
                 "test_player_and_cli", "test_ssp_libcosim", "test_instance_reuse", "test_algebraic_loops",
-                "test_fmi_conformance", "test_record_replay", "test_stop_races"}
+                "test_fmi_conformance", "test_record_replay", "test_stop_races", "test_ssp_import"}
 
 compared: list[str] = []  # the tests whose runs were twinned (a test can see that its run was)
 
