@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -121,6 +123,35 @@ def test_spread_takes_points_across_the_whole_space():
     assert [p.index for p in space.spread(4)] == [0, 31, 62, 93]
     assert [p.values for p in space.spread(4)] == [points[i].values for i in (0, 31, 62, 93)]
     assert space.spread(200) == points and [p.index for p in space.spread(1)] == [0]
+
+
+def test_stratified_covers_every_parameter_range_where_spread_covers_only_the_slowest():
+    """Issue 39: a dry run's few samples must reach a dear region along any parameter. A 12 x 12 grid whose
+    fastest-varying parameter decides the cost: spread(8) strides through the enumeration and samples b at 8
+    values spread anyhow; stratified(8) puts one sample in each eighth of both axes."""
+    design = {"parameters": {"ode.a": {"min": 0, "max": 11, "step": 1}, "ode.x0": {"min": 0, "max": 11, "step": 1}}}
+    space = DesignSpace.from_spec(make_spec(design))
+    chosen = space.stratified(8)
+    assert len(chosen) == 8 and chosen == space.stratified(8)  # deterministic
+    by_index = {p.index: p for p in space}
+    assert all(by_index[p.index] == p for p in chosen)  # real points of the space, with their index and id
+    for name in ("ode.a", "ode.x0"):  # one sample per eighth of each axis: the k-th lowest in cells 12k/8..
+        for k, value in enumerate(sorted(p.values[name] for p in chosen)):
+            assert math.floor(12 * k / 8) <= value <= math.ceil(12 * (k + 1) / 8) - 1, (name, k, value)
+    assert space.stratified(8, seed=1) != chosen
+    assert space.stratified(500) == list(space)
+
+
+def test_stratified_on_a_constrained_grid_takes_accepted_points_near_each_target():
+    design = {"parameters": {"ode.a": {"min": 0, "max": 9, "step": 1}, "ode.x0": {"min": 0, "max": 9, "step": 1}},
+              "constraint": "ode.a + ode.x0 != 5"}
+    space = DesignSpace.from_spec(make_spec(design))
+    chosen = space.stratified(6)
+    points = {p.index: p for p in space}
+    assert 4 <= len(chosen) <= 6 and all(points[p.index] == p for p in chosen)
+    assert all(p.values["ode.a"] + p.values["ode.x0"] != 5 for p in chosen)
+    assert len({p.values["ode.a"] for p in chosen}) == len(chosen)  # still spread along each axis
+    assert [p.index for p in chosen] == sorted(p.index for p in chosen)
 
 
 def test_constraint_on_array_elements():

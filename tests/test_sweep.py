@@ -17,6 +17,7 @@ import pytest
 
 import cosim
 from cosim.cli.main import main
+from cosim.cli.sweep import DRY_RUN_SAMPLES
 from cosim.spec.design import DesignSpace
 from cosim.spec.loader import load_spec
 from cosim.studies.sweep import Sweep, SweepError
@@ -111,10 +112,12 @@ def test_cli_exit_codes_and_dry_run(write_spec, tmp_path, capsys, local_cluster)
     assert main(["sweep", spec_path, "--dry-run"]) == 0
     text = capsys.readouterr().out
     assert "10 points" in text and "ode.a=-2.0, ode.x0=1.0" in text and "estimate:" in text
-    # the sample runs are spread over the space: points 0, 3, 6 and 9 of 10, not the first four
-    space = list(Sweep(spec_path, out=tmp_path / "z", quiet=True).space)
+    # the sample runs are stratified over the space (issue 39; tests/test_design.py checks the strata); a
+    # space of 10 points has fewer than DRY_RUN_SAMPLES, so every point is a sample
+    space = Sweep(spec_path, out=tmp_path / "z", quiet=True).space
     sampled = [line.split()[1].rstrip(":") for line in text.splitlines() if line.startswith("sample ")]
-    assert sampled == [space[i].id for i in (0, 3, 6, 9)]
+    assert sampled == [p.id for p in space.stratified(DRY_RUN_SAMPLES)] == [p.id for p in space]
+    assert "range" in text.split("estimate: ")[1]
     assert main(["sweep", spec_path, "--out", str(tmp_path / "x"), "--timeout", "-1"]) == 2
     bad = write_spec({**ode_spec(), "design": {"parameters": {"ode.nope": {"values": [1]}}}}, "bad.json")
     assert main(["sweep", str(bad), "--out", str(tmp_path / "y")]) == 2
@@ -166,9 +169,9 @@ def test_resume_after_kill_9_of_the_client_runs_only_missing_points(write_spec, 
 
 
 def test_dry_run_estimate_counts_the_few_slow_points(write_spec, capsys):
-    # 12 points of 10 steps each: the last 3 sleep 10x longer per step than the others. The median of the
-    # samples (points 4, 7 and 11 after the warm-up run of point 0) would say 10 fast steps a point; the work is
-    # 9 fast and 3 slow points, 3.25x that
+    # 16 points of 10 steps each: the last 4 sleep 10x longer per step than the others. The median of the
+    # samples would say 10 fast steps a point; the work is 12 fast and 4 slow points, 3.25x that. The 12
+    # samples are stratified over s.delay (4 values: each value three times), so the slow value is sampled too
     fast, slow, steps = 0.004, 0.04, 10
     spec = write_spec({
         "name": "uneven",
@@ -176,14 +179,15 @@ def test_dry_run_estimate_counts_the_few_slow_points(write_spec, capsys):
         "experiment": {"stop": 1.0, "step": 1.0 / steps},
         "objectives": {"y_end": {"signal": "s.y", "reduce": "final"}},
         "design": {"parameters": {"s.delay": {"values": [fast, fast + 1e-4, fast + 2e-4, slow]},
-                                  "s.gain": {"values": [1.0, 2.0, 3.0]}}}})
+                                  "s.gain": {"values": [1.0, 2.0, 3.0, 4.0]}}}})
     assert main(["sweep", str(spec), "--dry-run", "--workers", "1"]) == 0
     text = capsys.readouterr().out
     samples = [float(line.split(" in ")[1].split()[0]) for line in text.splitlines() if line.startswith("sample ")]
     per_point = float(text.split("estimate: ")[1].split()[0])
-    assert per_point == pytest.approx(sum(samples[1:]) / 3, abs=1.5e-3)  # the mean of the steady samples
-    true_total = steps * (9 * fast + 3 * slow)  # the sleeps alone (the 1e-4 apart: each value once)
-    assert 0.9 * true_total <= 12 * per_point <= 2.0 * true_total, (per_point, text)
+    # the mean of the samples (the warm-up run before them, which also loads the units, is not shown)
+    assert len(samples) == 12 and per_point == pytest.approx(sum(samples) / 12, abs=1.5e-3)
+    true_total = steps * (12 * fast + 4 * slow)  # the sleeps alone (the 1e-4 apart: each value once)
+    assert 0.9 * true_total <= 16 * per_point <= 2.0 * true_total, (per_point, text)
     assert "about" in text and "on 1 worker(s)" in text and "differ more than 3x" in text
 
 

@@ -11,10 +11,16 @@ import argparse
 import os
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from cosim.cli.exit_codes import EXIT_OK, EXIT_RUN_FAILED
 from cosim.errors import UsageError
+
+if TYPE_CHECKING:  # the estimate imports numpy, which `cosim --help` does not
+    from cosim.studies.estimate import TimeEstimate
+
+# sample runs of a dry run: stratified over the space (a Latin hypercube of the grid's axes), one warm-up first
+DRY_RUN_SAMPLES = 12
 
 
 def add_sweep_parser(sub: Any) -> None:
@@ -150,10 +156,10 @@ def first_not_ok(table: Path, n: int) -> list[dict]:
 
 
 def _dry_run(args: argparse.Namespace) -> int:
-    import os
     import tempfile
 
     from cosim.cli.options import experiment_overrides, message_line
+    from cosim.studies.estimate import estimate_time
     from cosim.studies.sweep import Sweep
 
     with tempfile.TemporaryDirectory(prefix="cosim_dry_") as scratch:
@@ -171,36 +177,40 @@ def _dry_run(args: argparse.Namespace) -> int:
             print(f"  {point.id}  " + ", ".join(f"{k}={v}" for k, v in point.values.items()))
         if total > 5:
             print(f"  ... and {total - 5} more")
-        samples = sweep.sample_runs(4)
+        samples = sweep.sample_runs(DRY_RUN_SAMPLES)
     for row in samples:
         print(f"sample {row.point_id}: {row.status} in {row.run_time:.3f} s"
               + (f" ({message_line(row.message, 100)})" if row.message else ""))
-    times = [r.run_time for r in samples if r.ok]
+    times = sorted(r.run_time for r in samples if r.ok)
     if times:
-        # the first run also instantiates the units; the others show the steady cost per point
-        steady = sorted(times[1:] or times)
-        # the mean, not the median: on an uneven space a few dear points make most of the total, and the
-        # median of a few samples ignores them (5-6x under on a space where the mean is 10x the median)
-        per_point = sum(steady) / len(steady)
-        spread = f"mean of {len(steady)} sample run(s), {steady[0]:.3f}-{steady[-1]:.3f} s"
-        workers = args.workers or os.cpu_count() or 1
-        if args.scheduler or args.cluster:
-            print(f"estimate: {per_point:.3f} s per point ({spread}); {total * per_point:.0f} s of work in total "
-                  "(divide by the scheduler's worker count)")
-        else:
-            print(f"estimate: {per_point:.3f} s per point ({spread}), about "
-                  f"{_fmt_time(total * per_point / workers)} on {workers} worker(s)")
-        if steady[-1] > 3 * steady[0]:
-            print("note: the sample runs differ more than 3x: the points' cost depends on the design, and the "
-                  "estimate is only as good as the few samples are typical of the space")
-        if args.timeout is None:
-            from cosim.parallel.point_stream import TIMEOUT_FACTOR, default_timeout
-
-            print(f"timeout: {default_timeout(steady * 3):.0f} s per point by default ({TIMEOUT_FACTOR} x the "
-                  "measured point time, within COSIM_TIMEOUT_FLOOR .. COSIM_TIMEOUT_FIRST); --timeout S sets it")
+        _print_estimate(args, estimate_time(times), times, total)
     else:
         print("estimate: none (no sample run succeeded)")
     return EXIT_OK
+
+
+def _print_estimate(args: argparse.Namespace, estimate: TimeEstimate, times: list[float], total: int) -> None:
+    """The time of the whole sweep from the sample times: the mean (not the median: on an uneven space a
+    few dear points make most of the total) and the bootstrap range of that mean (cosim.studies.estimate)."""
+    per_point = estimate.mean
+    spread = (f"mean of {len(times)} sample run(s) stratified over the space, {times[0]:.3f}-{times[-1]:.3f} s; "
+              f"{estimate.confidence:.0%} range of the mean {estimate.low:.3f}-{estimate.high:.3f} s")
+    workers = args.workers or os.cpu_count() or 1
+    if args.scheduler or args.cluster:
+        print(f"estimate: {per_point:.3f} s per point ({spread}); {total * per_point:.0f} s of work in total "
+              f"({total * estimate.low:.0f}-{total * estimate.high:.0f} s; divide by the scheduler's worker count)")
+    else:
+        mean, low, high = estimate.total(total, workers)
+        print(f"estimate: {per_point:.3f} s per point ({spread}), about {_fmt_time(mean)} on {workers} "
+              f"worker(s) (range {_fmt_time(low)} to {_fmt_time(high)})")
+    if times[-1] > 3 * times[0]:
+        print("note: the sample runs differ more than 3x: the points' cost depends on the design, and the "
+              "estimate is only as good as the few samples are typical of the space")
+    if args.timeout is None:
+        from cosim.parallel.point_stream import TIMEOUT_FACTOR, default_timeout
+
+        print(f"timeout: {default_timeout(times * 3):.0f} s per point by default ({TIMEOUT_FACTOR} x the "
+              "measured point time, within COSIM_TIMEOUT_FLOOR .. COSIM_TIMEOUT_FIRST); --timeout S sets it")
 
 
 def _fmt_time(seconds: float) -> str:

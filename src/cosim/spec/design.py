@@ -410,6 +410,73 @@ class DesignSpace:
                     break
         return picked
 
+    def stratified(self, n: int, seed: int = 0) -> list[Point]:
+        """About ``n`` points that together cover every parameter's range (all points when there are at most ``n``).
+
+        A Latin hypercube over the grid's axes: each axis is cut into ``n`` equal strata and each stratum of
+        each axis holds one point (an axis with at most ``n`` values gets each value, about equally often).
+        For estimates from a few runs: where the dear points of a space lie along any parameter, a share of
+        the sample in proportion to their region's size lands there, where :meth:`spread`, striding through
+        the enumeration, covers only the slowest-varying parameter evenly. Two hypercube points falling in
+        one grid cell give one point, so a small grid may give fewer than ``n``. A constrained grid takes,
+        per hypercube point, the nearest accepted point; a sampled space (lhs, sobol, random) is
+        space-filling already and is spread evenly over its draw. Deterministic for a given ``seed``; in
+        enumeration order. Raises SpecError like iterating (a constraint that cannot be evaluated).
+        """
+        if len(self) <= n:
+            return list(self)
+        if self._samples is not None or not self._dims:
+            return self.spread(n)
+        sizes = [len(d) for d in self._dims]
+        # a centred Latin hypercube of value indices: the k-th stratum of an axis of m values is the value at
+        # (k + 1/2) m / n, so every value is taken when m <= n; the strata are paired across axes at random
+        cells = self._latin_cells(n, sizes, seed)
+        if self.constraint is not None:
+            return self._nearest_accepted(cells, sizes)
+        points = []
+        for index in sorted({int(np.ravel_multi_index(tuple(row), sizes)) for row in cells}):
+            values = self._values(self._flat_at(np.unravel_index(index, sizes)))
+            points.append(Point(index, self.point_id(values), values))
+        return points
+
+    @staticmethod
+    def _latin_cells(n: int, sizes: list[int], seed: int, tries: int = 64) -> np.ndarray:
+        """``n`` grid cells (value indices per axis) of a centred Latin hypercube: the k-th stratum of an axis of
+        m values is the value at (k + 1/2) m / n, so every value is taken when m <= n; the strata are paired
+        across axes at random, keeping the pairing of ``tries`` with the fewest cells taken twice."""
+        rng = np.random.default_rng(seed)
+        strata = (np.arange(n) + 0.5) / n
+        best: np.ndarray | None = None
+        for _ in range(tries):
+            cells = np.column_stack([rng.permutation((strata * m).astype(int)) for m in sizes])
+            if best is None or len(np.unique(cells, axis=0)) > len(np.unique(best, axis=0)):
+                best = cells
+            if len(np.unique(best, axis=0)) == n:
+                break
+        assert best is not None  # tries >= 1
+        return best
+
+    def _flat_at(self, cell: Sequence[Any]) -> tuple[Any, ...]:
+        """The dimension values of one grid cell (one value index per dimension)."""
+        return tuple(dim.values[int(k)] for dim, k in zip(self._dims, cell) if dim.values is not None)
+
+    def _nearest_accepted(self, cells: np.ndarray, sizes: list[int]) -> list[Point]:
+        """Per target cell, the accepted grid point nearest to it (axes scaled to [0, 1]); one pass over the grid."""
+        scale = np.array(sizes, dtype=float)
+        targets = (cells + 0.5) / scale
+        best: list[tuple[float, Point] | None] = [None] * len(cells)
+        index = 0
+        for cell in itertools.product(*(range(s) for s in sizes)):
+            values = self._values(self._flat_at(cell))
+            if not self._accepts(values):
+                continue
+            distance = (((np.array(cell) + 0.5) / scale - targets) ** 2).sum(axis=1)
+            for k in np.flatnonzero([b is None or d < b[0] for b, d in zip(best, distance)]):
+                best[k] = (float(distance[k]), Point(index, self.point_id(values), values))
+            index += 1
+        picked = {b[1].index: b[1] for b in best if b is not None}
+        return [picked[i] for i in sorted(picked)]
+
     def columns(self, values: dict[str, Any]) -> dict[str, Any]:
         """A point's values as flat table columns (arrays as ``target[i]``)."""
         out: dict[str, Any] = {}

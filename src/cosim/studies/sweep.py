@@ -337,12 +337,15 @@ class Sweep:
             columns.update(pruned_columns(row))
         return row.to_dict(columns)
 
-    def sample_runs(self, n: int = 3) -> list[PointRow]:
-        """Run ``n`` points spread over the space locally (in a child process, so a crash cannot hit the caller)."""
+    def sample_runs(self, n: int = 8) -> list[PointRow]:
+        """Rows of about ``n`` points stratified over the space (:meth:`DesignSpace.stratified`), run locally in
+        a child process (a crash cannot hit the caller), after one warm-up run of the first of them whose row
+        is dropped: it also loads and instantiates the units, which a sweep does once per worker."""
         runner = IsolatedRunner(self.payload)
         try:
-            points = self.space.spread(n)
-            return runner.run([(p.id, p.values) for p in points], self.timeout)
+            points = [(p.id, p.values) for p in self.space.stratified(n)]
+            runner.run(points[:1], self.timeout)
+            return runner.run(points, self.timeout)
         finally:
             runner.close()
 
