@@ -168,3 +168,41 @@ def test_run_of_an_fmu_alone_sets_parameters_and_input_start_values_and_writes_w
         assert main(["run", str(spec), "--out", str(theirs)]) == 0
         read = pd.read_parquet if suffix == ".parquet" else pd.read_csv
         pd.testing.assert_frame_equal(read(mine), read(theirs))
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_set_gives_a_states_declared_start_value_and_refuses_a_calculated_output(tmp_path, capsys, version):
+    # decay: der(x) = -k x with x's start on x itself (initial="exact", as the Reference FMU Dahlquist declares it)
+    fmu = _fmu(tmp_path, version, "decay")
+    out = tmp_path / "x.csv"
+    assert main(["run", str(fmu), "--set", "decay.x=3", "--set", "decay.k=0.5", "--out", str(out)]) == 0
+    table = pd.read_csv(out)
+    assert table["decay.x"].iloc[0] == 3.0
+    assert table["decay.x"].iloc[-1] == pytest.approx(3.0 * math.exp(-0.5 * 10.0), rel=1e-12)  # stop 10 s
+    # the same start value on the unit run as model exchange (integrated by CVode)
+    spec = tmp_path / "me.json"
+    spec.write_text(json.dumps({"units": {"decay": {"fmu": fmu.name, "interface": "model-exchange"}},
+                                "experiment": {"stop": 2.0, "step": 0.1}}))
+    assert main(["run", str(spec), "--set", "decay.x=3", "--out", str(out)]) == 0
+    table = pd.read_csv(out)
+    assert table["decay.x"].iloc[0] == 3.0
+    assert table["decay.x"].iloc[-1] == pytest.approx(3.0 * math.exp(-2.0), rel=1e-3)
+    capsys.readouterr()
+    # linear_ode's y is calculated (its start is the parameter x0): refused, naming what can be set
+    assert main(["run", str(_fmu(tmp_path, version)), "--set", "linear_ode.y=3"]) == 2
+    err = capsys.readouterr().err
+    assert "'linear_ode.y': 'y' of unit 'linear_ode' is an output the unit calculates (no start value to set)" in err
+    assert 'start values the unit declares (FMI initial="exact" or "approx"' in err and "Traceback" not in err
+
+
+def test_a_states_start_value_is_a_design_parameter_of_a_starter_spec_sweep(tmp_path, local_cluster):
+    fmu = _fmu(tmp_path, 3, "decay")
+    spec = tmp_path / "spec.json"
+    assert main(["new", str(spec), "--from", str(fmu)]) == 0
+    content = json.loads(spec.read_text())
+    assert content["record"] == ["decay.x"] and content["objectives"]["x_final"]["signal"] == "decay.x"
+    content["design"] = {"parameters": {"decay.x": {"values": [1.0, 2.0]}}}  # the state's start, as FMPy users vary it
+    spec.write_text(json.dumps(content))
+    assert main(["sweep", str(spec), "--out", str(tmp_path / "r"), "--scheduler", local_cluster]) == 0
+    rows = pd.read_parquet(tmp_path / "r" / "results.parquet").sort_values("decay.x")
+    assert rows["x_final"].tolist() == pytest.approx([math.exp(-10.0), 2.0 * math.exp(-10.0)], rel=1e-12)

@@ -22,7 +22,7 @@ from cosim.fmus.build import FmuBuildError, build_fmu, ensure_built
 from cosim.fmus.testing import FmuInstance
 
 REPO = Path(__file__).resolve().parents[1]
-MODELS = ["algebraic", "bouncing_ball", "counter", "fault", "gain_array", "linear_ode", "mass_spring", "motor_gear_energy",
+MODELS = ["algebraic", "bouncing_ball", "counter", "decay", "fault", "gain_array", "linear_ode", "mass_spring", "motor_gear_energy",
           "panda_inverse_dynamics", "square_lag"]
 # tests/test_fmu_model_exchange.py runs them (mass_spring: tests/test_coupled_model_exchange.py)
 MODEL_EXCHANGE_ONLY = {"bouncing_ball", "mass_spring", "square_lag"}
@@ -71,6 +71,8 @@ def test_fmu_validates_and_simulates(name, version):
     final = result[-1]
     if name == "linear_ode":
         assert final["y"] == pytest.approx(math.exp(-1.0), rel=1e-12)
+    elif name == "decay":  # x starts at its declared start 1: x = e^{-t}
+        assert final["x"] == pytest.approx(math.exp(-1.0), rel=1e-12)
     elif name == "fault":
         assert final["y"] == pytest.approx(1.0)
     elif name == "motor_gear_energy":
@@ -288,3 +290,29 @@ def test_fault_modes_1_and_2_crash_or_hang_a_separate_process(mode, tmp_path):
         assert proc.returncode == -11  # SIGSEGV
     else:
         assert hung
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_a_state_declared_exact_takes_its_start_value_before_initialization_only(version, tmp_path):
+    # decay's x: initial="exact", start 1, not an initial unknown; set before initialization the model starts there
+    path = str(ensure_built("decay", version))
+    md = read_model_description(path)
+    x = next(v for v in md.modelVariables if v.name == "x")
+    assert (x.causality, x.initial, x.start) == ("output", "exact", "1.0")
+    assert "x" not in [u.variable.name for u in md.initialUnknowns]
+    for interface in ("CoSimulation", "ModelExchange"):
+        result = simulate_fmu(path, fmi_type=interface, start_values={"x": 3.0, "k": 0.5}, stop_time=2.0,
+                              output_interval=0.1)
+        assert result["x"][0] == 3.0
+        # co-simulation exact; model exchange by fmpy's CVode at its default tolerance
+        assert result["x"][-1] == pytest.approx(3.0 * math.exp(-1.0), rel=1e-12 if interface == "CoSimulation"
+                                                else 1e-3)
+    with FmuInstance(path, unzip_parent=tmp_path) as fmu:
+        fmu.instantiate()
+        fmu.set("x", 2.0)  # before initialization: the start value
+        fmu.initialize(k=0.5)
+        assert fmu.get("x") == 2.0
+        fmu.step(0.0, 1.0)
+        assert fmu.get("x") == pytest.approx(2.0 * math.exp(-0.5), rel=1e-15)
+        with pytest.raises(FMICallException):  # after initialization a set of x is refused, as FMI says
+            fmu.set("x", 2.0)

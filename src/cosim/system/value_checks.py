@@ -49,9 +49,11 @@ def assignment(unit: SystemUnit, port: str, value: Any, field_name: str | None, 
         problems.append(Problem(file, path, f"'{port}' of unit '{unit.name}' is a {var.causality}",
                                 "set it under 'parameters' instead of 'start'"))
         return None
-    if field_name is None and var.causality not in SETTABLE_AS_PARAMETER + ("input",):
-        problems.append(Problem(file, path, f"'{port}' of unit '{unit.name}' is {article(var.causality)}; "
-                                            "only parameters and inputs can be set", "choose a parameter"))
+    if field_name is None and var.causality not in SETTABLE_AS_PARAMETER + ("input",) and not has_start(var):
+        problems.append(Problem(file, path, f"'{port}' of unit '{unit.name}' is {article(var.causality)}"
+                                            f"{_calculated(var)}; only parameters, inputs and start values the "
+                                            "unit declares (FMI initial=\"exact\" or \"approx\", e.g. a state's) "
+                                            "can be set", "choose a parameter"))
         return None
     if field_name is None and var.causality == "structuralParameter":
         problems.append(Problem(file, path, f"'{port}' of unit '{unit.name}' is a structural parameter: it may "
@@ -72,6 +74,16 @@ def assignment(unit: SystemUnit, port: str, value: Any, field_name: str | None, 
         checked.append(float(v) if var.type == "Real" else int(v) if var.type == "Integer"
                        else bytes.fromhex(v) if var.type == "Binary" else v)
     return Assignment(unit.name, tuple(refs), tuple(checked))
+
+
+def has_start(var: Variable) -> bool:
+    """True for an output or local with a start value the unit lets be set (FMI initial="exact" or "approx":
+    a state's start value, as the Reference FMUs declare BouncingBall's h or Dahlquist's x)."""
+    return var.causality in ("output", "local") and var.initial in ("exact", "approx")
+
+
+def _calculated(var: Variable) -> str:
+    return " the unit calculates (no start value to set)" if var.causality in ("output", "local") else ""
 
 
 def value_problem(var: Variable, value: Any) -> tuple[str, str] | None:

@@ -73,6 +73,9 @@ class Variable:
     fmi_type: str | None = None  # an FMU variable's own FMI type (Float32, UInt64, Enumeration, Binary ...)
     # FMI relativeQuantity: the value is a difference (e.g. of temperatures), so unit offsets do not apply
     relative_quantity: bool = False
+    # FMI initial ("exact", "approx", "calculated"; None when the unit says none): an output or local whose start
+    # is "exact" or "approx" (a state's start value, as the Reference FMUs declare them) may be set before a run
+    initial: str | None = None
 
     @property
     def size(self) -> int:

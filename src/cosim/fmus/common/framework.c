@@ -252,6 +252,8 @@ Status framework_check_set(ModelInstance *comp, size_t index, VariableType type)
                  v->name);
         return Error;
     }
+    /* A state's start value (initial="exact"): FMI lets the environment set it until exitInitializationMode. */
+    if (v->exact_start && (comp->state == STATE_INSTANTIATED || comp->state == STATE_INITIALIZATION)) return OK;
     if (v->causality != CAUS_PARAMETER && v->causality != CAUS_INPUT) {
         logError(comp, "'%s' is not a parameter or input and cannot be set", v->name);
         return Error;

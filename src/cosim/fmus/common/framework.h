@@ -44,6 +44,7 @@ typedef struct {
     size_t offset; /* offsetof(ModelData, <name>) */
     uint32_t vr2;  /* FMI 2.0 value reference of the first element */
     bool tunable;  /* a parameter that may be set after initialization (FMI variability "tunable") */
+    bool exact_start; /* an output or local with initial="exact": its start value may be set before exitInitialization */
 } VariableInfo;
 
 extern const VariableInfo VARIABLES[N_VARIABLES];

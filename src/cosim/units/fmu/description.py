@@ -451,6 +451,7 @@ def _describe(md: Any, reference: str, structural: dict[str, int] | None = None
             min=_number(v.min, "Real") if v.min is not None else None,
             max=_number(v.max, "Real") if v.max is not None else None,
             variability=v.variability or "continuous", fmi_type=v.type, relative_quantity=_relative(v),
+            initial=v.initial,
         ))
         elements[v.name] = [FmiElement(v.type, v.valueReference, i, size) for i in range(size)] if shape \
             else [FmiElement(v.type, v.valueReference)]
@@ -488,7 +489,8 @@ def _group_indexed(variables: list[Variable], elements: dict[str, list[FmiElemen
             name=base, causality=first.causality, type=first.type, unit=first.unit,
             start=None if all(s is None for s in starts) else tuple(starts),
             description=first.description, shape=(len(ordered),), min=first.min, max=first.max,
-            variability=first.variability,
+            variability=first.variability, initial=first.initial if all(m.initial == first.initial for m in ordered)
+            else None,
         ))
         elements[base] = [elements[m.name][0] for m in ordered]
     return variables + extra, elements
