@@ -224,3 +224,21 @@ def test_a_sub_systems_bound_connector_behind_an_unbound_root_connector_is_a_sig
     assert main(["run", str(spec), "--set", "root.sub.g=9", "--out", str(out)]) == 0
     traces = pd.read_csv(out)
     assert float(traces["sub.C.y"].iloc[0]) == 9.0 and float(traces["root.sub.g"].iloc[0]) == 9.0
+
+
+def test_a_calculated_parameter_connector_binds_and_records_as_a_parameter_connector(tmp_path):
+    # OMSimulator writes kind="calculatedParameter" for a system connector computed from others: bound, it is a
+    # parameter connector like any (a signal, feeding what it is connected to)
+    import json
+
+    members = build([("C", "inline"), ("root:sub.g", "ssv")])
+    ssd = members["SystemStructure.ssd"].decode().replace('name="g" kind="parameter"', 'name="g" kind="calculatedParameter"')
+    assert 'kind="calculatedParameter"' in ssd
+    write_archive(tmp_path / "calc.ssp", {**members, "SystemStructure.ssd": ssd.encode()})
+    spec = tmp_path / "spec.json"
+    spec.write_text(json.dumps({"system": "calc.ssp", "experiment": {"step": 0.05},
+                                "record": ["root.sub.g"], "objectives": {"g": {"signal": "root.sub.g",
+                                                                               "reduce": "final"}}}))
+    result = Execution(check_spec(spec), record=True).run()
+    assert result.ok and result.objectives["g"] == 5.0
+    assert _x0(tmp_path, "calc2", {**members, "SystemStructure.ssd": ssd.encode()}) == 5.0
