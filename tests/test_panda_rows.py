@@ -169,3 +169,85 @@ def test_the_library_is_built_once_per_source_digest(tmp_path, monkeypatch):
     assert path.is_file() and path.parent.parent == tmp_path and panda_rows.source_digest()[:20] in path.parent.name
     mtime = path.stat().st_mtime_ns
     assert panda_rows.library_path() == path and path.stat().st_mtime_ns == mtime  # cached, not rebuilt
+
+
+# the inverse-dynamics twins' kernels (id_rows.c) against the numpy code they replace, bit for bit ----------------
+
+def _bits(x: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(x, dtype=np.float64).view(np.int64)
+
+
+def _trajectory_twin(rows: int, kernel: bool):
+    from cosim.models.trajectory import TrajectoryGenerator
+
+    twin = TrajectoryGenerator.batch_class(TrajectoryGenerator, "traj", rows)
+    rng = np.random.default_rng(rows)
+    for k in range(rows):  # three waypoints per row, random middle poses (thesis degrees)
+        twin.waypoints[k, 7:14] = [-90.0, *rng.uniform(-100, 20, 1), 0.0, *rng.uniform(0, 140, 1), 0.0, 0.0, 0.0]
+        twin.waypoints[k, 14] = -180.0
+    twin.n_waypoints[:] = 3
+    twin.convention[:] = "thesis_deg"
+    twin.sampling[:] = "step_midpoint"
+    if not kernel:
+        twin._row_kernel = lambda: None
+    twin.setup(0.0, 10.0)
+    twin.exit_initialization()
+    assert (twin._kernel is not None) == kernel
+    return twin
+
+
+def test_the_compiled_trajectory_sampling_is_the_numpy_twins_bit_for_bit():
+    twin = _trajectory_twin(6, kernel=True)
+    numpy_twin = _trajectory_twin(6, kernel=False)
+    # inside phases, before the start, after the end, and exactly at phase starts and durations
+    times = [-0.5, 0.0, 1e-9, 0.37, 1.0, 2.5, 4.0, *twin._starts[2, :4], *twin.duration, twin.duration[0] - 1e-12]
+    q, v, a = (np.zeros((6, 7)) for _ in range(3))
+    for t in times:
+        twin._kernel.sample(float(t), q.ctypes.data, v.ctypes.data, a.ctypes.data)
+        expected = numpy_twin._sample(float(t))
+        for got, want in zip((q, v, a), expected):
+            np.testing.assert_array_equal(_bits(got), _bits(want), err_msg=f"t={t}")
+    for t in np.arange(0.01, 4.0, 0.01):  # the twins' outputs step by step, midpoint sampling
+        twin.do_step(float(t) - 0.01, 0.01)
+        numpy_twin.do_step(float(t) - 0.01, 0.01)
+        for name in ("q_ref", "qd_ref", "qdd_ref", "finished"):
+            np.testing.assert_array_equal(getattr(twin, name), getattr(numpy_twin, name), err_msg=name)
+        assert np.array_equal(_bits(twin.qdd_ref), _bits(numpy_twin.qdd_ref))
+
+
+def _arm_twin(kernel: bool, rows: int = 5):
+    from cosim.models.panda_inverse_dynamics import PandaInverseDynamics
+
+    twin = PandaInverseDynamics.batch_class(PandaInverseDynamics, "robot", rows)
+    if not kernel:
+        twin._row_kernel = lambda: None
+    return twin
+
+
+def test_the_compiled_arm_outputs_are_the_numpy_twins_bit_for_bit():
+    rng = np.random.default_rng(35)
+    lim = FRANKA_DOC_LIMITS
+    twins = [_arm_twin(True), _arm_twin(False)]
+    references = [(rng.uniform(lim.q_min * 1.1, lim.q_max * 1.1, (5, 7)), rng.uniform(-3, 3, (5, 7)),
+                   rng.uniform(-20, 20, (5, 7))) for _ in range(30)]
+    references[7][0][2, 3] = np.nan  # a NaN angle: numpy's max and min propagate it
+    references[9][1][4] = -0.0
+    last_q, last_qd, last_qdd = references[-1]
+    last_q[0], last_qd[0], last_qdd[0] = (lim.q_min + lim.q_max) / 2, 0.0, 0.0  # at rest inside its limits
+    for twin in twins:
+        twin.q_ref[:], twin.qd_ref[:], twin.qdd_ref[:] = references[0]
+        twin.setup(0.0, 1.0)
+        twin.exit_initialization()
+    assert twins[0]._kernel is not None and twins[1]._kernel is None
+    for step, (q, qd, qdd) in enumerate(references[1:]):
+        for twin in twins:
+            if step == 12:
+                twin.active = np.array([0, 2, 3])  # rows end: only the active ones are computed
+            twin.q_ref[:], twin.qd_ref[:], twin.qdd_ref[:] = q, qd, qdd
+            twin._outputs_stale = True
+            twin.do_step(0.01 * step, 0.01)
+        for name in ("tau", "ee_pos", "ee_path_length", "tracking_error", "tau_ratio"):
+            np.testing.assert_array_equal(_bits(getattr(twins[0], name)), _bits(getattr(twins[1], name)),
+                                          err_msg=f"{name} at step {step}")
+        np.testing.assert_array_equal(twins[0].limit_violated, twins[1].limit_violated)
+    assert twins[0].limit_violated.any() and not twins[0].limit_violated.all()

@@ -30,8 +30,10 @@ simulation, a twin refusing the rows (:class:`~cosim.units.python.batch.NotBatch
 Lock-step is used only where it pays and cannot change a result: no traces
 recorded, only numeric probes, Real connections, no algebraic loops, a master
 algorithm that can step batches (``batchable``), and at least one unit with
-a twin.  An FMU's outputs that no objective needs before a point's end (only
-``final`` reductions) are read at that point's last sample only.
+a twin.  Outputs that no objective needs before a point's end (only
+``final`` reductions) are read at that point's last sample only, and outputs
+no objective needs are not read (:func:`_probe_plan` says when that holds
+for a Python unit).
 """
 
 from __future__ import annotations
@@ -42,10 +44,13 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
+from cosim.errors import KernelUnavailable
+from cosim.execution.lockstep_reduce import reduce_group
 from cosim.execution.observers import reduction_of
 from cosim.execution.point_row import PointRow
 from cosim.execution.result import FAILED, OK, UNIT_FAILURE, RunResult
 from cosim.master.contract import MasterAlgorithm, SystemView
+from cosim.master.native.rows import NativeRows
 from cosim.master.observers import ObjectiveReducer, flatten_objectives
 from cosim.master.registry import ALGORITHMS, make_algorithm
 from cosim.master.transfers import Link
@@ -69,14 +74,19 @@ class InstanceBatch:
     Only the rows in ``active`` are set, stepped and read during the run, so
     a point that has ended sees no further step.  Errors are not wrapped per
     instance: any exception makes the caller run the points one by one, where
-    each gets its own message.
+    each gets its own message.  FMI 2.0/3.0 co-simulation instances are set
+    (plain Real inputs) and stepped by C loops over the rows
+    (:class:`~cosim.master.native.rows.NativeRows`, the same FMI calls in the
+    same order) unless ``native`` is False or the kernel's library cannot be
+    built here; then, and for any other unit, each instance is called from Python.
     """
 
-    def __init__(self, units: Sequence[Unit]):
+    def __init__(self, units: Sequence[Unit], native: bool = True):
         self.units = list(units)
         self.name = self.units[0].name
         self.description = self.units[0].description
         self.rows = len(self.units)
+        self.native = _native_rows(self.units) if native else None
         self.active = np.arange(self.rows)
         self._steps = [unit.do_step for unit in self.units]
 
@@ -88,62 +98,95 @@ class InstanceBatch:
     @active.setter
     def active(self, rows: np.ndarray) -> None:
         self._active, self._active_list = rows, rows.tolist()  # the list is what the loops below walk
+        self._active_c = np.ascontiguousarray(rows, dtype=np.int64)  # and this what the C loops walk
+        self._active_at = self._active_c.ctypes.data
 
-    def select(self, refs: Sequence[Any]) -> tuple[list[Selection], list[Any], list[Any]]:
+    def _sync(self) -> None:
+        if self.native is not None:
+            self.native.sync()
+
+    def select(self, refs: Sequence[Any]) -> tuple[list[Selection], list[Any], list[Any], Any]:
         selections = [unit.select(refs) for unit in self.units]
         # bound once: the unit's fastest reader (an FMU's is a view of its buffer) and its set
         readers = [unit.reader(s) for unit, s in zip(self.units, selections)]
         setters = [unit.writer(s) for unit, s in zip(self.units, selections)]
-        return selections, readers, setters
+        plan = self.native.inputs(selections) if self.native is not None else None  # None: set from Python
+        return selections, readers, setters, plan
 
-    def get(self, selection: tuple[list[Selection], list[Any], list[Any]]) -> np.ndarray:
+    def get(self, selection: tuple[list[Selection], list[Any], list[Any], Any]) -> np.ndarray:
+        self._sync()
         readers = selection[1]
         out = np.zeros((self.rows, len(selection[0][0])))
         for k in self._active_list:
             out[k] = readers[k]()
         return out
 
-    def get_rows(self, selection: tuple[list[Selection], list[Any], list[Any]], rows: list[int]) -> np.ndarray:
+    def get_rows(self, selection: tuple[list[Selection], list[Any], list[Any], Any], rows: list[int]) -> np.ndarray:
+        self._sync()
         readers = selection[1]
         return np.array([readers[k]() for k in rows], dtype=float).reshape(len(rows), len(selection[0][0]))
 
-    def set(self, selection: tuple[list[Selection], list[Any], list[Any]], values: np.ndarray) -> None:
+    def set(self, selection: tuple[list[Selection], list[Any], list[Any], Any], values: np.ndarray) -> None:
+        plan = selection[3]
+        if plan is not None and self.native is not None:
+            self.native.set(plan, len(self._active_c), self._active_at, np.ascontiguousarray(values, dtype=np.float64))
+            return
+        self._sync()
         setters = selection[2]
         for k in self._active_list:
             setters[k](values[k])
 
-    def set_row(self, selection: tuple[list[Selection], list[Any], list[Any]], row: int, values: Sequence[Any]) -> None:
+    def set_row(self, selection: tuple[list[Selection], list[Any], list[Any], Any], row: int,
+                values: Sequence[Any]) -> None:
+        self._sync()
         self.units[row].set(selection[0][row], list(values))
 
     def setup(self, start_time: float, stop_time: float | None) -> None:
+        self._sync()
         for unit in self.units:
             unit.setup(start_time, stop_time)
 
     def enter_initialization(self) -> None:
+        self._sync()
         for unit in self.units:
             unit.enter_initialization()
 
     def exit_initialization(self) -> None:
+        self._sync()
         for unit in self.units:
             unit.exit_initialization()
 
     def do_step(self, t: float, h: float) -> None:
         """Step the active instances from ``t`` to ``t + h`` (what a master algorithm calls, as on a unit)."""
+        if self.native is not None:
+            self.native.do_step(len(self._active_c), self._active_at, t, h)
+            return
         steps = self._steps
         for k in self._active_list:
             steps[k](t, h)
 
     def reset(self) -> None:
+        self._sync()
         for unit in self.units:
             unit.reset()
         self.active = np.arange(self.rows)
 
     def terminate(self) -> None:
+        self._sync()
         for unit in self.units:
             try:
                 unit.terminate()
             except Exception:
                 pass  # terminating every instance matters more than one instance's complaint
+
+
+def _native_rows(units: Sequence[Unit]) -> Any:
+    """C loops over these FMU instances (:class:`~cosim.master.native.rows.NativeRows`), or None where they
+    do not apply (not FMI co-simulation instances) or the kernel's library cannot be built or loaded here."""
+    try:
+        return NativeRows(units)
+    except (ValueError, KernelUnavailable, OSError):
+        return None
 
 
 def has_twin(system: System) -> bool:
@@ -182,7 +225,9 @@ class Batches(dict[str, Any]):
 
 
 def instantiate(system: System, rows: int) -> Batches:
-    """One batch per unit of ``system`` for ``rows`` points: its twin, or ``rows`` instances."""
+    """One batch per unit of ``system`` for ``rows`` points: its twin, or ``rows`` instances (FMU instances
+    called by C loops unless the spec's ``experiment.kernel`` is ``python``)."""
+    native = system.spec.experiment.kernel != "python"
     batches = Batches()
     try:
         for name, system_unit in system.units.items():
@@ -191,7 +236,7 @@ def instantiate(system: System, rows: int) -> Batches:
             if twin is not None and isinstance(unit_type, PythonUnitType):  # twin implies a Python unit
                 batches[name] = twin(unit_type.load_class(), name, rows)
             else:
-                batches[name] = InstanceBatch([unit_type.instantiate(name) for _ in range(rows)])
+                batches[name] = InstanceBatch([unit_type.instantiate(name) for _ in range(rows)], native)
     except BaseException:
         terminate(batches)
         raise
@@ -271,20 +316,36 @@ class _BatchProbe:
             values[np.ix_(rows, where)] = batch.get_rows(selection, rows.tolist())
 
 
-def _end_only_columns(system: System, batches: Mapping[str, Any], columns: Sequence[str]) -> set[str]:
-    """Columns of FMU instances that no objective needs before a point's end: read only then.
+def _probe_plan(system: System, batches: Mapping[str, Any], columns: Sequence[str]) -> tuple[set[str], set[str]]:
+    """The columns read at every communication point and those read at each point's end only.
 
-    A column only reduced by ``final`` (or ``initial``: the first sample is read whole) or not used at all
-    needs no sample but the last; an FMU's get has no side effect, so reading it then gives the same value
-    (a Python unit's get may compute its outputs, so Python units are read every step).
+    Every sample is kept for a column that ``stop_when`` or an objective other than ``final`` (or
+    ``initial``: the first sample is read whole) reduces; a column only reduced by ``final`` needs no sample
+    but a point's last, and a column nothing reduces needs none.  An FMU's get has no side effect, so its
+    other columns are read at a point's end only (unused ones never).  A Python unit's get may compute its
+    outputs, so a Python unit with no column needed every step keeps all its columns every step; one with
+    such a column is still read at every step (the same computations at the same times), and its other
+    columns are read at a point's end (``final``) or never (unused).
     """
-    needed = {system.spec.experiment.stop_when} if system.spec.experiment.stop_when else set()
+    every = {system.spec.experiment.stop_when} if system.spec.experiment.stop_when else set()
+    final: set[str] = set()
     for o in system.spec.objectives:
-        if o.signal and o.reduce not in ("final", "initial"):
-            needed.update(_columns_of(system, o.signal))
-    fmu_units = {name for name, batch in batches.items()
-                 if isinstance(batch, InstanceBatch) and isinstance(batch.units[0], FmiInstance)}
-    return {c for s in system.probes if s.unit in fmu_units for c in s.columns if c not in needed} & set(columns)
+        if o.signal:
+            (final if o.reduce in ("final", "initial") else every).update(_columns_of(system, o.signal))
+    keep_every: set[str] = set()
+    end_only: set[str] = set()
+    for name in batches:
+        mine = [c for s in system.probes if s.unit == name for c in s.columns if c in columns]
+        if not any(c in every for c in mine) and not _is_fmu(batches[name]):
+            keep_every.update(mine)  # nothing of it is needed every step: read it all, every step, as before
+            continue
+        keep_every.update(c for c in mine if c in every)
+        end_only.update(c for c in mine if c in final and c not in every)
+    return keep_every, end_only
+
+
+def _is_fmu(batch: Any) -> bool:
+    return isinstance(batch, InstanceBatch) and isinstance(batch.units[0], FmiInstance)
 
 
 def run_lockstep(system: System, points: Sequence[Sequence[Assignment]], batches: Mapping[str, Any]) -> list[RunResult]:
@@ -312,10 +373,13 @@ def run_lockstep(system: System, points: Sequence[Sequence[Assignment]], batches
     t_all = np.array(times)
     elapsed = (time.perf_counter() - started) / n
     results = []
-    reducer = wiring.reducer  # one reducer, loaded with each point's samples in turn
+    reducer = wiring.reducer  # one reducer: the whole group's reductions at once, or each point's in turn
+    reduced = reduce_group(reducer, t_all, data, ends)
     for i in range(n):
-        reducer.load(t_all[:ends[i] + 1], data[:ends[i] + 1, i, :])
-        flat = flatten_objectives(evaluate_expressions(system.spec.objectives, reducer.results()))
+        if reduced is None:
+            reducer.load(t_all[:ends[i] + 1], data[:ends[i] + 1, i, :])
+        values = reducer.results() if reduced is None else reduced[i]
+        flat = flatten_objectives(evaluate_expressions(system.spec.objectives, values))
         nan = [name for name, v in flat.items() if not math.isfinite(v)]
         end_time = float(t_all[ends[i]])
         if nan:
@@ -397,13 +461,22 @@ class _Wiring:
         self.into = [(batches[name], _transfers(batches, into.get(name, []))) for name in system.order]
         self.after_init = _transfers(batches, system.init_order)
         self.columns = probe_columns(system)
-        end_only = _end_only_columns(system, batches, self.columns)
-        self.probe = _BatchProbe(system, batches, self.columns, set(self.columns) - end_only)
+        every, end_only = _probe_plan(system, batches, self.columns)
+        self.probe = _BatchProbe(system, batches, self.columns, every)
         self.end_probe = _BatchProbe(system, batches, self.columns, end_only)
         self.algorithm = _bind_algorithm(system, batches)
         self.reducer = ObjectiveReducer(self.columns, [(o.name, reduction_of(o), _columns_of(system, o.signal))
                                                        for o in system.spec.objectives if o.signal])
         self._selections: dict[tuple[str, tuple[Any, ...]], Any] = {}
+        self._spec_values: list[tuple[Any, Any, list[Any]]] | None = None
+
+    def _resolved(self, assignment: Assignment) -> tuple[Any, Any, list[Any]]:
+        """The batch, the selection (made once per unit and elements) and the values of ``assignment``."""
+        batch = self.batches[assignment.unit]
+        key = (assignment.unit, assignment.refs)
+        if key not in self._selections:
+            self._selections[key] = batch.select(assignment.refs)
+        return batch, self._selections[key], list(assignment.values)
 
     def initialize(self, points: Sequence[Sequence[Assignment]]) -> None:
         """As :meth:`Execution._initialize`, for every row: the spec's assignments, then each point's overrides."""
@@ -411,13 +484,14 @@ class _Wiring:
         exp = system.spec.experiment
         for batch in batches.values():
             batch.setup(exp.start, exp.stop)
+        if self._spec_values is None:  # the spec's own assignments are the same for every row and group
+            self._spec_values = [self._resolved(a) for a in system.assignments]
         for row, overrides in enumerate(points):
-            for assignment in tuple(system.assignments) + tuple(overrides):
-                batch = batches[assignment.unit]
-                key = (assignment.unit, assignment.refs)
-                if key not in self._selections:
-                    self._selections[key] = batch.select(assignment.refs)
-                batch.set_row(self._selections[key], row, list(assignment.values))
+            for batch, selection, values in self._spec_values:
+                batch.set_row(selection, row, values)
+            for assignment in overrides:
+                batch, selection, values = self._resolved(assignment)
+                batch.set_row(selection, row, values)
         for batch in batches.values():
             batch.enter_initialization()
         # units leave initialization in stepping order, each after receiving its sources' initial outputs

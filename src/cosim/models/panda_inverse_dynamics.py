@@ -19,6 +19,7 @@ from cosim.units.python.batch import PythonBatchUnit
 from cosim.units.python.unit import PythonUnit
 
 from .panda_model import cached_model, ee_frame_id, limits_exceeded, payload_key, robot_variables
+from .panda_rows import IdRowKernel, KernelsUnavailable
 
 
 class PandaInverseDynamics(PythonUnit):
@@ -91,9 +92,11 @@ class PandaInverseDynamicsBatch(PythonBatchUnit):
     """:class:`PandaInverseDynamics` for K design points at once (lock-step runs, cosim.execution.lockstep).
 
     pinocchio has no batched RNEA, so it is called per active row, with the
-    single unit's calls; everything else works on all rows at once with the
-    same element-wise operations, so row k's outputs equal a single unit's bit
-    for bit.
+    single unit's calls; the rest (path length, torque ratios, limit flags) is
+    one compiled call for all rows (:class:`~cosim.models.panda_rows.IdRowKernel`,
+    numpy's operations in numpy's order), or numpy on all rows where the
+    library cannot be built here; either way row k's outputs equal a single
+    unit's bit for bit.
     """
 
     def initialize(self) -> None:
@@ -107,10 +110,24 @@ class PandaInverseDynamicsBatch(PythonBatchUnit):
             self._models.append(keys[key])
         # row views, made once: the arrays are only ever written in place
         self._row_views = list(zip(self.q, self.qd, self.qdd))
-        self._path_done = None
+        # the TCP path committed at the last communication point (do_step), written in place
+        self._done_length, self._done_ee = np.zeros(self.rows), np.zeros((self.rows, 3))
+        self._committed = False
+        self._kernel = self._row_kernel()
+        self._active_seen: np.ndarray | None = None
         self.compute_outputs()
-        self._path_done = (np.zeros(self.rows), self.ee_pos.copy())
+        self._done_ee[:] = self.ee_pos
+        self._committed = True
         self.ee_path_length[:] = 0.0
+
+    def _row_kernel(self) -> IdRowKernel | None:
+        arrays = {name: getattr(self, name) for name in ("q", "qd", "tau", "q_min", "q_max", "qd_max", "tau_max",
+                                                         "ee_pos", "ee_path_length", "tracking_error", "tau_ratio",
+                                                         "limit_violated")}
+        try:
+            return IdRowKernel(dict(arrays, done_length=self._done_length, done_ee=self._done_ee), self.rows)
+        except (KernelsUnavailable, ValueError):  # no C compiler here, or an array not as the kernel takes it
+            return None
 
     def compute_outputs(self) -> None:
         self.q[:] = self.q_ref
@@ -125,12 +142,18 @@ class PandaInverseDynamicsBatch(PythonBatchUnit):
             tau[k] = rnea(m, d, q_k, qd_k, qdd_k)
             kinematics(m, d, q_k)
             ee[k] = placement(m, d, frame).translation
-        done = self._path_done
-        if done is not None:  # the chord from the last communication point to now, as the single unit
-            chord = ee[active] - done[1][active]
+        if self._kernel is not None:
+            if active is not self._active_seen:  # lock-step sets a new array when rows end
+                self._active_seen = active
+                self._active_c = np.ascontiguousarray(active, dtype=np.int64)
+                self._active_address = self._active_c.ctypes.data
+            self._kernel.outputs(len(self._active_c), self._active_address, self._committed)
+            return
+        if self._committed:  # the chord from the last communication point to now, as the single unit
+            chord = ee[active] - self._done_ee[active]
             # a row's 3 squares add left to right (numpy's own order for 3 elements, no BLAS), as in the single
             # unit, so the length is the same bit for bit on any machine
-            self.ee_path_length[active] = done[0][active] + np.sqrt((chord * chord).sum(axis=1))
+            self.ee_path_length[active] = self._done_length[active] + np.sqrt((chord * chord).sum(axis=1))
         self.tracking_error[:] = 0.0
         np.divide(np.abs(tau), self.tau_max, out=self.tau_ratio)
         self.limit_violated[:] = ((self.tau_ratio.max(axis=1) > 1.0) | ((q - self.q_min).min(axis=1) < 0.0)
@@ -141,7 +164,8 @@ class PandaInverseDynamicsBatch(PythonBatchUnit):
         if self._outputs_stale:
             self._outputs_stale = False
             self.compute_outputs()
-        self._path_done = (self.ee_path_length.copy(), self.ee_pos.copy())
+        np.copyto(self._done_length, self.ee_path_length)
+        np.copyto(self._done_ee, self.ee_pos)
 
 
 PandaInverseDynamics.batch_class = PandaInverseDynamicsBatch

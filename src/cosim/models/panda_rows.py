@@ -8,7 +8,7 @@ ratios and limit flags after it.  Done per row in Python (pinocchio calls,
 numpy on 7-element rows) it cost 3-6 us per point and step, a third of the
 solver's own time; here it is one C call per step for all rows.
 
-The C comes from two places, both under ``models/panda_rows_c/``:
+The C comes from three places, both under ``models/panda_rows_c/``:
 
 * ``panda_rows_casadi.c``/``.h``: ``panda_rnea(q, qd, qdd, payload_mass,
   payload_com, payload_inertia) -> tau`` and ``panda_tcp(q) -> ee_pos``,
@@ -21,6 +21,13 @@ The C comes from two places, both under ``models/panda_rows_c/``:
 
 * ``panda_rows.c``: the row loops, written by hand.
 
+* ``id_rows.c``: the same for the inverse-dynamics level's twins
+  (:class:`~cosim.models.trajectory.TrajectoryGeneratorBatch`'s sampling,
+  :class:`~cosim.models.panda_inverse_dynamics.PandaInverseDynamicsBatch`'s
+  outputs after pinocchio), bound by :class:`TrajectoryRowKernel` and
+  :class:`IdRowKernel`; written by hand with numpy's operations in numpy's
+  order, so their rows equal the single units' bit for bit.
+
 :func:`library_path` compiles them with gcc into a shared library at first use,
 kept in the FMUs' cache (:func:`cosim.fmus.build.cache_dir`) under a digest of
 the sources, the flags and the compiler, so an edit rebuilds and nothing else
@@ -29,7 +36,8 @@ committed).  :class:`PandaRowKernels` binds the library to a twin's arrays.
 
 Promised (``tests/test_panda_rows.py``): RNEA equal to pinocchio's with the
 same payload to 1e-10 N.m, the TCP to pinocchio's forward kinematics to
-1e-12 m, the outputs to the twin's numpy formulas they replace.
+1e-12 m, the outputs to the twin's numpy formulas they replace; the
+inverse-dynamics kernels equal to the numpy twins bit for bit.
 """
 
 from __future__ import annotations
@@ -41,14 +49,16 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 SOURCE_DIR = Path(__file__).resolve().parent / "panda_rows_c"
 BASENAME = "panda_rows_casadi"
 GENERATED = (f"{BASENAME}.c", f"{BASENAME}.h")
-SOURCES = ("panda_rows.c",) + GENERATED
-CFLAGS = ("-shared", "-fPIC", "-O2", "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-Wall")
+SOURCES = ("panda_rows.c", "id_rows.c") + GENERATED
+# -ffp-contract=off: no fused multiply-add, so id_rows.c rounds each operation as the numpy code it replaces
+CFLAGS = ("-shared", "-fPIC", "-O2", "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-ffp-contract=off", "-Wall")
 LIBRARY = "panda_rows.so"
 
 
@@ -105,7 +115,7 @@ def library_path() -> Path:
     with tempfile.TemporaryDirectory(prefix="build-panda_rows-", dir=target.parent) as tmp:
         partial = Path(tmp) / LIBRARY
         command = [c_compiler(), *CFLAGS, f"-I{SOURCE_DIR}", str(SOURCE_DIR / "panda_rows.c"),
-                   str(SOURCE_DIR / f"{BASENAME}.c"), "-o", str(partial), "-lm"]
+                   str(SOURCE_DIR / "id_rows.c"), str(SOURCE_DIR / f"{BASENAME}.c"), "-o", str(partial), "-lm"]
         result = subprocess.run(command, capture_output=True, text=True)
         if result.returncode != 0:
             raise FmuBuildError(f"compiling the Panda row kernels failed:\n{' '.join(command)}\n{result.stderr.strip()}")
@@ -149,6 +159,9 @@ def load_library() -> ctypes.CDLL:
             function = getattr(lib, name)
             function.argtypes = [ctypes.c_void_p, ctypes.c_int64, ctypes.c_void_p, *extra]
             function.restype = ctypes.c_int
+        lib.traj_rows_sample.argtypes = [ctypes.c_void_p, ctypes.c_double] + [ctypes.c_void_p] * 3
+        lib.id_rows_outputs.argtypes = [ctypes.c_void_p, ctypes.c_int64, ctypes.c_void_p, ctypes.c_int]
+        lib.traj_rows_sample.restype = lib.id_rows_outputs.restype = None
         _LIBRARY.append(lib)
     return _LIBRARY[0]
 
@@ -192,6 +205,85 @@ class PandaRowKernels:
         if result < 0:
             raise RuntimeError("the generated TCP kinematics failed")
         return result
+
+
+def _checked(name: str, array: np.ndarray, shape: tuple[int, ...], dtype: Any = np.float64) -> int:
+    """The address of ``array`` after checking it is C-contiguous ``dtype`` of ``shape`` (ValueError if not)."""
+    if array.dtype != np.dtype(dtype) or array.shape != shape or not array.flags.c_contiguous:
+        raise ValueError(f"{name}: expected a C-contiguous {np.dtype(dtype)} array of shape {shape}, "
+                         f"got {array.dtype} {array.shape}" + ("" if array.flags.c_contiguous else " not C-ordered"))
+    return int(array.ctypes.data)
+
+
+class _TrajRows(ctypes.Structure):
+    _fields_ = [("rows", ctypes.c_int64), ("phases", ctypes.c_int64)] + [
+        (name, ctypes.c_void_p) for name in ("starts", "q", "v", "a", "first", "last", "duration")]
+
+
+class TrajectoryRowKernel:
+    """``id_rows.c``'s sampling of K planned parabolic blends, bound to a twin's padded phase tables.
+
+    ``starts`` (K, P) with +inf padding, ``q``, ``v``, ``a`` (K, P, 7), ``first``, ``last`` (K, 7),
+    ``duration`` (K,): float64, C-ordered, kept alive and unchanged while this lives.  Raises ValueError
+    for an array of the wrong type, shape or layout, :class:`KernelsUnavailable` when the library cannot
+    be built.
+    """
+
+    def __init__(self, starts: np.ndarray, q: np.ndarray, v: np.ndarray, a: np.ndarray, first: np.ndarray,
+                 last: np.ndarray, duration: np.ndarray):
+        rows, phases = starts.shape
+        tables = {"starts": (starts, (rows, phases)), "q": (q, (rows, phases, 7)), "v": (v, (rows, phases, 7)),
+                  "a": (a, (rows, phases, 7)), "first": (first, (rows, 7)), "last": (last, (rows, 7)),
+                  "duration": (duration, (rows,))}
+        addresses = {name: _checked(name, array, shape) for name, (array, shape) in tables.items()}
+        self._keep = tables
+        self._struct = _TrajRows(rows, phases, **addresses)
+        self._address = ctypes.addressof(self._struct)
+        self._sample = load_library().traj_rows_sample
+        self.rows = rows
+
+    def sample(self, t: float, q: int | None, v: int | None, a: int | None) -> None:
+        """Position, velocity, acceleration of every row at ``t`` into the (K, 7) float64 C-ordered arrays at
+        the addresses given (None: not wanted); the caller checks them once (:func:`row_address`)."""
+        self._sample(self._address, t, q, v, a)
+
+
+def row_address(name: str, array: np.ndarray, rows: int, length: int) -> int:
+    """The address of a (rows, length) float64 C-ordered array for a kernel to write (ValueError if not one)."""
+    return _checked(name, array, (rows, length))
+
+
+_ID_FIELDS = (("q", 7), ("qd", 7), ("tau", 7), ("q_min", 7), ("q_max", 7), ("qd_max", 7), ("tau_max", 7),
+              ("ee_pos", 3), ("done_length", 0), ("done_ee", 3), ("ee_path_length", 0), ("tracking_error", 0),
+              ("tau_ratio", 7), ("limit_violated", 0))
+
+
+class _IdRows(ctypes.Structure):
+    _fields_ = [("rows", ctypes.c_int64)] + [(name, ctypes.c_void_p) for name, _ in _ID_FIELDS]
+
+
+class IdRowKernel:
+    """``id_rows.c``'s outputs of K inverse-dynamics arms after pinocchio has written ``tau`` and ``ee_pos``.
+
+    ``arrays`` maps every name of ``_ID_FIELDS`` to a C-contiguous array of K rows of its length (float64;
+    ``limit_violated`` bool): the twin's attributes and its committed path (``done_length``, ``done_ee``),
+    written in place only, for as long as this lives.  Raises ValueError for an array of the wrong type,
+    shape or layout, :class:`KernelsUnavailable` when the library cannot be built.
+    """
+
+    def __init__(self, arrays: dict[str, np.ndarray], rows: int):
+        addresses = {name: _checked(name, arrays[name], (rows, length) if length else (rows,),
+                                    np.bool_ if name == "limit_violated" else np.float64)
+                     for name, length in _ID_FIELDS}
+        self._keep = dict(arrays)
+        self._struct = _IdRows(rows, **addresses)
+        self._address = ctypes.addressof(self._struct)
+        self._outputs = load_library().id_rows_outputs
+
+    def outputs(self, count: int, rows_address: int, chord: bool) -> None:
+        """Path length of the ``count`` rows listed (int64) at ``rows_address`` (when ``chord``: the chord from
+        the committed point added), tracking error, torque ratios and limit flags of every row."""
+        self._outputs(self._address, count, rows_address, chord)
 
 
 def main(argv: list[str] | None = None) -> int:

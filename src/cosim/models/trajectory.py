@@ -43,6 +43,7 @@ from cosim.units.python.batch import NotBatchable, PythonBatchUnit
 from cosim.units.python.unit import PythonUnit
 
 from .panda_model import FRANKA_DOC_LIMITS, N_JOINTS, thesis_to_urdf
+from .panda_rows import KernelsUnavailable, TrajectoryRowKernel, row_address
 
 MAX_SLOWDOWNS = 10_000  # a safety net: the fix converges in a handful of passes on real paths
 
@@ -372,7 +373,24 @@ class TrajectoryGeneratorBatch(PythonBatchUnit):
         self._first = np.array([p.waypoints[0] for p in plans])
         self._last = np.array([p.waypoints[-1] for p in plans])
         self.duration[:] = [p.duration for p in plans]
+        self._kernel = self._row_kernel()
         self._write(self.start_time, 0.0)
+
+    def _row_kernel(self) -> TrajectoryRowKernel | None:
+        """The compiled sampling of every row (the numpy one of :meth:`_sample` in C, the same bits), bound to
+        this run's tables and output arrays; None where the library cannot be built here."""
+        try:
+            kernel = TrajectoryRowKernel(self._starts, self._q, self._v, self._a, self._first, self._last,
+                                         self.duration)
+            rows = self.rows
+            self._ends = [np.zeros((rows, N_JOINTS)) for _ in range(2)]  # qd at steps' ends, taken in turn
+            self._at = {name: row_address(name, array, rows, N_JOINTS) for name, array in
+                        (("q_ref", self.q_ref), ("qd_ref", self.qd_ref), ("qdd_ref", self.qdd_ref))}
+            self._ends_at = [row_address("qd_end", end, rows, N_JOINTS) for end in self._ends]
+            self._turn = 0
+        except (KernelsUnavailable, ValueError):  # no C compiler here, or an array not as the kernel takes it
+            return None
+        return kernel
 
     def _sample(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """ParabolicBlendTrajectory.sample of every row at ``t`` (same operations, per element)."""
@@ -392,8 +410,32 @@ class TrajectoryGeneratorBatch(PythonBatchUnit):
     def do_step(self, t: float, h: float) -> None:
         self._write(t + h, h)
 
+    def _write_compiled(self, local: float, h: float) -> None:
+        """:meth:`_write` with the compiled sampling: the same values into the same arrays.  qd at the last
+        step's end is kept in ``_ends[_turn]``; this step's end goes into the other buffer."""
+        kernel, at = self._kernel, self._at
+        assert kernel is not None
+        last = self._turn
+        self._turn = 1 - last
+        if self._midpoint and h > 0:
+            kernel.sample(local - 0.5 * h, at["q_ref"], at["qd_ref"], None)
+            kernel.sample(local, None, self._ends_at[self._turn], None)
+            # the previous step's end is this step's start (steps follow each other)
+            if not abs(self._last_time - (local - h)) <= 1e-12 * max(1.0, abs(local)):
+                kernel.sample(local - h, None, self._ends_at[last], None)
+            np.subtract(self._ends[self._turn], self._ends[last], out=self.qdd_ref)
+            self.qdd_ref /= h
+        else:
+            kernel.sample(local, at["q_ref"], at["qd_ref"], at["qdd_ref"])
+            self._ends[self._turn][:] = self.qd_ref
+        self._last_time = local
+        self.finished[:] = local >= self.duration - 1e-9
+
     def _write(self, t: float, h: float) -> None:
         local = t - self.start_time
+        if self._kernel is not None:
+            self._write_compiled(local, h)
+            return
         if self._midpoint and h > 0:
             q, qd, _ = self._sample(local - 0.5 * h)
             self.q_ref[:] = q

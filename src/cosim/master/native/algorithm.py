@@ -65,6 +65,28 @@ def _address(function: Any) -> int:
     return ctypes.cast(function, ctypes.c_void_p).value or 0
 
 
+def describe_fmu(into: Any, unit: Any) -> None:
+    """Fill the kernel's ``KUnit`` ``into`` with an FMI 2.0/3.0 co-simulation instance's handle and the FMI
+    functions FMPy resolved from its library (raises ValueError for any other unit)."""
+    from cosim.units.fmu.fmpy_internals import library
+
+    version = _version(unit)
+    if version not in (2, 3):
+        raise ValueError(f"unit '{unit.name}' is not an FMI 2.0/3.0 co-simulation instance")
+    into.version = version
+    dll = library(unit._slave)
+    component = unit._component
+    into.component = getattr(component, "value", component)
+    prefix = f"fmi{version}"
+    into.do_step = _address(getattr(dll, f"{prefix}DoStep"))
+    for i, kind in enumerate(_CALL_TYPES[version]):
+        into.get[i] = _address(getattr(dll, f"{prefix}Get{kind}"))
+        into.set[i] = _address(getattr(dll, f"{prefix}Set{kind}"))
+    if version == 3:
+        into.event, into.terminate = ctypes.addressof(unit._event), ctypes.addressof(unit._terminate)
+        into.early, into.last_time = ctypes.addressof(unit._early), ctypes.addressof(unit._last_time)
+
+
 class NativeFixedStep(FixedStep):
     """A fixed-step algorithm (``base``: gauss-seidel, jacobi or jacobi-delayed) whose steps run in C.
 
@@ -130,19 +152,7 @@ class NativeFixedStep(FixedStep):
             return self._describe_player(into, unit)
         if version == lib.STORE:
             return self._describe_store(into, unit)
-        from cosim.units.fmu.fmpy_internals import library
-
-        dll = library(unit._slave)
-        component = unit._component
-        into.component = getattr(component, "value", component)
-        prefix = f"fmi{version}"
-        into.do_step = _address(getattr(dll, f"{prefix}DoStep"))
-        for i, kind in enumerate(_CALL_TYPES[version]):
-            into.get[i] = _address(getattr(dll, f"{prefix}Get{kind}"))
-            into.set[i] = _address(getattr(dll, f"{prefix}Set{kind}"))
-        if version == 3:
-            into.event, into.terminate = ctypes.addressof(unit._event), ctypes.addressof(unit._terminate)
-            into.early, into.last_time = ctypes.addressof(unit._early), ctypes.addressof(unit._last_time)
+        describe_fmu(into, unit)
 
     def _describe_player(self, into: Any, unit: Any) -> None:
         """The player's table as kernel.c plays it; its ``current`` becomes the array the kernel writes."""

@@ -398,3 +398,46 @@ int cosim_reduce_all(int k, const int *codes, const double *t, const double *row
         if (cosim_reduce(codes[r], t, rows, n, stride, m, cols, out + (size_t)r * (size_t)m, scratch) != 0) return -1;
     return 0;
 }
+
+/* Lock-step rows (cosim/master/native/rows.py, used by cosim/execution/lockstep.py): one FMI call made on the
+ * listed instances of K instances of one FMU, rows[0..n) of units[], in a C loop instead of one ctypes call per
+ * instance.  The values and their order are those of the Python loop it replaces.  On a status above Warning,
+ * or an FMI 3.0 step that ends the simulation or returns early, it stops there and says which row in *fail. */
+
+typedef int (*fmi2_set_real_t)(void *, const unsigned *, size_t, const double *);
+typedef int (*fmi3_set_real_t)(void *, const unsigned *, size_t, const double *, size_t);
+
+/* Set the same Real/Float64 variables of each listed row: row r's values start at values + r * stride. */
+int cosim_rows_set_reals(const KUnit *units, long n, const int64_t *rows, const unsigned *vrs, size_t n_vrs,
+                         size_t n_values, const double *values, long stride, KFail *fail) {
+    for (long i = 0; i < n; i++) {
+        const int64_t r = rows[i];
+        const KUnit *u = &units[r];
+        const double *v = values + (size_t)r * (size_t)stride;
+        int st = u->version == 2 ? ((fmi2_set_real_t)u->set[0])(u->component, vrs, n_vrs, v)
+                                 : ((fmi3_set_real_t)u->set[0])(u->component, vrs, n_vrs, v, n_values);
+        if (st > 1) {
+            fail->unit = (int)r; fail->call = CALL_SET; fail->type = T_REAL; fail->status = st;
+            return RUN_FAILED;
+        }
+    }
+    return RUN_DONE;
+}
+
+/* doStep(t, h) of each listed row, as the units' do_step calls it (noSetFMUStatePriorToCurrentPoint true). */
+int cosim_rows_do_step(const KUnit *units, long n, const int64_t *rows, double t, double h, KFail *fail) {
+    fail->t = t;
+    fail->h = h;
+    for (long i = 0; i < n; i++) {
+        const int64_t r = rows[i];
+        const KUnit *u = &units[r];
+        int st = u->version == 2 ? ((fmi2_do_step_t)u->do_step)(u->component, t, h, 1)
+               : ((fmi3_do_step_t)u->do_step)(u->component, t, h, true, u->event, u->terminate, u->early, u->last_time);
+        if (st > 1) {
+            fail->unit = (int)r; fail->call = CALL_DOSTEP; fail->type = 0; fail->status = st;
+            return RUN_FAILED;
+        }
+        if (u->version == 3 && (*u->terminate || *u->early)) { fail->unit = (int)r; return RUN_ENDED; }
+    }
+    return RUN_DONE;
+}

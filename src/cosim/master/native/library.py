@@ -99,6 +99,7 @@ class KFail(ctypes.Structure):
 
 
 RUN_DONE, RUN_STOPPED, RUN_FAILED, RUN_ENDED = 0, 1, 2, 3
+CALL_DOSTEP, CALL_GET, CALL_SET = 0, 1, 2  # KFail.call
 
 
 @lru_cache(maxsize=1)
