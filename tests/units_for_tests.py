@@ -197,11 +197,12 @@ class Ishigami(PythonUnit):
 
 
 class Algebraic(PythonUnit):
-    """y = c0 + c1*u + c3*u^3 + a*cos(u) + w, direct feed-through from u and w (as the `algebraic` FMU, plus w)."""
+    """y = c0 + c1*u + c2*u^2 + c3*u^3 + a*cos(u) + w, direct feed-through from u and w (as the `algebraic` FMU)."""
 
     variables = (
         Variable("c0", "parameter", start=0.0),
         Variable("c1", "parameter", start=1.0),
+        Variable("c2", "parameter", start=0.0),
         Variable("c3", "parameter", start=0.0),
         Variable("a", "parameter", start=0.0),
         Variable("u", "input", start=0.0),
@@ -211,7 +212,7 @@ class Algebraic(PythonUnit):
     feedthrough = {"y": ["u", "w"]}
 
     def compute_outputs(self):
-        self.y = self.c0 + self.c1 * self.u + self.c3 * self.u ** 3 + self.a * math.cos(self.u) + self.w
+        self.y = self.c0 + self.c1 * self.u + self.c2 * self.u ** 2 + self.c3 * self.u ** 3 + self.a * math.cos(self.u) + self.w
 
     def do_step(self, t, h):
         self.compute_outputs()

@@ -58,14 +58,21 @@ class GaussSeidel(FixedStep):
         self._loops = (CouplingRuntime(coupling, units, view.links, view.transfers)
                        if self.solves_loops and coupling.loops else None)
         self._solve_after: list[list[Any]] | None = None  # per unit in order: the loops solved once it has stepped
+        self._after_solve: list[Any] = []  # the links into inputs that feed no output directly (start)
         if self._loops is not None:  # a system without loops pays nothing for them
             last = {loop: max(order.index(u) for u in loop.units) for loop in coupling.loops}
             self._solve_after = [[self._loops.solver(loop).solve for loop in coupling.loops if last[loop] == i]
                                  for i in range(len(order))]
+            direct = coupling.direct
+            self._after_solve = view.transfers(units, [c for i, c in enumerate(view.links) if i not in direct])
 
     def start(self, t: float) -> None:
         if self._loops is not None:
             self._loops.propagate(t)
+            # initialization carried the values from before the solve: the rest of the inputs get the solution,
+            # so the first row of the traces shows it (they feed no output directly: no output changes)
+            for transfer in self._after_solve:
+                transfer.run()
         super().start(t)
 
     def step(self, t: float, h: float) -> None:
@@ -123,6 +130,10 @@ class Jacobi(FixedStep):
     def start(self, t: float) -> None:
         if self._loops and self._coupling is not None:  # initialization set every input in dependency order:
             self._coupling.propagate(t)                  # only loops remain
+            # the other inputs still hold what initialization carried before the loops were solved: the first
+            # step starts from the solution, as every later one does (they feed no output directly)
+            for transfer in self._transfers:
+                transfer.run()
         super().start(t)
 
     def step(self, t: float, h: float) -> None:

@@ -316,6 +316,17 @@ class LoopSolver:
         self.iterations = 0
         self.newton_stop = ""  # why the last Newton iteration stopped short, for the message
 
+    def _start_values(self) -> np.ndarray:
+        """The tearing variables as their units hold them now (the cut links' targets, read back); what the cut
+        links carry (their sources, converted) where a transfer cannot read its target (a group's own)."""
+        values = []
+        for transfer in self._torn:
+            target, selection = getattr(transfer, "target", None), getattr(transfer, "target_selection", None)
+            if target is None or selection is None:
+                return self._read()
+            values.append(np.array(target.get(selection), dtype=float).reshape(-1))
+        return np.concatenate(values)
+
     def _read(self) -> np.ndarray:
         """The cut links' values now (their sources' outputs, converted)."""
         return np.concatenate([np.array(t.read(), dtype=float).reshape(-1) for t in self._torn])
@@ -370,10 +381,13 @@ class LoopSolver:
         return self._solutions[-1][1] if self._solutions else None
 
     def _guess(self, t: float) -> np.ndarray:
-        """Where to start at ``t``: the last two solutions extrapolated linearly (the last one alone after the
-        first solve; what the cut links carry now before it), so a smooth solution is followed closely."""
+        """Where to start at ``t``: at the first solve the tearing variables' values now (their start values:
+        the system does not carry the cut links at initialization), as OpenModelica's KINSOL starts from the
+        start values; then the last two solutions extrapolated linearly (the last one alone after the first
+        solve), so a smooth solution is followed closely.  Newton is local: this choice is which root a loop
+        with several solutions reaches."""
         if not self._solutions:
-            return self._read()
+            return self._start_values()
         t1, x1 = self._solutions[-1]
         if len(self._solutions) == 1 or t == t1:
             return x1.copy()

@@ -95,6 +95,11 @@ def check_algebraic_loops(units: Mapping[str, SystemUnit], connections: list[Con
                           algorithm: str | None = None) -> list[Connection]:
     """Report the algebraic loops that cannot be solved; return the connections in initialization order.
 
+    The loops' cut connections (the links into their tearing variables) are left out of the initialization
+    order: a tearing variable keeps its start value (the spec's ``start``, else the unit's own) until the
+    master solves the loop at the start time, and Newton starts there, as OpenModelica's KINSOL starts from
+    the start values (carrying the cut links through a loop at initialization would start it wherever a few
+    rounds of fixed-point iteration had wandered to).
     Loops of Real signals are solved by the master (:mod:`cosim.master.loops`); a loop carrying Integer,
     Boolean or String values, or a master ``algorithm`` that does not solve loops, is reported.
     Nodes are (unit, variable); a connection is an edge output -> input and a
@@ -130,7 +135,9 @@ def check_algebraic_loops(units: Mapping[str, SystemUnit], connections: list[Con
     for i, comp in enumerate(reversed(strongly_connected(nodes, edges))):
         for n in comp:
             rank[n] = i
-    return sorted(connections, key=lambda c: rank.get((c.source.unit, c.source.variable.name), 0))
+    torn = {i for loop in coupling.loops for i in loop.torn}
+    carried = [c for i, c in enumerate(connections) if i not in torn]
+    return sorted(carried, key=lambda c: rank.get((c.source.unit, c.source.variable.name), 0))
 
 
 def _element_input_connected(unit: str, variable: str, connected: set[tuple[str, str]]) -> bool:

@@ -72,7 +72,7 @@ KIND = UnitKind("fmu", {
                                  "model exchange (integrated by cosim with CVode inside each step)."},
     "tolerance": {"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": 1,
                   "description": "fmu, model exchange only: relative tolerance of the solver (CVode; absolute "
-                                 "tolerance = tolerance x nominal). Default 1e-6."},
+                                 "tolerance = tolerance x nominal). Default 1e-8."},
     "max_step": {"type": "number", "exclusiveMinimum": 0,
                  "description": "fmu, model exchange only: largest internal solver step in seconds. Default: the "
                                 "communication step."},
