@@ -8,7 +8,7 @@ into a transfer with pre-built selections, so a step does no name lookup and no 
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Sequence
 
 from cosim.master.contract import MasterAlgorithm, StepGrid, SystemView, step_unit
 from cosim.master.loops import CouplingRuntime
@@ -58,7 +58,7 @@ class GaussSeidel(FixedStep):
         self._loops = (CouplingRuntime(coupling, units, view.links, view.transfers)
                        if self.solves_loops and coupling.loops else None)
         self._solve_after: list[list[Any]] | None = None  # per unit in order: the loops solved once it has stepped
-        self._after_solve: list[Any] = []  # the links into inputs that feed no output directly (start)
+        self._after_solve: Sequence[Any] = ()  # the links into inputs that feed no output directly (start)
         if self._loops is not None:  # a system without loops pays nothing for them
             last = {loop: max(order.index(u) for u in loop.units) for loop in coupling.loops}
             self._solve_after = [[self._loops.solver(loop).solve for loop in coupling.loops if last[loop] == i]
