@@ -95,22 +95,24 @@ def _settle_groups(groups: Sequence[CoupledModelExchange], t: float) -> None:
 
 class _MemberTransfer:
     """One link between members of a group, for the loop solver: read the source's output (scaled), set the
-    target's input as the group does while it evaluates its equations (``set_within_group``: no solver restart)."""
+    target's input as the group does while it evaluates its equations (``set_within_group``: no solver restart).
+    ``target`` and ``target_selection`` let the solver read a tearing variable's start value back, as for any
+    transfer."""
 
-    __slots__ = ("_read", "_selection", "_set", "_factor", "_offset")
+    __slots__ = ("_read", "target", "target_selection", "_set", "_factor", "_offset")
 
     def __init__(self, members: Mapping[str, Any], link: Link):
-        source, target = members[link.source.unit], members[link.target.unit]
+        source, self.target = members[link.source.unit], members[link.target.unit]
         self._read = source.reader(source.select(list(link.source.refs)))
-        self._selection = target.select(list(link.target.refs))
-        self._set = target.set_within_group
+        self.target_selection = self.target.select(list(link.target.refs))
+        self._set = self.target.set_within_group
         self._factor, self._offset = link.factor, link.offset
 
     def read(self) -> list[float]:
         return [self._factor * float(v) + self._offset for v in self._read()]
 
     def write(self, values: Sequence[float]) -> None:
-        self._set(self._selection, list(values))
+        self._set(self.target_selection, list(values))
 
     def run(self) -> None:
         self.write(self.read())

@@ -318,7 +318,7 @@ class LoopSolver:
 
     def _start_values(self) -> np.ndarray:
         """The tearing variables as their units hold them now (the cut links' targets, read back); what the cut
-        links carry (their sources, converted) where a transfer cannot read its target (a group's own)."""
+        links carry (their sources, converted) where a transfer does not say its target."""
         values = []
         for transfer in self._torn:
             target, selection = getattr(transfer, "target", None), getattr(transfer, "target_selection", None)
