@@ -4,6 +4,7 @@ locate the failures, survive the trip through models.json, and the command refus
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pandas as pd
@@ -106,6 +107,9 @@ def test_table_surrogates_rank_locate_failures_and_round_trip(tmp_path):
     summary = pd.read_csv(stored / "summary.csv")
     assert list(summary["objective"]) == ["smooth", "quadratic"]
     assert summary["q2"].tolist() == pytest.approx([s.fitted.q2 for s in surrogates.objectives.values()])
+    for row, s in zip(summary.to_dict("records"), surrogates.objectives.values()):
+        for i in s.ranking:  # each parameter's Q²: Q² x its total index
+            assert row[f"Q2[{i.parameter}]"] == pytest.approx(s.fitted.q2 * i.total, abs=1e-12)
 
 
 def test_command_fits_predicts_and_refuses_bad_input(tmp_path, capsys):
@@ -121,6 +125,7 @@ def test_command_fits_predicts_and_refuses_bad_input(tmp_path, capsys):
     section = page[page.index("<h2>Surrogates and their prognosis quality</h2>"):]
     assert f"<td class='l'>quadratic</td><td class=''>poly 2</td><td class=''>{stored.fitted.q2:.6g}</td>" in section
     assert "u.a " in section and "alt='figure'" in section.split("<h2>")[1]
+    assert "Q² of the parameter" in section and f"({stored.fitted.q2 * stored.ranking[0].total:.2f})" in section
     assert len(stored.fitted.simulated) == len(stored.fitted.cross_validated) == stored.rows
     designs = tmp_path / "designs.csv"
     pd.DataFrame({"u.a": [0.2, 0.5], "u.b": [1.0, 0.5], "u.c": [0.0, 0.3]}).to_csv(designs, index=False)
@@ -154,3 +159,20 @@ def test_command_fits_predicts_and_refuses_bad_input(tmp_path, capsys):
     refused(["surrogate", str(other), "--predict", str(designs), "-o", str(predicted)], "cosim surrogate")
     (tmp_path / "other" / "metadata.json").unlink()
     refused(["surrogate", str(other)], "--spec")
+
+
+def test_q2_of_a_parameter_is_its_drop_of_q2_for_an_additive_objective(tmp_path):
+    """Q² x ST per parameter against what it stands for on an additive objective: Q² of the surrogate with
+    every parameter minus Q² of one refitted (5-fold) without that parameter."""
+    from cosim.analysis.surrogate.ranking import parameter_q2, sobol_ranking
+
+    rng = np.random.default_rng(7)
+    x = rng.random((400, 3))
+    y = 3 * x[:, 0] + x[:, 1] + 0.05 * rng.standard_normal(400)  # ST about 0.9, 0.1, 0
+    full = fit_objective(x, y, "poly")
+    ranking = {i.parameter: i for i in sobol_ranking(full.model, ["a", "b", "c"])}
+    for j, name in enumerate(["a", "b", "c"]):
+        without = fit_objective(np.delete(x, j, axis=1), y, "poly")
+        assert parameter_q2(full.q2, ranking[name]) == pytest.approx(full.q2 - without.q2, abs=0.03)
+    assert parameter_q2(full.q2, ranking["a"]) > 0.85 and parameter_q2(full.q2, ranking["c"]) < 0.01
+    assert math.isnan(parameter_q2(float("nan"), ranking["a"]))

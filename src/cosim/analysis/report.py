@@ -295,6 +295,7 @@ def _surrogate_section(table: ResultsTable) -> str:
     """The surrogates ``cosim surrogate`` stored beside the table: Q² per objective, the parameters ranked by
     their total Sobol index, and each objective's simulated values against their k-fold predictions."""
     from cosim.analysis.surrogate import read, surrogate_folder
+    from cosim.analysis.surrogate.ranking import parameter_q2
 
     head = "<h2>Surrogates and their prognosis quality</h2>"
     folder = surrogate_folder(table.path.parent)
@@ -308,10 +309,14 @@ def _surrogate_section(table: ResultsTable) -> str:
     text = head + ("<p>Q² (coefficient of prognosis) is 1 - the squared error of each design's prediction by the "
                    "surrogate fitted without it (5-fold cross-validation) / the objective's variance: 1 is a "
                    "perfect prognosis, 0 no better than the mean. Parameters are ranked by the total Sobol index "
-                   "of the surrogate (its variance due to the parameter with all its interactions).</p>")
+                   "ST of the surrogate (its variance due to the parameter with all its interactions); a "
+                   "parameter's Q² is its coefficient of prognosis, Q² × ST: the share of the objective's variance "
+                   "the surrogate predicts through that parameter.</p>")
     rows = [[name, s.fitted.candidate, s.fitted.q2, s.fitted.rmse, s.rows,
-             ", ".join(f"{i.parameter} {i.total:.2f}" for i in s.ranking)] for name, s in surrogates.objectives.items()]
-    text += _table(["objective", "surrogate", "Q²", "RMSE", "designs", "ranking (total Sobol index)"], rows)
+             ", ".join(f"{i.parameter} {i.total:.2f} ({parameter_q2(s.fitted.q2, i):.2f})" for i in s.ranking)]
+            for name, s in surrogates.objectives.items()]
+    text += _table(["objective", "surrogate", "Q²", "RMSE", "designs", "ranking: total Sobol index (Q² of the "
+                    "parameter)"], rows)
     if surrogates.failures is not None:
         f = surrogates.failures
         text += (f"<p>Failed designs: {f.failed} of {f.total}; the classifier of where they fail has a 5-fold "

@@ -71,9 +71,12 @@ def cmd_surrogate(args: argparse.Namespace) -> int:
 
 
 def _summary_text(surrogates: Any) -> str:
-    lines = [f"{'objective':<24} {'surrogate':<14} {'Q2':>8} {'RMSE':>11} {'designs':>7}  ranking (total Sobol index)"]
+    from cosim.analysis.surrogate.ranking import parameter_q2
+
+    lines = [f"{'objective':<24} {'surrogate':<14} {'Q2':>8} {'RMSE':>11} {'designs':>7}  ranking: total Sobol index "
+             "(Q2 of the parameter)"]
     for name, s in surrogates.objectives.items():
-        ranking = ", ".join(f"{i.parameter} {i.total:.2f}" for i in s.ranking)
+        ranking = ", ".join(f"{i.parameter} {i.total:.2f} ({parameter_q2(s.fitted.q2, i):.2f})" for i in s.ranking)
         lines.append(f"{name:<24} {s.fitted.candidate:<14} {s.fitted.q2:>8.4f} {s.fitted.rmse:>11.4g} {s.rows:>7}  "
                      f"{ranking}")
         if not s.fitted.q2 >= TRUST_BELOW:

@@ -14,7 +14,7 @@ Optuna's ask-and-tell drives the search; cosim only translates:
   comparisons such as ``peak_tau_ratio <= 1``.  A comparison's violation is
   ``max(lhs - rhs)`` over the elements of an array (``rhs - lhs`` for >=);
   positive means infeasible.  Each violation is set on the trial
-  (``Trial.set_constraint``), which NSGA-II, TPE and GP take into account
+  (``Trial.set_constraint``), which NSGA-II, TPE, GP and surrogate take into account
   (random and qmc ignore it), and each row gets ``feasible``;
   infeasible rows stay in the table and are never on a Pareto front
   (``cosim pareto``, ``cosim report``).
@@ -288,8 +288,10 @@ def finite_choices(dists: Mapping[str, Any]) -> dict[str, list[Any]] | None:
     return out
 
 
-def make_sampler(name: str, seed: int, batch: int) -> Any:
-    """The Optuna sampler ``name`` (see SAMPLERS), seeded; raises OptimizeError when it cannot be had."""
+def make_sampler(name: str, seed: int, batch: int, dists: Mapping[str, Any] | None = None) -> Any:
+    """The Optuna sampler ``name`` (see SAMPLERS), seeded; ``dists``: the distributions every trial is asked with
+    (the surrogate sampler needs them; the others learn them from the trials).  Raises OptimizeError when the
+    sampler cannot be had."""
     import optuna
 
     if name == "tpe":
@@ -306,6 +308,12 @@ def make_sampler(name: str, seed: int, batch: int) -> Any:
                                 "pins the CPU build of torch the project is tested with), or use tpe, nsga2, "
                                 "random or qmc") from None
         return optuna.samplers.GPSampler(seed=seed)
+    if name == "surrogate":
+        from cosim.studies.surrogate_sampler import SurrogateSampler
+
+        if dists is None:
+            raise OptimizeError("the surrogate sampler needs the design space's distributions")
+        return SurrogateSampler(dists, seed, batch)
     if name == "random":
         return optuna.samplers.RandomSampler(seed=seed)
     if name == "qmc":
@@ -397,6 +405,7 @@ class Optimization:
         self._outcomes: dict[tuple, tuple] = {}  # (point id, status) -> _outcome: each row is read once
         self._sampler_label = self.settings.sampler  # "random" once the search switched (see _switch)
         self.stop_reason: str | None = None  # why the run ended before its budget (None: the budget was spent)
+        self.sampler: Any = None  # the Optuna sampler, once the run started
         self.sampler_seconds = 0.0  # time spent in the sampler's ask, over the whole run
         self.trials_asked = 0
 
@@ -482,13 +491,13 @@ class Optimization:
         if self.resume:
             stored = {r["point_id"]: r for r in self.store.read().to_dict("records")}
         s = self.settings
-        sampler = make_sampler(s.sampler, s.seed, s.batch)
+        dists = distributions(self.space)
+        self.sampler = sampler = make_sampler(s.sampler, s.seed, s.batch, dists)
         if self.storage:
             study = open_storage_study(self.storage, self.study_name, list(s.objectives.values()), list(s.objectives),
                                        sampler, self.resume, self.out)
         else:
             study = optuna.create_study(directions=list(s.objectives.values()), sampler=sampler)
-        dists = distributions(self.space)
         if evaluator is not None:
             self.folder.write_metadata(self._metadata(started, "", 0))
             self._loop(study, dists, evaluator, stored)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -45,20 +46,36 @@ def scaling_of(x: np.ndarray, y: np.ndarray) -> Scaling:
     return Scaling(low, span, float(np.mean(y)), scale if scale > 0 else 1.0)
 
 
-def fit_gp(x: np.ndarray, y: np.ndarray, shape: str, seed: int = 0) -> GaussianProcess:
-    """A Gaussian process with an anisotropic kernel, hyper-parameters by maximum likelihood (RESTARTS restarts)."""
+def fit_gp(x: np.ndarray, y: np.ndarray, shape: str, seed: int = 0, restarts: int = RESTARTS,
+           start: GaussianProcess | None = None, iterations: int | None = None,
+           shortest: float = 1e-3) -> GaussianProcess:
+    """A Gaussian process with an anisotropic kernel, hyper-parameters by maximum likelihood (``restarts`` more
+    optimiser starts from random hyper-parameters).  ``start``: a fitted process whose hyper-parameters are the
+    first start instead of the defaults (unit length scales of 0.5); ``iterations``: at most this many L-BFGS
+    iterations per start (None: scikit-learn's default, which can run to thousands on a flat likelihood; 0: the
+    start's hyper-parameters as they are, only conditioned on the designs);
+    ``shortest``: the lower bound of the length scales in the unit box.  The optimiser of ``--sampler surrogate``
+    uses all three to keep its own time small against the simulations' (a length scale near 1e-3 puts kernel
+    entries of 1e-300 and below into the Cholesky factorisation, whose subnormal arithmetic is 500 times slower)."""
     from sklearn.gaussian_process import GaussianProcessRegressor
     from sklearn.gaussian_process.kernels import RBF, ConstantKernel, Matern, WhiteKernel
 
     scaling = scaling_of(x, y)
     z, t = scaling.inputs(x), (y - scaling.y_mean) / scaling.y_scale
     d = x.shape[1]
-    bounds = (1e-3, 1e3)
-    shape_kernel = RBF(np.full(d, 0.5), bounds) if shape == "rbf" else \
-        Matern(np.full(d, 0.5), bounds, nu=1.5 if shape == "matern32" else 2.5)
+    bounds = (shortest, 1e3)
+    scales, constant, noise = np.full(d, 0.5), 1.0, 1e-6
+    if start is not None:  # the same hyper-parameters in this fit's own unit box and standardisation
+        scales = np.clip(start.length_scales * start.scaling.span / scaling.span, 2 * shortest, 5e2)
+        constant = float(np.clip(start.constant * (start.scaling.y_scale / scaling.y_scale) ** 2, 2e-3, 5e2))
+        noise = float(np.clip(start.noise * (start.scaling.y_scale / scaling.y_scale) ** 2, 2e-10, 5e-2))
+    shape_kernel = RBF(scales, bounds) if shape == "rbf" else \
+        Matern(scales, bounds, nu=1.5 if shape == "matern32" else 2.5)
     # the noise floor keeps the kernel matrix well conditioned (its Cholesky factor goes into the model)
-    kernel = ConstantKernel(1.0, (1e-3, 1e3)) * shape_kernel + WhiteKernel(1e-6, (1e-10, 1e-1))
-    gp = GaussianProcessRegressor(kernel, alpha=0.0, normalize_y=False, n_restarts_optimizer=RESTARTS, random_state=seed)
+    kernel = ConstantKernel(constant, (1e-3, 1e3)) * shape_kernel + WhiteKernel(noise, (1e-10, 1e-1))
+    gp = GaussianProcessRegressor(kernel, alpha=0.0, normalize_y=False, n_restarts_optimizer=restarts,
+                                  random_state=seed, optimizer="fmin_l_bfgs_b" if iterations is None
+                                  else _limited_lbfgs(iterations) if iterations > 0 else None)
     with warnings.catch_warnings():  # a hyper-parameter at its bound is reported by Q², not by a warning
         warnings.simplefilter("ignore")
         gp.fit(z, t)
@@ -67,6 +84,19 @@ def fit_gp(x: np.ndarray, y: np.ndarray, shape: str, seed: int = 0) -> GaussianP
                            np.broadcast_to(np.asarray(k.k1.k2.length_scale, float), (d,)).copy(),
                            float(k.k2.noise_level), z.copy(), np.asarray(gp.alpha_, float).ravel(),
                            np.asarray(gp.L_, float))
+
+
+def _limited_lbfgs(iterations: int) -> Any:
+    """scikit-learn's hyper-parameter optimiser (L-BFGS-B on the log marginal likelihood), stopped after
+    ``iterations``."""
+    from scipy.optimize import minimize
+
+    def optimise(objective: Any, theta: np.ndarray, bounds: np.ndarray) -> tuple[np.ndarray, float]:
+        result = minimize(objective, theta, method="L-BFGS-B", jac=True, bounds=bounds,
+                          options={"maxiter": iterations})
+        return result.x, float(result.fun)
+
+    return optimise
 
 
 def fit_poly(x: np.ndarray, y: np.ndarray, degree: int) -> Polynomial:

@@ -18,7 +18,7 @@ import pandas as pd
 from cosim.analysis.surrogate.failures import FailureModel, fit_failures
 from cosim.analysis.surrogate.fit import FOLDS, Fitted, fit_objective
 from cosim.analysis.surrogate.models import model_from_json
-from cosim.analysis.surrogate.ranking import Influence, sobol_ranking
+from cosim.analysis.surrogate.ranking import Influence, parameter_q2, sobol_ranking
 from cosim.analysis.table import ResultsTable
 from cosim.errors import AnalysisError, did_you_mean
 
@@ -58,13 +58,15 @@ class SurrogateSet:
         return out
 
     def summary(self) -> pd.DataFrame:
-        """One row per objective: surrogate, Q², RMSE, designs and each parameter's total Sobol index."""
+        """One row per objective: surrogate, Q², RMSE, designs, each parameter's total Sobol index ``ST[p]`` and
+        its Q² (coefficient of prognosis of the parameter, :func:`.ranking.parameter_q2`) ``Q2[p]``."""
         rows = []
         for name, s in self.objectives.items():
             row: dict[str, Any] = {"objective": name, "surrogate": s.fitted.candidate, "q2": s.fitted.q2,
                                    "rmse": s.fitted.rmse, "designs": s.rows,
                                    "ranking": " > ".join(i.parameter for i in s.ranking)}
             row.update({f"ST[{i.parameter}]": i.total for i in s.ranking})
+            row.update({f"Q2[{i.parameter}]": parameter_q2(s.fitted.q2, i) for i in s.ranking})
             rows.append(row)
         return pd.DataFrame(rows)
 
@@ -75,7 +77,9 @@ class SurrogateSet:
                                       "candidate": s.fitted.candidate, "tried": s.fitted.tried, "rows": s.rows,
                                       "simulated": s.fitted.simulated,
                                       "cross_validated": s.fitted.cross_validated,
-                                      "ranking": [vars(i) for i in s.ranking]}
+                                      "ranking": [vars(i) for i in s.ranking],
+                                      "parameter_q2": {i.parameter: parameter_q2(s.fitted.q2, i)
+                                                       for i in s.ranking}}
                                for name, s in self.objectives.items()},
                 "failures": self.failures.to_json() if self.failures is not None else None}
 
