@@ -36,7 +36,8 @@ class Gain(PythonUnit):
 
 MEASURE = '''
 import json, sys, time
-from cosim.parallel.isolation import IsolatedRunner, make_payload
+from cosim.parallel.isolation.payload import make_payload
+from cosim.parallel.isolation.runner import IsolatedRunner
 from cosim.system.validate import check_spec
 
 spec, points = sys.argv[1], int(sys.argv[2])

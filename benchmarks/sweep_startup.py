@@ -207,7 +207,8 @@ if __name__ == "__main__":
 CHILD_PROBE = r'''
 import sys, time
 from cosim.system.validate import check_spec
-from cosim.parallel.isolation import IsolatedRunner, make_payload
+from cosim.parallel.isolation.payload import make_payload
+from cosim.parallel.isolation.runner import IsolatedRunner
 from cosim.spec.design import DesignSpace
 system = check_spec(sys.argv[1])
 payload = make_payload(system)

@@ -30,7 +30,7 @@ def kill_group(proc: subprocess.Popen) -> None:
 def worker_process_cluster() -> Iterator[str]:
     """The address of a fresh distributed.LocalCluster of 2 worker processes (1 thread each, 127.0.0.1) whose
     scheduler lets a task lose one worker, as on the clusters cosim starts: for tests that kill a worker
-    process (cosim's own local cluster runs its workers in the client's process, cosim.parallel.evaluator).
+    process (cosim's own local cluster runs its workers in the client's process, cosim.parallel.cluster.client).
     The workers get this process's environment as it is now."""
     import dask
     from distributed import LocalCluster

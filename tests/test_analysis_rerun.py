@@ -158,7 +158,7 @@ def test_every_caller_runs_a_point_through_run_point(tmp_path, write_spec, monke
     import cosim
     import cosim.execution.point
     from cosim.analysis.rerun import rerun
-    from cosim.parallel.isolation import PointRunner
+    from cosim.parallel.isolation.point_runner import PointRunner
     from cosim.system.validate import check_spec
 
     table_path = linear_ode_sweep(tmp_path / "decay", write_spec)

@@ -13,7 +13,9 @@ import time
 from multiprocessing.connection import Connection
 
 from cosim.execution.point_row import PointRow
-from cosim.parallel.isolation import IsolatedRunner, _Channel, make_payload
+from cosim.parallel.isolation.channel import Channel
+from cosim.parallel.isolation.payload import make_payload
+from cosim.parallel.isolation.runner import IsolatedRunner
 from cosim.system.validate import check_spec
 
 from .conftest import TESTS
@@ -22,7 +24,7 @@ from .conftest import TESTS
 def test_the_reader_thread_closes_the_pipe_itself_once_the_child_is_gone():
     read_fd, write_fd = os.pipe()
     inbox, outbox = Connection(read_fd, writable=False), Connection(write_fd, readable=False)
-    channel = _Channel(inbox)
+    channel = Channel(inbox)
     outbox.send(("row", (PointRow("p", "ok", "", 0.5), None)))
     assert channel.get(5) == ("row", (PointRow("p", "ok", "", 0.5), None))
     outbox.close()  # the child is gone

@@ -20,7 +20,8 @@ import pytest
 
 import cosim
 from cosim.cli.main import main
-from cosim.parallel.cluster import ClusterFileError, read_cluster_file
+from cosim.errors import ClusterFileError
+from cosim.parallel.cluster.cluster_file import read_cluster_file
 from cosim.studies.sweep import SweepError
 
 STOP = 0.5
@@ -91,7 +92,7 @@ def test_dask_jobqueue_in_its_test_mode_and_a_slurm_job_script(write_spec, tmp_p
     df = cosim.sweep(str(spec), cluster=cluster, quiet=True)
     assert_exact(df)
     # the README's Slurm recipe: a real SLURMCluster renders its sbatch script from the file's kwargs
-    from cosim.parallel.cluster import import_cluster_class
+    from cosim.parallel.cluster.cluster_file import import_cluster_class
 
     slurm = read_cluster_file(write(tmp_path, "slurm.yaml", readme_cluster_file("slurm.yaml")))
     with import_cluster_class(slurm)(**slurm.kwargs) as made:
@@ -160,7 +161,8 @@ def test_cluster_and_scheduler_together_are_refused(write_spec, tmp_path, capsys
 def test_the_readme_kubernetes_file_is_accepted_and_fails_cleanly_without_kubernetes(write_spec, tmp_path):
     """No Kubernetes cluster here: the README's file is read and checked as --cluster reads it, then its start
     fails with one message (no credentials, or dask-kubernetes not installed), exit 2, no traceback."""
-    from cosim.parallel.cluster import ALLOWED_FAILURES, import_cluster_class
+    from cosim.parallel.cluster.cluster_file import import_cluster_class
+    from cosim.parallel.cluster.local import ALLOWED_FAILURES
 
     kube = write(tmp_path, "kube.yaml", readme_cluster_file("kube.yaml"))
     config = read_cluster_file(kube)

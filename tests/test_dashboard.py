@@ -16,7 +16,7 @@ import pytest
 from dask.utils import key_split
 
 import cosim
-from cosim.parallel.dashboard import task_key
+from cosim.parallel.dashboard.task_keys import task_key
 
 from .conftest import TESTS
 from .sweep_fixtures import free_port, kill_group, wait_for_workers
@@ -114,10 +114,11 @@ def test_failing_points_are_rows_and_leave_no_traceback_in_any_log(write_spec, l
 
 DASHBOARD_SCRIPT = """
 import sys, urllib.error, urllib.request
-from cosim.parallel.evaluator import dask_client
+from cosim.parallel.cluster.choice import choose_cluster
+from cosim.parallel.cluster.client import dask_client
 
 if __name__ == "__main__":
-    with dask_client(1) as (_, _, link):
+    with dask_client(choose_cluster(1)) as (_, _, link):
         urllib.request.urlopen(link, timeout=60).read()  # the dashboard is loaded when first opened
         try:
             status = urllib.request.urlopen(link.rsplit("/", 1)[0] + "/sitemap.json", timeout=30).status

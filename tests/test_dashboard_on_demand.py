@@ -18,8 +18,9 @@ from .conftest import TESTS
 
 SCRIPT = """
 import sys, urllib.error, urllib.request
-from cosim.parallel.dashboard_points import open_board
-from cosim.parallel.evaluator import dask_client
+from cosim.parallel.dashboard.points import open_board
+from cosim.parallel.cluster.choice import choose_cluster
+from cosim.parallel.cluster.client import dask_client
 
 def status(url):
     try:
@@ -29,7 +30,7 @@ def status(url):
         return exc.code, url, ""
 
 if __name__ == "__main__":
-    with dask_client(1) as (client, _, link):
+    with dask_client(choose_cluster(1)) as (client, _, link):
         root = link.rsplit("/", 1)[0]
         board = open_board(client, "sweep", "study", 10, dashboard=link)  # what a sweep registers
         print("loaded at start:", "distributed.dashboard.scheduler" in sys.modules)

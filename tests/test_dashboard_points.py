@@ -1,4 +1,4 @@
-"""The dashboard's points page counts points as they finish inside a batch (cosim.parallel.dashboard_points).
+"""The dashboard's points page counts points as they finish inside a batch (cosim.parallel.dashboard.points).
 
 Real `cosim sweep` processes on a local cluster, a cluster file and a `dask
 scheduler` that cannot import cosim; the page is read with real HTTP requests.

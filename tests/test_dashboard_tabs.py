@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from cosim.parallel.dashboard import tab_closed_while_loading, web_server_tracebacks_as_lines
+from cosim.parallel.dashboard.web_server import tab_closed_while_loading, web_server_tracebacks_as_lines
 
 from .test_hostile_files import _spec
 from .test_room_browser import browser  # noqa: F401  (fixture)

@@ -151,7 +151,8 @@ def test_members_leaving_the_folder_are_refused(built_fmu, tmp_path, name):
 
 def test_a_sweep_worker_refuses_an_fmu_the_client_was_allowed_to_use(built_fmu, write_spec, tmp_path, monkeypatch):
     """The limits travel with the payload: a worker child applies the client's limits, not its own."""
-    from cosim.parallel.isolation import IsolatedRunner, make_payload
+    from cosim.parallel.isolation.payload import make_payload
+    from cosim.parallel.isolation.runner import IsolatedRunner
     from cosim.system.validate import check_spec
 
     fmu = _rewrite(built_fmu("linear_ode", 2), tmp_path / "bomb.fmu",

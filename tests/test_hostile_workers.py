@@ -9,7 +9,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from cosim.parallel.isolation import IsolatedRunner, make_payload
+from cosim.parallel.isolation.payload import make_payload
+from cosim.parallel.isolation.runner import IsolatedRunner
 from cosim.studies.sweep import Sweep
 from cosim.system.validate import check_spec
 

@@ -1,4 +1,4 @@
-"""Instances reused across the points of a worker (cosim.parallel.isolation.PointRunner): units reset between
+"""Instances reused across the points of a worker (cosim.parallel.isolation.point_runner.PointRunner): units reset between
 points give every point the objectives of a fresh run bit for bit; a broken reset is found by the check on the
 first point and turns reuse off; ``"reuse": false`` makes one unit anew for every point."""
 
@@ -12,7 +12,7 @@ import pytest
 from cosim import Execution, build_system, load_spec
 from cosim.execution.point import run_point
 from cosim.fmus.build import ensure_built
-from cosim.parallel.isolation import PointRunner
+from cosim.parallel.isolation.point_runner import PointRunner
 from cosim.units.protocol import ElementRef
 
 POINTS = [{"a.a": -1.0 - 0.3 * i, "b.a": -2.0 + 0.1 * i} for i in range(5)]

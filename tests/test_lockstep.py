@@ -20,7 +20,7 @@ from cosim import build_system, load_spec
 from cosim.execution.lockstep import LockstepRunner, can_run_in_lockstep, instantiate, run_lockstep
 from cosim.execution.point import assignments_for, run_point
 from cosim.master.registry import ALGORITHMS
-from cosim.parallel.isolation import PointRunner
+from cosim.parallel.isolation.point_runner import PointRunner
 from cosim.units.python.batch import NotBatchable
 
 FOLDER = Path(__file__).resolve().parents[1] / "examples" / "pick_and_place"
@@ -197,7 +197,8 @@ def test_the_runner_times_two_points_alone_then_groups_the_rest():
 
 def test_a_sweep_child_runs_its_points_in_lockstep_groups(monkeypatch):
     """Through the sweep's child process (cosim.parallel.isolation): rows of one group share their run time."""
-    from cosim.parallel.isolation import IsolatedRunner, make_payload
+    from cosim.parallel.isolation.payload import make_payload
+    from cosim.parallel.isolation.runner import IsolatedRunner
 
     monkeypatch.setenv("COSIM_LOCKSTEP_SECONDS", "1000")  # groups of the largest size however loaded the machine
 
@@ -220,7 +221,8 @@ def test_a_sweep_child_runs_its_points_in_lockstep_groups(monkeypatch):
 def test_a_point_that_kills_or_hangs_its_lockstep_group_alone_gets_the_blame(tmp_path, monkeypatch, mode, status,
                                                                              fragment):
     """The child announces each group; when a group dies, its points run again one by one (cosim.parallel.isolation)."""
-    from cosim.parallel.isolation import IsolatedRunner, make_payload
+    from cosim.parallel.isolation.payload import make_payload
+    from cosim.parallel.isolation.runner import IsolatedRunner
 
     monkeypatch.setenv("COSIM_LOCKSTEP_SECONDS", "1000")  # the culprit surely runs in a group (travels in the payload)
 

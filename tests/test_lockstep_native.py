@@ -22,7 +22,7 @@ from cosim.execution.lockstep_reduce import GROUP_REDUCTIONS, reduce_group
 from cosim.execution.point import assignments_for
 from cosim.master.native.rows import NativeRows
 from cosim.master.observers import ObjectiveReducer
-from cosim.parallel.isolation import PointRunner
+from cosim.parallel.isolation.point_runner import PointRunner
 from cosim.units.protocol import UnitError
 
 FOLDER = Path(__file__).resolve().parents[1] / "examples" / "pick_and_place"

@@ -83,14 +83,15 @@ def test_a_point_that_kills_its_workers_is_crashed_and_the_others_are_ok(write_s
 def test_the_optimizers_evaluator_blames_only_the_killer(write_spec, worker_processes):
     """cosim optimize evaluates through point_stream.Evaluator (the loop the sweep streams through): the same rule
     holds there."""
-    from cosim.parallel.evaluator import dask_client
-    from cosim.parallel.isolation import make_payload
+    from cosim.parallel.cluster.choice import choose_cluster
+    from cosim.parallel.cluster.client import dask_client
+    from cosim.parallel.isolation.payload import make_payload
     from cosim.parallel.point_stream import Evaluator
     from cosim.system.validate import check_spec
 
     system = check_spec(write_spec(square_spec(6, 0.0, kill_at=3.0)))
     points = [(f"p{i}", {"sq.x": float(i)}) for i in range(6)]
-    with dask_client(2, scheduler=worker_processes) as (client, n_workers, _):
+    with dask_client(choose_cluster(2, scheduler=worker_processes)) as (client, n_workers, _):
         with Evaluator(client, make_payload(system), n_workers) as evaluator:
             rows = evaluator.evaluate(points)
     assert [r.point_id for r in rows] == [pid for pid, _ in points]  # every point once, in order

@@ -13,7 +13,7 @@ from concurrent.futures import CancelledError
 from distributed import KilledWorker
 
 import cosim
-from cosim.parallel.evaluator import RERUN_GROUP, Reruns
+from cosim.parallel.reruns import RERUN_GROUP, Reruns
 
 from .test_lost_workers import square_spec
 

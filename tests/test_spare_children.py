@@ -15,14 +15,10 @@ from pathlib import Path
 import psutil
 import pytest
 
-from cosim.parallel import isolation
-from cosim.parallel.isolation import (
-    IsolatedRunner,
-    make_payload,
-    preload_spare_children,
-    start_spare_children,
-    stop_spare_children,
-)
+from cosim.parallel.isolation import children
+from cosim.parallel.isolation.children import preload_spare_children, stop_spare_children
+from cosim.parallel.isolation.payload import make_payload
+from cosim.parallel.isolation.runner import IsolatedRunner, start_spare_children
 from cosim.system.validate import check_spec
 
 UNIT = """
@@ -56,7 +52,7 @@ def no_spares_left():
 
 
 def spare_pids() -> list[int]:
-    return [spare._proc.pid for spare in isolation._SPARES]
+    return [spare._proc.pid for spare in children.SPARES]
 
 
 def test_a_runner_takes_a_spare_child_and_runs_its_points_there(tmp_path):
@@ -107,11 +103,11 @@ def test_a_spare_started_under_other_limits_is_not_taken(tmp_path, monkeypatch):
 def test_stopping_the_spares_ends_their_processes_and_removes_their_folders():
     start_spare_children(2)
     processes = [psutil.Process(pid) for pid in spare_pids()]
-    folders = [Path(spare._folder) for spare in isolation._SPARES]
+    folders = [Path(spare._folder) for spare in children.SPARES]
     assert all(folder.is_dir() for folder in folders)
     stop_spare_children()
     gone, alive = psutil.wait_procs(processes, timeout=5)
-    assert not alive and not isolation._SPARES
+    assert not alive and not children.SPARES
     assert not any(folder.exists() for folder in folders)
 
 
@@ -131,7 +127,7 @@ def test_a_spare_whose_parent_ends_before_its_payload_ends_quietly(capfd):
     """A sweep refused for its spec's problems ends before its spares get a payload: their channel closes,
     and they end without a traceback on the terminal after the problems (exit 0)."""
     start_spare_children(1)
-    [spare] = isolation._SPARES
+    [spare] = children.SPARES
     capfd.readouterr()
     spare._outbox.close()  # what the parent's exit does to the child's end of the channel
     assert spare._proc.wait(timeout=60) == 0

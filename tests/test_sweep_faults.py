@@ -10,7 +10,8 @@ from __future__ import annotations
 import pytest
 
 import cosim
-from cosim.parallel.isolation import IsolatedRunner, make_payload
+from cosim.parallel.isolation.payload import make_payload
+from cosim.parallel.isolation.runner import IsolatedRunner
 from cosim.system.validate import check_spec
 
 from .conftest import TESTS

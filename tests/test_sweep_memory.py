@@ -12,7 +12,9 @@ import pickle
 
 import numpy as np
 
-from cosim.parallel.evaluator import LOG_LENGTH, dask_client
+from cosim.parallel.cluster.choice import choose_cluster
+from cosim.parallel.cluster.client import dask_client
+from cosim.parallel.cluster.local import LOG_LENGTH
 from cosim.parallel.tasks import PointBatch
 
 
@@ -28,7 +30,7 @@ def test_a_point_batch_travels_as_one_bytes_object_and_is_unpickled_when_read():
 
 
 def test_every_process_of_the_local_cluster_keeps_few_recent_messages():
-    with dask_client(1) as (client, _, _):
+    with dask_client(choose_cluster(1)) as (client, _, _):
         assert client.scheduler_comm.recent_message_log.maxlen == LOG_LENGTH  # client -> scheduler
         scheduler = client.cluster.scheduler  # runs in this process
         assert [s.recent_message_log.maxlen for s in scheduler.stream_comms.values()] == [LOG_LENGTH]

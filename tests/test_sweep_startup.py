@@ -92,7 +92,7 @@ def test_the_local_clusters_workers_run_in_this_process_and_serve_only_127_0_0_1
     cluster keeps its workers in the client's process, without their bokeh pages."""
     from distributed import Client
 
-    from cosim.parallel.evaluator import local_cluster
+    from cosim.parallel.cluster.local import local_cluster
 
     me = psutil.Process()
     connections = getattr(me, "net_connections", None) or me.connections  # psutil >= 6 / the declared 5.9

@@ -205,7 +205,7 @@ def test_cosim_run_says_where_the_run_started_and_refuses_a_fixed_parameter(writ
 def test_a_study_warm_up_that_crashes_or_fails_is_a_clear_error_not_a_dead_client(tmp_path, mode, why):
     """The `fault` FMU (our C sources) segfaults or fails at t >= 0.5, inside the warm-up to t = 1: the study's
     payload is made in this process, the warm-up in a child process, so this process lives and says why."""
-    from cosim.parallel.isolation import make_payload
+    from cosim.parallel.isolation.payload import make_payload
 
     spec = lag_spec(SOURCES["fmi2"]())
     spec["units"]["fault"] = {"fmu": str(ensure_built("fault", 2)), "parameters": {"mode": mode, "trigger_time": 0.5}}
@@ -218,7 +218,7 @@ def test_a_study_warm_up_that_crashes_or_fails_is_a_clear_error_not_a_dead_clien
 
 
 def test_a_study_names_the_unit_that_cannot_save_its_state_from_the_warm_up_child(tmp_path):
-    from cosim.parallel.isolation import make_payload
+    from cosim.parallel.isolation.payload import make_payload
 
     spec = lag_spec({"python": python_unit("LinearOde")})
     spec["units"]["lag"]["parameters"] = {"x0": 0.0}

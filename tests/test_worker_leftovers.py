@@ -12,7 +12,7 @@ import os
 import subprocess
 import sys
 
-from cosim.parallel.leftovers import MARKER, mark, remove_leftovers, start_time
+from cosim.parallel.isolation.leftovers import MARKER, mark, remove_leftovers, start_time
 
 from .test_hostile_files import REPO, _exact, _spec
 

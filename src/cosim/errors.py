@@ -289,6 +289,15 @@ class ClusterError(UserError):
     """No Dask workers can be had (scheduler unreachable or without workers)."""
 
 
+class SchedulerAddressError(ClusterError):
+    """A scheduler address that does not have the form of one (``address``; ``why``: what the parser said)."""
+
+    def __init__(self, address: str, why: str):
+        self.address, self.why = address, why
+        super().__init__(f"'{address}' is not a Dask scheduler address ({why}); write it as tcp://HOST:PORT, as "
+                         "`dask scheduler` prints it, e.g. tcp://127.0.0.1:8786")
+
+
 class ClusterFileError(UserError):
     """A cluster file that cannot be read, or whose cluster cannot be made as it says."""
 

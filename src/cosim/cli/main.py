@@ -53,7 +53,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "handler", None):
         parser.print_help()
         return EXIT_USAGE
-    from cosim.parallel.interrupts import raise_if_stopped, restore_signals, stop_cleanly_on_signals
+    from cosim.parallel.cluster.interrupts import raise_if_stopped, restore_signals, stop_cleanly_on_signals
     previous = stop_cleanly_on_signals()
     stdout = sys.stdout
     sys.stdout = _ReaderMayLeave(stdout)  # `cosim sweep ... | head`: the command goes on and says how it ended
@@ -68,7 +68,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BaseException as exc:  # noqa: BLE001 - every outcome gets its exit code here, and only here
         if isinstance(exc, SystemExit):
             raise
-        report_error(exc, debug=args.debug, all_problems=args.all_problems)
+        from cosim.cli.wording import in_command_line_words
+
+        report_error(in_command_line_words(exc), debug=args.debug, all_problems=args.all_problems)
         return exit_code(exc)
     finally:
         sys.stdout = stdout

@@ -79,7 +79,7 @@ def cmd_optimize(args: argparse.Namespace) -> int:
     summary = ", ".join(f"{n} {s}" for s, n in sorted(counts.items()) if n)
     print(f"{total} evaluations: {summary or 'none'}; table: {run.store.table_path}")
     print(f"front: cosim pareto {run.store.table_path}; report: cosim report {out} -o report.html")
-    say_the_dashboard_is_gone(args, run.store, runs_before, out)
+    say_the_dashboard_is_gone(args, run.store, runs_before, out, run.cluster)
     not_ok = total - counts.get("ok", 0)
     if not_ok:
         print_not_ok(run.store.table_path, 5)

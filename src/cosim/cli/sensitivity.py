@@ -60,7 +60,7 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
     print(wide.to_string(float_format=lambda v: f"{v:.4f}"))
     print(f"{total} designs: " + ", ".join(f"{n} {s}" for s, n in sorted(counts.items()) if n)
           + f"; indices: {out / TABLE_NAME}, figure: {out / FIGURE_NAME}")
-    say_the_dashboard_is_gone(args, study.sweep.store, runs_before, out)
+    say_the_dashboard_is_gone(args, study.sweep.store, runs_before, out, study.sweep.cluster)
     warning = unreliable_indices(indices, args.method, study.n)
     if warning:
         print(f"cosim: warning: {warning}", file=sys.stderr)

@@ -71,10 +71,12 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     """Run (or dry-run) a sweep; returns the exit code. SpecError, SweepError and UsageError reach cli.main."""
     if args.batch_size is not None and args.batch_size < 1:
         raise UsageError("--batch-size must be at least 1")
-    if not args.dry_run and args.scheduler is None and args.cluster is None:
+    from cosim.parallel.cluster.choice import named_local
+
+    if not args.dry_run and named_local(args.scheduler, args.cluster):
         # most likely a local cluster, whose workers run in this process: their point children start now and
         # import while this process imports the rest and checks the spec (stopped if the sweep runs elsewhere)
-        from cosim.parallel.isolation import start_spare_children
+        from cosim.parallel.isolation.runner import start_spare_children
 
         start_spare_children(args.workers or os.cpu_count() or 1)
     from cosim.cli.options import experiment_overrides
@@ -94,7 +96,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     total = sum(counts.values())
     summary = ", ".join(f"{n} {s}" for s, n in sorted(counts.items()) if n)
     print(f"{total} points: {summary or 'none'}; table: {sweep.store.table_path}")
-    say_the_dashboard_is_gone(args, sweep.store, runs_before, out)
+    say_the_dashboard_is_gone(args, sweep.store, runs_before, out, sweep.cluster)
     pruned = counts.get("pruned", 0)  # proven off the front (docs/pruning.md): a result, not a failure
     if pruned:
         print(f"{pruned} pruned: proven off the front; their objective columns hold bounds, not results "
@@ -119,16 +121,17 @@ def runs_recorded(store: Any) -> int:
     return len((store.metadata() or {}).get("runs", []))
 
 
-def say_the_dashboard_is_gone(args: argparse.Namespace, store: Any, runs_before: int, out: Path) -> None:
+def say_the_dashboard_is_gone(args: argparse.Namespace, store: Any, runs_before: int, out: Path,
+                              cluster: Any) -> None:
     """After a study on a cluster cosim started (and closed), say on stderr that the dashboard link printed at its
     start is gone with it, and how to look at the results instead (also for ``optimize`` and ``sensitivity``).
 
     The dashboard lives as long as its cluster: the link of a study of a few seconds (the README's first
     sweep) was dead before it could be clicked, with nothing saying why.  Nothing is said under ``-q``, on a
-    running scheduler (``--scheduler`` or ``$DASK_SCHEDULER_ADDRESS``: its dashboard stays), or when no
+    running scheduler (``cluster``, the study's ClusterChoice, names one: its dashboard stays), or when no
     cluster was started (every point was already in the folder: no run was recorded).
     """
-    if getattr(args, "quiet", False) or args.scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS"):
+    if getattr(args, "quiet", False) or not cluster.started_here:
         return
     if runs_recorded(store) <= runs_before:
         return
@@ -164,7 +167,9 @@ def _dry_run(args: argparse.Namespace) -> int:
 
     with tempfile.TemporaryDirectory(prefix="cosim_dry_") as scratch:
         sweep = Sweep(args.spec, workers=args.workers, out=scratch, timeout=args.timeout, quiet=True,
-                      experiment=experiment_overrides(args), fixed=fixed_values(args))
+                      scheduler=args.scheduler, cluster=args.cluster, experiment=experiment_overrides(args),
+                      fixed=fixed_values(args))
+        local = sweep.cluster.local
         total = len(sweep.space)
         if not sweep.space.targets:
             from cosim.studies.sweep import NO_DESIGN_SPACE
@@ -183,20 +188,21 @@ def _dry_run(args: argparse.Namespace) -> int:
               + (f" ({message_line(row.message, 100)})" if row.message else ""))
     times = sorted(r.run_time for r in samples if r.ok)
     if times:
-        _print_estimate(args, estimate_time(times), times, total)
+        _print_estimate(args, estimate_time(times), times, total, local)
     else:
         print("estimate: none (no sample run succeeded)")
     return EXIT_OK
 
 
-def _print_estimate(args: argparse.Namespace, estimate: TimeEstimate, times: list[float], total: int) -> None:
+def _print_estimate(args: argparse.Namespace, estimate: TimeEstimate, times: list[float], total: int,
+                    local: bool) -> None:
     """The time of the whole sweep from the sample times: the mean (not the median: on an uneven space a
     few dear points make most of the total) and the bootstrap range of that mean (cosim.studies.estimate)."""
     per_point = estimate.mean
     spread = (f"mean of {len(times)} sample run(s) stratified over the space, {times[0]:.3f}-{times[-1]:.3f} s; "
               f"{estimate.confidence:.0%} range of the mean {estimate.low:.3f}-{estimate.high:.3f} s")
     workers = args.workers or os.cpu_count() or 1
-    if args.scheduler or args.cluster:
+    if not local:  # the sweep runs on a scheduler or a cluster file's cluster (its ClusterChoice)
         print(f"estimate: {per_point:.3f} s per point ({spread}); {total * per_point:.0f} s of work in total "
               f"({total * estimate.low:.0f}-{total * estimate.high:.0f} s; divide by the scheduler's worker count)")
     else:

@@ -520,7 +520,7 @@ def _bind_algorithm(system: System, batches: Mapping[str, Any]) -> MasterAlgorit
 class LockstepRunner:
     """A sweep child's points in lock-step groups where that is possible, else one by one.
 
-    Wraps the child's :class:`~cosim.parallel.isolation.PointRunner` and gives
+    Wraps the child's :class:`~cosim.parallel.isolation.point_runner.PointRunner` and gives
     the same rows (:class:`~cosim.execution.point_row.PointRow`).  The
     first two points run alone, which times a point; then groups of up to
     GROUP_SIZE points, as many as take about COSIM_LOCKSTEP_SECONDS, run in lock-step; if the system does not

@@ -5,7 +5,7 @@ of every point's run repeating the same warm-up.  With ``"experiment": {"warm_st
 with the spec's own values (:func:`warm_up`): its units' states at ``T`` are saved and serialized
 (:meth:`~cosim.units.protocol.Unit.serialize_state`: FMI ``fmi2SerializeFMUstate`` / ``fmi3SerializeFMUState``, a
 Python unit's pickled ``get_state``), and the probed samples from the start time to ``T`` are kept.  The bytes
-travel with a study's payload to every worker (:func:`cosim.parallel.isolation.make_payload`).  Each point then
+travel with a study's payload to every worker (:func:`cosim.parallel.isolation.payload.make_payload`).  Each point then
 
 1. initializes its units as the warm-up did (the spec's own values), restores their states at ``T``
    (:func:`restore_warm`), and sets its own values there: inputs and *tunable* parameters only, since a fixed

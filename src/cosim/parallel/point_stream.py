@@ -5,17 +5,17 @@ points they ask for and when; they all evaluate them through :class:`PointStream
 
 - It puts the points into Dask tasks of :func:`cosim.parallel.tasks.run_batch` (a batch each, sized by a
   :class:`BatchSizer` or split evenly over the workers by :class:`EvenBatches`), keeps a bounded number
-  in flight, and sends the payload to the workers once (:class:`~cosim.parallel.evaluator.ScatteredPayload`).
+  in flight, and sends the payload to the workers once (:class:`~cosim.parallel.scattered.ScatteredPayload`).
 - A task sends the rows of its finished points to the client while it runs (a Dask event on a topic of
   this stream, at most every ``tasks.ROWS_EVERY`` seconds), so a row reaches the caller within a fraction
   of a second of its point's end, however long the rest of the batch takes; the task's result then
   brings every row of the batch again, and is what counts: a row streamed is only an early copy, each
   point is handed to the caller once.
 - A task lost with its workers: the points that already sent their rows keep them; the others are run
-  again (:class:`~cosim.parallel.evaluator.Reruns`), only a point that kills its workers while it runs
-  alone gets ``crashed`` (:func:`~cosim.parallel.evaluator.lost_rows`).
+  again (:class:`~cosim.parallel.reruns.Reruns`), only a point that kills its workers while it runs
+  alone gets ``crashed`` (:func:`~cosim.parallel.reruns.lost_rows`).
 - A stop (Ctrl-C, SIGTERM, SIGHUP: KeyboardInterrupt in the main thread, see
-  :mod:`cosim.parallel.interrupts`): the rows still on their way are collected for up to ``GRACE``
+  :mod:`cosim.parallel.cluster.interrupts`): the rows still on their way are collected for up to ``GRACE``
   seconds (at once, when the cluster runs in this process: its point children were killed and its
   tasks end at once) and handed to the caller, then the KeyboardInterrupt goes on.  So every point
   that finished before the signal is kept.
@@ -38,8 +38,9 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Iterator, Sequence
 
 from cosim.execution.point_row import PointRow
-from cosim.parallel.evaluator import Reruns, ScatteredPayload, lost_rows, release_futures
-from cosim.parallel.interrupts import raise_if_stopped
+from cosim.parallel.cluster.interrupts import raise_if_stopped
+from cosim.parallel.reruns import Reruns, lost_rows
+from cosim.parallel.scattered import ScatteredPayload, release_futures
 from cosim.spec.design import Point
 from cosim.util import limits
 
@@ -144,11 +145,11 @@ OnRows = Callable[[list[tuple[Point, PointRow]]], None]
 class PointStream:
     """Evaluates points on ``client`` and hands each row to the caller as its point finishes (module docstring).
 
-    ``payload`` is :func:`cosim.parallel.isolation.make_payload` of the system, scattered to the workers
+    ``payload`` is :func:`cosim.parallel.isolation.payload.make_payload` of the system, scattered to the workers
     once.  ``timeout``: seconds a point may run before its child is killed (row status ``timeout``); None:
     :func:`default_timeout` of the points measured so far when ``adaptive_timeout``, else the
     ``timeout_first_seconds`` limit.  ``kind`` and ``name`` name the tasks on the dashboard
-    (:func:`cosim.parallel.dashboard.task_key`); ``board`` (:func:`cosim.parallel.dashboard_points.open_board`)
+    (:func:`cosim.parallel.dashboard.task_keys.task_key`); ``board`` (:func:`cosim.parallel.dashboard.points.open_board`)
     counts their points on its page.  Use it as a context manager, or call :meth:`close`: it releases the
     payload and unsubscribes from the rows' topic.
     """
@@ -257,7 +258,7 @@ class PointStream:
             fill()
 
     def _submit(self, batch: list[Point], alone: bool, total: int | None) -> None:
-        from cosim.parallel.dashboard import task_key
+        from cosim.parallel.dashboard.task_keys import task_key
         from cosim.parallel.tasks import PointBatch, run_batch
 
         timeout = self.timeout
@@ -307,7 +308,7 @@ class PointStream:
 
         The tasks go on where the cluster runs elsewhere: their rows come as events, for up to GRACE
         seconds.  A cluster in this process was stopped with the client (its point children killed, see
-        :mod:`cosim.parallel.interrupts`): its tasks end at once, their results holding the rows of the
+        :mod:`cosim.parallel.cluster.interrupts`): its tasks end at once, their results holding the rows of the
         points that finished (only those, see tasks.run_batch), read here; then QUIET seconds more for
         events.  The rows the caller was being given when the stop came are given again (a results store
         keeps a point's latest row; the Evaluator takes each point once).
@@ -372,7 +373,7 @@ class Evaluator:
         """One row per ``(point_id, values)``, in the order given; never raises for a failing point.
 
         The points are split into one task per worker, so a batch of K runs K / workers points per process.
-        Points of a task lost with its workers are run again (:class:`~cosim.parallel.evaluator.Reruns`).
+        Points of a task lost with its workers are run again (:class:`~cosim.parallel.reruns.Reruns`).
         ``on_rows`` gets rows as their points finish (before this returns), e.g. to store them at once.
         """
         if not points:

@@ -2,7 +2,7 @@
 
 It runs on a worker (or anywhere): the child process holding a system (:mod:`cosim.parallel.isolation`) is kept
 for the next batch of the same payload.  A scheduler must be able to import this module to unpickle cosim's
-tasks (:mod:`cosim.parallel.scheduler_check`).
+tasks (:mod:`cosim.parallel.cluster.scheduler_check`).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import threading
 from typing import Any, Sequence
 
 from cosim.execution.point_row import PointRow
-from cosim.parallel.isolation import IsolatedRunner
+from cosim.parallel.isolation.runner import IsolatedRunner
 
 _IDLE: dict[str, list[IsolatedRunner]] = {}
 _IDLE_LOCK = threading.Lock()
@@ -29,7 +29,7 @@ class PointBatch:
     60 µs a point, more than a trivial point's whole run.  Pickled as one
     bytes object, the points stay bytes wherever Dask only passes the task
     on (the scheduler unpickles every task it receives and keeps its recent
-    messages, see :data:`cosim.parallel.evaluator.LOG_LENGTH`): 2048 trivial
+    messages, see :data:`cosim.parallel.cluster.local.LOG_LENGTH`): 2048 trivial
     points take 72 kB as bytes, 690 kB unpickled, and are one object instead
     of thousands.  They are unpickled when first read, on the worker.
     """
@@ -68,10 +68,10 @@ def run_batch(payload: dict[str, Any], points: PointBatch | Sequence[tuple[str, 
     while the batch runs (:class:`RowSender`; :mod:`cosim.parallel.point_stream`).
     ``prune``: a :class:`~cosim.execution.prune.PruneOrder` (the study's front) each point compares its bound
     with while it runs (:mod:`cosim.studies.pruning`).
-    Once a stop of this process began (:func:`cosim.parallel.isolation.kill_point_children_now`)
+    Once a stop of this process began (:func:`cosim.parallel.isolation.children.kill_point_children_now`)
     the rows of points the stop cut short are left out: the result holds only finished points.
     """
-    from cosim.parallel.dashboard_points import BatchProgress
+    from cosim.parallel.dashboard.points import BatchProgress
 
     if isinstance(points, PointBatch):
         points = points.points
@@ -116,7 +116,7 @@ class RowSender:
 
     A Dask scheduler keeps the recent events of each topic, as many as its
     configuration says (recent distributed: ``low-level-log-length``, which
-    is ``evaluator.LOG_LENGTH`` on the clusters cosim starts), so the rows of a
+    is ``cluster.local.LOG_LENGTH`` on the clusters cosim starts), so the rows of a
     study's last events stay in its memory until pushed out.
     A task of cheap points (about half a second, see ``BatchSizer``) sends one
     or two events; one of slow points one per point.

@@ -18,6 +18,7 @@ from __future__ import annotations
 import errno
 import getpass
 import json
+import math
 import platform
 import socket
 import sys
@@ -28,13 +29,25 @@ from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping, TextIO
 
 from cosim.errors import OutputError, UserError
-from cosim.parallel.interrupts import raise_if_stopped
+from cosim.parallel.cluster.interrupts import raise_if_stopped
 
 # The distributions whose versions can change a row's numbers (cosim's own is fmi-cosim: "cosim" on the index
 # is another project): the FMI runtime, the built-in units' physics and code generation (pin, exudyn, casadi,
 # the Panda's URDF in example-robot-data), numerics, the samplers and the sensitivity analysis.
 PACKAGES = ("fmi-cosim", "fmpy", "dask", "distributed", "numpy", "pandas", "pyarrow", "scipy", "pin", "exudyn",
             "casadi", "example-robot-data", "optuna", "SALib")
+
+
+def check_timeout(timeout: float | None, error: type[UserError] = UserError) -> None:
+    """Refuse a per-point timeout that is not a positive, finite number of seconds (None: the default timeout).
+
+    Every driver (sweep, optimize, sensitivity) checks its ``timeout`` here
+    before any work.  Raises ``error`` (a UserError, so exit code 2): NaN,
+    infinity, zero or a negative number would make every point ``crashed`` or
+    never stop a hanging one.
+    """
+    if timeout is not None and not (isinstance(timeout, (int, float)) and math.isfinite(timeout) and timeout > 0):
+        raise error(f"the timeout must be a positive number of seconds, got {timeout}")
 
 
 def study_identity(spec_digest: str, kind: str, units: Mapping[str, str],
@@ -308,17 +321,19 @@ class StudyFolder:
 
 
 @contextmanager
-def study_cluster(workers: int, scheduler: str | None, cluster: str | None, error: type[UserError],
-                  interrupted: Callable[[], None], early: Any = None) -> Iterator[tuple[Any, int, str]]:
-    """:func:`cosim.parallel.evaluator.dask_client` for a study: ``(client, worker threads, dashboard link)``.
+def study_cluster(choice: Any, error: type[UserError], interrupted: Callable[[], None],
+                  early: Any = None) -> Iterator[tuple[Any, int, str]]:
+    """:func:`cosim.parallel.cluster.client.dask_client` on ``choice`` (a
+    :class:`~cosim.parallel.cluster.choice.ClusterChoice`) for a study: ``(client, worker threads, dashboard link)``.
 
     A cluster that cannot be had is the study's ``error`` (exit 2); on a stop (KeyboardInterrupt)
     ``interrupted()`` says where the rows are before it goes on.
     """
-    from cosim.parallel.evaluator import ClusterError, dask_client
+    from cosim.errors import ClusterError
+    from cosim.parallel.cluster.client import dask_client
 
     try:
-        with dask_client(workers, scheduler, cluster, early=early) as connected:
+        with dask_client(choice, early=early) as connected:
             yield connected
     except ClusterError as exc:
         raise error(str(exc)) from None

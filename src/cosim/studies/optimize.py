@@ -1,4 +1,4 @@
-"""``cosim optimize``: multi-objective optimisation of a spec's design space, on the sweep's evaluator.
+"""``cosim optimize``: multi-objective optimisation of a spec's design space, on the sweep's evaluate loop.
 
 Optuna's ask-and-tell drives the search; cosim only translates:
 
@@ -362,17 +362,15 @@ class Optimization:
         trial is told to Optuna as PRUNED (see :meth:`_tell`)."""
         import os
 
-        from cosim.parallel.cluster import read_cluster_file
-        from cosim.parallel.evaluator import check_timeout
-        from cosim.parallel.isolation import make_payload
+        from cosim.parallel.cluster.choice import choose_cluster
+        from cosim.parallel.isolation.payload import make_payload
+        from cosim.studies.driver import check_timeout
         from cosim.system.validate import check_spec
 
         check_timeout(timeout, OptimizeError)
-        if cluster is not None and scheduler is not None:
-            raise OptimizeError("give either a cluster file or a scheduler address, not both")
-        self.cluster = None if cluster is None else str(cluster)
-        if cluster is not None:
-            read_cluster_file(cluster)  # a bad cluster file is reported before any work (ClusterFileError)
+        self.workers = workers or os.cpu_count() or 1
+        # which cluster, checked before any work (a bad cluster file: ClusterFileError; a malformed address)
+        self.cluster = choose_cluster(self.workers, scheduler, cluster)
         self.system = check_spec(spec_path)
         self.spec = self.system.spec
         self.space = optimization_space(self.spec)
@@ -397,7 +395,7 @@ class Optimization:
         self.prune = prune_settings(self.system, list(self.settings.objectives.items()),
                                     self.settings.constraints) if prune else None
         self.keeper = FrontKeeper(self.prune) if self.prune is not None else None
-        self.workers, self.scheduler, self.timeout = workers or os.cpu_count() or 1, scheduler, timeout
+        self.timeout = timeout
         self.quiet, self.progress_stream = quiet, progress
         # the trials also in an Optuna storage, for Optuna's tools (see cosim.studies.optuna_storage)
         self.storage, self.study_name = storage, study_name or default_study_name(self.out)
@@ -482,7 +480,7 @@ class Optimization:
     def _run_locked(self, evaluator: Any = None) -> dict[str, int]:
         import optuna
 
-        from cosim.parallel.dashboard_points import open_board
+        from cosim.parallel.dashboard.points import open_board
         from cosim.parallel.point_stream import Evaluator
 
         optuna.logging.set_verbosity(optuna.logging.WARNING)
@@ -502,7 +500,7 @@ class Optimization:
             self.folder.write_metadata(self._metadata(started, "", 0))
             self._loop(study, dists, evaluator, stored)
             return self._finish()
-        with study_cluster(self.workers, self.scheduler, self.cluster, OptimizeError, self._interrupted) as \
+        with study_cluster(self.cluster, OptimizeError, self._interrupted) as \
                 (client, n_workers, link):
             self.folder.write_metadata(self._metadata(started, client.scheduler.address, n_workers))
             room = open_room(self.out) if self.explore else None

@@ -7,7 +7,7 @@ evaluates the points on Dask:
 - Cluster: by default a ``distributed.LocalCluster`` whose workers (one per
   core, one thread each, bound to 127.0.0.1) run in cosim's process and run
   their points in child processes (FMUs cannot safely share a process; see
-  :func:`cosim.parallel.evaluator.local_cluster`), any running scheduler by address (also from
+  :func:`cosim.parallel.cluster.local.local_cluster`), any running scheduler by address (also from
   ``DASK_SCHEDULER_ADDRESS``), or any Dask cluster class named in a cluster
   file (Slurm, PBS, Kubernetes ...; :mod:`cosim.parallel.cluster`).
 - The payload is scattered to the workers once; FMU, ``file.py`` unit and
@@ -16,7 +16,7 @@ evaluates the points on Dask:
   filesystem (installed modules must be installed where the workers run too).
 - Points go in batches, through the one evaluate loop of every study
   (:class:`~cosim.parallel.point_stream.PointStream`).  On a worker,
-  :class:`~cosim.parallel.isolation.IsolatedRunner` runs a batch in a child
+  :class:`~cosim.parallel.isolation.runner.IsolatedRunner` runs a batch in a child
   process that keeps the loaded system and live unit instances between
   batches, with a per-point watchdog: a point that hangs (``timeout``) or
   kills its process (``crashed``) gets a row and the other points go on.  A
@@ -25,7 +25,7 @@ evaluates the points on Dask:
   (KilledWorker) its points without a row run again in small groups, each
   alone on the cluster, then those of a group lost again one at a time, so
   only a point that kills its workers while alone gets ``crashed``
-  (:class:`~cosim.parallel.evaluator.Reruns`).  Rows out = points in.
+  (:class:`~cosim.parallel.reruns.Reruns`).  Rows out = points in.
 - The client streams: a bounded number of batches in flight, and each
   point's row comes back and is appended to the
   :class:`~cosim.results.store.ResultsStore` as soon as that point finishes
@@ -47,13 +47,15 @@ from typing import TYPE_CHECKING, Any, Sequence, TextIO
 
 from cosim.errors import SweepError
 from cosim.execution.point_row import PointRow
-from cosim.parallel.early_cluster import EarlyCluster
-from cosim.parallel.evaluator import check_timeout
-from cosim.parallel.isolation import IsolatedRunner, make_payload, preload_spare_children, stop_spare_children
+from cosim.parallel.cluster.early import EarlyCluster
+from cosim.parallel.isolation.children import preload_spare_children, stop_spare_children
+from cosim.parallel.isolation.payload import make_payload
+from cosim.parallel.isolation.runner import IsolatedRunner
 from cosim.parallel.point_stream import BatchSizer, PointStream
 from cosim.spec.design import DesignSpace, Point
 from cosim.studies.driver import (
     StudyFolder,
+    check_timeout,
     interrupted_note,
     now_utc,
     open_room,
@@ -121,7 +123,7 @@ class Sweep:
 
     ``start_early`` (``cosim sweep``'s way): once the spec is checked, the
     local cluster (when one is used) starts in the background while the rest
-    is prepared (:mod:`cosim.parallel.early_cluster`); :meth:`run`,
+    is prepared (:mod:`cosim.parallel.cluster.early`); :meth:`run`,
     :meth:`run_to_disk` or :meth:`close` then ends it.
     """
 
@@ -133,19 +135,15 @@ class Sweep:
                  explore: bool = False, kind: str = "sweep", prune: bool = False,
                  prune_objectives: Sequence[tuple[str, str]] | None = None, prune_constraints: Sequence[str] = (),
                  fixed: dict[str, Any] | None = None):
-        from cosim.parallel.cluster import read_cluster_file
+        from cosim.parallel.cluster.choice import choose_cluster
         from cosim.system.validate import check_spec
 
         check_timeout(timeout, SweepError)
         if workers is not None and workers < 1:
             raise SweepError(f"workers must be at least 1, got {workers}")
-        if cluster is not None and scheduler is not None:
-            raise SweepError("give either a cluster file or a scheduler address, not both")
-        self.cluster = None if cluster is None else str(cluster)
-        if cluster is not None:
-            read_cluster_file(cluster)  # a bad cluster file is reported before any work (ClusterFileError)
-        if scheduler is not None:
-            check_scheduler_address(scheduler)
+        self.workers = workers or os.cpu_count() or 1
+        # which cluster, checked before any work (a bad cluster file: ClusterFileError; a malformed address)
+        self.cluster = choose_cluster(self.workers, scheduler, cluster)
         # experiment: command-line overrides; fixed: parameters set for every point (cosim sweep --set)
         self.system = check_spec(spec_path, experiment, fixed=fixed)
         self.spec = self.system.spec
@@ -156,8 +154,7 @@ class Sweep:
         objectives = prune_objectives or list((section.get("objectives") or {}).items()) or None
         self.prune = prune_settings(self.system, objectives, prune_constraints or section.get("constraints", ())
                                     ) if prune else None
-        self.workers = workers or os.cpu_count() or 1
-        self.scheduler, self.timeout, self.resume = scheduler, timeout, resume
+        self.timeout, self.resume = timeout, resume
         self.batch_size, self.csv, self.quiet = batch_size, csv, quiet
         self.progress_stream, self.kind = progress, kind
         if kind == "sweep" and not self.space.targets:
@@ -168,7 +165,7 @@ class Sweep:
             raise SweepError("explore serves the results folder while the sweep writes it: give one (--out DIR)")
         if resume and out is None:
             raise SweepError("resume needs the results folder of the interrupted sweep (--out DIR)")
-        if start_early and self._runs_on_a_local_cluster():
+        if start_early and self.cluster.local:
             # the spare point children `cosim sweep` started load the system now, while this process starts
             # the cluster (importing Dask) and prepares the results folder (importing pandas)
             self.payload = make_payload(self.system)  # FMU bytes read now: workers never open these paths
@@ -187,12 +184,6 @@ class Sweep:
         except BaseException:
             self.close()
             raise
-
-    def _runs_on_a_local_cluster(self) -> bool:
-        """Whether no cluster file, scheduler address or configured scheduler is given (a local cluster)."""
-        from cosim.parallel.cluster import configured_scheduler
-
-        return self.scheduler is None and self.cluster is None and configured_scheduler() is None
 
     def close(self) -> None:
         """Stop the cluster started early if no run took it (a no-op otherwise)."""
@@ -251,7 +242,7 @@ class Sweep:
             self.close()  # the early cluster, if no cluster took it
 
     def _run_locked(self) -> dict[str, int]:
-        from cosim.parallel.dashboard_points import open_board
+        from cosim.parallel.dashboard.points import open_board
 
         started = now_utc()
         done = self.store.done_ids() if self.resume else set()
@@ -266,7 +257,7 @@ class Sweep:
                 self.folder.write_metadata(self._metadata({"started": started, "scheduler": "", "workers": 0,
                                                            "timeout": self.timeout}))
             return self._finish()
-        with study_cluster(self.workers, self.scheduler, self.cluster, SweepError, self._interrupted,
+        with study_cluster(self.cluster, SweepError, self._interrupted,
                            early=self._early) as (client, n_workers, link):
             info = {"started": started, "scheduler": client.scheduler.address, "workers": n_workers,
                     "timeout": self.timeout}
@@ -363,22 +354,6 @@ def _refuse_design_of_players(spec: Any) -> None:
                              f"{players[unit]} (a recording made with one value of each parameter), so "
                              f"'{p.target}' would vary nothing; remove it from design.parameters, or sweep the "
                              "recorded unit itself")
-
-
-def check_scheduler_address(address: str) -> None:
-    """Raise SweepError unless ``address`` has the form of a Dask scheduler address (tcp://host:port)."""
-    from distributed.comm.addressing import parse_address, parse_host_port
-    from distributed.comm.registry import backends
-
-    try:
-        scheme, location = parse_address(address)
-        if scheme not in backends:
-            raise ValueError(f"unknown protocol '{scheme}'")
-        if scheme in ("tcp", "tls"):
-            parse_host_port(location)
-    except (ValueError, TypeError) as exc:
-        raise SweepError(f"--scheduler '{address}' is not a Dask scheduler address ({exc}); write it as "
-                         "tcp://HOST:PORT, as `dask scheduler` prints it, e.g. tcp://127.0.0.1:8786") from None
 
 
 def sweep(spec_path: str | Path, workers: int | None = None, out: str | Path | None = None,

@@ -230,7 +230,7 @@ def serve(study: Study | LiveStudy, host: str = LOOPBACK, port: int = 0, token: 
     """Serve the room until interrupted, announcing its link first.
 
     Runs until KeyboardInterrupt (Ctrl-C; under the ``cosim`` command also SIGTERM and SIGHUP, which
-    :func:`cosim.parallel.interrupts.stop_cleanly_on_signals` turns into it): the server then closes its
+    :func:`cosim.parallel.cluster.interrupts.stop_cleanly_on_signals` turns into it): the server then closes its
     sockets and the KeyboardInterrupt is raised again, so the command ends as every interrupted command does
     (``cosim: interrupted``, exit 130).  Open pages and a re-run in progress (a daemon thread) do not hold it.
     """

@@ -22,7 +22,7 @@ page to the dashboard that can:
 The plugin is sent to the scheduler *by value* (cloudpickle), so the page
 does not depend on the cosim version installed where the scheduler runs (it
 must have cosim anyway: Dask's scheduler unpickles every task, see
-:mod:`cosim.parallel.scheduler_check`).  It needs the client's Python version
+:mod:`cosim.parallel.cluster.scheduler_check`).  It needs the client's Python version
 there; when the plugin cannot be installed the study runs as before and its
 start line says that there is no page and why.  Everything the plugin uses is
 in this module, the standard library, tornado and distributed: nothing else
@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING, Any, Iterator
 from distributed.diagnostics.plugin import SchedulerPlugin
 from tornado import web
 
-from cosim.parallel.interrupts import scheduler_gone
+from cosim.parallel.cluster.interrupts import scheduler_gone
 
 if TYPE_CHECKING:  # only named: this module is sent to the scheduler by value, needing nothing of cosim there
     from cosim.execution.point_row import PointRow
@@ -140,7 +140,7 @@ class PointsPlugin(SchedulerPlugin):
         _link_from_the_navigation_bar(scheduler)
 
     def dashboard_loaded(self, scheduler: Any) -> None:
-        """The dashboard was built after this plugin started (see :mod:`cosim.parallel.dashboard_on_demand`)."""
+        """The dashboard was built after this plugin started (see :mod:`cosim.parallel.dashboard.on_demand`)."""
         _link_from_the_navigation_bar(scheduler)
 
     def log_event(self, topic: str, msg: Any) -> None:
@@ -205,7 +205,7 @@ def _link_from_the_navigation_bar(scheduler: Any) -> None:
     Only a link: when distributed changes these internals the page is still
     there, at its address.  Only once the dashboard is loaded: the local
     cluster cosim starts builds it when first opened
-    (:mod:`cosim.parallel.dashboard_on_demand`, which then calls
+    (:mod:`cosim.parallel.dashboard.on_demand`, which then calls
     :meth:`PointsPlugin.dashboard_loaded`); importing it here would build it
     at every sweep.
     """

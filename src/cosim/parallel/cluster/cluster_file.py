@@ -1,28 +1,19 @@
-"""Which Dask cluster a sweep or an optimisation runs on.
+"""A cluster file: the Dask cluster a study starts, named by class, with its arguments and its scaling.
 
-In order of precedence:
+A cluster file (YAML or JSON) names a Dask cluster class by import path, its keyword arguments and its
+scaling (how cosim chooses a cluster at all: :mod:`cosim.parallel.cluster.choice`)::
 
-1. ``--cluster FILE``: a cluster file (YAML or JSON) naming a Dask cluster
-   class by import path, its keyword arguments and its scaling::
+    type: dask_jobqueue.SLURMCluster      # or distributed.LocalCluster, dask_kubernetes.operator.KubeCluster
+    kwargs: {cores: 1, memory: 4GB, walltime: "01:00:00"}
+    scale: {jobs: 20}                     # or {n: 20} workers; or instead:
+    adapt: {minimum: 2, maximum: 50}
 
-       type: dask_jobqueue.SLURMCluster      # or distributed.LocalCluster, dask_kubernetes.operator.KubeCluster
-       kwargs: {cores: 1, memory: 4GB, walltime: "01:00:00"}
-       scale: {jobs: 20}                     # or {n: 20} workers; or instead:
-       adapt: {minimum: 2, maximum: 50}
+(the shape dask-ctl and ESMValCore use).  :func:`read_cluster_file` checks it, :func:`start_cluster` imports
+the class -- only then, so dask-jobqueue and dask-kubernetes are optional -- makes the cluster and scales it
+(``scale``) or lets Dask adapt it (``adapt``).
 
-   (the shape dask-ctl and ESMValCore use).  :func:`read_cluster_file` checks
-   it, :func:`start_cluster` imports the class -- only then, so
-   dask-jobqueue and dask-kubernetes are optional -- makes the cluster and
-   scales it.
-2. ``--scheduler ADDRESS``: a running scheduler.
-3. Dask's own configuration: ``scheduler-address`` (also set by the
-   environment variable ``DASK_SCHEDULER_ADDRESS``), see
-   :func:`configured_scheduler`.
-4. Otherwise a local cluster whose workers run in cosim's process, each running
-   its points in a child process (:func:`cosim.parallel.evaluator.local_cluster`).
-
-Every mistake in a cluster file is a :class:`~cosim.errors.UserError`
-naming the file, the field and the fix (exit code 2).
+Every mistake in a cluster file is a :class:`~cosim.errors.ClusterFileError` (a UserError) naming the file,
+the field and the fix (exit code 2).
 """
 
 from __future__ import annotations
@@ -37,15 +28,14 @@ from pathlib import Path
 from typing import Any, Iterator
 
 from cosim.errors import ClusterFileError, Problem
-from cosim.parallel.interrupts import processes_started_here_ignore_ctrl_c
+from cosim.parallel.cluster.interrupts import processes_started_here_ignore_ctrl_c
+from cosim.parallel.cluster.local import ALLOWED_FAILURES
 
 # the package a cluster class comes from -> how to install it (the optional extras of pyproject.toml)
 EXTRAS = {
     "dask_jobqueue": "pip install 'cosim[jobqueue]'  (or: pip install dask-jobqueue)",
     "dask_kubernetes": "pip install 'cosim[kubernetes]'  (or: pip install dask-kubernetes)",
 }
-
-ALLOWED_FAILURES = 1  # a task whose worker died is run once more elsewhere; a second death is the point's fault
 
 
 @dataclass(frozen=True)
@@ -248,13 +238,3 @@ def _close_quietly(cluster: Any) -> None:
     except Exception:
         pass  # the error that made us close it matters more
 
-
-def configured_scheduler() -> str | None:
-    """The scheduler address of Dask's configuration (``scheduler-address``, ``DASK_SCHEDULER_ADDRESS``), if any."""
-    import os
-
-    import dask
-
-    # the variable is read here too: dask collects the environment only when it is first imported
-    address = os.environ.get("DASK_SCHEDULER_ADDRESS") or dask.config.get("scheduler-address", None)
-    return str(address) if address else None

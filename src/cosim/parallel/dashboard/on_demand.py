@@ -10,7 +10,7 @@ the dashboard pages (``Scheduler(dashboard=False)``; the server's own routes,
 first request there loads the dashboard (:func:`distributed.dashboard.scheduler.connect`,
 what the scheduler would have done at start), removes the handler, calls
 ``dashboard_loaded(scheduler)`` of the scheduler plugins that have it
-(:class:`cosim.parallel.dashboard_points.PointsPlugin` links its page from the
+(:class:`cosim.parallel.dashboard.points.PointsPlugin` links its page from the
 navigation bar) and redirects the browser to the same address, now served by
 the dashboard.  The
 link printed when a sweep starts is the same; its first opening takes about
@@ -24,6 +24,13 @@ import importlib
 from typing import Any
 
 DASHBOARD_MODULE = "distributed.dashboard.scheduler"
+
+
+def dashboard_available() -> bool:
+    """Whether bokeh is installed (distributed serves its dashboard only with it); found, not imported."""
+    import importlib.util
+
+    return importlib.util.find_spec("bokeh") is not None
 
 
 def serve_dashboard_on_demand(cluster: Any) -> None:

@@ -6,7 +6,7 @@ spec is checked (pandas and pyarrow for the results, the results folder, the
 payload with the unit files) takes about half a second; neither needs the
 other.  ``cosim sweep`` therefore starts the cluster first
 (:class:`EarlyCluster`) and prepares the rest meanwhile;
-:func:`cosim.parallel.evaluator.dask_client` then takes the started cluster
+:func:`cosim.parallel.cluster.client.dask_client` then takes the started cluster
 instead of starting one.
 """
 
@@ -17,7 +17,7 @@ from typing import Any
 
 
 class EarlyCluster:
-    """:func:`cosim.parallel.evaluator.local_cluster` of ``workers`` processes, started in a background thread.
+    """:func:`cosim.parallel.cluster.local.local_cluster` of ``workers`` processes, started in a background thread.
 
     :meth:`take` waits for it and hands it over (the taker closes it);
     :meth:`close` closes it unless it was taken.  One of the two must be
@@ -26,7 +26,7 @@ class EarlyCluster:
 
     def __init__(self, workers: int):
         # Dask is imported here, not in the thread: the caller goes on importing modules that import parts of
-        # Dask (cosim.parallel.dashboard_points), and two threads importing one package with circular imports can
+        # Dask (cosim.parallel.dashboard.points), and two threads importing one package with circular imports can
         # see it half initialised (ImportError "partially initialized module 'distributed...'").
         import distributed  # noqa: F401
 
@@ -37,7 +37,7 @@ class EarlyCluster:
         self._thread.start()
 
     def _start(self, workers: int) -> None:
-        from cosim.parallel.evaluator import local_cluster
+        from cosim.parallel.cluster.local import local_cluster
 
         try:
             self._cluster = local_cluster(workers)

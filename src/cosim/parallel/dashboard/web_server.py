@@ -1,53 +1,20 @@
-"""What the Dask dashboard shows of cosim's work, and what its web server may print.
+"""What the web server of the Dask dashboard may print while a study runs.
 
-- :func:`task_key`: the key of a task running a batch of points.  Dask groups
-  tasks by the key's leading words (its *prefix*, ``dask.utils.key_split``),
-  so every batch of one study falls under one progress bar named after it
-  (``cosim sweep NAME``), and the rest of the key names the task's points,
-  as the dashboard's task stream, worker and task pages show it:
-  ``cosim sweep NAME-points 4..6 of 40-<unique>``.  Dask's bars count
-  these tasks; the points page of :mod:`cosim.parallel.dashboard_points`
-  counts points.  A point's own status is
-  a row of the results table, never a task error: a failing point leaves no
-  traceback in a worker's log.
-- :func:`web_server_tracebacks_as_lines`: the dashboard of a cluster cosim
-  starts runs inside the ``cosim`` process (the scheduler is local), and its
-  web server (tornado, bokeh) logs an uncaught exception of a page handler
-  with a full traceback on the terminal (e.g. ``GET /sitemap.json`` raises in
-  distributed 2026.8).  While a study runs such records are logged as one
-  line with the exception's type and message instead, and bokeh's error about a browser tab closed while
-  its page loaded (:func:`tab_closed_while_loading`) not at all.
+The dashboard of a cluster cosim starts runs inside the ``cosim`` process (the scheduler is local), and its web
+server (tornado, bokeh) logs an uncaught exception of a page handler with a full traceback on the terminal
+(e.g. ``GET /sitemap.json`` raises in distributed 2026.8).  Within :func:`web_server_tracebacks_as_lines` such
+records are logged as one line with the exception's type and message instead, and bokeh's error about a
+browser tab closed while its page loaded (:func:`tab_closed_while_loading`) not at all.
 """
 
 from __future__ import annotations
 
 import logging
-import uuid
 from contextlib import contextmanager
-from typing import Iterator, Sequence
+from typing import Iterator
 
 # loggers of the dashboard's web server (and of asyncio, where its unretrieved task errors end)
 WEB_SERVER_LOGGERS = ("tornado.application", "tornado.general", "bokeh", "asyncio")
-
-
-def task_key(kind: str, study: str, indices: Sequence[int], total: int, run: str = "") -> str:
-    """A unique Dask key for the task running the points at ``indices`` (0-based) of the ``total`` of ``study``.
-
-    ``kind`` is the command (``sweep``, ``optimize``); the prefix
-    ``cosim KIND STUDY`` is what the progress bar shows.  ``run`` (letters
-    and digits) identifies this run of the study for the points page of
-    :mod:`cosim.parallel.dashboard_points`: the key then ends ``-RUN.<unique>``.
-    """
-    name = study.replace("-", "_") or "study"  # '-' separates a key's prefix from the rest
-    first, last = indices[0] + 1, indices[-1] + 1
-    if len(indices) == 1:
-        which = f"point {first}"
-    elif last - first + 1 == len(indices):
-        which = f"points {first}..{last}"
-    else:  # not consecutive
-        which = f"{len(indices)} points from {first}"
-    unique = f"{run}.{uuid.uuid4().hex[:16]}" if run else uuid.uuid4().hex
-    return f"cosim {kind} {name}-{which} of {total}-{unique}"
 
 
 def tab_closed_while_loading(exc: BaseException) -> bool:

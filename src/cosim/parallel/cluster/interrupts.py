@@ -21,7 +21,7 @@ the rows written so far and says ``cosim: interrupted``):
   processes a cluster file's class starts on this machine, and
   :func:`processes_started_here_get_the_preload` for those its scale/adapt
   starts later, as long as the cluster lives.
-- Point children (:mod:`cosim.parallel.isolation`) ignore SIGINT themselves.
+- Point children (:mod:`cosim.parallel.isolation.runner`) ignore SIGINT themselves.
 - :func:`scheduler_gone` tells the client, after a stop, that the signal ended
   the scheduler too (a cluster file's ``dask spec`` processes close themselves on
   SIGINT), so that it neither sends to it nor waits for it.
@@ -66,7 +66,7 @@ def stop_cleanly_on_signals() -> dict[int, Any]:
         for name in ("distributed", "asyncio"):  # asyncio reports tasks of workers that never started
             logging.getLogger(name).setLevel(logging.CRITICAL + 1)
         sys.unraisablehook = lambda unraisable: None
-        from cosim.parallel.isolation import kill_point_children_now
+        from cosim.parallel.isolation.children import kill_point_children_now
 
         kill_point_children_now()  # their points are unfinished: waiting for them could take minutes
         raise KeyboardInterrupt
@@ -110,7 +110,7 @@ def restore_signals(previous: dict[int, Any]) -> None:
         signal.signal(signum, handler)
     _STOPS.clear()  # the command is over: a study run later from Python is not stopped by its signal
     if previous:
-        from cosim.parallel.isolation import allow_point_children
+        from cosim.parallel.isolation.children import allow_point_children
 
         allow_point_children()
 
@@ -145,7 +145,7 @@ def processes_started_here_ignore_ctrl_c() -> Iterator[None]:
 def processes_started_here_get_the_preload() -> Iterator[None]:
     """Every Dask scheduler, nanny and worker process started here while the block runs runs :func:`dask_setup`.
 
-    For the whole life of a cluster a cluster file starts (cosim.parallel.evaluator): the workers its
+    For the whole life of a cluster a cluster file starts (cosim.parallel.cluster.client): the workers its
     scale/adapt starts later, after the cluster's class returned, ignore Ctrl-C as the first ones do.
     Processes a nanny of this process starts get it through Dask's ``distributed.worker.preload`` setting
     (a nanny hands its configuration to its worker); processes started as commands (a SubprocessCluster's
