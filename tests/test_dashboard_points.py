@@ -294,3 +294,82 @@ def test_points_of_a_task_lost_with_its_workers_are_counted_once(write_spec, tmp
         assert (final["done"], final["total"], final["failed"], final["running_tasks"]) == (8, 8, 1, 0)
     finally:
         cluster.close()
+
+
+def test_the_rate_is_that_of_the_last_half_minute_and_the_time_left_follows_from_it(monkeypatch):
+    """Issue 39: the page says how fast a study goes and how long it has left (cosim.parallel.dashboard_points)."""
+    from cosim.parallel import dashboard_points as P
+
+    clock = [1000.0]
+    monkeypatch.setattr(P.time, "time", lambda: clock[0])
+    plugin = P.PointsPlugin()
+    plugin.log_event(P.TOPIC, {"op": "start", "study": "s1", "kind": "sweep", "name": "demo", "total": 100,
+                               "before": 10, "client": "c"})
+    key = "cosim sweep demo-points 1..50 of 100-s1.abc"
+    assert plugin.summary()[0]["rate"] is None and plugin.summary()[0]["left_s"] is None  # nothing done yet
+    for t, done in ((1010.0, 5), (1020.0, 10), (1040.0, 20), (1060.0, 30)):
+        clock[0] = t
+        plugin.log_event(P.TOPIC, {"key": key, "done": done, "failed": 1})
+    study = plugin.summary()[0]
+    # the window keeps one count from before the last 30 s: (1020, 10) .. (1060, 30): 20 points in 40 s
+    assert study["rate"] == pytest.approx(0.5) and study["done"] == 40 and study["failed"] == 1
+    assert study["left_s"] == pytest.approx(60 / 0.5)
+    clock[0] = 1080.0  # no point for 20 s: the rate falls as time passes without one
+    assert plugin.summary()[0]["rate"] == pytest.approx(20 / 60)
+    plugin.log_event(P.TOPIC, {"op": "end", "study": "s1", "state": "finished"})
+    clock[0] = 2000.0
+    ended = plugin.summary()[0]
+    assert ended["left_s"] is None and ended["rate"] == pytest.approx(20 / 60)  # measured up to the end
+    assert (P.rate_text(0.5), P.rate_text(120.4), P.rate_text(None)) == ("0.50 /s", "120 /s", "\u2013")
+    assert (P.duration_text(42), P.duration_text(600), P.duration_text(9000)) == ("42 s", "10 min", "2.5 h")
+
+
+def test_the_points_page_is_live_in_a_browser_without_reloading(tmp_path, dask_commands):
+    """Issue 39: the Cosim page was an HTML page reloaded every 2 s. Now its script redraws the counts in place:
+    in chromium, a mark set on the page's window survives while the counts go from 6 to 12 of 12 (on a
+    scheduler that outlives the sweep, so the page is still there when it has finished)."""
+    from cosim.analysis.room import browser as B
+
+    from .conftest import require_tool
+
+    require_tool("chromium", "chromium")
+    require_tool("chromedriver", "chromium-driver")
+    address, _ = dask_commands()
+    spec = _gate_spec(tmp_path / "project")
+    env = {"PYTHONPATH": os.pathsep.join([str(ROOT / "src"), str(ROOT)])}
+    cosim = CosimProcess([str(spec), "--out", str(tmp_path / "out"), "--batch-size", "6", "--scheduler", address],
+                         env)
+    driver = B.chromium()
+    try:
+        points_url = _points_url(cosim.start_line())
+        _study(points_url, lambda s: s["done"] == 6)
+        driver.get(points_url)
+        driver.execute_script("window.__same_page = 'yes'")
+
+        def cells() -> dict:
+            return driver.execute_script(
+                "const r = document.querySelector('#studies tr'); const out = {};"
+                "for (const td of r.querySelectorAll('td')) { if (td.className) out[td.className] = td.textContent; }"
+                "return out;")
+
+        deadline = time.monotonic() + 30
+        while cells().get("rate", "\u2013") == "\u2013":  # the rate needs two counts, from the page's script
+            assert time.monotonic() < deadline, cells()
+            time.sleep(0.2)
+        running = cells()
+        assert running["points"] == "6 / 12" and running["failed"] == "1" and running["state"] == "running"
+        assert running["rate"].endswith(" /s") and running["name"] == "sweep gated"
+        assert running["left"] != "\u2013" and "updated" in driver.find_element("id", "updated").text
+        (tmp_path / "project" / "release").write_text("")
+        deadline = time.monotonic() + 90
+        while cells().get("state") != "finished":
+            assert time.monotonic() < deadline, (cells(), _get(points_url + "/points.json"), cosim.lines[-5:])
+            time.sleep(0.2)
+        done = cells()
+        assert done["points"] == "12 / 12" and done["left"] == "\u2013"
+        assert driver.execute_script("return window.__same_page") == "yes"  # redrawn in place, never reloaded
+        assert B.console_errors(driver) == []
+    finally:
+        driver.quit()
+        cosim.kill()
+    cosim.finish()

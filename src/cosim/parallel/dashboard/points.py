@@ -12,8 +12,11 @@ page to the dashboard that can:
   (``SchedulerPlugin.log_event``), keeps per study the counts of its tasks
   (dropping an attempt lost with its worker: ``transition`` out of
   ``processing`` to anything but ``memory``), and serves ``/cosim`` (an HTML
-  page, refreshed every 2 s) and ``/cosim/points.json`` on the dashboard's
-  web server.  It adds "Cosim" to the dashboard's navigation bar.
+  page whose script, ``/cosim/page.js``, redraws its table from
+  ``/cosim/points.json`` every second without reloading the page: points done,
+  not ok so far, the rate over the last ``RATE_WINDOW`` seconds and the time
+  left at that rate) on the dashboard's web server.  It adds "Cosim" to the
+  dashboard's navigation bar.
 - Client: :func:`open_board` registers the plugin and announces the study
   (its total and the points already stored when resuming, and the link of
   its decision room when it runs with ``--explore``: the page links it); the
@@ -32,6 +35,7 @@ server's root (``/cosim``), not under a ``--dashboard-prefix``.
 
 from __future__ import annotations
 
+import collections
 import html
 import json
 import sys
@@ -52,6 +56,7 @@ PLUGIN_NAME = "cosim-points-1"  # the version of the event protocol: a scheduler
 ROUTE = "cosim"  # the page; its data: ROUTE + "/points.json"
 EVERY = 0.5  # seconds between a worker's events for one running task
 KEPT_STUDIES = 20  # the page lists the studies of this scheduler, the most recent this many
+RATE_WINDOW = 30.0  # seconds: the rate is that of the points done within the last this many seconds
 
 
 def study_of(key: Any) -> str | None:
@@ -130,10 +135,12 @@ class PointsPlugin(SchedulerPlugin):
         self.studies: dict[str, dict[str, Any]] = {}
         self.tasks: dict[str, dict[str, tuple[int, int]]] = {}  # study -> task key -> (done, failed)
         self.running: dict[str, set[str]] = {}  # study -> keys of tasks still running
+        self.history: dict[str, collections.deque[tuple[float, int]]] = {}  # study -> (time, points done this run)
 
     async def start(self, scheduler: Any) -> None:
         handlers = [(rf"/{ROUTE}", PageHandler, {"plugin": self}),
-                    (rf"/{ROUTE}/points.json", JsonHandler, {"plugin": self})]
+                    (rf"/{ROUTE}/points.json", JsonHandler, {"plugin": self}),
+                    (rf"/{ROUTE}/page.js", ScriptHandler)]
         application = getattr(scheduler, "http_application", None)
         if application is not None:
             application.add_handlers(r".*", handlers)
@@ -158,6 +165,7 @@ class PointsPlugin(SchedulerPlugin):
                 self.tasks[study][msg["key"]] = (int(msg.get("done", 0)), int(msg.get("failed", 0)))
                 if not msg.get("final"):  # final: rows the client made for a task lost with its workers
                     self.running[study].add(msg["key"])
+                self._note_progress(study)
 
     def _start(self, msg: dict[str, Any]) -> None:
         study = str(msg.get("study"))
@@ -166,9 +174,29 @@ class PointsPlugin(SchedulerPlugin):
                                "client": msg.get("client"), "room": msg.get("room"),
                                "state": "running", "started": time.time(), "ended": None}
         self.tasks[study], self.running[study] = {}, set()
+        self.history[study] = collections.deque([(time.time(), 0)])
         for old in list(self.studies)[:-KEPT_STUDIES]:
-            for table in (self.studies, self.tasks, self.running):
+            for table in (self.studies, self.tasks, self.running, self.history):
                 table.pop(old, None)
+
+    def _note_progress(self, study: str) -> None:
+        """Remember when the study had how many points done (this run), for the rate; forget what is older
+        than the rate's window, keeping one sample from before it to measure from."""
+        history = self.history.setdefault(study, collections.deque())
+        now = time.time()
+        history.append((now, sum(d for d, _ in self.tasks[study].values())))
+        while len(history) > 2 and history[1][0] < now - RATE_WINDOW:
+            history.popleft()
+
+    def _rate(self, study: str, now: float) -> float | None:
+        """Points per second over the last RATE_WINDOW seconds (from the study's start when it is younger);
+        None before two counts are known. Points lost with their workers and counted again may dip it."""
+        history = self.history.get(study)
+        if not history or len(history) < 2:
+            return None
+        (t0, d0), (_, d1) = history[0], history[-1]
+        span = max(now, history[-1][0]) - t0
+        return max(d1 - d0, 0) / span if span > 0 else None
 
     def transition(self, key: Any, start: str, finish: str, *args: Any, **kwargs: Any) -> None:
         if start != "processing":
@@ -186,16 +214,21 @@ class PointsPlugin(SchedulerPlugin):
                 study.update(state="client gone", ended=time.time())
 
     def summary(self) -> list[dict[str, Any]]:
-        """Every study kept, the most recent first: points done (of total), not ok (this run), tasks running."""
-        out = []
+        """Every study kept, the most recent first: points done (of total), not ok (this run), tasks running,
+        ``rate`` (points per second lately, None until known) and ``left_s`` (seconds left at that rate, None
+        when unknown or ended)."""
+        out, now = [], time.time()
         for sid, study in reversed(self.studies.items()):
             counts = self.tasks.get(sid, {}).values()
             done = study["before"] + sum(d for d, _ in counts)
             failed = sum(f for _, f in counts)  # of this run (a resume's stored rows are not read)
+            running = study["state"] == "running"
+            rate = self._rate(sid, now if running else study["ended"] or now)
+            left = max(study["total"] - done, 0) / rate if running and rate else None
             out.append({"study": sid, "name": study["name"], "kind": study["kind"], "total": study["total"],
                         "done": done, "failed": failed, "running_tasks": len(self.running.get(sid, ())),
                         "state": study["state"], "started": study["started"], "ended": study["ended"],
-                        "room": study.get("room")})
+                        "room": study.get("room"), "rate": rate, "left_s": left})
         return out
 
 
@@ -233,34 +266,131 @@ class JsonHandler(web.RequestHandler):
 
 
 class PageHandler(JsonHandler):
-    """``/cosim``: one line per study with a bar, refreshed every 2 seconds."""
+    """``/cosim``: one line per study with a bar, drawn here once and redrawn every second by ``page.js``."""
 
     def get(self) -> None:
-        rows = []
-        for s in self.plugin.summary():
-            share = s["done"] / s["total"] if s["total"] else 1.0
-            room = f" <a class='room' href='{html.escape(s['room'])}'>explore</a>" if s.get("room") else ""
-            rows.append(
-                f"<tr><td>{html.escape(s['kind'])} {html.escape(s['name'])}{room}</td>"
-                f"<td><progress max='{s['total']}' value='{s['done']}'></progress></td>"
-                f"<td class='points'>{s['done']} / {s['total']}</td><td class='failed'>{s['failed']}</td>"
-                f"<td>{s['running_tasks']}</td><td>{html.escape(s['state'])}</td><td>{100 * share:.0f} %</td></tr>")
-        body = "".join(rows) or "<tr><td colspan='7'>no cosim study has run on this scheduler yet</td></tr>"
+        rows = "".join(_row_html(s) for s in self.plugin.summary())
+        body = rows or "<tr><td colspan='8'>no cosim study has run on this scheduler yet</td></tr>"
         self.set_header("Content-Type", "text/html; charset=utf-8")
         self.write(PAGE.format(rows=body))
 
 
+class ScriptHandler(web.RequestHandler):
+    """``/cosim/page.js``: the page's script (a file of its own: the page has no inline script)."""
+
+    def get(self) -> None:
+        self.set_header("Content-Type", "text/javascript; charset=utf-8")
+        self.set_header("Cache-Control", "no-cache")
+        self.write(SCRIPT)
+
+
+def duration_text(seconds: float | None) -> str:
+    """``42 s``, ``7 min``, ``2.5 h``; a dash for unknown (page.js's ``duration`` writes the same)."""
+    if seconds is None:
+        return "\u2013"
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def rate_text(rate: float | None) -> str:
+    """``3.25 /s`` (below 10 a second), ``120 /s``; a dash for unknown (as page.js's ``rate``)."""
+    if not rate:
+        return "\u2013"
+    return f"{rate:.2f} /s" if rate < 10 else f"{rate:.0f} /s"
+
+
+def _row_html(s: dict[str, Any]) -> str:
+    room = s.get("room")
+    link = (f" <a class='room' href='{html.escape(room)}'>explore</a>"
+            if isinstance(room, str) and room.startswith(("http://", "https://")) else "")
+    left = duration_text(s["left_s"]) if s["state"] == "running" else "\u2013"
+    return (f"<tr><td class='name'>{html.escape(s['kind'])} {html.escape(s['name'])}{link}</td>"
+            f"<td><progress max='{s['total']}' value='{s['done']}'></progress></td>"
+            f"<td class='points'>{s['done']} / {s['total']}</td><td class='failed'>{s['failed']}</td>"
+            f"<td class='rate'>{rate_text(s['rate'])}</td><td class='left'>{left}</td>"
+            f"<td class='tasks'>{s['running_tasks']}</td><td class='state'>{html.escape(s['state'])}</td></tr>")
+
+
 PAGE = """<!DOCTYPE html>
-<html><head><meta charset="utf-8"><meta http-equiv="refresh" content="2"><title>cosim: points</title>
+<html><head><meta charset="utf-8"><title>cosim: points</title>
+<noscript><meta http-equiv="refresh" content="2"></noscript>
 <style>body {{font-family: sans-serif; margin: 1.5em}} td, th {{padding: 0.2em 0.8em; text-align: left}}
-progress {{width: 20em}}</style></head>
+progress {{width: 20em}} #updated {{color: #666}}</style>
+<script src="cosim/page.js" defer></script></head>
 <body><p><a href="status">&larr; Dask dashboard</a></p>
 <h2>cosim: points of each study on this scheduler</h2>
-<table><tr><th>study</th><th></th><th>points done</th><th>not ok (this run)</th><th>tasks running</th><th>state</th><th></th></tr>
-{rows}</table>
+<table><thead><tr><th>study</th><th></th><th>points done</th><th>not ok (this run)</th><th>rate</th>
+<th>time left</th><th>tasks running</th><th>state</th></tr></thead>
+<tbody id="studies">{rows}</tbody></table>
+<p id="updated"></p>
 <p>Points done counts every point with a row (ok or not); a task lost with its worker is counted again when it
-runs again. <i>explore</i> opens a study's decision room (<code>--explore</code>): its points as they arrive.
+runs again. The rate is that of the last 30 s, and the time left is what is left at that rate. <i>explore</i>
+opens a study's decision room (<code>--explore</code>): its points as they arrive.
 Data: <a href="cosim/points.json">cosim/points.json</a>.</p></body></html>
+"""
+
+SCRIPT = r"""// cosim's points page: the table is redrawn from points.json every second, without reloading the page.
+// Every value is written as text (textContent), never as markup: a study's name comes from a user's file.
+"use strict";
+function duration(s) {
+  if (s === null || s === undefined) return "–";
+  if (s < 120) return Math.round(s) + " s";
+  if (s < 7200) return Math.round(s / 60) + " min";
+  return (s / 3600).toFixed(1) + " h";
+}
+function rate(r) {
+  if (!r) return "–";
+  return r < 10 ? r.toFixed(2) + " /s" : Math.round(r) + " /s";
+}
+function cell(row, text, name) {
+  const td = document.createElement("td");
+  td.textContent = text;
+  if (name) td.className = name;
+  row.appendChild(td);
+  return td;
+}
+function studyRow(s) {
+  const tr = document.createElement("tr");
+  const name = cell(tr, s.kind + " " + s.name, "name");
+  if (typeof s.room === "string" && /^https?:\/\//.test(s.room)) {
+    const a = document.createElement("a");
+    a.href = s.room; a.className = "room"; a.textContent = "explore";
+    name.append(" ", a);
+  }
+  const bar = document.createElement("progress");
+  bar.max = s.total; bar.value = s.done;
+  cell(tr, "", "").appendChild(bar);
+  cell(tr, s.done + " / " + s.total, "points");
+  cell(tr, String(s.failed), "failed");
+  cell(tr, rate(s.rate), "rate");
+  cell(tr, s.state === "running" ? duration(s.left_s) : "–", "left");
+  cell(tr, String(s.running_tasks), "tasks");
+  cell(tr, s.state, "state");
+  return tr;
+}
+async function refresh() {
+  const note = document.getElementById("updated");
+  try {
+    const answer = await fetch("cosim/points.json", {cache: "no-store"});
+    if (!answer.ok) throw new Error("HTTP " + answer.status);
+    const studies = (await answer.json()).studies;
+    const rows = studies.map(studyRow);
+    if (!rows.length) {
+      const tr = document.createElement("tr");
+      cell(tr, "no cosim study has run on this scheduler yet", "").colSpan = 8;
+      rows.push(tr);
+    }
+    document.getElementById("studies").replaceChildren(...rows);
+    note.textContent = "updated " + new Date().toLocaleTimeString();
+  } catch (error) {
+    note.textContent = "the scheduler does not answer (" + error.message + "); trying again";
+  }
+}
+refresh();
+setInterval(refresh, 1000);
 """
 
 
