@@ -15,7 +15,8 @@
    (examples/pick_and_place/spec_coarse.json and spec_coarse_exudyn.json) on 1 and 2 workers.
 5. kernel: designs/s of ``cosim sweep`` of a 2-FMU linear_ode ring (10^3 steps a point) on 2 workers with
    ``experiment.kernel`` python and native, alternating on one cluster (issue 35: >= 5x; the issue's 10^5 designs
-   via ``--points``).
+   via ``--points``, or ``--native-points`` for one native-only sweep after the pairs), each written to disk as
+   ``cosim sweep`` writes it, with the client's peak RSS growth.
 """
 
 from __future__ import annotations
@@ -229,20 +230,63 @@ def ring_spec(folder: Path, n_points: int, kernel: str) -> Path:
     return path
 
 
-def part_kernel(folder: Path, repeat: int, n_points: int) -> dict:
+def sweep_to_disk(spec: Path, address: str, out: Path) -> tuple[float, int, float, float]:
+    """(seconds, rows, client RSS before in MB, client RSS peak in MB) of one sweep written to disk as
+    ``cosim sweep`` writes it (the table stays on disk), the client's RSS sampled every 50 ms."""
+    import psutil
+
+    from cosim.studies.sweep import Sweep
+
+    shutil.rmtree(out, ignore_errors=True)
+    proc = psutil.Process()
+    sweep = Sweep(spec, scheduler=address, out=out, quiet=True)
+    baseline = proc.memory_info().rss
+    peak = [baseline]
+    stop = threading.Event()
+
+    def sample() -> None:
+        while not stop.is_set():
+            peak[0] = max(peak[0], proc.memory_info().rss)
+            time.sleep(0.05)
+
+    thread = threading.Thread(target=sample, daemon=True)
+    thread.start()
+    started = time.perf_counter()
+    counts = sweep.run_to_disk()
+    elapsed = time.perf_counter() - started
+    stop.set()
+    thread.join()
+    assert counts.get("ok", 0) == sum(counts.values()), counts
+    return elapsed, sum(counts.values()), baseline / 1e6, peak[0] / 1e6
+
+
+def part_kernel(folder: Path, repeat: int, n_points: int, native_points: int = 0) -> dict:
+    """Interleaved python/native pairs of ``n_points`` designs, then (``native_points`` > 0) one native sweep of
+    that many designs alone: designs/s, the ratio per pair, and the client's RSS growth during each sweep."""
     rates: dict[str, list[float]] = {"python": [], "native": []}
     specs = {k: ring_spec(folder, n_points, k) for k in rates}
+    out: dict = {"rates": rates}
     with cluster(2) as c:
         for kernel, spec in specs.items():  # warm up: worker children loaded, kernel compiled
             timed_sweep(ring_spec(folder, 8, kernel), c.scheduler_address, folder / f"warm_{kernel}")
         for _ in range(repeat):
             for kernel, spec in specs.items():
-                elapsed, n = timed_sweep(spec, c.scheduler_address, folder / f"k_{kernel}")
+                load = os.getloadavg()[0]
+                elapsed, n, before, peak = sweep_to_disk(spec, c.scheduler_address, folder / f"k_{kernel}")
                 rates[kernel].append(n / elapsed)
-                print(f"  {kernel}: {n} designs in {elapsed:.1f} s, {n / elapsed:.0f} designs/s", flush=True)
+                print(f"  {kernel}: {n} designs in {elapsed:.1f} s, {n / elapsed:.0f} designs/s; client RSS "
+                      f"{before:.0f} -> peak {peak:.0f} MB (+{peak - before:.0f}); load {load:.1f}", flush=True)
+        if native_points:
+            big = ring_spec(folder, native_points, "native")
+            load = os.getloadavg()[0]
+            elapsed, n, before, peak = sweep_to_disk(big, c.scheduler_address, folder / "k_big")
+            print(f"  native alone: {n} designs in {elapsed:.1f} s, {n / elapsed:.0f} designs/s; client RSS "
+                  f"{before:.0f} -> peak {peak:.0f} MB (+{peak - before:.0f}); load {load:.1f}", flush=True)
+            out["native_alone"] = {"designs": n, "seconds": elapsed, "rss_growth_mb": peak - before}
     ratio = statistics.median(b / a for a, b in zip(rates["python"], rates["native"]))
     print(f"  native / python designs per second: {ratio:.1f}x (median of {repeat} interleaved pairs)")
-    return {"rates": rates, "ratio": ratio}
+    out["ratio"] = ratio
+    return out
 
 
 def part_pickplace(repeat: int) -> dict:
@@ -271,6 +315,8 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--points", type=int, default=200, help="FMU points for efficiency and bag")
     parser.add_argument("--sizes", default="10000,100000", help="point counts for the memory part")
+    parser.add_argument("--native-points", type=int, default=0,
+                        help="kernel part: one more native-only sweep of this many designs (the issue's 10^5)")
     parser.add_argument("--memory-child", nargs=2, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.memory_child:
@@ -293,7 +339,7 @@ def main() -> None:
             part_pickplace(args.repeat)
         if args.part in ("kernel", "all"):
             print(f"native kernel vs python master, 2-FMU ring, 10^3 steps, 2 workers, load {os.getloadavg()[0]:.1f}:")
-            part_kernel(folder, args.repeat, args.points)
+            part_kernel(folder, args.repeat, args.points, args.native_points)
 
 
 if __name__ == "__main__":

@@ -325,3 +325,31 @@ def test_arrays_are_stepped_natively_one_step_at_a_time_too(write_spec):
     (native, rows_native), (python, rows_python) = seen
     assert_identical(native, python)
     assert [v.tobytes() for _, v in rows_native] == [v.tobytes() for _, v in rows_python]
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_units_of_measure_are_converted_by_the_kernel_bit_for_bit(write_spec, tmp_path, version):
+    """A player's rpm column into an FMU's rad/s array element, the FMU's rpm output into a rad/s system
+    connector, a torque in N.m from another column: the unit conversions cosim derives, applied in C."""
+    import pandas as pd
+
+    table = tmp_path / "drive.csv"
+    pd.DataFrame({"time": [0.0, 0.2, 0.5, 1.0], "n": [0.0, 3000.0, -1200.0, 450.0],
+                  "torque": [0.0, 12.0, -3.0, 7.5]}).to_csv(table, index=False)
+    spec = {"units": {"play": {"player": str(table), "units": {"n": "rpm", "torque": "N.m"}},
+                      "energy": {"fmu": fmu("motor_gear_energy", version)},
+                      "Root": {"connectors": "Root", "inputs": {"speed": "rad/s"}}},
+            "connections": [{"from": "play.n", "to": "energy.omega[2]"}, {"from": "play.torque", "to": "energy.tau[2]"},
+                            {"from": "energy.n_motor[2]", "to": "Root.speed"}],
+            "record": ["play.n", "energy.omega", "energy.n_motor", "energy.e_el", "Root.speed"],
+            "objectives": {"e": {"signal": "energy.e_total", "reduce": "final"},
+                           "p": {"signal": "energy.p_el", "reduce": "max"},
+                           "speed": {"signal": "Root.speed", "reduce": "integral_abs"}},
+            "experiment": {"stop": 1.0, "step": 0.02}}
+    native, python, system = both(write_spec, spec)
+    assert system.kernel.kernel == "native" and native.status == "ok", native.message
+    assert_identical(native, python)
+    traces = native.traces
+    rpm = np.pi / 30.0
+    np.testing.assert_allclose(traces["energy.omega[2]"], traces["play.n"] * rpm, rtol=1e-15)
+    assert traces["play.n"].abs().max() > 1000 and native.objectives["e"] != 0.0
