@@ -16,7 +16,7 @@ import pytest
 from dask.utils import key_split
 
 import cosim
-from cosim.parallel.dashboard.task_keys import task_key
+from cosim.parallel.dashboard.task_keys import payload_key, task_key
 
 from .conftest import TESTS
 from .sweep_fixtures import free_port, kill_group, wait_for_workers
@@ -50,6 +50,31 @@ def test_the_dashboard_shows_one_progress_bar_per_sweep_and_each_task_names_its_
     keys = sorted(str(task["key"]) for task in stream.data)
     assert {key_split(k) for k in keys} == {"cosim sweep dash_demo"}  # the progress bar's name
     assert [k.split("-")[1] for k in keys] == ["point 7 of 7", "points 1..3 of 7", "points 4..6 of 7"]
+
+
+def test_the_payload_is_one_piece_of_data_named_after_the_study(local_cluster):
+    """Issue 39: a study's payload was scattered as a dict, which Dask keeps as one key per entry: the dashboard
+    showed data named 'key', 'system', 'files' and 'limits'. Now it is one key named for people."""
+    from distributed import Client
+
+    from cosim.parallel.scattered import ScatteredPayload
+
+    payload = {"key": "k1", "system": {"units": 3}, "files": {"a.py": b"x = 1"}, "limits": {}}
+    with Client(local_cluster) as client:
+        scattered = ScatteredPayload(client, payload, payload_key("sweep", "my-study"))
+        future = scattered.future()
+        held = client.run_on_scheduler(lambda dask_scheduler: [str(k) for k in dask_scheduler.tasks])
+        ours = [k for k in held if k.startswith("cosim ")]
+        assert [key_split(k) for k in ours] == ["cosim sweep my_study system and unit files"]
+        assert not {"key", "system", "files", "limits"} & {key_split(k) for k in held}
+        assert client.submit(lambda p: p, future, pure=False).result() == payload  # a task gets the whole dict
+        assert scattered.future() is future  # kept while alive: scattered once
+        scattered.release()
+        deadline = time.monotonic() + 10
+        while ours[0] in client.run_on_scheduler(lambda dask_scheduler: [str(k) for k in dask_scheduler.tasks]):
+            assert time.monotonic() < deadline, "the released payload stayed on the scheduler"
+            time.sleep(0.1)
+    assert key_split(payload_key("", "")) == "cosim system and unit files"
 
 
 @pytest.fixture

@@ -39,6 +39,7 @@ from typing import Any, Callable, Iterable, Iterator, Sequence
 
 from cosim.execution.point_row import PointRow
 from cosim.parallel.cluster.interrupts import raise_if_stopped
+from cosim.parallel.dashboard.task_keys import payload_key
 from cosim.parallel.reruns import Reruns, lost_rows
 from cosim.parallel.scattered import ScatteredPayload, release_futures
 from cosim.spec.design import Point
@@ -163,7 +164,7 @@ class PointStream:
         self.client, self.n_workers = client, max(1, n_workers)
         self.kind, self.name, self.board = kind, name, board
         self.timeout, self.adaptive_timeout = timeout, adaptive_timeout
-        self.payload = ScatteredPayload(client, payload)
+        self.payload = ScatteredPayload(client, payload, payload_key(kind, name))
         self._times: collections.deque[float] = collections.deque(maxlen=1000)  # recent ok point times
         self._inbox: queue.Queue = queue.Queue()  # ("rows", event message) from the topic, ("done", future)
         self.topic = f"cosim-rows-{uuid.uuid4().hex}"

@@ -6,6 +6,7 @@ import time
 from typing import Any
 
 from cosim.errors import ClusterError
+from cosim.parallel.dashboard.task_keys import payload_key
 
 SCATTER_TRIES = 5  # sending the payload to the workers, when workers die meanwhile
 WORKER_WAIT = 120.0  # seconds to wait for a worker when all died (a loaded machine restarts them slowly)
@@ -16,10 +17,16 @@ class ScatteredPayload:
 
     Scattered data lives only on workers: when every worker that held it
     dies (a cluster of two both killed, a lost node), its tasks are cancelled.
+    The payload travels as one piece of data under one key that names it for people
+    (:func:`~cosim.parallel.dashboard.task_keys.payload_key`, e.g. ``cosim sweep NAME system and unit
+    files-<unique>``): scattered as a dict, Dask would have made one key per entry, and the dashboard showed
+    them as "key", "system", "files" and "limits".
     """
 
-    def __init__(self, client: Any, payload: dict[str, Any]):
+    def __init__(self, client: Any, payload: dict[str, Any], key: str | None = None):
+        """``key``: the Dask key of the scattered payload (default: a unique one naming no study)."""
         self.client, self.payload, self._future = client, payload, None
+        self.key = key or payload_key("", "")
 
     def future(self) -> Any:
         """The payload's future; scattered anew if it is lost (the workers holding it all died).
@@ -35,7 +42,7 @@ class ScatteredPayload:
             for attempt in range(SCATTER_TRIES):
                 try:
                     self._wait_for_a_worker()
-                    self._future = self.client.scatter(self.payload, broadcast=True, hash=False)
+                    self._future = self.client.scatter({self.key: self.payload}, broadcast=True)[self.key]
                     break
                 # OSError, also TimeoutError: "No valid workers found" when the last one just died; ValueError: "Can
                 # not use replicate to delete data" when the workers changed while the payload was sent to them all

@@ -32,3 +32,15 @@ def task_key(kind: str, study: str, indices: Sequence[int], total: int, run: str
         which = f"{len(indices)} points from {first}"
     unique = f"{run}.{uuid.uuid4().hex[:16]}" if run else uuid.uuid4().hex
     return f"cosim {kind} {name}-{which} of {total}-{unique}"
+
+
+def payload_key(kind: str, study: str) -> str:
+    """A unique Dask key for a study's payload (its system and unit files), scattered once to every worker.
+
+    The dashboard lists it among the data held in memory and as a progress bar of its own, under the prefix
+    ``cosim KIND STUDY system and unit files`` (``cosim system and unit files`` without a study): a name a
+    user recognises, beside the study's bar of batches.
+    """
+    name = study.replace("-", "_")
+    words = " ".join(w for w in ("cosim", kind, name, "system and unit files") if w)
+    return f"{words}-{uuid.uuid4().hex}"
