@@ -14,8 +14,10 @@ output -> input, a unit's declared feed-through an edge input -> output.  :func:
 derivatives where every unit on the loop gives them (FMI getDirectionalDerivative, :class:`LoopDerivatives`), else
 by finite differences; kept from one communication point to the next while it still contracts, backtracking
 steps), falling back to fixed-point
-iteration x <- G(x); ``"fixed-point"`` uses only the latter.  Each solve starts from the last two solutions
-extrapolated to the time (Newton is local: it follows the solution branch it starts on).  A loop that does not converge within the
+iteration x <- G(x); ``"fixed-point"`` uses only the latter.  The first solve starts from the tearing variables'
+start values (the system does not carry the cut links at initialization), as OpenModelica's KINSOL does, each
+later one from the last two solutions extrapolated to its time (Newton is local: it follows the solution branch
+it starts on, so this is which root a loop with several reaches).  A loop that does not converge within the
 iteration limit raises :class:`LoopError` (a UnitError: the run becomes a failed row naming the loop and its
 residual), never a hang.  Units are only set and read (FMI 2/3 allow set/get between steps; a Python unit
 recomputes its outputs in ``compute_outputs``), never stepped, so solving costs no simulated time.
