@@ -5,8 +5,10 @@
 Serves examples/pick_and_place/study (with examples/pick_and_place/spec.json for the re-runs) as
 ``cosim explore`` does, and does in the page what the walk through says: narrows duration to the faster
 designs, ranks by e_total, duration and the shoulder's torque peak with TOPSIS, selects the three best designs,
-re-runs them; one screenshot per tab, and one of the re-run designs' 3-D arm view (room-arm.png).  Needs
-Debian's chromium and chromium-driver and selenium.
+pins them to the shortlist and re-runs them there, re-runs them in the Selection tab; one screenshot per tab,
+one of the shortlist (room-shortlist.png) and one of the re-run designs' 3-D arm view (room-arm.png).  Then the
+Study tab of the optimisation examples/pick_and_place_free_pose/results_optimize (room-study-optimisation.png).
+Needs Debian's chromium and chromium-driver and selenium.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 STUDY = REPO / "examples" / "pick_and_place" / "study"
 SPEC = REPO / "examples" / "pick_and_place" / "spec.json"
+OPTIMISATION = REPO / "examples" / "pick_and_place_free_pose" / "results_optimize"
 
 
 def main() -> None:
@@ -57,6 +60,20 @@ def main() -> None:
         B.show_tab(browser, 1)
         time.sleep(1.0)
         browser.save_screenshot(str(out / "room-decide.png"))
+        # the three pinned to the shortlist, compared side by side and re-run there (their traces overlaid)
+        B.click_widget(browser, "pin")
+        B.wait_for(browser, "return doc.is_idle && doc.get_model_by_name('shortlist').columns.length === 5;")
+        B.click_widget(browser, "rerun-shortlist")
+        status = B.wait_for(browser, "const t = doc.get_model_by_name('shortlist-status').text; "
+                                     "return doc.get_model_by_name('shortlist-traces').children.length || "
+                                     "t.includes('failed') ? t : null;")
+        print(f"shortlist re-run: {status}")
+        print(f"the view's link: {browser.current_url.split('&', 1)[1]}")
+        time.sleep(1.5)
+        browser.execute_script("Bokeh.index.find_one(Bokeh.documents[0].get_model_by_name('shortlist-box')).el"
+                               ".scrollIntoView({block: 'start'});")
+        time.sleep(1.0)
+        browser.save_screenshot(str(out / "room-shortlist.png"))
         B.show_tab(browser, 2)
         B.click_widget(browser, "rerun")
         status = B.wait_for(browser, "const t = doc.get_model_by_name('rerun-status').text; "
@@ -79,10 +96,23 @@ def main() -> None:
                        "return Bokeh.documents[0].get_model_by_name('scatter3d-source').data.px[0];")
         time.sleep(1.5)
         browser.save_screenshot(str(out / "room-dimensions.png"))
-        print(f"written: {', '.join(str(out / f'room-{n}.png') for n in ('points', 'decide', 'selection', 'arm', 'dimensions'))}")
     finally:
         browser.quit()
         server.stop()
+    # the Study tab of an optimisation: examples/pick_and_place_free_pose/results_optimize (cosim optimize, TPE)
+    server = RoomServer(Study(load_results(OPTIMISATION)))
+    browser = B.chromium(1100, 2700)
+    try:
+        B.load(browser, server.link)
+        B.show_tab(browser, 3)
+        B.wait_for(browser, "return doc.is_idle && doc.get_model_by_name('contour') !== null;")
+        time.sleep(1.5)
+        browser.save_screenshot(str(out / "room-study-optimisation.png"))
+    finally:
+        browser.quit()
+        server.stop()
+    names = ("points", "decide", "shortlist", "selection", "arm", "dimensions", "study-optimisation")
+    print(f"written: {', '.join(str(out / f'room-{n}.png') for n in names)}")
 
 
 if __name__ == "__main__":

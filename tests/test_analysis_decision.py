@@ -198,3 +198,23 @@ def test_filters_are_the_explorers(tmp_path):
         state.set_range("traj.q_via[2]", lo, hi)
         d.filters.set_range("traj.q_via[2]", lo, hi)
         assert np.array_equal(state.active(), d.active())
+
+
+def test_the_room_ranks_on_every_objective_with_a_sense_also_after_an_optimisation(tmp_path):
+    """Issue 39.2: an optimisation of one objective whose spec states three with a sense ranks on the three
+    (its front and report stay the optimisation's own); a spec objective without a sense is not ranked on."""
+    from cosim.analysis.table import ResultsTable
+
+    df = pd.DataFrame({"point_id": ["a", "b", "c"], "x": [1.0, 2.0, 3.0], "cost": [3.0, 2.0, 1.0],
+                       "reach[1]": [1.0, 5.0, 2.0], "reach[2]": [0.0, 1.0, 0.5], "mass": [9.0, 8.0, 7.0],
+                       "status": "ok"})
+    spec = {"objectives": {"cost": {"sense": "minimize"}, "reach": {"sense": "maximize"}, "mass": {"unit": "kg"}},
+            "design": {"parameters": {"x": {"min": 0, "max": 4}}}}
+    table = ResultsTable(df=df, path=tmp_path / "results.parquet", spec=spec,
+                         metadata={"kind": "optimization", "spec": spec,
+                                   "optimize": {"objectives": {"cost": "minimize"}}})
+    assert table.objective_senses() == {"cost": "min"}
+    assert table.sensed_objectives() == {"cost": "min", "reach[1]": "max", "reach[2]": "max"}
+    assert Decision(table).objectives == [("cost", "min"), ("reach[1]", "max"), ("reach[2]", "max")]
+    table.choose_objectives([("mass", "min")])  # the reader's choice replaces them all
+    assert Decision(table).objectives == [("mass", "min")]

@@ -83,11 +83,11 @@ def decay_spec() -> dict:
     return {"name": "decay", "units": {"ode": {"python": python_unit("LinearOde")},
                                        "f": {"python": python_unit("Failing")}},
             "experiment": {"start": 0.0, "stop": 1.0, "step": 0.01}, "record": ["ode.y"],
-            "objectives": {"y_end": {"signal": "ode.y", "reduce": "final", "sense": "minimize"},
-                           "y_int": {"signal": "ode.y", "reduce": "integral", "sense": "maximize"}},
+            "objectives": {"y_end": {"signal": "ode.y", "reduce": "final", "sense": "minimize", "unit": "m"},
+                           "y_int": {"signal": "ode.y", "reduce": "integral", "sense": "maximize", "unit": "m.s"}},
             "design": {"parameters": {"ode.a": {"values": [-2.0, -1.5, -1.0, -0.5]},
                                       "ode.x0": {"values": [1.0, 2.0, 3.0]},
-                                      "f.fail_at": {"values": [5.0, 0.5]}}}}
+                                      "f.fail_at": {"values": [5.0, 0.5], "unit": "s"}}}}
 
 
 def bowls_spec() -> dict:
@@ -269,6 +269,92 @@ def test_sweep_folder_filter_click_rerun_and_ranking(browser, studies, room):
     assert f"--point {df['point_id'].iloc[row]}" in export and "data:text/csv;base64," in export
 
 
+def test_decide_tab_explains_designs_pins_a_shortlist_and_keeps_the_view_in_its_link(browser, studies, room):
+    """Issue 39.2 on the sweep: the ranking shows each design's parameters and objectives with their units, on
+    both objectives with a sense; two ranked designs pinned are compared side by side and re-run, their traces
+    overlaid (y = x0 e^(a t)); the view (axes, colour, a filter, the method, a weight, the shortlist, the tab)
+    goes into the page's address, and that address opened in a fresh chromium (no cookie) shows the same
+    widgets' values, ranking and shortlist."""
+    folder = studies["sweep"]
+    link, _ = room(folder)
+    table = load_results(folder)
+    df = table.df
+    ids = df["point_id"].astype(str).to_numpy()
+    B.load(browser, link)
+    B.show_tab(browser, 1)
+    doc = "Bokeh.documents[0]"
+    assert browser.execute_script(f"return [{doc}.get_model_by_name('minimise').value, "
+                                  f"{doc}.get_model_by_name('maximise').value];") == [["y_end"], ["y_int"]]
+    titles = browser.execute_script(f"return {doc}.get_model_by_name('ranking').columns.map((c) => c.title);")
+    assert titles == ["#", "design", "score", "ode.a", "ode.x0", "f.fail_at [s]", "y_end [m] (min)",
+                      "y_int [m.s] (max)"]
+    data = browser.execute_script(f"const d = {doc}.get_model_by_name('ranking').source.data; "
+                                  "return Object.fromEntries(Object.entries(d).map(([k, v]) => [k, Array.from(v)]));")
+    rows = [int(np.flatnonzero(ids == i)[0]) for i in data["point_id"]]
+    assert len(rows) == 12  # the ok designs
+    for field, name in (("p0", "ode.a"), ("p1", "ode.x0"), ("p2", "f.fail_at"), ("o0", "y_end"), ("o1", "y_int")):
+        assert data[field] == pytest.approx(table.values(name)[rows], rel=1e-12)
+    # the radar has a spoke per objective
+    assert browser.execute_script(f"return {doc}.get_model_by_name('radar-spokes').data.label.length;") == 2
+
+    # the first two ranked designs: a click on their rows selects them; pinned, they are compared side by side
+    browser.execute_script(f"{doc}.get_model_by_name('ranking').source.selected.indices = [0, 1];")
+    B.wait_for(browser, "return doc.is_idle && Array.from(doc.get_model_by_name('show-selected').booleans)"
+                        ".filter(Boolean).length === 2;")
+    B.click_widget(browser, "pin")
+    shortlist = B.wait_for(browser, "const t = doc.get_model_by_name('shortlist'); return doc.is_idle && "
+                                    "t.columns.length === 4 && 'd1' in t.source.data ? [t.columns.map((c) => c.title), "
+                                    "Object.fromEntries(Object.entries(t.source.data).map(([k, v]) => [k, Array.from(v)]))]"
+                                    " : null;")
+    pinned = data["point_id"][:2]
+    assert shortlist[0] == ["", "", *pinned]
+    assert shortlist[1]["quantity"] == ["ode.a", "ode.x0", "f.fail_at [s]", "y_end [m]", "y_int [m.s]"]
+    for k, r in enumerate(rows[:2]):
+        assert shortlist[1][f"d{k}"] == pytest.approx([table.values(c)[r] for c in
+                                                       ("ode.a", "ode.x0", "f.fail_at", "y_end", "y_int")])
+    B.click_widget(browser, "rerun-shortlist")
+    lines = B.wait_for(browser, "const f = doc.get_model_by_name('shortlist-trace:ode.y'); "
+                                "if (doc.get_model_by_name('shortlist-status').text.includes('failed')) return 'failed';"
+                                "return f && doc.is_idle ? f.renderers.map((r) => [r.name, Array.from(r.data_source.data.x),"
+                                " Array.from(r.data_source.data.y)]) : null;")
+    assert lines != "failed"
+    assert sorted(name.split(":")[-1] for name, _, _ in lines) == sorted(pinned)
+    for name, t, y in lines:
+        r = rows[pinned.index(name.split(":")[-1])]
+        a, x0 = table.values("ode.a")[r], table.values("ode.x0")[r]
+        assert np.array(y) == pytest.approx(x0 * np.exp(a * np.array(t)), rel=1e-9)
+    screenshot(browser, "sweep-shortlist")
+
+    # the view changed on every count the link carries; the address bar follows
+    B.set_and_wait(browser, "choose-x", "value", "ode.x0", "return location.search.includes('x=ode.x0') || null;")
+    B.set_and_wait(browser, "choose-colour", "value", "y_int", "return location.search.includes('colour=y_int') || null;")
+    B.set_filter(browser, "ode.a", -1.5, -0.5, watch="return location.search.includes('f=ode.a') ? location.search : null;")
+    B.set_and_wait(browser, "method", "value", "topsis", "return location.search.includes('rank=topsis') || null;")
+    B.set_and_wait(browser, "weight:y_end", "value", 0.25, "return location.search.includes('y_end~0.25') || null;")
+    address = browser.current_url
+    assert address.startswith(link) and "pin=" in address and "tab=1" in address
+    expected = browser.execute_script(f"return Array.from({doc}.get_model_by_name('ranking').source.data.point_id);")
+    colleague = B.chromium()
+    try:
+        count, _ = B.load(colleague, address)
+        assert count.startswith(f"<b>{int((table.values('ode.a') >= -1.5).sum())}</b> of {len(df)}")
+        B.wait_for(colleague, "return doc.is_idle && doc.get_model_by_name('ranking') !== null;")
+        got = colleague.execute_script(
+            f"const d = {doc}; const v = (n, a) => d.get_model_by_name(n)[a]; "
+            "return [v('tabs', 'active'), v('choose-x', 'value'), v('choose-y', 'value'), v('choose-colour', 'value'),"
+            " v('method', 'value'), v('weight:y_end', 'value'), v('weight:y_int', 'value'), v('filter', 'tags')[0],"
+            " Array.from(v('filter', 'value')), v('minimise', 'value'), v('maximise', 'value'),"
+            " v('shortlist', 'columns').map((c) => c.title), Array.from(v('ranking', 'source').data.point_id)];")
+        y_axis = browser.execute_script(f"return {doc}.get_model_by_name('choose-y').value;")
+        assert got == [1, "ode.x0", y_axis, "y_int", "topsis", 0.25, 1.0, "ode.a", [-1.5, -0.5], ["y_end"], ["y_int"],
+                       ["", "", *pinned], expected]
+        assert "ode.a: -1.5 … -0.5" in colleague.execute_script(f"return {doc}.get_model_by_name('narrowed').text;")
+        assert colleague.current_url == address  # the page opened with it writes the same view back
+        assert B.console_errors(colleague) == []
+    finally:
+        colleague.quit()
+
+
 def test_optimisation_folder_with_its_hypervolume(browser, studies, room):
     from cosim.analysis.hypervolume import hypervolume, normalised_losses
     from cosim.analysis.pareto import pareto_mask
@@ -294,6 +380,44 @@ def test_optimisation_folder_with_its_hypervolume(browser, studies, room):
     final = hypervolume(normalised_losses(front, ["min", "min"], first.min(axis=0), first.max(axis=0)))
     assert len(history) == len(df) and history[-1] == pytest.approx(final, rel=1e-9)
     assert all(b >= a - 1e-12 for a, b in zip(history, history[1:]))
+
+    # what optuna-dashboard shows (issue 39.2), from the table: the history of f1 and its best so far...
+    from cosim.analysis.room import trials as T
+
+    table = seen["table"]
+
+    def drawn(name, fields):
+        return browser.execute_script(  # live: a view drawn anew leaves its old model in the page a while
+            B.LIVE_JS + "const m = live(arguments[0]); "
+            "const s = m.data_source ?? m; return arguments[1].map((f) => Array.from(s.data[f]));", name, fields)
+
+    order = df.sort_values("trial", kind="stable")
+    good = ((order["status"] == "ok") & order["feasible"]).to_numpy()
+    trials, values = drawn("history-values", ["x", "y"])
+    assert trials == list(order["trial"][good]) and values == pytest.approx(list(order["f1"][good]))
+    best = drawn("history-best", ["y"])[0]
+    assert best == pytest.approx(np.fmin.accumulate(np.where(good, order["f1"], np.nan)), nan_ok=True)
+    # ... the importances of optuna's fANOVA on the table's trials, most important first ...
+    names = T.parameters(table, table.numeric_columns())
+    expected = T.importances(table, names, {"f1": "min", "f2": "min"})["f1"]
+    parameter, importance = drawn("importances-source", ["parameter", "importance"])
+    assert dict(zip(parameter, importance)) == pytest.approx(expected) and sum(importance) == pytest.approx(1.0)
+    assert parameter[-1] == max(expected, key=expected.get)  # the top bar
+    # ... a slice plot per parameter, and the contour of the two over their hull
+    x, y = drawn("slice-source:b.x", ["x", "y"])
+    assert x == pytest.approx(list(df["b.x"][usable])) and y == pytest.approx(list(df["f1"][usable]))
+    grid = T.contour(df["b.x"][usable].to_numpy(float), df["b.y"][usable].to_numpy(float),
+                     df["f1"][usable].to_numpy(float))
+    image = browser.execute_script("const s = Bokeh.documents[0].get_model_by_name('contour-source'); "
+                                   "const i = s.data.image[0]; return [Array.from(i.shape ?? []), Array.from(i.flat ?? i)];")
+    assert np.allclose(np.array(image[1], dtype=float), grid["image"].ravel(), equal_nan=True)
+    # another objective chosen: the history is f2's
+    B.set_and_wait(browser, "study-objective", "value", "f2",
+                   B.LIVE_JS.replace("throw new Error(`${hits.length} models named ${name} in the page`)", "return null")
+                   + "const m = live('history'); return m && m.title.text.includes('f2') ? m.title.text : null;")
+    values = drawn("history-values", ["y"])[0]
+    assert values == pytest.approx(list(order["f2"][good]))
+    screenshot(browser, "optimize-study-trials")
 
 
 def test_sensitivity_folder_with_its_indices(browser, studies, room):

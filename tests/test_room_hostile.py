@@ -131,6 +131,19 @@ def test_every_string_of_a_hostile_folder_reaches_the_page_escaped(browser, tmp_
         selected = B.wait_for(browser, "const t = doc.get_model_by_name('selected').text; "
                                        "return doc.is_idle && t.includes('design(s) selected') ? t : null;")
         assert html.escape(payload("point-id-0"), quote=False) in selected
+        # the ranking's headers name the parameter and the objective with its unit; the two designs pinned: the
+        # shortlist's headers are their ids, its rows the names with units (issue 39.2)
+        titles = browser.execute_script("return Bokeh.documents[0].get_model_by_name('ranking').columns"
+                                        ".map((c) => c.title);")
+        assert titles[3:] == [html.escape(PARAMETER), html.escape(f"{OBJECTIVE} [{payload('unit')}] (min)"),
+                              html.escape(f"{PARAMETER} (max)")]  # the parameter maximised above
+        B.show_tab(browser, 1)
+        B.click_widget(browser, "pin")
+        pinned = B.wait_for(browser, "const t = doc.get_model_by_name('shortlist'); return doc.is_idle && "
+                                     "t.columns.length === 4 && 'd1' in t.source.data ? [t.columns.map((c) => c.title), "
+                                     "Array.from(t.source.data.quantity)] : null;")
+        assert pinned == [["", "", html.escape(payload("point-id-0")), html.escape(payload("point-id-1"))],
+                          [PARAMETER, f"{OBJECTIVE} [{payload('unit')}]", PARAMETER]]  # cells: text
         # a re-run, which fails on the spec path the folder names: its status quotes it
         B.show_tab(browser, 2)
         B.click_widget(browser, "rerun")
@@ -140,6 +153,38 @@ def test_every_string_of_a_hostile_folder_reaches_the_page_escaped(browser, tmp_
         # the failures table (messages, statuses) and everything else: nothing ran, no handler in the page
         B.show_tab(browser, 0)
         time.sleep(1.0)  # an <img src=x> fails to load within milliseconds: its handler would have run by now
+        assert browser.execute_script("return window.__pwned ?? null;") is None
+        assert browser.execute_script(HANDLERS) == []
+        assert B.console_errors(browser) == []
+    finally:
+        server.stop()
+
+
+def test_a_hostile_link_is_shown_as_text(browser, tmp_path):
+    """A link typed (or sent) with payloads for the view's columns and designs (issue 39.2: the view lives in
+    the link): the page names what it left out, escaped, and nothing runs; a payload that is the table's own
+    column or design is taken, and shown escaped."""
+    from urllib.parse import urlencode
+
+    from cosim.analysis.room.data import Study
+    from cosim.analysis.room.server import RoomServer
+    from cosim.analysis.table import load_results
+
+    server = RoomServer(Study(load_results(hostile_folder(tmp_path / "hostile"))))
+    try:
+        query = urlencode([("x", payload("link-x")), ("f", payload("link-filter") + "~1~2"), ("tab", "1"),
+                           ("pin", payload("link-pin")), ("pin", payload("point-id-1")), ("colour", PARAMETER),
+                           ("rank", payload("link-rank"))])
+        B.load(browser, server.link + "&" + query)
+        note = text_of(browser, "view-link")
+        for sink in ("link-x", "link-filter", "link-pin", "link-rank"):
+            assert html.escape(payload(sink)) in note
+        pinned = B.wait_for(browser, "const t = doc.get_model_by_name('shortlist'); return doc.is_idle && "
+                                     "t.columns.length === 3 ? t.columns.map((c) => c.title) : null;")
+        assert pinned == ["", "", html.escape(payload("point-id-1"))]
+        assert browser.execute_script("return Bokeh.documents[0].get_model_by_name('choose-colour').value;") \
+            == PARAMETER
+        time.sleep(1.0)
         assert browser.execute_script("return window.__pwned ?? null;") is None
         assert browser.execute_script(HANDLERS) == []
         assert B.console_errors(browser) == []

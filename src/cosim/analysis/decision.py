@@ -5,8 +5,8 @@ apart from any view so that it is tested without a browser:
 
 - **filters**: a range per numeric column (:class:`cosim.analysis.filters.RangeFilters`);
   ``active()`` are the rows inside every narrowed range;
-- **objectives**: (column, 'min'|'max') pairs, by default those the table's
-  metadata gives (the optimisation's, else the spec's objectives with a sense);
+- **objectives**: (column, 'min'|'max') pairs, by default every objective with a
+  sense (the optimisation's, then the spec's others: :meth:`ResultsTable.sensed_objectives`);
 - **candidates**: the active rows that are ok, feasible and have a value in
   every objective: the rows the Pareto front and the ranking are made of;
 - **Pareto front**: the non-dominated candidates (:func:`cosim.analysis.pareto.pareto_mask`);
@@ -45,7 +45,7 @@ class Decision:
         self.method = "weighted_sum"
         self.selection: list[int] = []
         if objectives is None:
-            objectives = [(c, s) for c, s in table.objective_senses().items() if c in self.filters.bounds]
+            objectives = [(c, s) for c, s in table.sensed_objectives().items() if c in self.filters.bounds]
         self.set_objectives(objectives)
 
     # -- objectives and weights -----------------------------------------------------------------------------

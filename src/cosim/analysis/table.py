@@ -129,6 +129,21 @@ class ResultsTable:
                 senses[column] = "max" if sense.startswith("max") else "min"
         return senses
 
+    def sensed_objectives(self) -> dict[str, str]:
+        """Every flat objective column with a sense -> 'min' or 'max': those chosen with choose_objectives, else
+        an optimisation's objectives first, then every other objective of the spec that has a sense (the
+        decision room ranks on all of them: an optimisation of one objective whose spec states three ranks
+        on three).  :meth:`objective_senses` stays the optimisation's own, for its front and report."""
+        senses = self.objective_senses()
+        if self._chosen_senses:
+            return senses
+        for name, o in ((self.spec or {}).get("objectives") or {}).items():
+            sense = o.get("sense") if isinstance(o, Mapping) else None
+            if sense in ("minimize", "maximize", "min", "max"):
+                for column in self._columns_of(name):
+                    senses.setdefault(column, "max" if sense.startswith("max") else "min")
+        return senses
+
     def objective_columns(self) -> list[str]:
         """Flat columns of every objective the spec names (with or without a sense)."""
         out: list[str] = []

@@ -6,18 +6,24 @@ Tabs of the page:
   (any numeric column; the narrowed ones listed under it); a histogram of any column, all rows against the
   rows kept; the failed, timed-out and crashed designs with their messages.  A click (tap, box or lasso) on
   the cloud selects designs.
-- **Decide**: objectives to minimise and to maximise, the ranking method (weighted sum, TOPSIS), a weight
-  per objective, the best designs (a click on a row selects it), the radar of the selected designs.
+- **Decide**: objectives to minimise and to maximise (by default every objective with a sense), the ranking
+  method (weighted sum, TOPSIS), a weight per objective, the best designs with their parameters and objectives
+  (a click on a row selects it), the radar of the selected designs, and the shortlist (:mod:`.shortlist`):
+  designs pinned and compared side by side, their traces overlaid.
 - **Selection**: the selected designs, their re-run with the spec's recorded signals (traces overlaid per
   port) and, when a trace viewer supplies link frames (:mod:`.animation`; e.g. the Panda arm's), the designs
   as 3-D stick figures over time; a switch that draws these figures as SVG (their save buttons then write
   SVG, not PNG); the selection as CSV and as ``cosim run --point`` commands.
-- **Study**: counts by status; an optimisation's hypervolume against evaluations; a sensitivity analysis's
-  indices with their confidence intervals.
+- **Study**: counts by status; an optimisation's hypervolume against evaluations, its history, parameter
+  importances, slice and contour plots (:mod:`.trials`); a sensitivity analysis's indices with their
+  confidence intervals.
 
 Only the Points tab is built with the page; the others are built on the server the first time they are
 shown (what makes a page of a wide table slow is the number of bokeh models, not its rows: the 17061-point
 study had ~350 models and 70 range sliders, see benchmarks/room_load.md).
+
+The view (axes, colour, filters, objectives, weights, ranking method, shortlist, tab) lives in the page's
+address (:mod:`.link`): a page opened with that link starts in the same state.
 
 Every change goes through the Decision, and :meth:`Room.refresh` recomputes what depends on it.  A re-run
 runs in a thread of its own so the server keeps answering; its traces are drawn from the document's next
@@ -33,20 +39,24 @@ from typing import Any
 
 from bokeh.core.property.validation import without_property_validation
 from bokeh.layouts import column, row
-from bokeh.models import MultiChoice, SaveTool, Select, TabPanel, Tabs, Toggle
+from bokeh.models import CustomJS, MultiChoice, Select, TabPanel, Tabs, Toggle
 
 from cosim.analysis.decision import Decision
 from cosim.analysis.ranking import METHODS
 from cosim.analysis.rerun import port_groups, rerun_rows
 from cosim.analysis.room import animation as A
 from cosim.analysis.room import data as D
+from cosim.analysis.room import link as L
 from cosim.analysis.room import views as V
 from cosim.analysis.room.clouds import BinnedCloud, PointCloud
 from cosim.analysis.room.dimensions import Dimensions
 from cosim.analysis.room.live import LiveStudy
+from cosim.analysis.room.shortlist import Shortlist
+from cosim.analysis.room.trials import TrialViews, is_optimisation
 from cosim.analysis.table import AnalysisError
 
 TOP = 20  # designs in the ranking table
+TAB_NAMES = ("points", "decide", "selection", "study", "dimensions")
 MAX_RERUN = 8  # designs re-run at once (one colour each)
 MAX_FAILURES_LISTED = 500  # rows of the table of designs not ok (the count says how many there are)
 WEBGL_ABOVE = 50_000  # rows from which the cloud is drawn through WebGL rather than canvas
@@ -74,8 +84,14 @@ class Room:
         study, doc = self.study, self.doc
         self.decision = Decision(study.table)
         table = study.table
+        view, notes = L.decode(self._arguments(doc), self.decision.filters.columns, list(METHODS), study.ids,
+                               len(TAB_NAMES))
+        self._apply(view)
         self.x, self.y, self.colour = study.default_axes(self.decision)
         self.size: str | None = None
+        for which in ("x", "y", "colour", "size"):
+            if getattr(view, which) is not None:
+                setattr(self, which, None if getattr(view, which) == L.NONE else getattr(view, which))
         self.runs: list = []
         self.motions: list[A.Motion] = []  # the re-run designs' link frames, when a viewer supplies them
         self.motion_note = ""
@@ -92,6 +108,7 @@ class Room:
 
         # -- Points
         self.choosers = V.axis_choosers(columns, self.x, self.y, self.colour)
+        self.choosers["size"].value = self.size or V.NONE
         axes = (self.x, self.y, self.colour)
         self.cloud: PointCloud | BinnedCloud = \
             BinnedCloud(study, self.decision, axes, self._on_cloud_selection, doc) \
@@ -99,8 +116,10 @@ class Room:
                                                                 webgl)
         if isinstance(self.cloud, BinnedCloud):
             self.choosers["size"].disabled = True  # a bin has no size
+        elif self.size:  # sized by the link
+            self.cloud.set_axes(self.x, self.y, self.colour, self.size)
         self.count = V.text("", "count")
-        first = (table.parameter_columns() + columns)[0]
+        first = (self.decision.filters.narrowed() + table.parameter_columns() + columns)[0]
         self.filter_column = Select(title="filter by", value=first, options=list(columns), name="filter-column",
                                     width=300)
         self.filter = V.range_filter(self._filter_state(first))
@@ -118,9 +137,19 @@ class Room:
                                     value=[c for c, s in senses.items() if s == "min"])
         self.maximise = MultiChoice(title="maximise", options=V.choices(columns), name="maximise", width=360,
                                     value=[c for c, s in senses.items() if s == "max"])
-        self.method = Select(title="ranking", value="weighted_sum", options=list(METHODS.items()), name="method",
+        self.method = Select(title="ranking", value=self.decision.method, options=list(METHODS.items()), name="method",
                              width=200)
         self.weights = column(name="weights")
+        self.shortlist = Shortlist(study, self.decision, doc, self._publish, view.pinned or ())
+
+        # -- the view's link: the address bar follows the state (link.REPLACE_JS, the page's own CustomJS)
+        self.view_link = V.text("<i>the address bar holds this view (axes, filters, ranking, weights, shortlist):"
+                                " bookmark it or send it</i>" + "".join(
+                                    f"<br><span class='link-note'>left out of the link: {html.escape(n)}</span>"
+                                    for n in notes), "view-link", width=300)
+        replace = CustomJS(args={"state": self.view_link}, code=L.REPLACE_JS)
+        self.view_link.js_on_change("tags", replace)
+        doc.js_on_event("document_ready", replace)
 
         # -- Selection
         self.selected = V.text("<p>No design selected: click points of the cloud or rows of the ranking.</p>",
@@ -139,13 +168,56 @@ class Room:
         points = row(column(row(*self.choosers.values()), self.cloud.figure, self.count,
                             row(self.histogram_column), self.histogram["figure"],
                             self.failures),
-                     column(self.filter_column, self.filter, self.reset, self.narrowed))
+                     column(self.filter_column, self.filter, self.reset, self.narrowed, self.view_link))
         self._builders = {1: self._build_decide, 2: self._build_selection, 3: self._build_study,
                           4: self._build_dimensions}
         self.tabs = Tabs(tabs=[TabPanel(child=points, title="Points")] +
                          [TabPanel(child=column(name=f"tab:{name}"), title=name.capitalize())
-                          for name in ("decide", "selection", "study", "dimensions")], name="tabs")
+                          for name in TAB_NAMES[1:]], name="tabs")
         self.tabs.on_change("active", self._on_tab)
+        if view.tab:
+            self.tabs.active = view.tab
+            self._on_tab("active", 0, view.tab)
+        self._publish()
+
+    # -- the view's link --------------------------------------------------------------------------------------
+    @staticmethod
+    def _arguments(doc: Any) -> dict[str, list[bytes]]:
+        """The query arguments of the page that opened this document ({} outside a server's session)."""
+        context = getattr(doc, "session_context", None)
+        request = getattr(context, "request", None) if context is not None else None
+        return dict(getattr(request, "arguments", None) or {})
+
+    def _apply(self, view: L.ViewState) -> None:
+        """The link's objectives, method, weights and filters into the tab's Decision (checked by L.decode)."""
+        if view.minimise is not None or view.maximise is not None:
+            self.decision.set_objectives([(c, "min") for c in view.minimise or []] +
+                                         [(c, "max") for c in view.maximise or []])
+        if view.method:
+            self.decision.set_method(view.method)
+        for name, weight in view.weights.items():
+            if name in self.decision.weights:
+                self.decision.set_weight(name, min(weight, 1.0))  # a weight slider ends at 1
+        for name, (lo, hi) in view.filters.items():
+            self.decision.filters.set_range(name, lo, hi)
+
+    def view_state(self) -> L.ViewState:
+        """The tab's view as its link carries it."""
+        f, objectives = self.decision.filters, self.decision.objectives
+        return L.ViewState(x=self.x, y=self.y, colour=self.colour or L.NONE, size=self.size or L.NONE,
+                           minimise=[c for c, s in objectives if s == "min"],
+                           maximise=[c for c, s in objectives if s == "max"], method=self.decision.method,
+                           weights=dict(self.decision.weights),
+                           filters={c: (f.ranges[c].lo, f.ranges[c].hi) for c in f.narrowed()},
+                           pinned=list(self.shortlist.ids), tab=self.tabs.active if hasattr(self, "tabs") else 0)
+
+    def _publish(self) -> None:
+        """The view's query into ``view-link`` (the page's CustomJS puts it into the address bar)."""
+        if not hasattr(self, "shortlist"):  # the first refresh, before the models exist
+            return
+        query = L.encode(self.view_state())
+        if self.view_link.tags != [query]:
+            self.view_link.tags = [query]
 
     # -- a running study's new rows -------------------------------------------------------------------------------
     def _look(self) -> None:
@@ -182,6 +254,7 @@ class Room:
         if self.dimensions is not None:
             self.dimensions.reload(study, decision)
         decision.select(selected)  # after the views let go of the old rows' selection
+        self.shortlist.reload(study, decision)
         self.filter.update(**self._filter_state(self.filter.tags[0]))
         self.failures.children = self._failures()
         self.refresh()
@@ -191,15 +264,17 @@ class Room:
         build = self._builders.pop(new, None)
         if build is not None:
             self.tabs.tabs[new].child.children = build()
+        self._publish()
 
     @without_property_validation
     def _build_decide(self) -> list:
-        self.ranking = V.ranking_table(self.decision.objectives, D.ranking_rows(self.study, self.decision, TOP))
+        self.ranking = V.ranking_table(D.ranking_columns(self.study, self.decision),
+                                       D.ranking_rows(self.study, self.decision, TOP))
         self.ranking.source.selected.on_change("indices", self._on_ranking_selection)
         self.radar = V.radar(D.radar(self.decision, []), [])
         self._refresh_radar()
         return [row(column(row(self.minimise, self.maximise), self.method, self.weights),
-                    column(self.ranking, self.radar["figure"]))]
+                    column(self.ranking, self.radar["figure"])), self.shortlist.layout]
 
     def _build_selection(self) -> list:
         return [self.selected, row(self.rerun_button, self.svg, self.rerun_status), row(self.traces, self.viewer),
@@ -228,6 +303,8 @@ class Room:
         history = self.study.hypervolume()
         if history is not None:
             views.append(V.hypervolume(*history))
+        if is_optimisation(self.study.table):  # what optuna-dashboard shows, from the table
+            views.append(TrialViews(self.study.table, self.decision.filters.columns).layout)
         indices = self.study.sensitivity()
         if indices is not None:
             views.extend(V.sensitivity(indices))
@@ -250,6 +327,7 @@ class Room:
     def _on_axis(self, which: str, attr: str, old: Any, new: Any) -> None:
         setattr(self, which, None if new == V.NONE else new)
         self.cloud.set_axes(self.x, self.y, self.colour, self.size)
+        self._publish()
 
     def _filter_state(self, name: str) -> dict[str, Any]:
         """The range filter's properties showing column ``name``: its bounds and its current range."""
@@ -340,6 +418,7 @@ class Room:
                            f"{front} on the Pareto front of "
                            + (", ".join(f"{s} {html.escape(c)}" for c, s in self.decision.objectives) or "no objective")
                            + self._live_note())
+        self._publish()
 
     def _live_note(self) -> str:
         """For a watched folder: its rows so far by status, and whether its study still runs."""
@@ -365,15 +444,15 @@ class Room:
         if self.ranking is None:  # the Decide tab was not shown yet
             return
         data = D.ranking_rows(self.study, self.decision, TOP)
-        columns = [c.field for c in self.ranking.columns]
-        if columns != ["rank", "point_id", "score", *[f"o{k}" for k in range(len(self.decision.objectives))]] \
-                or [c.title for c in self.ranking.columns[3:]] != [V.objective_title(n, s) for n, s in self.decision.objectives]:
-            self.ranking.columns = V.ranking_table(self.decision.objectives, data).columns  # objectives changed
+        wanted = [(field, html.escape(title)) for field, title in D.ranking_columns(self.study, self.decision)]
+        if [(c.field, c.title) for c in self.ranking.columns[3:]] != wanted:  # objectives changed
+            self.ranking.columns = V.ranking_columns(D.ranking_columns(self.study, self.decision))
         # emptied first: bokeh 3.9 does not redraw a DataTable whose source's data is replaced by as many rows
         # as before (bokeh/bokeh#15328); a new source would make bokeh walk the whole document again
         self.ranking.source.data = {k: [] for k in data}
         self.ranking.source.data = data
         self._refresh_radar()
+        self._publish()
 
     def _refresh_radar(self) -> None:
         if self.radar is None:
@@ -470,11 +549,7 @@ class Room:
         self.link_view = view = A.LinkView(self.motions, backend, **shown) if self.motions else None
         for fig in figures:  # a 200 px plot's toolbar has room for four tools: save went into its "…" menu
             fig.height = 240
-        for fig in figures + ([view.figure] if view else []):
-            fig.toolbar.logo = None
-            for tool in fig.select(type=SaveTool):
-                # no dot: the browser adds .png or .svg only to a name without an extension
-                tool.filename = "cosim-" + "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in fig.name)
+        V.name_save_tools(figures + ([view.figure] if view else []))
         self.traces.children = figures
         self.viewer.children = [view.layout] if view else [A.note(self.motion_note)] if self.motion_note else []
 

@@ -190,16 +190,36 @@ def histogram(values: np.ndarray, active: np.ndarray, bins: int = HISTOGRAM_BINS
 
 
 def ranking_rows(study: Study, decision: Decision, top: int) -> dict[str, list]:
-    """The ``top`` best candidates: rank, row, point_id, score and every objective's value."""
+    """The ``top`` best candidates: rank, row, point_id, score, each design parameter's value (``p0``, ``p1``,
+    ...: :func:`ranking_parameters`) and each objective's (``o0``, ...): a design is shown by what it is and
+    what it does, not by its id alone."""
     score = decision.scores()
     order = decision.ranking(top, score)
     data: dict[str, list] = {"rank": list(range(1, len(order) + 1)), "row": [int(r) for r in order],
                              "point_id": [str(study.ids[r]) for r in order],
                              "score": [float(score[r]) for r in order]}
+    for k, name in enumerate(ranking_parameters(study, decision)):
+        values = decision.filters.values(name)
+        data[f"p{k}"] = [float(values[r]) for r in order]
     for k, (name, _) in enumerate(decision.objectives):
         values = decision.filters.values(name)
         data[f"o{k}"] = [float(values[r]) for r in order]
     return data
+
+
+def ranking_parameters(study: Study, decision: Decision) -> list[str]:
+    """The design parameters the ranking shows: the spec's numeric ones, in spec order."""
+    numeric = set(decision.filters.columns)
+    return [c for c in study.table.parameter_columns() if c in numeric]
+
+
+def ranking_columns(study: Study, decision: Decision) -> list[tuple[str, str]]:
+    """(field, title) of the ranking's value columns, plain text (the view escapes them): each parameter
+    and each objective with its unit from the results metadata, the objectives with their sense
+    (``e_total [J] (min)``)."""
+    label = study.table.label
+    return [(f"p{k}", label(name)) for k, name in enumerate(ranking_parameters(study, decision))] + \
+        [(f"o{k}", f"{label(name)} ({sense})") for k, (name, sense) in enumerate(decision.objectives)]
 
 
 def radar(decision: Decision, rows: Sequence[int]) -> dict[str, Any]:

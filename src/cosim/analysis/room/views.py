@@ -30,6 +30,7 @@ from bokeh.models import (
     NumberFormatter,
     Range1d,
     RangeSlider,
+    SaveTool,
     Select,
     Slider,
     TableColumn,
@@ -170,21 +171,21 @@ def histogram(data: dict[str, np.ndarray], label: str) -> dict[str, Any]:
     return {"figure": fig, "source": source}
 
 
-def ranking_table(objectives: Sequence[tuple[str, str]], data: dict[str, list]) -> DataTable:
-    """The best designs: rank, design, score, and each objective."""
+def ranking_table(columns: Sequence[tuple[str, str]], data: dict[str, list]) -> DataTable:
+    """The best designs: rank, design, score, and each (field, title) of ``columns`` (:func:`.data.ranking_columns`:
+    the parameters and objectives with their units); wider than the page, it scrolls sideways."""
+    return DataTable(source=ColumnDataSource(data), columns=ranking_columns(columns), name="ranking", width=WIDTH,
+                     height=330, index_position=None, selectable=True, autosize_mode="none")
+
+
+def ranking_columns(columns: Sequence[tuple[str, str]]) -> list[TableColumn]:
+    """The ranking's TableColumns.  A DataTable shows its titles as HTML (its cells as text), so the titles
+    (column names and units from a results file) are escaped here."""
     number = NumberFormatter(format="0.[0000]")
-    columns = [TableColumn(field="rank", title="#", width=40), TableColumn(field="point_id", title="design"),
-               TableColumn(field="score", title="score", formatter=NumberFormatter(format="0.0000"))]
-    columns += [TableColumn(field=f"o{k}", title=objective_title(name, sense), formatter=number)
-                for k, (name, sense) in enumerate(objectives)]
-    return DataTable(source=ColumnDataSource(data), columns=columns, name="ranking", width=WIDTH, height=330,
-                     index_position=None, selectable=True)
-
-
-def objective_title(name: str, sense: str) -> str:
-    """The ranking's title of an objective's column, escaped: a DataTable shows its titles as HTML (its cells
-    as text)."""
-    return html.escape(f"{name} ({sense})")
+    head = [TableColumn(field="rank", title="#", width=36), TableColumn(field="point_id", title="design", width=140),
+            TableColumn(field="score", title="score", formatter=NumberFormatter(format="0.0000"), width=60)]
+    return head + [TableColumn(field=field, title=html.escape(title), formatter=number,
+                               width=min(max(80, 7 * len(title)), 220)) for field, title in columns]
 
 
 def weight_sliders(weights: dict[str, float]) -> list[Slider]:
@@ -232,9 +233,10 @@ def element_style(design: int, element: int, elements: int) -> dict[str, Any]:
     return {"color": mixed, "line_dash": ELEMENT_DASHES[element % len(ELEMENT_DASHES)]}
 
 
-def trace_figures(groups: list[tuple[str, list[str]]], runs: Sequence[Any], backend: str = "canvas") -> list:
-    """One figure per port (``trace:<port>``), a line per design and element, x ranges linked; drawn through
-    ``backend`` ("canvas", or "svg" for a save button that writes SVG).
+def trace_figures(groups: list[tuple[str, list[str]]], runs: Sequence[Any], backend: str = "canvas",
+                  prefix: str = "trace") -> list:
+    """One figure per port (``<prefix>:<port>``, ``trace:robot.q``), a line per design and element, x ranges
+    linked; drawn through ``backend`` ("canvas", or "svg" for a save button that writes SVG).
 
     Each design has its own colour; the elements of an array port are drawn in that colour's family, each
     with its own shade and dash (:func:`element_style`).  The y axis names the port and its unit
@@ -248,7 +250,7 @@ def trace_figures(groups: list[tuple[str, list[str]]], runs: Sequence[Any], back
     for port, columns in groups:
         linked = {"x_range": figures[0].x_range} if figures else {}
         label = f"{port} [{units[port]}]" if units.get(port) else port
-        fig = figure(name=f"trace:{port}", width=WIDTH, height=200, x_axis_label="time [s]", y_axis_label=label,
+        fig = figure(name=f"{prefix}:{port}", width=WIDTH, height=200, x_axis_label="time [s]", y_axis_label=label,
                      tools="pan,wheel_zoom,box_zoom,reset,save", output_backend=backend, **linked)
         fig.add_tools(HoverTool(tooltips=[("line", "$name"), ("t [s]", "$x"), (label, "$y")],
                                 line_policy="nearest"))
@@ -277,6 +279,16 @@ def trace_figures(groups: list[tuple[str, list[str]]], runs: Sequence[Any], back
             fig.add_layout(legend, "right")
             figures.append(fig)
     return figures
+
+
+def name_save_tools(figures: Sequence[Any]) -> None:
+    """No bokeh logo in the figures' toolbars, and their save buttons name the file after the figure
+    (``cosim-trace_robot_q.png`` or ``.svg`` for ``trace:robot.q``)."""
+    for fig in figures:
+        fig.toolbar.logo = None
+        for tool in fig.select(type=SaveTool):
+            # no dot: the browser adds .png or .svg only to a name without an extension
+            tool.filename = "cosim-" + "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in fig.name)
 
 
 def hypervolume(evaluations: np.ndarray, values: np.ndarray) -> Any:
