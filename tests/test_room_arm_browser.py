@@ -146,6 +146,21 @@ def test_the_arm_of_rerun_designs_in_3d_with_time_slider_play_and_svg(browser, r
     assert B.wait_for(browser, "return doc.get_model_by_name('arm-view') !== null && doc.is_idle;")
     traces = {i: page_q(browser, i) for i in ids}
     assert all(len(t) > 100 for t, _ in traces.values())
+    # issue 39.3 as the page draws it: the y axis names the port and its unit, the legend the designs and then
+    # each joint as recorded, and each joint has a shade and dash of its own within its design's colour
+    axis, legend, styles = browser.execute_script(B.LIVE_JS + """
+const f = live('trace:robot.q');
+const legend = f.right.find((r) => r.items !== undefined);
+const value = (p) => (p !== null && typeof p === 'object' && 'value' in p) ? p.value : p;  // a bokeh value spec
+const label = (i) => value(i.label);
+return [f.left[0].axis_label, legend.items.map(label),
+        f.renderers.map((r) => [r.name, value(r.glyph.line_color), JSON.stringify(value(r.glyph.line_dash))])];""")
+    assert axis == "robot.q [rad]"
+    assert legend == [*ids, *[f"robot.q[{j}]" for j in range(1, 8)]]
+    by_line = {name: (colour, dash) for name, colour, dash in styles}
+    for i in ids:
+        assert len({by_line[f"trace:robot.q[{j}]:{i}"] for j in range(1, 8)}) == 7
+    assert {by_line[f"trace:robot.q[1]:{i}"][0] for i in ids} == {"#1f77b4", "#ff7f0e"}  # Category10's first two
     assert not np.allclose(traces[ids[0]][1][len(traces[ids[0]][0]) // 2], traces[ids[1]][1][len(traces[ids[1]][0]) // 2])
 
     # the first pose: both designs at the start (q1 = 0: the arm upright), then the slider to another time

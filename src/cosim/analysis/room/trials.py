@@ -219,7 +219,8 @@ class TrialViews:
                                                 name=f"slice-source:{name}"))
             fig.axis.major_label_text_font_size = "7pt"
             panels.append(fig)
-        panels[-1].add_layout(ColorBar(color_mapper=mapper, title="trial", width=8), "right")
+        # on the first row's last panel: a wider panel elsewhere would widen its column of the grid
+        panels[min(2, len(panels) - 1)].add_layout(ColorBar(color_mapper=mapper, title="trial", width=8), "right")
         grid = gridplot(panels, ncols=3, toolbar_location="right", merge_tools=True)
         return column(figure_title(f"slice plots of {objective} (colour: trial)"), grid)
 
