@@ -6,6 +6,7 @@ import argparse
 import json
 import logging
 import os
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -31,8 +32,9 @@ def cmd_new(args: argparse.Namespace) -> int:
     """Write the starter spec, after checking it as ``cosim validate`` and ``cosim sweep`` would.
 
     Raises UsageError (exit 2) for a spec that exists (without ``--force``), a name not ending in .json, or a
-    source that is neither an FMU nor an SSP; SpecError (exit 2) for a model that cannot be read."""
-    from cosim.errors import UsageError
+    source that is neither an FMU nor an SSP; SpecError (exit 2) for a model that cannot be read; InternalError
+    (exit 70) when the starter spec made does not validate (a bug: nothing is written)."""
+    from cosim.errors import InternalError, SpecError, UsageError
     from cosim.spec.fmu_alone import is_fmu
     from cosim.ssp import is_ssp
     from cosim.system.starter import explanation, starter_spec
@@ -61,6 +63,10 @@ def cmd_new(args: argparse.Namespace) -> int:
         logging.disable(logging.WARNING)  # the model's notes were shown once, when it was read above
         try:
             check_design(check_spec(trial))
+        except SpecError as exc:  # a starter spec that does not validate is cosim's mistake: said so, nothing written
+            raise InternalError(f"the starter spec cosim new made for {source} does not validate (not written):\n"
+                                + "\n".join(str(replace(p, file=str(spec_path) if p.file == str(trial) else p.file))
+                                             for p in exc.problems)) from None
         finally:
             logging.disable(logging.NOTSET)
         os.replace(trial, spec_path)
