@@ -6,7 +6,9 @@ messages, the spec path a re-run reads) is an ``<img src=x onerror=...>`` that w
 (count text, selects, tables, hover, titles, status, messages, the narrowed list, the selection, the re-run's
 status) and the test checks that nothing ran and that no element of the page (shadow roots included) carries
 an ``on...`` attribute: escaping is checked by itself, not only hidden behind the Content-Security-Policy,
-which a second test checks by putting a live payload into the page itself.
+which a second test checks by putting a live payload into the page itself.  Issue 39.2's sinks are driven
+too: the ranking's and the shortlist's headers (parameters, objectives, units, design ids), a link whose
+query names payloads, and the Study tab of a hostile optimisation (history, importances, slices, contour).
 
 The token tests run ``cosim explore`` as the user does and open its printed link in chromium.
 """
@@ -122,6 +124,8 @@ def test_every_string_of_a_hostile_folder_reaches_the_page_escaped(browser, tmp_
         # every tab built: the ranking's titles and ids, weights, radar, summary, dimensions' selects
         for tab in (1, 2, 3, 4, 0):
             B.show_tab(browser, tab)
+        # one objective with a sense: the radar has one spoke, and the Decide tab says how to get more
+        assert "states one objective with a sense" in text_of(browser, "radar-note")
         # the parameter chosen under "maximise" too (the issue's second way in), and a histogram of it
         browser.execute_script("const d = Bokeh.documents[0]; d.get_model_by_name('maximise').value = [arguments[0]];"
                                "d.get_model_by_name('choose-colour').value = arguments[0];", PARAMETER)
@@ -153,6 +157,53 @@ def test_every_string_of_a_hostile_folder_reaches_the_page_escaped(browser, tmp_
         # the failures table (messages, statuses) and everything else: nothing ran, no handler in the page
         B.show_tab(browser, 0)
         time.sleep(1.0)  # an <img src=x> fails to load within milliseconds: its handler would have run by now
+        assert browser.execute_script("return window.__pwned ?? null;") is None
+        assert browser.execute_script(HANDLERS) == []
+        assert B.console_errors(browser) == []
+    finally:
+        server.stop()
+
+
+def test_a_hostile_optimisation_reaches_its_study_tab_escaped(browser, tmp_path):
+    """The Study tab of an optimisation (issue 39.2): history, importances, slices and contour name the
+    objective, its unit and the parameters in titles, axis labels, factors, tooltips and a Select; none runs."""
+    from selenium.webdriver.common.actions.action_builder import ActionBuilder
+
+    from cosim.analysis.room.data import Study
+    from cosim.analysis.room.server import RoomServer
+    from cosim.analysis.table import load_results
+
+    folder = tmp_path / "hostile-optimisation"
+    folder.mkdir()
+    other = payload("parameter-2")
+    spec = {"name": payload("study-name"), "units": {}, "experiment": {"stop": 1.0, "step": 0.1},
+            "objectives": {OBJECTIVE: {"signal": "u.y", "reduce": "final", "unit": payload("unit"),
+                                       "sense": "minimize"}},
+            "design": {"parameters": {PARAMETER: {"min": 0.0, "max": 1.0, "unit": payload("parameter-unit")},
+                                      other: {"min": 0.0, "max": 1.0}}}}
+    x = [0.1, 0.9, 0.5, 0.3, 0.7, 0.2, 0.8, 0.6]
+    y = [0.2, 0.8, 0.1, 0.9, 0.4, 0.6, 0.3, 0.7]
+    pd.DataFrame({"point_id": [payload(f"point-id-{k}") for k in range(8)], PARAMETER: x, other: y,
+                  OBJECTIVE: [a * a + b for a, b in zip(x, y)], "trial": range(8), "batch": [0] * 4 + [1] * 4,
+                  "sampler": payload("sampler"), "feasible": True, "status": "ok", "message": "",
+                  "run_time": 0.01}).to_parquet(folder / "results.parquet", index=False)
+    (folder / "metadata.json").write_text(json.dumps({
+        "spec": spec, "kind": "optimization", "optimize": {"objectives": {OBJECTIVE: "minimize"}}}))
+    server = RoomServer(Study(load_results(folder)))
+    try:
+        B.load(browser, server.link)
+        B.show_tab(browser, 3)
+        B.wait_for(browser, "return doc.is_idle && doc.get_model_by_name('contour') !== null;")
+        assert browser.execute_script("return Bokeh.documents[0].get_model_by_name('importances-source')"
+                                      ".data.parameter.length;") == 2
+        # hover over the importance bars and the history's points: their tooltips name parameters and values
+        for name in ("importances", "history", "contour"):
+            where = browser.execute_script(B.WIDGET_ON_SCREEN, name)
+            hover_at = ActionBuilder(browser)
+            hover_at.pointer_action.move_to_location(int(where[0]), int(where[1]))
+            hover_at.perform()
+            time.sleep(0.3)
+        time.sleep(1.0)
         assert browser.execute_script("return window.__pwned ?? null;") is None
         assert browser.execute_script(HANDLERS) == []
         assert B.console_errors(browser) == []

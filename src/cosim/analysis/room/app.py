@@ -272,9 +272,10 @@ class Room:
                                        D.ranking_rows(self.study, self.decision, TOP))
         self.ranking.source.selected.on_change("indices", self._on_ranking_selection)
         self.radar = V.radar(D.radar(self.decision, []), [])
+        self.radar_note = V.text("", "radar-note", width=460)
         self._refresh_radar()
         return [row(column(row(self.minimise, self.maximise), self.method, self.weights),
-                    column(self.ranking, self.radar["figure"])), self.shortlist.layout]
+                    column(self.ranking, self.radar_note, self.radar["figure"])), self.shortlist.layout]
 
     def _build_selection(self) -> list:
         return [self.selected, row(self.rerun_button, self.svg, self.rerun_status), row(self.traces, self.viewer),
@@ -460,6 +461,11 @@ class Room:
         data = D.radar(self.decision, self.decision.selection[:MAX_RERUN])
         self.radar["spokes"].data = {"x": data["spoke_x"], "y": data["spoke_y"], "label": data["labels"]}
         self.radar["designs"].data = V.radar_columns(data, [self.study.ids[r] for r in data["rows"]])
+        k = len(self.decision.objectives)
+        self.radar_note.text = "" if k >= 2 else (
+            "<i>the radar compares designs over two objectives or more: "
+            + ("this study states one objective with a sense; " if k == 1 else "")
+            + "choose more under minimise or maximise</i>")
 
     def _refresh_selection(self) -> None:
         rows = self.decision.selection

@@ -3,7 +3,10 @@
 Every model a test or a user script may look for carries a ``name`` (``Bokeh.documents[0].get_model_by_name``
 in the page): ``cloud``, ``count``, ``filter-column`` and ``filter`` (the range filter of the column chosen,
 ``tags[0]``), ``narrowed``, ``histogram``, ``ranking``, ``weight:<objective>``,
-``radar``, ``rerun``, ``trace:<port>``, ``export``, ``hypervolume``, ``sensitivity:<objective>``.
+``radar``, ``rerun``, ``trace:<port>``, ``export``, ``hypervolume``, ``sensitivity:<objective>``; the
+shortlist's (:mod:`.shortlist`: ``pin``, ``shortlist``, ``shortlist-trace:<port>``), the view's link
+(``view-link``, :mod:`.link`) and an optimisation's Study views (:mod:`.trials`: ``history``,
+``importances``, ``slice:<parameter>``, ``contour``).
 """
 
 from __future__ import annotations
