@@ -230,9 +230,10 @@ def ring_spec(folder: Path, n_points: int, kernel: str) -> Path:
     return path
 
 
-def sweep_to_disk(spec: Path, address: str, out: Path) -> tuple[float, int, float, float]:
+def sweep_to_disk(spec: Path, address: str, out: Path, curve: list | None = None) -> tuple[float, int, float, float]:
     """(seconds, rows, client RSS before in MB, client RSS peak in MB) of one sweep written to disk as
-    ``cosim sweep`` writes it (the table stays on disk), the client's RSS sampled every 50 ms."""
+    ``cosim sweep`` writes it (the table stays on disk), the client's RSS sampled every 50 ms; ``curve`` (if
+    given) gets the (seconds since the start, RSS in MB) samples."""
     import psutil
 
     from cosim.studies.sweep import Sweep
@@ -244,14 +245,18 @@ def sweep_to_disk(spec: Path, address: str, out: Path) -> tuple[float, int, floa
     peak = [baseline]
     stop = threading.Event()
 
+    started = time.perf_counter()
+
     def sample() -> None:
         while not stop.is_set():
-            peak[0] = max(peak[0], proc.memory_info().rss)
+            rss = proc.memory_info().rss
+            peak[0] = max(peak[0], rss)
+            if curve is not None:
+                curve.append((time.perf_counter() - started, rss / 1e6))
             time.sleep(0.05)
 
     thread = threading.Thread(target=sample, daemon=True)
     thread.start()
-    started = time.perf_counter()
     counts = sweep.run_to_disk()
     elapsed = time.perf_counter() - started
     stop.set()
@@ -279,13 +284,18 @@ def part_kernel(folder: Path, repeat: int, n_points: int, native_points: int = 0
         if native_points:
             big = ring_spec(folder, native_points, "native")
             load = os.getloadavg()[0]
-            elapsed, n, before, peak = sweep_to_disk(big, c.scheduler_address, folder / "k_big")
+            curve: list[tuple[float, float]] = []
+            elapsed, n, before, peak = sweep_to_disk(big, c.scheduler_address, folder / "k_big", curve)
             print(f"  native alone: {n} designs in {elapsed:.1f} s, {n / elapsed:.0f} designs/s; client RSS "
                   f"{before:.0f} -> peak {peak:.0f} MB (+{peak - before:.0f}); load {load:.1f}", flush=True)
+            at = {f: max((rss for t, rss in curve if t <= f * elapsed), default=before) for f in (0.2, 0.5, 0.8, 1.0)}
+            print("  client RSS (highest so far) at " + ", ".join(f"{f:.0%} of the time: {rss:.0f} MB"
+                                                                 for f, rss in at.items()), flush=True)
             out["native_alone"] = {"designs": n, "seconds": elapsed, "rss_growth_mb": peak - before}
-    ratio = statistics.median(b / a for a, b in zip(rates["python"], rates["native"]))
-    print(f"  native / python designs per second: {ratio:.1f}x (median of {repeat} interleaved pairs)")
-    out["ratio"] = ratio
+    if repeat:
+        ratio = statistics.median(b / a for a, b in zip(rates["python"], rates["native"]))
+        print(f"  native / python designs per second: {ratio:.1f}x (median of {repeat} interleaved pairs)")
+        out["ratio"] = ratio
     return out
 
 

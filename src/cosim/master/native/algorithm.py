@@ -42,23 +42,29 @@ class KernelRun:
     error: UnitError | None = None
 
 
+_VERSIONS: dict[type, int] = {}  # unit class -> its KUnit.version, found once per class
+
+
 def _version(unit: Any) -> int:
     """kernel.c's KUnit.version of ``unit``: 2 or 3 (FMI co-simulation), PLAYER or STORE; raises ValueError."""
+    version = _VERSIONS.get(type(unit))
+    if version is not None:
+        return version
     from cosim.units.connectors import SystemConnectors
     from cosim.units.fmu.fmi2 import Fmi2Unit
     from cosim.units.fmu.fmi3 import Fmi3Unit
     from cosim.units.player import PlayerUnit
 
-    if type(unit) is Fmi2Unit:
-        return 2
-    if type(unit) is Fmi3Unit:
-        return 3
-    if type(unit) is PlayerUnit:
-        return lib.PLAYER
-    if isinstance(unit, SystemConnectors):
-        return lib.STORE
-    raise ValueError(f"unit '{getattr(unit, 'name', unit)}' is not an FMI 2.0/3.0 co-simulation instance, a "
-                     "player or system connectors")
+    exact = {Fmi2Unit: 2, Fmi3Unit: 3, PlayerUnit: lib.PLAYER}  # exact classes: a subclass may step otherwise
+    if type(unit) in exact:
+        version = exact[type(unit)]
+    elif isinstance(unit, SystemConnectors):
+        version = lib.STORE
+    else:
+        raise ValueError(f"unit '{getattr(unit, 'name', unit)}' is not an FMI 2.0/3.0 co-simulation instance, a "
+                         "player or system connectors")
+    _VERSIONS[type(unit)] = version
+    return version
 
 
 def _address(function: Any) -> int:
