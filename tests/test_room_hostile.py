@@ -343,3 +343,49 @@ def test_loopback_has_a_token_by_default_and_no_token_warns(browser, tmp_path):
         assert urllib.request.urlopen(link, timeout=60).status == 200
     finally:
         stop(proc)
+
+
+def test_the_surrogate_tab_of_a_hostile_folder_shows_every_string_escaped(browser, tmp_path):
+    """Surrogates fitted on a folder whose objective, parameters and ids are payloads: the Surrogate tab's
+    choosers, Q² text, held design, picked design and a failed "simulate here" (the spec path is missing)."""
+    from cosim.analysis.room.data import Study
+    from cosim.analysis.room.server import RoomServer
+    from cosim.analysis.surrogate import fit_table, surrogate_folder, write
+    from cosim.analysis.table import load_results
+
+    folder = tmp_path / "hostile"
+    folder.mkdir()
+    second = payload("parameter-2")
+    spec = {"name": payload("study-name"), "units": {}, "experiment": {"stop": 1.0, "step": 0.1},
+            "objectives": {OBJECTIVE: {"signal": "u.y", "reduce": "final", "sense": "minimize"}},
+            "design": {"parameters": {PARAMETER: {"min": 0.0, "max": 1.0}, second: {"min": 0.0, "max": 1.0}}}}
+    x = [i / 9 for i in range(10)]
+    pd.DataFrame({"point_id": [payload(f"point-id-{k}") for k in range(10)], PARAMETER: x,
+                  second: [(3 * v) % 1 for v in x], OBJECTIVE: [v * v for v in x], "status": "ok", "message": "",
+                  "run_time": 0.01, "worker": payload("worker")}).to_parquet(folder / "results.parquet", index=False)
+    (folder / "metadata.json").write_text(json.dumps({
+        "spec": spec, "kind": "sweep", "spec_path": str(folder / "missing" / payload("spec-path"))}))
+    write(fit_table(load_results(folder), method="poly"), surrogate_folder(folder))
+    server = RoomServer(Study(load_results(folder)))
+    try:
+        B.load(browser, server.link)
+        titles = browser.execute_script("return Bokeh.documents[0].get_model_by_name('tabs').tabs.map((t) => t.title);")
+        B.show_tab(browser, titles.index("Surrogate"))
+        quality = B.wait_for(browser, "const m = doc.get_model_by_name('surrogate-quality'); "
+                                      "return m && m.text ? m.text : null;")
+        assert html.escape(OBJECTIVE) in quality and "<img" not in quality
+        assert html.escape(payload("point-id-0")) in text_of(browser, "surrogate-held")
+        B.click_point(browser, 0.5, 0.5, figure="surrogate-map")
+        picked = B.wait_for(browser, "const t = doc.get_model_by_name('surrogate-pick-text').text; "
+                                     "return t.includes('Picked design') ? t : null;")
+        assert html.escape(PARAMETER) in picked and "<img" not in picked
+        B.click_widget(browser, "simulate-here")
+        status = B.wait_for(browser, "const t = doc.get_model_by_name('simulate-status').text; "
+                                     "return t.includes('failed') ? t : null;")
+        assert "&lt;img" in status and "<img" not in status
+        time.sleep(1.0)
+        assert browser.execute_script("return window.__pwned ?? null;") is None
+        assert browser.execute_script(HANDLERS) == []
+        assert B.console_errors(browser) == []
+    finally:
+        server.stop()

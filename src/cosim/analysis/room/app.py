@@ -17,6 +17,8 @@ Tabs of the page:
 - **Study**: counts by status; an optimisation's hypervolume against evaluations, its history, parameter
   importances, slice and contour plots (:mod:`.trials`); a sensitivity analysis's indices with their
   confidence intervals.
+- **Surrogate** (when ``cosim surrogate DIR`` stored surrogates): predicted surfaces over any two parameters with
+  the simulated designs on top, Q² on screen, and "simulate here" (:mod:`.surrogate_view`).
 
 Only the Points tab is built with the page; the others are built on the server the first time they are
 shown (what makes a page of a wide table slow is the number of bokeh models, not its rows: the 17061-point
@@ -47,6 +49,7 @@ from cosim.analysis.rerun import port_groups, rerun_rows
 from cosim.analysis.room import animation as A
 from cosim.analysis.room import data as D
 from cosim.analysis.room import link as L
+from cosim.analysis.room import surrogate_view as S
 from cosim.analysis.room import views as V
 from cosim.analysis.room.clouds import BinnedCloud, PointCloud
 from cosim.analysis.room.dimensions import Dimensions
@@ -84,8 +87,9 @@ class Room:
         study, doc = self.study, self.doc
         self.decision = Decision(study.table)
         table = study.table
+        self._has_surrogate = S.models_of(study) is not None  # a Surrogate tab after TAB_NAMES' (surrogate_view)
         view, notes = L.decode(self._arguments(doc), self.decision.filters.columns, list(METHODS), study.ids,
-                               len(TAB_NAMES))
+                               len(TAB_NAMES) + self._has_surrogate)
         self._apply(view)
         self.x, self.y, self.colour = study.default_axes(self.decision)
         self.size: str | None = None
@@ -100,6 +104,7 @@ class Room:
         self._weight_sliders: dict[str, Any] = {}
         self.ranking = self.radar = None  # the Decide tab's, built when it is first shown
         self.dimensions: Dimensions | None = None  # the Dimensions tab's
+        self.surrogate: Any = None  # the Surrogate tab's (surrogate_view.SurrogateView), when the folder has one
         columns = self.decision.filters.columns
         if aggregate_above is None:
             aggregate_above = AGGREGATE_ABOVE
@@ -171,9 +176,13 @@ class Room:
                      column(self.filter_column, self.filter, self.reset, self.narrowed, self.view_link))
         self._builders = {1: self._build_decide, 2: self._build_selection, 3: self._build_study,
                           4: self._build_dimensions}
+        names = list(TAB_NAMES[1:])
+        if self._has_surrogate:
+            self._builders[len(names) + 1] = self._build_surrogate
+            names.append("surrogate")
         self.tabs = Tabs(tabs=[TabPanel(child=points, title="Points")] +
                          [TabPanel(child=column(name=f"tab:{name}"), title=name.capitalize())
-                          for name in TAB_NAMES[1:]], name="tabs")
+                          for name in names], name="tabs")
         self.tabs.on_change("active", self._on_tab)
         if view.tab:
             self.tabs.active = view.tab
@@ -257,6 +266,8 @@ class Room:
         self.shortlist.reload(study, decision)
         self.filter.update(**self._filter_state(self.filter.tags[0]))
         self.failures.children = self._failures()
+        if self.surrogate is not None:
+            self.surrogate.reload(study, self._held_row())
         self.refresh()
 
     # -- the tabs built when first shown --------------------------------------------------------------------------
@@ -280,6 +291,14 @@ class Room:
     def _build_selection(self) -> list:
         return [self.selected, row(self.rerun_button, self.svg, self.rerun_status), row(self.traces, self.viewer),
                 self.export]
+
+    def _build_surrogate(self) -> list:
+        self.surrogate = S.SurrogateView(self.doc, self.study, self._held_row(), self.reload)
+        return [self.surrogate.layout]
+
+    def _held_row(self) -> int | None:
+        """The design the Surrogate tab holds the other parameters at: the first selected one."""
+        return self.decision.selection[0] if self.decision.selection else None
 
     def _build_dimensions(self) -> list:
         table = self.study.table
@@ -470,6 +489,8 @@ class Room:
     def _refresh_selection(self) -> None:
         rows = self.decision.selection
         self.cloud.show_selection(rows)
+        if self.surrogate is not None:
+            self.surrogate.hold(self._held_row())
         if self.dimensions is not None:
             self.dimensions.show_selection(rows)
         self._refresh_radar()

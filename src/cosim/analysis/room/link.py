@@ -9,7 +9,8 @@ The page's address carries, after the token, the query parameters of the view:
   (``w=duration~0.5``);
 - ``f``: a narrowed range filter, ``name~lo~hi`` (``f=duration~1.589~1.75``);
 - ``pin``: a design of the shortlist, repeated (``pin=ec9cab11ed867126``);
-- ``tab``: the tab shown (0 Points, 1 Decide, 2 Selection, 3 Study, 4 Dimensions).
+- ``tab``: the tab shown (0 Points, 1 Decide, 2 Selection, 3 Study, 4 Dimensions, 5 Surrogate when the folder has
+  surrogates).
 
 ``name~...`` splits at the last ``~`` (a column name may hold one; a number never does).  The server writes
 the query (:func:`encode`) into the ``view-link`` model's ``tags`` after every change and the page's own
