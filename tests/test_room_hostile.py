@@ -369,6 +369,7 @@ def test_the_surrogate_tab_of_a_hostile_folder_shows_every_string_escaped(browse
     server = RoomServer(Study(load_results(folder)))
     try:
         B.load(browser, server.link)
+        B.console_errors(browser)  # the previous test's page, whose server stopped, trying to reconnect
         titles = browser.execute_script("return Bokeh.documents[0].get_model_by_name('tabs').tabs.map((t) => t.title);")
         B.show_tab(browser, titles.index("Surrogate"))
         quality = B.wait_for(browser, "const m = doc.get_model_by_name('surrogate-quality'); "
