@@ -54,7 +54,7 @@ def test_the_dashboard_is_loaded_when_its_link_is_first_opened(tmp_path):
     assert done.stdout.splitlines() == [
         "loaded at start: False",
         "health: 200",
-        "points page: 200",  # cosim's points page (dashboard_points) is served without the dashboard
+        "points page: 200",  # cosim's points page (dashboard.points) is served without the dashboard
         "link: 200 True True True",  # the same address, after the redirect, a bokeh page linking the points page
         "loaded after: True",
         "progress page: 200",

@@ -297,8 +297,8 @@ def test_points_of_a_task_lost_with_its_workers_are_counted_once(write_spec, tmp
 
 
 def test_the_rate_is_that_of_the_last_half_minute_and_the_time_left_follows_from_it(monkeypatch):
-    """Issue 39: the page says how fast a study goes and how long it has left (cosim.parallel.dashboard_points)."""
-    from cosim.parallel import dashboard_points as P
+    """Issue 39: the page says how fast a study goes and how long it has left (cosim.parallel.dashboard.points)."""
+    from cosim.parallel.dashboard import points as P
 
     clock = [1000.0]
     monkeypatch.setattr(P.time, "time", lambda: clock[0])

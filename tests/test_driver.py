@@ -9,6 +9,7 @@ import re
 
 import pytest
 
+from cosim.cli.main import main
 from cosim.results.store import ResultsStore
 from cosim.studies.optimize import Optimization, OptimizeError
 from cosim.studies.sweep import Sweep, SweepError
@@ -33,16 +34,22 @@ def folder_with_rows(path, digest: str, **metadata) -> ResultsStore:
     return store
 
 
-def test_a_folder_with_rows_is_refused_without_resume_by_both_drivers(spec, tmp_path):
+def test_a_folder_with_rows_is_refused_without_resume_by_both_drivers(spec, tmp_path, capsys):
     digest = check_spec(spec).spec.digest
     folder_with_rows(tmp_path / "out", digest)
-    # said for both callers: the command's option and the Python argument
-    with pytest.raises(SweepError, match=re.escape("already holds results; add --resume (or resume=True from "
-                                                   "Python) to finish that sweep")):
+    # said to each caller in its own words: the Python argument from Python (the library names no command-line
+    # option), the command's option from the command line
+    with pytest.raises(SweepError, match=re.escape("already holds results; add resume=True to finish that sweep, "
+                                                   "or choose another out folder")):
         Sweep(spec, out=tmp_path / "out", quiet=True)
-    with pytest.raises(OptimizeError, match=re.escape("already holds results; add --resume (or resume=True from "
-                                                      "Python) to continue that optimisation")):
+    with pytest.raises(OptimizeError, match=re.escape("already holds results; add resume=True to continue that "
+                                                      "optimisation")):
         Optimization(spec, tmp_path / "out", quiet=True)
+    for command, to_resume in (("sweep", "finish that sweep"), ("optimize", "continue that optimisation")):
+        assert main([command, str(spec), "--out", str(tmp_path / "out"), "-q"]) == 2
+        err = capsys.readouterr().err
+        assert f"already holds results; add --resume to {to_resume}, or choose another --out" in err, err
+        assert "resume=True" not in err and "Traceback" not in err
 
 
 def test_resume_needs_the_same_spec_and_the_same_kind_of_study(spec, tmp_path):

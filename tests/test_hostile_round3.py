@@ -456,7 +456,7 @@ def test_a_folder_removed_mid_run_is_not_said_to_keep_its_rows(tmp_path, local_c
     assert proc.returncode == 2, err
     assert "was removed while cosim wrote into it" in err and "the rows it held are gone" in err, err
     assert "kept" not in err and "--resume to" not in err and "resume=True" not in err and "Traceback" not in err
-    assert "without --resume (resume=False from Python)" in err
+    assert "run it again without --resume, into a folder nothing else removes" in err
 
 
 # 8. Exit codes that lied --------------------------------------------------------------------------------------------

@@ -87,7 +87,8 @@ def sweep(spec_path: str | Path, workers: int | None = None, out: str | Path | N
     ``workers`` local workers (default: one per core, as ``cosim sweep``), or a running ``scheduler``
     (address).  ``out`` keeps the results folder; ``timeout`` is the seconds a point may run; ``resume`` runs
     only the points missing in ``out``.  Further options: ``batch_size``, ``csv``, ``progress`` (a stream),
-    ``quiet``.  See :class:`cosim.studies.sweep.Sweep`.
+    ``quiet``, or the option records ``where``, ``how`` and ``show`` (:mod:`cosim.studies.options`).  See
+    :class:`cosim.studies.sweep.Sweep`.
 
     Raises SpecError for a bad spec or design space, SweepError when ``out``
     or the scheduler cannot be used.
@@ -104,8 +105,9 @@ def optimize(spec_path: str | Path, out: str | Path, **options: Any) -> pd.DataF
     Options as ``cosim optimize``: ``objectives`` ({name: 'min'|'max'}), ``budget``, ``sampler``, ``batch``,
     ``seed``, ``resume``, ``workers``, ``scheduler``, ``cluster``, ``timeout``, ``progress``, ``quiet``, and
     ``storage`` (an Optuna storage URL such as ``sqlite:///study.db`` that also receives the trials, for
-    optuna-dashboard and Optuna's plots) with ``study_name`` (see :class:`cosim.studies.optimize.Optimization`).  Raises SpecError for a bad spec, OptimizeError when
-    ``out`` or the cluster cannot be used.
+    optuna-dashboard and Optuna's plots) with ``study_name``, or the option records ``where``, ``how``,
+    ``stop`` and ``show`` (:mod:`cosim.studies.options`; see :class:`cosim.studies.optimize.Optimization`).
+    Raises SpecError for a bad spec, OptimizeError when ``out`` or the cluster cannot be used.
     """
     from cosim.studies.optimize import optimize as run_optimization
 

@@ -306,10 +306,15 @@ class FolderInUse(UserError):
     """Another cosim process holds the results folder's lock."""
 
 
-# Studies
+# Studies: one family (cosim.studies.runner runs them all); each kind of study raises its own subclass
 
 
-class SweepError(UserError):
+class StudyError(UserError):
+    """A study cannot start or go on as asked: its options, its results folder, its cluster (the base of every
+    study's error; the message names options in the words of the caller, see cosim.studies.options)."""
+
+
+class SweepError(StudyError):
     """A sweep cannot start as asked (results folder in use, resume of another spec, no workers)."""
 
 
@@ -317,11 +322,11 @@ class OutputError(SweepError):
     """The results folder cannot be written: read-only, full, no permission."""
 
 
-class OptimizeError(UserError):
+class OptimizeError(StudyError):
     """An optimisation cannot start as asked (results folder in use, resume with other settings, no workers)."""
 
 
-class SensitivityError(UserError):
+class SensitivityError(StudyError):
     """A sensitivity study cannot be done as asked."""
 
 

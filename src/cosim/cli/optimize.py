@@ -59,6 +59,7 @@ def add_optimize_parser(sub: Any) -> None:
 def cmd_optimize(args: argparse.Namespace) -> int:
     """Run an optimisation; returns the exit code. SpecError, OptimizeError and UsageError reach cli.main."""
     from cosim.cli.sweep import print_not_ok, runs_recorded, say_the_dashboard_is_gone
+    from cosim.cli.wording import CLI_WORDS
     from cosim.results.folder import default_folder
     from cosim.studies.optimize import Optimization
 
@@ -72,7 +73,7 @@ def cmd_optimize(args: argparse.Namespace) -> int:
                        seed=args.seed, resume=args.resume, workers=args.workers, scheduler=args.scheduler,
                        cluster=args.cluster, timeout=args.timeout, quiet=getattr(args, "quiet", False),
                        storage=args.storage, study_name=args.study_name, explore=args.explore,
-                       prune=getattr(args, "prune", False))
+                       prune=getattr(args, "prune", False), words=CLI_WORDS)
     runs_before = runs_recorded(run.store)
     counts = run.run()
     total = sum(counts.values())

@@ -39,6 +39,7 @@ def add_sensitivity_parser(sub: Any) -> None:
 
 def cmd_sensitivity(args: argparse.Namespace) -> int:
     """Sample, run, analyse; prints the indices. SpecError and UserErrors reach cli.main."""
+    from cosim.cli.wording import CLI_WORDS
     from cosim.results.folder import default_folder
     from cosim.studies.sensitivity import FIGURE_NAME, TABLE_NAME, SensitivityStudy, unreliable_indices
 
@@ -48,7 +49,8 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
     study = SensitivityStudy(args.spec, out, method=args.method, n=args.n, seed=args.seed,
                              objectives=args.objective, workers=args.workers, scheduler=args.scheduler,
                              cluster=args.cluster,
-                             timeout=args.timeout, resume=args.resume, quiet=getattr(args, "quiet", False))
+                             timeout=args.timeout, resume=args.resume, quiet=getattr(args, "quiet", False),
+                             words=CLI_WORDS)
     from cosim.cli.sweep import runs_recorded, say_the_dashboard_is_gone
 
     runs_before = runs_recorded(study.sweep.store)
@@ -61,7 +63,7 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
     print(f"{total} designs: " + ", ".join(f"{n} {s}" for s, n in sorted(counts.items()) if n)
           + f"; indices: {out / TABLE_NAME}, figure: {out / FIGURE_NAME}")
     say_the_dashboard_is_gone(args, study.sweep.store, runs_before, out, study.sweep.cluster)
-    warning = unreliable_indices(indices, args.method, study.n)
+    warning = unreliable_indices(indices, args.method, study.n, CLI_WORDS)
     if warning:
         print(f"cosim: warning: {warning}", file=sys.stderr)
     not_ok = total - counts.get("ok", 0)

@@ -80,6 +80,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
         start_spare_children(args.workers or os.cpu_count() or 1)
     from cosim.cli.options import experiment_overrides
+    from cosim.cli.wording import CLI_WORDS
     from cosim.results.folder import default_folder
     from cosim.studies.sweep import Sweep
 
@@ -90,7 +91,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
                   timeout=args.timeout, fixed=fixed_values(args),
                   resume=args.resume, batch_size=args.batch_size, csv=args.csv, experiment=experiment_overrides(args),
                   recompute=args.recompute, quiet=getattr(args, "quiet", False), explore=args.explore,
-                  start_early=True, prune=getattr(args, "prune", False))  # the local cluster starts while the results folder and payload are prepared
+                  start_early=True, prune=getattr(args, "prune", False), words=CLI_WORDS)  # the local cluster starts while the results folder and payload are prepared
     runs_before = runs_recorded(sweep.store)
     counts = sweep.run_to_disk()  # a huge sweep's table never sits in memory
     total = sum(counts.values())
@@ -162,13 +163,14 @@ def _dry_run(args: argparse.Namespace) -> int:
     import tempfile
 
     from cosim.cli.options import experiment_overrides, message_line
+    from cosim.cli.wording import CLI_WORDS
     from cosim.studies.estimate import estimate_time
     from cosim.studies.sweep import Sweep
 
     with tempfile.TemporaryDirectory(prefix="cosim_dry_") as scratch:
         sweep = Sweep(args.spec, workers=args.workers, out=scratch, timeout=args.timeout, quiet=True,
                       scheduler=args.scheduler, cluster=args.cluster, experiment=experiment_overrides(args),
-                      fixed=fixed_values(args))
+                      fixed=fixed_values(args), words=CLI_WORDS)
         local = sweep.cluster.local
         total = len(sweep.space)
         if not sweep.space.targets:

@@ -70,7 +70,7 @@ class ScatteredPayload:
         except TimeoutError:
             raise ClusterError(f"every Dask worker died and none came back within {WORKER_WAIT:g} s (a Dask nanny "
                                "does not restart a worker killed while it starts); the rows so far are kept: start "
-                               "workers, or run again with --resume (or resume=True from Python)") from None
+                               "workers, then resume the study to finish it") from None
 
 
 def release_futures(futures: Any) -> None:

@@ -51,7 +51,7 @@ class FolderLock:
                 holder = _describe(_read(fd))
                 os.close(fd)
                 raise FolderInUse(f"{self.folder} is in use by another {holder}; wait for it to finish, or choose "
-                                  "another --out (a killed sweep releases the folder at once)",
+                                  "another results folder (a killed sweep releases the folder at once)",
                                   file=str(self.folder)) from None
             except OSError:
                 os.close(fd)

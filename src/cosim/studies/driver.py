@@ -10,7 +10,7 @@ raised as the driver's own :class:`~cosim.errors.UserError` subclass
 naming the folder and the fix.  ``metadata.json`` records the spec, the FMUs'
 checksums, package versions, host and user and one entry per run
 (:func:`run_metadata`, :func:`finish_metadata`); :func:`say` prints a driver's
-messages; :func:`open_room` serves the decision room of the folder while the driver writes it (``--explore``).
+messages; :func:`open_room` serves the decision room of the folder while the driver writes it (``Show.explore``).
 """
 
 from __future__ import annotations
@@ -18,7 +18,6 @@ from __future__ import annotations
 import errno
 import getpass
 import json
-import math
 import platform
 import socket
 import sys
@@ -30,24 +29,13 @@ from typing import Any, Callable, Iterator, Mapping, TextIO
 
 from cosim.errors import OutputError, UserError
 from cosim.parallel.cluster.interrupts import raise_if_stopped
+from cosim.studies.options import PYTHON_WORDS
 
 # The distributions whose versions can change a row's numbers (cosim's own is fmi-cosim: "cosim" on the index
 # is another project): the FMI runtime, the built-in units' physics and code generation (pin, exudyn, casadi,
 # the Panda's URDF in example-robot-data), numerics, the samplers and the sensitivity analysis.
 PACKAGES = ("fmi-cosim", "fmpy", "dask", "distributed", "numpy", "pandas", "pyarrow", "scipy", "pin", "exudyn",
             "casadi", "example-robot-data", "optuna", "SALib")
-
-
-def check_timeout(timeout: float | None, error: type[UserError] = UserError) -> None:
-    """Refuse a per-point timeout that is not a positive, finite number of seconds (None: the default timeout).
-
-    Every driver (sweep, optimize, sensitivity) checks its ``timeout`` here
-    before any work.  Raises ``error`` (a UserError, so exit code 2): NaN,
-    infinity, zero or a negative number would make every point ``crashed`` or
-    never stop a hanging one.
-    """
-    if timeout is not None and not (isinstance(timeout, (int, float)) and math.isfinite(timeout) and timeout > 0):
-        raise error(f"the timeout must be a positive number of seconds, got {timeout}")
 
 
 def study_identity(spec_digest: str, kind: str, units: Mapping[str, str],
@@ -59,14 +47,15 @@ def study_identity(spec_digest: str, kind: str, units: Mapping[str, str],
 
 
 def check_results_folder(store: Any, resume: bool, spec_digest: str, kind: str, to_resume: str,
-                         error: type[UserError], note: Callable[[str], None] | None = None
-                         ) -> dict[str, Any] | None:
+                         error: type[UserError], note: Callable[[str], None] | None = None,
+                         words: Mapping[str, str] = PYTHON_WORDS) -> dict[str, Any] | None:
     """The folder's stored metadata when resuming (None when it has none, or none that can be read);
     raises ``error`` when the folder is unusable.
 
     ``kind`` is the metadata's ``kind`` the driver writes (a sweep writes
-    none: "sweep"); ``to_resume`` completes "add --resume (...) to ..." in the
-    message for a folder that already holds rows.  The spec digest and kind
+    none: "sweep"); ``to_resume`` completes "add resume to ..." in the
+    message for a folder that already holds rows; ``words`` name the options
+    (:data:`cosim.studies.options.PYTHON_WORDS` by default).  The spec digest and kind
     are checked against ``metadata.json`` and against the identity every file
     of rows carries, so a lost or damaged ``metadata.json`` does not let rows
     of another spec through.  When resuming, files of rows that cannot be read
@@ -75,10 +64,10 @@ def check_results_folder(store: Any, resume: bool, spec_digest: str, kind: str, 
     """
     if not resume:
         if store.has_rows():
-            raise error(f"{store.folder} already holds results; add --resume (or resume=True from Python) to "
-                        f"{to_resume}, or choose another --out")
+            raise error(f"{store.folder} already holds results; add {words['resume']} to {to_resume}, or choose "
+                        f"another {words['out']}")
         return None
-    with results_writes(store.folder):
+    with results_writes(store.folder, words):
         for line in store.set_aside_damaged():
             if note is not None:
                 note(f"{store.folder}: {line}; its points are computed again")
@@ -89,11 +78,10 @@ def check_results_folder(store: Any, resume: bool, spec_digest: str, kind: str, 
         if record.get("spec_digest") != spec_digest:
             raise error(f"{store.folder} holds results of a different spec (digest "
                         f"{str(record.get('spec_digest'))[:12]}…, this one {spec_digest[:12]}…); "
-                        "use another --out, or run without --resume (resume=False from Python) into an empty "
-                        "folder")
+                        f"use another {words['out']}, or run without {words['resume']} into an empty folder")
         if record.get("kind", "sweep") != kind:
             raise error(f"{store.folder} holds {record.get('kind', 'sweep')} results, not {kind} results; use "
-                        "another --out, or resume it with the command that started it")
+                        f"another {words['out']}, or resume it with the study that started it")
     return previous
 
 
@@ -127,11 +115,11 @@ def resume_differences(store: Any, units: Mapping[str, str], data_files: Mapping
 
 
 @contextmanager
-def results_writes(out: Path) -> Iterator[None]:
+def results_writes(out: Path, words: Mapping[str, str] = PYTHON_WORDS) -> Iterator[None]:
     """Turn a failed write into the results folder into an OutputError (exit 2, no traceback).
 
     Half-written temporary files are removed; the part files already written
-    stay, so after freeing space ``--resume`` finishes the study exactly.  The
+    stay, so after freeing space a resume finishes the study exactly.  The
     message says so only when it is true: a folder removed while the study
     ran has lost its rows, and one without rows yet has nothing to resume.
     """
@@ -147,15 +135,14 @@ def results_writes(out: Path) -> Iterator[None]:
         if exc.errno == errno.ENOENT and not out.is_dir():  # removed (rm -rf) while the study wrote into it
             raise OutputError(f"cannot write the results into {out}: the folder was removed while cosim wrote "
                               f"into it ({reason}); the rows it held are gone", file=str(out),
-                              fix="run the same command again without --resume (resume=False from Python), "
-                                  "into a folder nothing else removes") from None
+                              fix=f"run it again without {words['resume']}, into a folder nothing else "
+                                  "removes") from None
         if _holds_rows(out):
-            fix = ("free space on that filesystem or make the folder writable (or choose another --out); the rows "
-                   "written so far are kept: run the same command with --resume (or resume=True from Python) to "
-                   "finish")
+            fix = (f"free space on that filesystem or make the folder writable (or choose another {words['out']}); "
+                   f"the rows written so far are kept: run it again with {words['resume']} to finish")
         else:
-            fix = ("free space on that filesystem or make the folder writable, or choose another --out; then run "
-                   "the same command again")
+            fix = ("free space on that filesystem or make the folder writable, or choose another "
+                   f"{words['out']}; then run {words['again']} again")
         raise OutputError(f"cannot write the results into {out}: {reason}", file=str(out), fix=fix) from None
 
 
@@ -248,36 +235,41 @@ class StudyFolder:
     4. :meth:`finish` sets aside a part damaged meanwhile, merges the parts into ``results.parquet`` and
        records the counts; ``error`` says which points are missing when a part was set aside.
 
-    ``to_resume`` completes "add --resume ... to" in the refusal of a folder that already holds rows;
+    ``to_resume`` completes "add resume ... to" in the refusal of a folder that already holds rows;
     ``command`` names the study in the lock ("cosim sweep"); ``note`` gets the notes that matter even when
-    quiet (a file of rows set aside).
+    quiet (a file of rows set aside); ``words`` how its messages name the options
+    (:data:`cosim.studies.options.PYTHON_WORDS` by default).
     """
 
     def __init__(self, out: Path, system: Any, kind: str, resume: bool, error: type[UserError], to_resume: str,
-                 command: str, note: Callable[[str], None], can_recompute: bool = False, recompute: bool = False):
+                 command: str, note: Callable[[str], None], can_recompute: bool = False, recompute: bool = False,
+                 words: Mapping[str, str] = PYTHON_WORDS):
         from cosim.results.checksums import data_file_checksums, unit_checksums
         from cosim.results.lock import FolderLock
         from cosim.results.store import ResultsStore  # (pandas and pyarrow are imported when the first rows come)
 
         self.out, self.kind, self.error, self.command = Path(out), kind, error, command
-        with results_writes(self.out):  # a read-only or full disk: said with what to do (exit 2)
+        self.words = {**PYTHON_WORDS, **words}
+        with results_writes(self.out, self.words):  # a read-only or full disk: said with what to do (exit 2)
             self.store = ResultsStore(self.out)
             self.lock = FolderLock(self.out)
             self.lock.check_free()  # a study running into this folder is the first thing to say
         spec = system.spec
         self.checksums, self.data_checksums = unit_checksums(system), data_file_checksums(system)
-        self.previous = check_results_folder(self.store, resume, spec.digest, kind, to_resume, error, note=note)
+        self.previous = check_results_folder(self.store, resume, spec.digest, kind, to_resume, error, note=note,
+                                             words=self.words)
         if resume:
             self._check_unit_files(spec.folder, can_recompute, recompute)
         self.store.identity = study_identity(spec.digest, kind, self.checksums, self.data_checksums)
 
     def _check_unit_files(self, folder: Path, can_recompute: bool, recompute: bool) -> None:
         changed, unverifiable = resume_differences(self.store, self.checksums, self.data_checksums, folder)
+        words = self.words
         if can_recompute:
-            whole, rows, fix = ("table", "results", "use another --out, or add --recompute to discard the stored "
-                                "rows and compute every point again")
+            whole, rows, fix = ("table", "results", f"use another {words['out']}, or add {words['recompute']} to "
+                                "discard the stored rows and compute every point again")
         else:
-            whole, rows, fix = "study", "trials", "or start afresh in another --out"
+            whole, rows, fix = "study", "trials", f"or start afresh in another {words['out']}"
         if unverifiable and not recompute:
             raise self.error(f"cannot resume {self.out}: {unverifiable}; resuming could mix two models in one "
                              f"{whole}; restore metadata.json, {fix}")
@@ -291,7 +283,7 @@ class StudyFolder:
     @contextmanager
     def locked(self) -> Iterator[None]:
         """Hold the folder's lock for the block (FolderInUse when another process holds it)."""
-        with results_writes(self.out):
+        with results_writes(self.out, self.words):
             self.lock.acquire(self.command)  # released when this process ends, however it ends
         try:
             yield
@@ -300,7 +292,7 @@ class StudyFolder:
 
     def write_metadata(self, metadata: Mapping[str, Any]) -> None:
         """Write ``metadata.json`` (a failed write is an OutputError naming the folder and the fix)."""
-        with results_writes(self.out):
+        with results_writes(self.out, self.words):
             self.store.write_metadata(metadata)
 
     def finish(self, missing: str, order: Any = None, csv: bool = False) -> dict[str, int]:
@@ -311,7 +303,7 @@ class StudyFolder:
         the part and ends with ``missing``, which may use ``{rows}`` (the rows in the table).
         """
         raise_if_stopped()  # a stop never ends as a complete study (issue 38.4), even one swallowed on its way
-        with results_writes(self.out):  # a full disk during the final merge loses nothing (see compact)
+        with results_writes(self.out, self.words):  # a full disk during the final merge loses nothing (see compact)
             aside = self.store.set_aside_damaged()  # a part damaged while the study ran: its points are missing
             counts = self.store.compact(order=order, csv=csv)
             finish_metadata(self.store, counts)
@@ -342,7 +334,7 @@ def study_cluster(choice: Any, error: type[UserError], interrupted: Callable[[],
         raise
 
 
-def interrupted_note(store: Any, out: Path, go_on: str) -> str:
+def interrupted_note(store: Any, out: Path, go_on: str, words: Mapping[str, str] = PYTHON_WORDS) -> str:
     """What an interrupted study says about its folder: how many rows it holds, or that it holds none yet
     (it said "the rows so far are in DIR" when there were none: issue 38.7).  ``go_on`` ends the sentence."""
     try:
@@ -350,13 +342,13 @@ def interrupted_note(store: Any, out: Path, go_on: str) -> str:
     except Exception:  # noqa: BLE001 - a part half written as the stop came: the count is not worth a traceback
         rows = -1
     if rows == 0:
-        return f"interrupted before any row was written: {out} holds none yet; run the same command again to start"
+        return f"interrupted before any row was written: {out} holds none yet; run {words['again']} again to start"
     held = f"the {rows} row(s) so far are" if rows > 0 else "the rows so far are"
-    return f"interrupted: {held} in {out}; run again with --resume (or resume=True from Python) to {go_on}"
+    return f"interrupted: {held} in {out}; run again with {words['resume']} to {go_on}"
 
 
 def open_room(folder: Path) -> Any:
-    """The decision room of ``folder`` served on loopback from a thread while the study writes it (``--explore``):
+    """The decision room of ``folder`` served on loopback from a thread while the study writes it (``Show.explore``):
     a :class:`cosim.analysis.room.server.RoomServer` with its ``link``; stopped by the caller.  Raises
     AnalysisError when no port can be bound."""
     from cosim.analysis.room.live import LiveStudy

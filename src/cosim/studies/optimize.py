@@ -28,7 +28,7 @@ Optuna's ask-and-tell drives the search; cosim only translates:
   besides the sweep's columns; ``metadata.json`` has ``kind: optimization``.
 - **Budget**: evaluations, i.e. rows.  A design asked again (samplers on
   stepped or categorical dimensions do that) is told the stored result and
-  costs nothing; at most ``20 * budget`` trials are asked in all.
+  costs nothing; at most ``20 * budget`` trials are asked in all (``Stop.proposals_per_evaluation``).
 - **Designs asked again**: once the optimum of a discrete space is found, TPE
   (and the others) propose evaluated designs batch after batch, each ask
   slower than the last.  So a batch that brings no design new to the run
@@ -57,7 +57,6 @@ import itertools
 import math
 import random
 import re
-import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -68,25 +67,16 @@ import numpy as np
 from cosim.analysis.hypervolume import progress_hypervolume
 from cosim.errors import OptimizeError, Problem, SpecError
 from cosim.execution.point_row import PointRow
-from cosim.studies.driver import (
-    StudyFolder,
-    interrupted_note,
-    now_utc,
-    open_room,
-    package_versions,
-    results_writes,
-    run_metadata,
-    say,
-    study_cluster,
-)
+from cosim.studies.driver import now_utc, package_versions, results_writes
+from cosim.studies.options import How, Show, Stop, Where, split_options
 from cosim.studies.optuna_storage import default_study_name, open_storage_study, shown_url
 from cosim.studies.progress import StatusLine
 from cosim.studies.pruning import PRUNED, FrontKeeper, prune_settings, pruned_columns
+from cosim.studies.runner import Study, metadata_of
 from cosim.studies.sampler_names import SAMPLERS
 
 DEFAULT_BUDGET = 200
 DEFAULT_BATCH = {"nsga2": 20}  # a generation of NSGA-II is one batch; the others ask 8 at a time
-MAX_TRIALS_PER_EVALUATION = 20
 MAX_ENUMERATED = 200_000  # a discrete space up to this size is listed to find the designs not yet evaluated
 _ELEMENT = re.compile(r"^(.*)\[(\d+)\]$")
 
@@ -345,70 +335,105 @@ class Progress:
         self._line.close()
 
 
-class Optimization:
-    """A prepared optimisation of the spec at ``spec_path`` (see the module docstring).
+class Optimiser:
+    """The point source of an optimisation: Optuna's ask-and-tell over the spec's design space, batch by batch,
+    until the budget of evaluations (``Stop.budget``) is in the table (see the module docstring).
 
-    Raises SpecError for a bad spec, design space or ``optimize`` section,
-    OptimizeError when ``out`` cannot be used as asked.
+    ``objectives`` ({name: 'minimize' | 'maximize'}), ``sampler``, ``batch`` and ``seed`` override the spec's
+    ``optimize`` section; ``storage`` (an Optuna storage URL) also receives the trials, as ``study_name``.
+    ``prune``: stop a design once a finished one strictly dominates its bound (docs/pruning.md); its trial is
+    told to Optuna as PRUNED (see :meth:`_tell`).  Raises SpecError for a bad ``optimize`` section, OptimizeError
+    when a resume would change the stored settings.
     """
 
-    def __init__(self, spec_path: str | Path, out: str | Path, objectives: Mapping[str, str] | None = None,
-                 budget: int | None = None, sampler: str | None = None,
-                 batch: int | None = None, seed: int | None = None, resume: bool = False, workers: int | None = None,
-                 scheduler: str | None = None, timeout: float | None = None, progress: TextIO | None = None,
-                 quiet: bool = False, cluster: str | Path | None = None, storage: str | None = None,
-                 study_name: str | None = None, explore: bool = False, prune: bool = False):
-        """``prune``: stop a design once a finished one strictly dominates its bound (docs/pruning.md); its
-        trial is told to Optuna as PRUNED (see :meth:`_tell`)."""
-        import os
+    kind, command, error = "optimization", "optimize", OptimizeError
+    to_resume, go_on, can_recompute = "continue that optimisation", "go on", False
 
-        from cosim.parallel.cluster.choice import choose_cluster
-        from cosim.parallel.isolation.payload import make_payload
-        from cosim.studies.driver import check_timeout
+    def __init__(self, objectives: Mapping[str, str] | None = None, sampler: str | None = None,
+                 batch: int | None = None, seed: int | None = None, storage: str | None = None,
+                 study_name: str | None = None):
+        self.given = {"sampler": sampler, "batch": batch, "seed": seed, "objectives": objectives}
+        self.storage, self._study_name = storage, study_name
+        self._outcomes: dict[tuple, tuple] = {}  # (point id, status) -> _outcome: each row is read once
+        self.stop_reason: str | None = None  # why the run ended before its budget (None: the budget was spent)
+        self.sampler: Any = None  # the Optuna sampler, once the run started
+        self.sampler_seconds = 0.0  # time spent in the sampler's ask, over the whole run
+        self.trials_asked = 0
+
+    def system(self, spec_path: str | Path) -> Any:
         from cosim.system.validate import check_spec
 
-        check_timeout(timeout, OptimizeError)
-        self.workers = workers or os.cpu_count() or 1
-        # which cluster, checked before any work (a bad cluster file: ClusterFileError; a malformed address)
-        self.cluster = choose_cluster(self.workers, scheduler, cluster)
-        self.system = check_spec(spec_path)
-        self.spec = self.system.spec
+        return check_spec(spec_path)
+
+    def plan(self, study: Any) -> None:
+        self.spec = study.spec
         self.space = optimization_space(self.spec)
-        self.out, self.resume = Path(out), resume
-        self.explore = explore  # serve the decision room of out while the study runs
-        self.folder = StudyFolder(self.out, self.system, "optimization", resume, OptimizeError,
-                                  "continue that optimisation", "cosim optimize",
-                                  lambda text: print(f"cosim: {text}", file=progress or sys.stderr, flush=True))
-        self.store, previous = self.folder.store, self.folder.previous
-        stored = (previous or {}).get("optimize", {})
-        given = {"budget": budget, "sampler": sampler, "batch": batch, "seed": seed, "objectives": objectives}
+
+    def bind(self, study: Any) -> None:
+        """The settings: the stored run's when resuming (a resume replays it), the spec's, the ones given."""
+        self.study, self.store, self.out, self.folder = study, study.store, study.out, study.folder
+        self.quiet, self.progress_stream, self.timeout = study.show.quiet, study.show.progress, study.how.timeout
+        stored = (study.folder.previous or {}).get("optimize", {})
+        given = {"budget": study.stop.budget, **self.given}
         for key in ("sampler", "batch", "seed", "objectives"):  # a resume replays the stored run: these must not change
             if stored.get(key) is not None and given[key] is not None and given[key] != stored[key]:
                 raise OptimizeError(f"{self.out} was optimised with {key} {stored[key]}; resume with the same "
-                                    f"{key} (or leave it out), or start afresh in another --out")
+                                    f"{key} (or leave it out), or start afresh in another {study.show.word('out')}")
             if given[key] is None and key in stored:
                 given[key] = stored[key]
         self.settings = OptimizeSettings.from_spec(self.spec, **given)
         if self.settings.seed is None:  # a resume must replay the same proposals: the seed is chosen and kept
             self.settings.seed = random.SystemRandom().randrange(2**31)
         self.constraints = output_constraints(self.spec, self.space, self.settings.constraints)
-        self.prune = prune_settings(self.system, list(self.settings.objectives.items()),
-                                    self.settings.constraints) if prune else None
+        self.prune = prune_settings(study.system, list(self.settings.objectives.items()),
+                                    self.settings.constraints) if study.how.prune else None
         self.keeper = FrontKeeper(self.prune) if self.prune is not None else None
-        self.timeout = timeout
-        self.quiet, self.progress_stream = quiet, progress
         # the trials also in an Optuna storage, for Optuna's tools (see cosim.studies.optuna_storage)
-        self.storage, self.study_name = storage, study_name or default_study_name(self.out)
-        self.payload = make_payload(self.system)
-        self._outcomes: dict[tuple, tuple] = {}  # (point id, status) -> _outcome: each row is read once
+        self.study_name = self._study_name or default_study_name(self.out)
         self._sampler_label = self.settings.sampler  # "random" once the search switched (see _switch)
-        self.stop_reason: str | None = None  # why the run ended before its budget (None: the budget was spent)
-        self.sampler: Any = None  # the Optuna sampler, once the run started
-        self.sampler_seconds = 0.0  # time spent in the sampler's ask, over the whole run
-        self.trials_asked = 0
+        self.max_trials = study.stop.proposals_per_evaluation * self.settings.budget
+
+    def start(self, study: Any) -> tuple[int, int]:
+        """Read the stored rows (when resuming) and open the Optuna study; (budget, evaluations stored)."""
+        import optuna
+
+        optuna.logging.set_verbosity(optuna.logging.WARNING)
+        self.stored = {r["point_id"]: r for r in self.store.read().to_dict("records")} if study.where.resume else {}
+        s = self.settings
+        self.dists = distributions(self.space)
+        self.sampler = sampler = make_sampler(s.sampler, s.seed, s.batch, self.dists)
+        if self.storage:
+            self.optuna_study = open_storage_study(self.storage, self.study_name, list(s.objectives.values()),
+                                                   list(s.objectives), sampler, study.where.resume, self.out,
+                                                   words=study.show.words)
+        else:
+            self.optuna_study = optuna.create_study(directions=list(s.objectives.values()), sampler=sampler)
+        return s.budget, len(self.stored)
+
+    def nothing_to_do(self, study: Any) -> str | None:
+        return None  # the loop itself finds the budget spent (and a resume of a finished run tells its trials)
+
+    def opening(self, study: Any, n_workers: int, link: str, board: Any) -> str:
+        s = self.settings
+        return (f"cosim optimize {self.spec.name}: {s.sampler}, budget {s.budget}, batch {s.batch}, "
+                f"seed {s.seed}, {len(self.stored)} evaluations stored; {n_workers} worker(s); dashboard: "
+                f"{link} ({board.describe()}); results: {self.out}")
+
+    def evaluate(self, run: Any) -> None:
+        from cosim.parallel.point_stream import Evaluator
+
+        study = run.study
+        with Evaluator(run.client, study.payload, run.n_workers, self.timeout, study=self.spec.name,
+                       board=run.board, prune=self.keeper.order if self.keeper else None) as evaluator, \
+                run.board.running():
+            self._loop(self.optuna_study, self.dists, evaluator, self.stored)
+
+    def evaluate_with(self, evaluator: Any) -> None:
+        """Evaluate through ``evaluator`` instead of Dask (anything with Evaluator's ``evaluate``)."""
+        self._loop(self.optuna_study, self.dists, evaluator, self.stored)
 
     def _say(self, text: str) -> None:
-        say(text, self.quiet, self.progress_stream)
+        self.study.say(text)
 
     # -- rows and trials ------------------------------------------------------------
     def _table_row(self, values: dict[str, Any], row: PointRow, trial: int, batch: int) -> dict[str, Any]:
@@ -462,67 +487,6 @@ class Optimization:
         study.tell(trial, values)
 
     # -- the run ------------------------------------------------------------------
-    def run(self, evaluator: Any = None) -> dict[str, int]:
-        """Optimise until ``budget`` evaluations are in the table; returns the counts by status.
-
-        Ctrl-C stops it; the rows so far stay and ``resume`` continues.
-        Raises OptimizeError when no Dask workers are reachable, FolderInUse when another
-        cosim process writes into the same folder, OutputError (exit 2) when the folder cannot be
-        written (read-only, full).  ``evaluator``
-        replaces the Dask evaluator (anything with Evaluator's ``evaluate``;
-        benchmarks answer from a stored table with it; one whose ``streams_rows`` is true gets
-        ``on_rows``, as :class:`~cosim.parallel.point_stream.Evaluator` does, and its rows are stored as
-        their points finish, so a stop keeps every finished point of a batch).
-        """
-        with self.folder.locked():
-            return self._run_locked(evaluator)
-
-    def _run_locked(self, evaluator: Any = None) -> dict[str, int]:
-        import optuna
-
-        from cosim.parallel.dashboard.points import open_board
-        from cosim.parallel.point_stream import Evaluator
-
-        optuna.logging.set_verbosity(optuna.logging.WARNING)
-        started = now_utc()
-        stored = {}
-        if self.resume:
-            stored = {r["point_id"]: r for r in self.store.read().to_dict("records")}
-        s = self.settings
-        dists = distributions(self.space)
-        self.sampler = sampler = make_sampler(s.sampler, s.seed, s.batch, dists)
-        if self.storage:
-            study = open_storage_study(self.storage, self.study_name, list(s.objectives.values()), list(s.objectives),
-                                       sampler, self.resume, self.out)
-        else:
-            study = optuna.create_study(directions=list(s.objectives.values()), sampler=sampler)
-        if evaluator is not None:
-            self.folder.write_metadata(self._metadata(started, "", 0))
-            self._loop(study, dists, evaluator, stored)
-            return self._finish()
-        with study_cluster(self.cluster, OptimizeError, self._interrupted) as \
-                (client, n_workers, link):
-            self.folder.write_metadata(self._metadata(started, client.scheduler.address, n_workers))
-            room = open_room(self.out) if self.explore else None
-            board = open_board(client, "optimize", self.spec.name, s.budget, before=len(stored), dashboard=link,
-                               room=room.link if room else None)
-            self._say(f"cosim optimize {self.spec.name}: {s.sampler}, budget {s.budget}, batch {s.batch}, "
-                      f"seed {s.seed}, {len(stored)} evaluations stored; {n_workers} worker(s); dashboard: "
-                      f"{link} ({board.describe()}); results: {self.out}"
-                      + (f"; decision room: {room.link}" if room else ""))
-            try:
-                with Evaluator(client, self.payload, n_workers, self.timeout, study=self.spec.name,
-                               board=board, prune=self.keeper.order if self.keeper else None) as evaluator, \
-                        board.running():
-                    self._loop(study, dists, evaluator, stored)
-            finally:
-                if room is not None:
-                    room.stop()
-        return self._finish()
-
-    def _interrupted(self) -> None:
-        self._say(interrupted_note(self.store, self.out, "go on"))
-
     def _loop(self, study: Any, dists: dict[str, Any], evaluator: Any, stored: dict[str, dict]) -> None:
         s = self.settings
         rows: dict[str, dict] = {}  # point id -> table row, of every evaluation told in this run
@@ -532,7 +496,7 @@ class Optimization:
         queue: list[dict[str, Any]] | None = None  # after the switch on a finite space: the designs not yet run
         switched = False
         while len(rows) < s.budget:
-            if trials_asked >= MAX_TRIALS_PER_EVALUATION * s.budget:
+            if trials_asked >= self.max_trials:
                 self._stop(f"stopped after {trials_asked} proposals: the sampler keeps proposing designs already "
                            f"evaluated or outside the design constraint ({len(rows)} evaluations)")
                 break
@@ -580,7 +544,7 @@ class Optimization:
                 def store(ran: list[PointRow]) -> None:  # each row as its point finishes: a stop keeps it
                     new = [self._table_row(to_run[r.point_id], r, self._trial_of(plan, r.point_id), batch_index)
                            for r in ran if r.point_id not in written]
-                    with results_writes(self.out):
+                    with results_writes(self.out, self.study.show.words):
                         self.store.append(new)
                     written.update((r["point_id"], r) for r in new)
 
@@ -684,22 +648,94 @@ class Optimization:
         hv = progress_hypervolume(values, senses, np.ones(len(values), dtype=bool), np.array([b for _, b in kept]))
         return not_ok, int(front.sum()), hv
 
-    def _metadata(self, started: str, scheduler: str, n_workers: int) -> dict[str, Any]:
-        info = {"started": started, "scheduler": scheduler, "workers": n_workers, "timeout": self.timeout,
-                "budget": self.settings.budget}
+    def metadata(self, study: Any, run: dict[str, Any]) -> dict[str, Any]:
+        info = {**run, "budget": self.settings.budget}
         if self.storage:
             info["optuna_storage"] = {"url": shown_url(self.storage), "study_name": self.study_name}
-        return run_metadata(self.store, self.system, info, kind="optimization", optimize=asdict(self.settings),
-                            packages=package_versions("optuna"), points=self.settings.budget,
-                            unit_checksums=self.folder.checksums, data_file_checksums=self.folder.data_checksums,
-                            design_method=f"optimize ({self.settings.sampler})")
+        return metadata_of(study, info, optimize=asdict(self.settings), packages=package_versions("optuna"),
+                           points=self.settings.budget, unit_checksums=study.folder.checksums,
+                           data_file_checksums=study.folder.data_checksums,
+                           design_method=f"optimize ({self.settings.sampler})")
 
-    def _finish(self) -> dict[str, int]:
+    def order(self, study: Any) -> Any:
         # rows in trial order (the order an uninterrupted run asks for them; they are stored as they finish)
         stored = self.store.read()
-        order = list(stored.sort_values("trial", kind="stable")["point_id"]) if "trial" in stored.columns else None
-        return self.folder.finish("run the same command with --resume (or resume=True from Python) to evaluate "
-                                  "their designs again", order=order)
+        return list(stored.sort_values("trial", kind="stable")["point_id"]) if "trial" in stored.columns else None
+
+    def missing(self, study: Any) -> str:
+        return f"run it again with {study.show.word('resume')} to evaluate their designs again"
+
+
+class Optimization(Study):
+    """A prepared optimisation of the spec at ``spec_path`` into ``out``: an :class:`Optimiser` run by the study
+    runner (:class:`cosim.studies.runner.Study`; see the module docstring).
+
+    Options: the records ``where``, ``how``, ``stop``, ``show`` (:mod:`cosim.studies.options`), or their fields
+    as keyword arguments (``resume``, ``workers``, ``scheduler``, ``cluster``, ``timeout``, ``budget``,
+    ``quiet``, ``explore``, ``prune`` ...); the point source ``optimiser`` (an :class:`Optimiser`), or its
+    options as keyword arguments: ``objectives``, ``sampler``, ``batch``, ``seed``, ``storage``,
+    ``study_name``.  Raises SpecError for a bad spec, design space or ``optimize``
+    section, OptimizeError when ``out`` cannot be used as asked.
+    """
+
+    OPTIMISER_OPTIONS = ("objectives", "sampler", "batch", "seed", "storage", "study_name")  # the optimiser's own
+
+    def __init__(self, spec_path: str | Path, out: str | Path, where: Where | None = None, how: How | None = None,
+                 stop: Stop | None = None, show: Show | None = None, optimiser: Optimiser | None = None,
+                 **options: Any):
+        own = {name: options.pop(name) for name in self.OPTIMISER_OPTIONS if name in options}
+        if optimiser is not None and own:
+            raise TypeError(f"give {', '.join(own)} to the Optimiser, not beside it")
+        self.optimiser = optimiser or Optimiser(**own)
+        super().__init__(spec_path, self.optimiser, split_options(where, how, stop, show, out=out, **options))
+
+    @property
+    def settings(self) -> OptimizeSettings:
+        """What is optimised and how (the spec's ``optimize`` section with the options given, or the stored run's)."""
+        return self.optimiser.settings
+
+    @property
+    def space(self) -> Any:
+        """The design space as the optimiser's dimensions."""
+        return self.optimiser.space
+
+    @property
+    def sampler(self) -> Any:
+        """The Optuna sampler, once the run started (None before)."""
+        return self.optimiser.sampler
+
+    @property
+    def stop_reason(self) -> str | None:
+        """Why the run ended before its budget (None: the budget was spent)."""
+        return self.optimiser.stop_reason
+
+    @property
+    def sampler_seconds(self) -> float:
+        """Time spent in the sampler's ask, over the whole run."""
+        return self.optimiser.sampler_seconds
+
+    @property
+    def trials_asked(self) -> int:
+        """Trials asked of the sampler, over the whole run."""
+        return self.optimiser.trials_asked
+
+    def run(self, evaluator: Any = None) -> dict[str, int]:
+        """Optimise until ``budget`` evaluations are in the table; returns the counts by status.
+
+        Ctrl-C stops it; the rows so far stay and a resume continues.  Raises OptimizeError when no Dask workers
+        are reachable, FolderInUse when another cosim process writes into the same folder, OutputError (exit
+        2) when the folder cannot be written (read-only, full).  ``evaluator`` replaces the Dask evaluator
+        (anything with Evaluator's ``evaluate``; benchmarks answer from a stored table with it; one whose
+        ``streams_rows`` is true gets ``on_rows``, as :class:`~cosim.parallel.point_stream.Evaluator` does, and
+        its rows are stored as their points finish, so a stop keeps every finished point of a batch).
+        """
+        if evaluator is None:
+            return self.run_to_disk()
+        with self.folder.locked():
+            self.optimiser.start(self)
+            self.folder.write_metadata(self.optimiser.metadata(self, self._run_info(now_utc(), "", 0)))
+            self.optimiser.evaluate_with(evaluator)
+            return self.finish()
 
 
 def optimize(spec_path: str | Path, out: str | Path, **options: Any) -> "Any":

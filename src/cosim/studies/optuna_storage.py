@@ -1,4 +1,4 @@
-"""An optimisation's trials also in an Optuna storage (``cosim optimize --storage sqlite:///study.db``).
+"""An optimisation's trials also in an Optuna storage (``storage="sqlite:///study.db"``).
 
 The results folder stays what a study *is* (its rows, metadata and resume); the storage is a mirror of it in
 Optuna's own form, for Optuna's tools: ``optuna-dashboard sqlite:///study.db``, ``optuna.load_study(...)`` and
@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
 from cosim.errors import OptimizeError
+from cosim.studies.options import PYTHON_WORDS
 
 STORAGE_FIX = ("give a database URL Optuna can open, e.g. sqlite:///study.db (a file beside you) or "
                "postgresql://user@host/db, and check that its folder exists")
@@ -36,27 +37,29 @@ def shown_url(url: str) -> str:
 
 
 def open_storage_study(url: str, name: str, directions: Sequence[str], metric_names: Sequence[str],
-                       sampler: Any, resume: bool, out: str | Path) -> Any:
+                       sampler: Any, resume: bool, out: str | Path, words: Mapping[str, str] = PYTHON_WORDS) -> Any:
     """A new Optuna study ``name`` in the storage at ``url``, with ``sampler``.
 
     On ``resume`` a study of that name is replaced: the run is replayed into it from the results folder.
     Raises OptimizeError (exit 2) when the storage cannot be opened, or when a fresh run finds a study of
-    that name already there (another run's trials, which a fresh run must not mix with its own).
+    that name already there (another run's trials, which a fresh run must not mix with its own); ``words``
+    name the options (:data:`cosim.studies.options.PYTHON_WORDS` by default).
     """
+    word = {**PYTHON_WORDS, **words}
     import optuna
 
     try:
         storage = optuna.storages.RDBStorage(url)
     except Exception as exc:  # noqa: BLE001 - sqlalchemy's and optuna's errors: a bad URL, a missing folder
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise OptimizeError(f"--storage {shown_url(url)}: cannot open it ({first}); {STORAGE_FIX}") from None
+        raise OptimizeError(f"{word['storage']} {shown_url(url)}: cannot open it ({first}); {STORAGE_FIX}") from None
     existing = {s.study_name for s in storage.get_all_studies()}
     if name in existing:
         if not resume:
-            raise OptimizeError(f"--storage {shown_url(url)} already holds a study named {name!r} (an earlier "
-                                f"optimisation into {out}); resume it with --resume, give another --study-name, "
-                                f"or delete it: optuna delete-study --storage {shown_url(url)} --study-name "
-                                f"'{name}'")
+            raise OptimizeError(f"{word['storage']} {shown_url(url)} already holds a study named {name!r} (an "
+                                f"earlier optimisation into {out}); resume it with {word['resume']}, give another "
+                                f"{word['study_name']}, or delete it with Optuna's command: optuna delete-study "
+                                f"--storage {shown_url(url)} --study-name '{name}'")
         optuna.delete_study(study_name=name, storage=storage)
     study = optuna.create_study(storage=storage, study_name=name, directions=list(directions), sampler=sampler)
     with warnings.catch_warnings():

@@ -12,7 +12,8 @@ SALib does the statistics; cosim runs the sample:
    4-level grid.
 3. The sample runs as a sweep (:class:`~cosim.studies.sweep.Sweep` of kind
    ``sensitivity`` with this sample as its points: Dask, isolation, timeouts,
-   fault rows, ``--resume`` of a sensitivity folder only).
+   fault rows, resuming a sensitivity folder only): the sensitivity design is the study's point source
+   (:class:`~cosim.studies.sweep.DesignGrid` over the sample).
    Two sample rows that round to the same design run once.
 4. SALib analyses each objective: Sobol gives ``S1`` and ``ST`` with their
    95 % bootstrap confidence half-widths; Morris gives ``mu_star`` (with its
@@ -29,11 +30,12 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any, Iterator, Sequence
+from typing import Any, Iterator, Mapping, Sequence
 
 import numpy as np
 
 from cosim.errors import Problem, SensitivityError, SpecError
+from cosim.studies.options import PYTHON_WORDS
 
 METHODS = ("sobol", "morris")
 DEFAULT_N = {"sobol": 256, "morris": 20}
@@ -138,12 +140,13 @@ def index_rows(problem: dict[str, Any], method: str, objective: str, result: dic
 SOBOL_SLACK, SOBOL_WIDE_CONF = 0.05, 0.25
 
 
-def unreliable_indices(indices: Any, method: str, n: int) -> str:
+def unreliable_indices(indices: Any, method: str, n: int, words: Mapping[str, str] = PYTHON_WORDS) -> str:
     """A warning when Sobol indices cannot be trusted (some outside [0, 1] by more than SOBOL_SLACK, or with
     confidence half-widths above SOBOL_WIDE_CONF), naming the worst ones and the base size ``n``; else ``""``.
 
     Estimated indices are unbiased but noisy: with a small ``n`` they leave [0, 1] (issue 28: -n 8 gave 1.21 and
-    -0.31 with no word said).  Morris indices have no such bound: ``""``.
+    -0.31 with no word said).  Morris indices have no such bound: ``""``.  ``words`` name the option ``n``
+    (:data:`cosim.studies.options.PYTHON_WORDS` by default).
     """
     if method != "sobol" or indices is None or not len(indices):
         return ""
@@ -160,7 +163,8 @@ def unreliable_indices(indices: Any, method: str, n: int) -> str:
     if not wide.empty:
         said.append(f"95 % confidence half-widths up to {float(wide['conf'].max()):.2f}")
     return (f"Sobol indices with n = {n} are not reliable ({'; '.join(said)}): the sample is too small for "
-            f"them; run again with a larger -n (each doubling halves the variance; e.g. -n {max(4 * n, 256)})")
+            f"them; run again with a larger {words.get('n', 'n')} (each doubling halves the variance; e.g. "
+            f"{words.get('n_is', 'n=')}{max(4 * n, 256)})")
 
 
 def choose_objectives(spec: Any, asked: Sequence[str] | None) -> list[str]:
@@ -201,13 +205,15 @@ class SensitivityStudy:
 
     def __init__(self, spec_path: str | Path, out: str | Path, method: str = "sobol", n: int | None = None,
                  seed: int | None = None, objectives: Sequence[str] | None = None, **sweep_options: Any):
+        """``sweep_options``: the study's options records or their fields, as :class:`cosim.studies.sweep.Sweep`
+        takes them (``workers``, ``scheduler``, ``cluster``, ``timeout``, ``resume``, ``quiet`` ...)."""
         from cosim.studies.sweep import Sweep
 
         if method not in METHODS:
             raise SensitivityError(f"unknown method '{method}': use {' or '.join(METHODS)}")
         self.method, self.n = method, n or DEFAULT_N[method]
         if self.n < 2:
-            raise SensitivityError(f"-n must be at least 2, got {self.n}")
+            raise SensitivityError(f"n must be at least 2, got {self.n}")
         self.out = Path(out)
         self.seed = DEFAULT_SEED if seed is None else seed  # fixed by default: a resume draws the same sample
         self.sample_space: SampleSpace | None = None
@@ -219,12 +225,15 @@ class SensitivityStudy:
             self.sample_space = SampleSpace(space, self.sample, f"{method} (SALib, n={self.n}, seed={self.seed})")
             return self.sample_space
 
-        self.sweep = Sweep(spec_path, out=self.out, space_of=space_of, kind="sensitivity", **sweep_options)
+        # the sensitivity design is the point source: its sample, run as a sweep of kind "sensitivity"
+        self.sweep = Sweep(spec_path, out=self.out, design=space_of, kind="sensitivity", **sweep_options)
         self.objectives = choose_objectives(self.sweep.spec, objectives)
-        previous = self.sweep.store.metadata() if sweep_options.get("resume") else None
+        previous = self.sweep.store.metadata() if self.sweep.where.resume else None
         if previous and previous.get("design_method") != self.sample_space.method:
+            word = self.sweep.show.word
             raise SensitivityError(f"{self.out} holds the sample '{previous.get('design_method')}', not "
-                                   f"'{self.sample_space.method}': resume with the same method, -n and --seed")
+                                   f"'{self.sample_space.method}': resume with the same {word('method')}, "
+                                   f"{word('n')} and {word('seed')}")
 
     def run(self) -> tuple[dict[str, int], "Any"]:
         """Run the sample (as a sweep) and write the indices; returns (counts by status, indices DataFrame)."""

@@ -328,7 +328,7 @@ progress {{width: 20em}} #updated {{color: #666}}</style>
 <p id="updated"></p>
 <p>Points done counts every point with a row (ok or not); a task lost with its worker is counted again when it
 runs again. The rate is that of the last 30 s, and the time left is what is left at that rate. <i>explore</i>
-opens a study's decision room (<code>--explore</code>): its points as they arrive.
+opens a study's decision room (a study run with explore): its points as they arrive.
 Data: <a href="cosim/points.json">cosim/points.json</a>.</p></body></html>
 """
 
