@@ -47,7 +47,7 @@ def test_history_is_each_trial_in_order_and_the_best_so_far(tmp_path):
     assert np.isnan(h["value"][~usable]).all()
 
 
-def test_importances_come_from_optunas_fanova_on_the_table(tmp_path):
+def test_importances_come_from_optunas_fanova_on_the_table(tmp_path, monkeypatch):
     table = optimisation(tmp_path)
     names = T.parameters(table, table.numeric_columns())
     assert names == ["x", "y"]  # w never varies
@@ -57,6 +57,12 @@ def test_importances_come_from_optunas_fanova_on_the_table(tmp_path):
         assert got[objective]["x"] > 0.9  # f and g hang on x; y moves f by 1 % of its range
     assert got == T.importances(table, names, {"f": "min", "g": "max"})  # seeded: the same figures each time
     assert T.importances(table, [], {"f": "min"}) == {"f": {}}
+    # a larger table: a sample of MAX_IMPORTANCE_TRIALS trials, still x first
+    big = optimisation(tmp_path, n=300)
+    every = T.importances(big, ["x", "y"], {"f": "min"})["f"]
+    monkeypatch.setattr(T, "MAX_IMPORTANCE_TRIALS", 100)
+    sampled = T.importances(big, ["x", "y"], {"f": "min"})["f"]
+    assert sampled["x"] > 0.9 and sampled != every
 
 
 def test_the_contour_interpolates_linearly_between_the_trials():

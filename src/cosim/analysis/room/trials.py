@@ -37,6 +37,7 @@ from cosim.analysis.table import ResultsTable
 
 GRID = 60  # contour cells per axis
 FOREST = {"n_trees": 16, "max_depth": 8}  # fANOVA's random forest (module docstring)
+MAX_IMPORTANCE_TRIALS = 2000  # a larger table's importances come from a random sample (seed 0) of this many
 MAX_SLICES = 12
 SLICE = 250  # px of one slice plot
 
@@ -80,8 +81,9 @@ def parameters(table: ResultsTable, numeric: Sequence[str]) -> list[str]:
 def importances(table: ResultsTable, names: Sequence[str], objectives: dict[str, str]) -> dict[str, dict[str, float]]:
     """objective -> {parameter: importance} (they sum to 1), by optuna's fANOVA on a study rebuilt in memory
     from the usable trials that have every objective (a trial per row: its parameters as float distributions
-    over their range in the table, its objectives as values).  An objective with fewer than 2 such trials, or
-    no parameter that varies, gets {}."""
+    over their range in the table, its objectives as values; above :data:`MAX_IMPORTANCE_TRIALS` such trials, a
+    random sample of that many, seed 0).  An objective with fewer than 2 such trials, or no parameter that
+    varies, gets {}."""
     import optuna
     from optuna.distributions import FloatDistribution
     from optuna.importance import FanovaImportanceEvaluator, get_param_importances
@@ -92,6 +94,8 @@ def importances(table: ResultsTable, names: Sequence[str], objectives: dict[str,
     rows = np.flatnonzero(usable(table) & np.all(np.isfinite(values), axis=1) & np.all(np.isfinite(params), axis=1))
     if len(rows) < 2 or not names or not senses:
         return {o: {} for o, _ in senses}
+    if len(rows) > MAX_IMPORTANCE_TRIALS:  # the forest's cost grows with the trials; the shares settle long before
+        rows = np.sort(np.random.default_rng(0).choice(rows, MAX_IMPORTANCE_TRIALS, replace=False))
     distributions = {p: FloatDistribution(float(params[rows, k].min()), float(params[rows, k].max()))
                      for k, p in enumerate(names)}
     before = optuna.logging.get_verbosity()
