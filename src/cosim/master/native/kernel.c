@@ -201,7 +201,12 @@ static int read_transfer(const Kernel *k, const KTransfer *tr, double *d, int *i
     return status;
 }
 
-static int max_port(int n, const KPort *p) { return p->n > n ? p->n : p->n_values > n ? p->n_values : n; }
+/* The most elements one port needs in a buffer: its own, and the whole array a partial port reads (n_values,
+ * which may exceed n when n itself is above the running maximum). */
+static int max_port(int n, const KPort *p) {
+    int m = p->n > n ? p->n : n;
+    return p->n_values > m ? p->n_values : m;
+}
 
 /* Runs from t0 up to max_steps steps while t < t_end.  rows (max_steps + 1 rows of n_columns) gets the probe
  * at t0 and after each step (NULL: nothing recorded, no stop_when).  Returns RUN_*; *steps_out the steps
