@@ -258,3 +258,88 @@ def test_jacobi_as_the_base_algorithm_and_stop_when(fmu, tmp_path):
     stopped, _ = run(spec, tmp_path)
     assert stopped.ok, stopped.message
     assert 0.5 <= stopped.end_time < 0.6 and stopped.step_stats["accepted"] == stopped.steps
+
+
+def never_accepted(fault_fmu: str, adaptive: dict | None = None, restore: str = "auto") -> dict:
+    """A fault FMU whose output turns NaN at t = 0.3 (mode 4), fed into a second one: no step after it can meet
+    any tolerance.  Before the bound, steps shrank to 1e-9 of the span and the run took ~10^9 of them."""
+    return {"units": {"bad": {"fmu": fault_fmu, "parameters": {"mode": 4, "trigger_time": 0.3}},
+                      "sink": {"fmu": fault_fmu}},
+            "connections": [{"from": "bad.y", "to": "sink.u"}],
+            "experiment": {"stop": 1.0, "step": 0.01, "algorithm": "adaptive",
+                           "adaptive": {"restore": restore, **(adaptive or {})}}}
+
+
+@pytest.mark.parametrize("restore", ["auto", "never"])
+def test_steps_never_accepted_end_the_run_as_failed_naming_them(built_fmu, tmp_path, restore):
+    fault = str(built_fmu("fault", 2))
+    result, _ = run(never_accepted(fault, restore=restore), tmp_path)
+    assert not result.ok and result.failure == "unit", result.message
+    # the default min_step: 1e-3 * rtol (1e-4) * step (0.01 s): 1e-9 s; the run ends after 101 tries in a row that missed
+    assert "adaptive steps at t=0.3" in result.message, result.message
+    assert "101 tries in a row missed the tolerance (rtol 0.0001, atol 1e-06; max_rejected 100)" in result.message
+    assert "(min_step 1e-09 s)" in result.message and "the exchanged signal bad.y is nan" in result.message
+    assert "raise max_rejected in experiment.adaptive" in result.message
+    assert result.end_time == pytest.approx(0.3, abs=0.2)  # where the NaN came, not 10^9 steps later
+    # a bound of one's own: max_rejected 5 ends it after 6
+    result, _ = run(never_accepted(fault, {"max_rejected": 5, "min_step": 1e-4}, restore), tmp_path)
+    assert "6 tries in a row missed the tolerance" in result.message and "(min_step 0.0001 s)" in result.message
+
+
+def test_cosim_run_of_steps_never_accepted_ends_with_exit_1(built_fmu, tmp_path):
+    path = tmp_path / "spec.json"
+    path.write_text(json.dumps(never_accepted(str(built_fmu("fault", 3)))))
+    out = subprocess.run([sys.executable, "-m", "cosim", "run", str(path)], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 1, (out.returncode, out.stdout, out.stderr)
+    assert "101 tries in a row missed the tolerance" in out.stdout + out.stderr
+    assert "Traceback" not in out.stderr
+
+
+@pytest.mark.parametrize("adaptive, path, words", [
+    ({"max_rejected": 0}, "$.experiment.adaptive.max_rejected", "out of range"),
+    ({"max_rejected": 10 ** 9}, "$.experiment.adaptive.max_rejected", "out of range"),
+])
+def test_a_bad_max_rejected_is_reported_at_its_path(adaptive, path, words, tmp_path):
+    unit = {"python": python_unit("LinearOde")}
+    with pytest.raises(SpecError) as caught:
+        spec_from_dict(oscillator(unit, unit, {"step": 0.1, "algorithm": "adaptive", "adaptive": adaptive}),
+                       tmp_path / "spec.json")
+    assert any(p.path == path and words in p.message for p in caught.value.problems), caught.value.problems
+
+
+FLIP = """
+from cosim import PythonUnit, Variable
+
+class Flip(PythonUnit):
+    # its output changes sign at every step, however short: no step meets a tolerance
+    variables = (Variable("y", "output", start=1.0),)
+
+    def do_step(self, t, h):
+        self.y = -self.y
+
+    def get_state(self):  # restorable: the output is a variable, restored with the others
+        return None
+
+    def set_state(self, state):
+        pass
+"""
+
+
+@pytest.mark.parametrize("restore", ["auto", "never"])
+def test_a_discontinuous_unit_ends_its_run_instead_of_taking_a_billion_steps(built_fmu, tmp_path, restore):
+    """Before the bound: step doubling rejected every step down to min_step (1e-9 of the span), kept each one
+    there over the tolerance, and `cosim run` went on for ~10^9 steps, silent (killed here after 120 s)."""
+    (tmp_path / "flip.py").write_text(FLIP)
+    spec = {"units": {"flip": {"python": "flip.py:Flip"}, "sink": {"fmu": str(built_fmu("fault", 2))}},
+            "connections": [{"from": "flip.y", "to": "sink.u"}],
+            "experiment": {"stop": 10.0, "step": 0.1, "algorithm": "adaptive", "adaptive": {"restore": restore}}}
+    path = tmp_path / "spec.json"
+    path.write_text(json.dumps(spec))
+    out = subprocess.run([sys.executable, "-m", "cosim", "run", str(path)], capture_output=True, text=True,
+                         timeout=120)
+    said = out.stdout + out.stderr
+    assert out.returncode == 1, (out.returncode, said)
+    assert "adaptive steps at t=" in said, said
+    assert float(said.split("adaptive steps at t=")[1].split(":")[0]) < 1.0  # soon, not at the stop time (10 s)
+    assert "101 tries in a row missed the tolerance" in said and "the exchanged signal farthest off is flip.y" in said
+    assert "(min_step 1e-08 s)" in said  # 1e-3 * rtol (1e-4) * step (0.1 s)

@@ -103,3 +103,164 @@ def test_storage_mistakes_are_one_line_and_exit_2(write_spec, tmp_path):
 def test_a_password_in_the_url_is_never_written():
     assert shown_url("postgresql://cosim:s3cret@db.example/studies") == "postgresql://cosim:***@db.example/studies"
     assert shown_url("sqlite:///study.db") == "sqlite:///study.db"
+
+
+SLOW_UNIT = """
+import time
+from cosim import PythonUnit, Variable
+
+class SlowSquare(PythonUnit):
+    variables = (Variable("x", "parameter", start=0.0), Variable("pause", "parameter", start=0.0),
+                 Variable("y", "output", start=0.0))
+
+    def do_step(self, t, h):
+        time.sleep(self.pause)
+        self.y = self.x ** 2
+"""
+
+
+def _slow_spec(folder, budget: int, pause: float):
+    (folder / "slow.py").write_text(SLOW_UNIT)
+    spec = {"name": "slow", "units": {"s": {"python": "slow.py:SlowSquare", "parameters": {"pause": pause}}},
+            "experiment": {"stop": 1.0, "step": 1.0},
+            "objectives": {"y": {"signal": "s.y", "reduce": "final", "sense": "minimize"}},
+            "design": {"parameters": {"s.x": {"min": -1.0, "max": 1.0}}},
+            "optimize": {"budget": budget, "batch": 2, "seed": 4}}
+    path = folder / "spec.json"
+    path.write_text(json.dumps(spec))
+    return path
+
+
+def _optimize(spec, out, url, *more: str, wait: bool = True):
+    command = [sys.executable, "-m", "cosim.cli.main", "optimize", str(spec), "--out", str(out), "--storage", url,
+               "--study-name", "shared", "--workers", "1", "-q", *more]
+    env = {"PYTHONPATH": str(REPO / "src"), "PATH": "/usr/bin:/bin", "HOME": str(out.parent)}
+    if wait:
+        return subprocess.run(command, capture_output=True, text=True, timeout=300, env=env)
+    return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+
+
+def _wait_for_lock(url: str, proc) -> None:
+    """Until the running optimisation holds the study's lock (its lock study is in the storage)."""
+    import time
+
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and proc.poll() is None:
+        try:
+            if "cosim-lock:shared" in optuna.get_all_study_names(url):
+                return
+        except Exception:  # noqa: BLE001 - the database not created yet
+            pass
+        time.sleep(0.05)
+    raise AssertionError(f"the first run never took the lock (exit {proc.poll()}): {proc.communicate()[1][-2000:]}")
+
+
+def _trials(url: str) -> tuple[list[int], list]:
+    """The numbers and point ids of the study's trials, in order."""
+    trials = optuna.load_study(study_name="shared", storage=url).trials
+    return [t.number for t in trials], [t.user_attrs.get("point_id") for t in trials]
+
+
+def _refused(done, url: str) -> None:
+    assert done.returncode == 2, (done.returncode, done.stderr)
+    assert "Traceback" not in done.stderr, done.stderr
+    message = done.stderr.strip().splitlines()[-1]
+    assert f"--storage {url}: the study 'shared' is in use by another cosim optimize (pid " in message, message
+    assert "Wait for that run to finish, or give this one another --study-name" in message, message
+    assert "optuna delete-study" in message and "'cosim-lock:shared'" in message, message
+
+
+def _wait_for_trials(url: str, proc, count: int) -> None:
+    import time
+
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and proc.poll() is None:
+        if len(_trials(url)[0]) >= count:
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"the run did not reach {count} trials (exit {proc.poll()})")
+
+
+def test_two_optimisers_on_one_storage_study_the_second_is_refused(tmp_path):
+    """Issue 38.5: real `cosim optimize` processes, one SQLite file, one study: while one runs, a second (fresh or
+    --resume, into another folder or the same) is refused; the study then holds the one run's trials only, each
+    trial number once (two runs had written 28 trials, a table 13 rows for a budget of 12)."""
+    import signal
+
+    spec = _slow_spec(tmp_path, budget=10, pause=1.5)
+    url = f"sqlite:///{tmp_path / 'study.db'}"
+    first = _optimize(spec, tmp_path / "a", url, wait=False)
+    try:
+        _wait_for_lock(url, first)
+        _refused(_optimize(spec, tmp_path / "b", url), url)  # a fresh run into another folder, same study
+        assert first.poll() is None, "the first run ended before the second was refused: make its points slower"
+        _wait_for_trials(url, first, 2)
+        first.send_signal(signal.SIGINT)  # interrupted: to be resumed below
+    finally:
+        _, err = first.communicate(timeout=300)
+    assert first.returncode == 130, err
+    assert not (tmp_path / "b" / "results.parquet").exists()
+    assert optuna.get_all_study_names(url) == ["shared"]  # the lock went with the run
+    resumed = _optimize(spec, tmp_path / "a", url, "--resume", wait=False)
+    try:
+        _wait_for_lock(url, resumed)
+        _refused(_optimize(spec, tmp_path / "b", url, "--resume"), url)  # another folder's resume, same study
+        same = _optimize(spec, tmp_path / "a", url, "--resume")  # the same folder's: refused by the folder lock
+        assert same.returncode == 2 and "is in use by another cosim optimize (pid" in same.stderr, same.stderr
+        assert "Traceback" not in same.stderr
+        assert resumed.poll() is None, "the resumed run ended before the others were refused"
+    finally:
+        _, err = resumed.communicate(timeout=300)
+    assert resumed.returncode == 0, err
+    numbers, ids = _trials(url)
+    table = pd.read_parquet(tmp_path / "a" / "results.parquet")
+    assert len(table) == 10 and numbers == list(range(10)) and sorted(ids) == sorted(table["point_id"])
+    assert not (tmp_path / "b" / "results.parquet").exists()
+
+
+def test_a_killed_optimiser_leaves_its_study_to_the_next_run(tmp_path):
+    """kill -9 leaves the lock in the storage: on the same host the next run sees its holder gone and takes it."""
+    import signal
+    import time
+
+    spec = _slow_spec(tmp_path, budget=8, pause=0.4)
+    url = f"sqlite:///{tmp_path / 'study.db'}"
+    first = _optimize(spec, tmp_path / "a", url, wait=False)
+    _wait_for_lock(url, first)
+    time.sleep(1.0)
+    first.kill()
+    first.communicate(timeout=60)
+    assert first.returncode == -signal.SIGKILL
+    assert "cosim-lock:shared" in optuna.get_all_study_names(url)  # left behind
+    done = _optimize(spec, tmp_path / "a", url, "--resume")
+    assert done.returncode == 0, done.stderr
+    assert optuna.get_all_study_names(url) == ["shared"]
+    numbers, ids = _trials(url)
+    assert numbers == list(range(8)) and sorted(ids) == sorted(pd.read_parquet(tmp_path / "a" / "results.parquet")
+                                                                ["point_id"])
+
+
+OPEN_AT = """
+import sys, time
+from cosim.studies.optuna_storage import open_storage_study
+time.sleep(max(0.0, float(sys.argv[2]) - time.time()))  # both processes open at the same moment
+open_storage_study(sys.argv[1], sys.argv[3], ["minimize"], ["y"], None, False, sys.argv[3])
+print("opened")
+"""
+
+
+def test_two_runs_creating_one_new_database_both_open_it(tmp_path):
+    """Two processes creating the tables of one new SQLite file at the same moment: the loser's UNIQUE-constraint
+    failure was reported as a bad URL ("cannot open it ... give a database URL Optuna can open"); both open it now
+    (3 new files, 2 processes each)."""
+    import time
+
+    env = {"PYTHONPATH": str(REPO / "src"), "PATH": "/usr/bin:/bin"}
+    for k in range(3):
+        url = f"sqlite:///{tmp_path / f'new{k}.db'}"
+        at = str(time.time() + 2.0)
+        runs = [subprocess.Popen([sys.executable, "-c", OPEN_AT, url, at, f"s{j}"], stdout=subprocess.PIPE,
+                                 stderr=subprocess.PIPE, text=True, env=env) for j in range(2)]
+        outcomes = [(p.wait(timeout=120), p.stdout.read(), p.stderr.read()[-1500:]) for p in runs]
+        assert [(code, said.strip()) for code, said, _ in outcomes] == [(0, "opened")] * 2, outcomes
+        assert sorted(optuna.get_all_study_names(url)) == ["s0", "s1"]

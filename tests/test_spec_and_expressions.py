@@ -120,3 +120,36 @@ def test_without_a_compiler_a_builtin_fmu_gives_a_clear_problem(write_spec, tmp_
     (problem,) = info.value.problems
     assert problem.path == "$.units.m.fmu" and "no C compiler" in problem.message
     assert "apt-get install gcc" in problem.fix
+
+
+def test_absurd_counts_in_a_spec_are_refused_at_their_path(write_spec, capsys):
+    """Issue 38.6: counts a run or a study takes from a spec are bounded; `cosim validate` names the JSON path
+    and the fix (before: a max_iterations of 10^9 or a budget of 10^12 was taken as written)."""
+    from cosim.cli.main import main
+
+    unit = {"python": f"{TESTS / 'units_for_tests.py'}:Gain", "parameters": {"k": 2.0}}
+    spec = {"units": {"g": unit}, "experiment": {"stop": 1.0, "step": 0.1,
+                                                "loop_solver": {"max_iterations": 10 ** 9}},
+            "objectives": {"y": {"signal": "g.y", "reduce": "final", "sense": "minimize"}},
+            "design": {"parameters": {"g.k": {"min": 0.0, "max": 1.0}}}}
+    assert main(["validate", str(write_spec(spec))]) == 2
+    err = capsys.readouterr().err
+    assert "$.experiment.loop_solver.max_iterations" in err and "use a number at most 100000" in err, err
+    spec["experiment"]["loop_solver"]["max_iterations"] = 200
+    spec["optimize"] = {"budget": 10 ** 12, "batch": 8}
+    assert main(["validate", str(write_spec(spec))]) == 2  # an optimize section: checked for optimize
+    err = capsys.readouterr().err
+    assert "$.optimize.budget" in err and "budget 1,000,000,000,000 is more than the limit of 1,000,000" in err, err
+    assert "COSIM_MAX_POINTS" in err
+
+
+def test_a_keyword_argument_to_a_known_function_is_named_as_such():
+    """`max(x, initial=0)` said "unknown function 'max'" while listing max among the allowed ones (issue 38.7)."""
+    with pytest.raises(ExpressionError) as caught:
+        Expression("max(x, initial=0)")
+    message = str(caught.value)
+    assert "unknown function" not in message, message
+    assert "max() takes no keyword arguments (got initial=); give its arguments by position, e.g. max(x, 0)" in message
+    with pytest.raises(ExpressionError, match=r"sqrt\(\) takes no keyword arguments \(got x=\)"):
+        Expression("sqrt(x=2)")
+    assert Expression("max(x, 0)").evaluate({"x": -3.0}) == 0.0

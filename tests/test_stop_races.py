@@ -71,6 +71,16 @@ OFFSETS = [(signal.SIGTERM, 0.3), (signal.SIGHUP, 0.8), (signal.SIGTERM, 1.5), (
            (signal.SIGINT, 1.0), (signal.SIGTERM, 4.0)]
 
 
+def _handles(pid: int, signum: int) -> bool:
+    """Whether process ``pid`` has a handler of its own for ``signum`` now (Linux: /proc/PID/status SigCgt)."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return False
+    caught = int(next(line.split()[1] for line in status.splitlines() if line.startswith("SigCgt:")), 16)
+    return bool(caught >> (signum - 1) & 1)
+
+
 def test_signals_at_several_offsets_never_end_as_a_complete_study(tmp_path):
     points = 16
     spec = _spec(tmp_path, points, pause=0.3)
@@ -81,6 +91,10 @@ def test_signals_at_several_offsets_never_end_as_a_complete_study(tmp_path):
                                  "--workers", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                 env=_env(), start_new_session=True)
         time.sleep(after)
+        # cosim's handlers are the first thing its main() installs (SIGTERM's stands for all three: Python itself
+        # handles SIGINT from its start); only a signal before that, while the interpreter itself starts, may end
+        # the process by the signal's default action
+        handled = _handles(proc.pid, signal.SIGTERM)
         os.killpg(proc.pid, signum)
         try:
             _, err = proc.communicate(timeout=180)
@@ -88,13 +102,14 @@ def test_signals_at_several_offsets_never_end_as_a_complete_study(tmp_path):
             os.killpg(proc.pid, signal.SIGKILL)
             raise
         meta = _metadata(out)
-        outcomes.append((signal.Signals(signum).name, after, proc.returncode))
+        outcomes.append((signal.Signals(signum).name, after, handled, proc.returncode))
         if proc.returncode == 0:  # it finished before the signal: then every point is there
             assert meta.get("ended"), (outcomes, err)
             _exact(pd.read_parquet(out / "results.parquet"), points)
-        elif proc.returncode in (-signum, -signal.SIGINT):
-            # before cosim's handlers were set (Python starting: the signal's default action), or a stop raised
-            # outside the command (Python ends an uncaught KeyboardInterrupt by SIGINT): never success either
+        elif not handled:
+            # the interpreter still starting (the signal's default action; Python ends an uncaught
+            # KeyboardInterrupt by SIGINT): never success either
+            assert proc.returncode in (-signum, -signal.SIGINT), (outcomes, err)
             assert meta.get("ended") is None, (outcomes, meta)
         else:
             assert proc.returncode == 130, (outcomes, err)
@@ -102,6 +117,41 @@ def test_signals_at_several_offsets_never_end_as_a_complete_study(tmp_path):
             assert err.strip().splitlines()[-1] == "cosim: interrupted", err
             assert "Traceback" not in err, err
     print("outcomes:", outcomes)
+
+
+# (signal, the import after which it is sent): a stop while cosim's own modules import, which ended the process
+# by the signal's default action (-15, -1, -2) while main()'s handlers came only after every subcommand's module
+WHILE_IMPORTING = [(signal.SIGTERM, "cosim.cli.exit_codes"), (signal.SIGHUP, "cosim.master.registry"),
+                   (signal.SIGINT, "argparse")]
+
+
+def test_a_stop_while_cosim_still_imports_ends_as_a_stop(tmp_path):
+    spec = _spec(tmp_path, 4)
+    for k, (signum, module) in enumerate(WHILE_IMPORTING):
+        out = tmp_path / f"out{k}"
+        # Python reports each import on stderr as it completes (PYTHONPROFILEIMPORTTIME): the signal goes when
+        # the named module is imported, in the middle of the command's imports
+        proc = subprocess.Popen([sys.executable, "-m", "cosim.cli.main", "sweep", str(spec), "--out", str(out),
+                                 "--workers", "1"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                                env=dict(_env(), PYTHONPROFILEIMPORTTIME="1"), start_new_session=True)
+        try:
+            assert proc.stderr is not None
+            seen = []
+            for line in proc.stderr:
+                seen.append(line)
+                if line.rstrip().endswith(f"| {module}"):
+                    os.killpg(proc.pid, signum)
+                    break
+            err = "".join(seen) + proc.communicate(timeout=120)[1]
+            said = "\n".join(line for line in err.splitlines() if not line.startswith("import time:"))
+        finally:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+        name = signal.Signals(signum).name
+        assert any(line.rstrip().endswith(f"| {module}") for line in seen), (name, module, err[-2000:])
+        assert proc.returncode == 130, (name, module, proc.returncode, err[-2000:])
+        assert said.strip().splitlines() == ["cosim: interrupted"], (name, said[-3000:])
+        assert _metadata(out).get("ended") is None
 
 
 STOPPED_BEFORE_ANY_ROW = """

@@ -226,3 +226,66 @@ def test_a_study_names_the_unit_that_cannot_save_its_state_from_the_warm_up_chil
         make_payload(system_of(spec, tmp_path))
     [problem] = info.value.problems
     assert problem.path == "$.experiment.warm_start" and "unit 'lag' cannot save and serialize" in problem.message
+
+
+def test_a_hanging_warm_up_obeys_the_study_timeout(tmp_path):
+    """The `fault` FMU hangs at t >= 0.5 inside the warm-up to t = 1: the study's --timeout (here 3 s) stops it;
+    before, only COSIM_TIMEOUT_FIRST (600 s) did, whatever --timeout said."""
+    import time
+
+    from cosim.parallel.isolation.payload import make_payload
+
+    spec = lag_spec(SOURCES["fmi2"]())
+    spec["units"]["fault"] = {"fmu": str(ensure_built("fault", 2)), "parameters": {"mode": 2, "trigger_time": 0.5}}
+    system = system_of(spec, tmp_path)
+    began = time.monotonic()
+    with pytest.raises(UserError) as info:
+        make_payload(system, timeout=3.0)
+    [problem] = info.value.problems
+    assert problem.path == "$.experiment.warm_start", problem
+    assert "the warm-up run to t=1 failed: it did not finish within 3 s (--timeout); it was stopped" in problem.message
+    assert time.monotonic() - began < 120  # the child load and the 3 s, not 600 s
+
+
+BIG_STATE = """
+from cosim import PythonUnit, Variable
+
+class BigState(PythonUnit):
+    # a unit whose saved state is size_mb megabytes
+    variables = (Variable("size_mb", "parameter", start=2.0), Variable("y", "output", start=0.0))
+
+    def do_step(self, t, h):
+        self.y = t + h
+
+    def get_state(self):
+        return b"x" * int(self.size_mb * (1 << 20))
+
+    def set_state(self, state):
+        pass
+"""
+
+
+def test_a_warm_state_over_the_channel_limit_names_the_limit_its_unit_and_the_fix(tmp_path, monkeypatch):
+    """A 2 MB warm state under COSIM_CHILD_MESSAGE_MB=1 (the limit is 64 MB by default): a study's warm-up
+    child could not send it and the study said "wrote something other than a result on its channel (bad message
+    length)", while `cosim run` went on; both refuse it now with one message naming the limit, its unit (MB),
+    the unit whose state it is and the fix."""
+    from cosim.parallel.isolation.payload import make_payload
+
+    (tmp_path / "big.py").write_text(BIG_STATE)
+    spec = {"units": {"big": {"python": "big.py:BigState"}}, "experiment": {"stop": 1.0, "step": 0.1, "warm_start": 0.5},
+            "objectives": {"y_end": {"signal": "big.y", "reduce": "final"}}}
+    monkeypatch.setenv("COSIM_CHILD_MESSAGE_MB", "1")
+    messages = []
+    for how in (lambda system: warmed(system), lambda system: make_payload(system)):  # cosim run, a study
+        with pytest.raises(UserError) as info:
+            how(system_of(spec, tmp_path))
+        [problem] = info.value.problems
+        assert problem.path == "$.experiment.warm_start", problem
+        messages.append((problem.message, problem.fix))
+    assert messages[0] == messages[1], messages
+    message, fix = messages[0]
+    assert "the warm state at t=0.5 is 2.0 MB (unit 'big' saved 2.0 MB of it), more than the limit of 1 MB" in message
+    assert "COSIM_CHILD_MESSAGE_MB=3 (megabytes)" in fix
+    monkeypatch.setenv("COSIM_CHILD_MESSAGE_MB", "3")  # the fix works
+    assert make_payload(system_of(spec, tmp_path))["system"]

@@ -185,6 +185,20 @@ class LoopError(UnitError):
                             + f": {message}")
 
 
+class StepControlError(UnitError):
+    """The adaptive algorithm's steps kept missing the tolerance (cosim.master.adaptive): names the counts, the
+    step, the time and the signal farthest off.  A UnitError, so the run is a failed row; ``unit`` holds the unit
+    of that signal."""
+
+    def __init__(self, unit: str, message: str, time: float | None = None, traceback: str = ""):
+        self.unit = unit
+        self.time = time
+        self.message = message
+        self.traceback = traceback
+        CosimError.__init__(self, "adaptive steps" + (f" at t={time:g}" if time is not None else "")
+                            + f": {message}")
+
+
 #: bounds of the traceback a row keeps: the innermost frames of the unit's code, and at most so many characters
 UNIT_TRACEBACK_FRAMES = 12
 UNIT_TRACEBACK_CHARS = 4000

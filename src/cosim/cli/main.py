@@ -8,18 +8,33 @@ A user's mistake never shows a traceback.
 
 from __future__ import annotations
 
-import argparse
-import importlib
+# Only the standard library's lightest modules at the top: the console script imports this module and then calls
+# main(), whose first act is to install cosim's stop handlers.  A SIGTERM, SIGHUP or Ctrl-C that arrived while the
+# rest (argparse, the error family, every subcommand's module) was still importing ended the process by the
+# signal's default action (exit -15, -1, -2) instead of as a stop (exit 130) -- issue 38.
 import os
 import sys
-import traceback
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
-from cosim.cli.exit_codes import EXIT_INTERNAL, EXIT_OK, EXIT_RUN_FAILED, EXIT_USAGE, exit_code
-from cosim.cli.problems import ALL_PROBLEMS, SHOWN, print_problems
-from cosim.errors import DEBUG_VARIABLE, UnitError, UsageError, UserError
+if TYPE_CHECKING:
+    import argparse
+
+    from cosim.cli.exit_codes import EXIT_INTERNAL, EXIT_OK, EXIT_RUN_FAILED, EXIT_USAGE
+    from cosim.errors import UsageError
 
 __all__ = ["EXIT_INTERNAL", "EXIT_OK", "EXIT_RUN_FAILED", "EXIT_USAGE", "UsageError", "main"]
+_REEXPORTED = {"EXIT_INTERNAL": "cosim.cli.exit_codes", "EXIT_OK": "cosim.cli.exit_codes",
+               "EXIT_RUN_FAILED": "cosim.cli.exit_codes", "EXIT_USAGE": "cosim.cli.exit_codes",
+               "UsageError": "cosim.errors"}
+
+
+def __getattr__(name: str) -> Any:
+    """The names this module re-exports, imported on first use (see the comment on the imports)."""
+    if name in _REEXPORTED:
+        import importlib
+
+        return getattr(importlib.import_module(_REEXPORTED[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 # The subcommand modules, each with a function registering its subcommands (and their handlers) on the
 # parser; this module only builds the parser from them, dispatches, and maps outcomes to exit codes.
@@ -41,8 +56,34 @@ def main(argv: Sequence[str] | None = None) -> int:
     Every subcommand returns its own code for what it ran (0, or 1 when a run
     failed); whatever it raises is reported here and mapped by
     :func:`cosim.cli.exit_codes.exit_code`: a UserError lists its problems
-    (exit 2), anything unexpected prints a traceback (exit 70).
+    (exit 2), anything unexpected prints a traceback (exit 70).  A stop (Ctrl-C, SIGTERM, SIGHUP) at any
+    moment after this function began, also while the command's modules are still importing, ends it with
+    "cosim: interrupted" and exit 130.
     """
+    from cosim.parallel.cluster.interrupts import restore_signals, stop_cleanly_on_signals
+
+    previous = stop_cleanly_on_signals()  # first of all, before the heavy imports (see the imports' comment)
+    try:
+        return _command(argv)
+    except KeyboardInterrupt:  # a stop before the command ran: while importing, parsing, configuring
+        print("cosim: interrupted", file=sys.stderr)
+        from cosim.cli.exit_codes import EXIT_INTERRUPTED
+
+        return EXIT_INTERRUPTED
+    finally:
+        if argv is None:  # cosim is the program, and it ends now
+            _end_at_once_on_signals()
+            _skip_final_collections()
+        else:
+            restore_signals(previous)  # main() may be called from a program with handlers of its own
+
+
+def _command(argv: Sequence[str] | None) -> int:
+    """Parse ``argv`` (None: sys.argv) and run its subcommand; its exit code (see :func:`main`)."""
+    from cosim.cli.exit_codes import EXIT_RUN_FAILED, EXIT_USAGE, exit_code
+    from cosim.errors import DEBUG_VARIABLE
+    from cosim.parallel.cluster.interrupts import raise_if_stopped
+
     parser = _parser()
     arguments = list(sys.argv[1:] if argv is None else argv)
     arguments = _global_options_first(arguments)
@@ -53,8 +94,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "handler", None):
         parser.print_help()
         return EXIT_USAGE
-    from cosim.parallel.cluster.interrupts import raise_if_stopped, restore_signals, stop_cleanly_on_signals
-    previous = stop_cleanly_on_signals()
     stdout = sys.stdout
     sys.stdout = _ReaderMayLeave(stdout)  # `cosim sweep ... | head`: the command goes on and says how it ended
     try:
@@ -74,11 +113,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         return exit_code(exc)
     finally:
         sys.stdout = stdout
-        if argv is None:  # cosim is the program, and it ends now
-            _end_at_once_on_signals()
-            _skip_final_collections()
-        else:
-            restore_signals(previous)  # main() may be called from a program with handlers of its own
 
 
 def _end_at_once_on_signals() -> None:
@@ -166,6 +200,11 @@ def report_error(exc: BaseException, debug: bool = False, all_problems: bool = F
     """Print what a user needs to know about ``exc`` on stderr: no traceback for a user's mistake, unless
     ``debug`` (``cosim --debug``), which prints every error's whole traceback after its message.  Many
     problems are listed as a sample by kind unless ``all_problems`` (see :mod:`cosim.cli.problems`)."""
+    import traceback
+
+    from cosim.cli.problems import print_problems
+    from cosim.errors import UnitError, UserError
+
     if isinstance(exc, UserError):
         print_problems(exc.problems, every=all_problems)
     elif isinstance(exc, KeyboardInterrupt):
@@ -180,7 +219,7 @@ def report_error(exc: BaseException, debug: bool = False, all_problems: bool = F
         traceback.print_exception(exc)
 
 
-GLOBAL_FLAGS = ("--debug", ALL_PROBLEMS, "-q", "--quiet", "-v", "-vv", "--verbose")
+GLOBAL_FLAGS = ("--debug", "--all-problems", "-q", "--quiet", "-v", "-vv", "--verbose")  # cli.problems.ALL_PROBLEMS
 
 
 def _global_options_first(arguments: list[str]) -> list[str]:
@@ -227,7 +266,11 @@ def _configure_logging(args: argparse.Namespace) -> None:
 
 
 def _parser() -> argparse.ArgumentParser:
+    import argparse
+    import importlib
+
     from cosim import __version__
+    from cosim.cli.problems import ALL_PROBLEMS, SHOWN
 
     parser = argparse.ArgumentParser(prog="cosim", description="FMI co-simulation orchestrator.")
     parser.add_argument("--version", action="version", version=f"cosim {__version__}")

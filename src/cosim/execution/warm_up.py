@@ -20,7 +20,34 @@ def warm_up(system: System) -> tuple[WarmState | None, RunResult]:
     """
     execution = Execution(system, save_warm=True)
     result = execution.run()
+    if execution.saved is not None:
+        _check_size(system, execution.saved)
     return execution.saved, result
+
+
+def _check_size(system: System, state: WarmState) -> None:
+    """Raise UserError when ``state`` is larger than one message a child process may send (``child_message_mb``).
+
+    A study makes its warm state in a child process and receives it as one message; over the limit it was
+    refused as "something other than a result on its channel".  ``cosim run`` (no child) checks the same
+    limit, so that it and a study agree on a spec.
+    """
+    import pickle
+
+    from cosim.util import limits
+
+    most = limits.limit("child_message_mb")
+    size = len(pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL)) / (1 << 20)
+    if size <= most:
+        return
+    largest, data = max(state.states, key=lambda named: len(named[1]), default=("?", b""))
+    needed = int(size) + 1
+    raise UserError([Problem(system.spec.path, WARM_PATH, f"the warm state at t={state.time:g} is {size:.1f} MB "
+                             f"(unit '{largest}' saved {len(data) / (1 << 20):.1f} MB of it), more than the limit "
+                             f"of {most:g} MB for one message from a child process, which carries it to the "
+                             "study's points",
+                             f"raise the limit: COSIM_CHILD_MESSAGE_MB={needed} (megabytes), or warm-start units "
+                             "with a smaller state; the same limit holds for cosim run and a study")])
 
 
 def warmed(system: System) -> System:

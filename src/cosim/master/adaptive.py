@@ -24,6 +24,12 @@ In both cases the next step is ``h * min(grow, max(shrink, safety / r))`` with `
 estimate to allowance (both estimates grow like ``h``), bounded by ``min_step`` and ``max_step`` and cut to
 end exactly at the stop time.  A step that is still rejected at ``min_step`` is kept (``exceeded``).
 
+A run ends: ``min_step`` defaults to ``1e-3 * rtol * step`` (rtol taken within [1e-6, 0.01]: the experiment's
+step scaled by the relative tolerance, with room below it for steps that cross an event), and more than ``max_rejected`` tries in a row that miss the tolerance (steps rejected and
+repeated, steps kept over it) end the run with :class:`~cosim.errors.StepControlError`, naming the counts, the
+step reached and the signal farthest off.  Before, a unit whose outputs never met the tolerance (NaN, a
+jump at every step) shrank the step to 1e-9 of the span and took ~10^9 steps: the run never ended.
+
 Time: the fixed-step algorithms count whole steps (``t_k = start + k h``); here each step's end time
 ``t + h`` is computed once and is the next step's start, so every unit is stepped from exactly the time
 it reached, and the last step ends exactly at ``stop``.
@@ -49,6 +55,10 @@ GROW, SHRINK = 4.0, 0.2  # the most a step may grow or shrink at once
 DOUBLING_ORDER, CHANGE_ORDER = 2, 1
 BASES = {GaussSeidel.name: GaussSeidel, Jacobi.name: Jacobi}
 RESTORE_MODES = ("auto", "never")
+MAX_REJECTED = 100  # tries in a row that miss the tolerance before the run fails (experiment.adaptive.max_rejected)
+# the default min_step is MIN_STEP_SCALE * rtol * step, rtol taken within RTOL_RANGE (an atol-only or a loose
+# tolerance still gets one): three decades below the step a tolerance of rtol would ask for in step doubling
+MIN_STEP_SCALE, RTOL_RANGE = 1e-3, (1e-6, 1e-2)
 
 
 @dataclass(frozen=True)
@@ -56,7 +66,9 @@ class AdaptiveSettings:
     """The options of ``experiment.adaptive`` (all optional) and the run's span.
 
     ``rtol``/``atol``: relative and absolute tolerance on the exchanged signals; ``min_step`` and
-    ``max_step`` bound the step (defaults: ``1e-9 * (stop - start)`` and ``stop - start``); ``initial_step``
+    ``max_step`` bound the step (defaults: ``1e-3 * rtol * initial_step``, rtol within [1e-6, 0.01], at most
+    ``max_step``, and ``stop - start``); ``max_rejected``: the most tries in a row that miss the tolerance
+    before the run fails; ``initial_step``
     is the experiment's ``step``; ``base`` the fixed-step algorithm taking each step; ``restore``:
     ``"auto"`` rejects and repeats steps where every unit can restore its state, ``"never"`` only adapts.
     Raises ValueError for values that cannot work (the spec check reports them first, at their path).
@@ -69,6 +81,7 @@ class AdaptiveSettings:
     atol: float = 1e-6
     min_step: float | None = None
     max_step: float | None = None
+    max_rejected: int = MAX_REJECTED
     base: str = GaussSeidel.name
     restore: str = "auto"
 
@@ -81,6 +94,8 @@ class AdaptiveSettings:
             raise ValueError("rtol and atol cannot both be 0")
         if not self.min_step_or_default > 0 or not self.max_step_or_default >= self.min_step_or_default:
             raise ValueError(f"need 0 < min_step <= max_step, not {self.min_step!r} and {self.max_step!r}")
+        if isinstance(self.max_rejected, bool) or not isinstance(self.max_rejected, int) or self.max_rejected < 1:
+            raise ValueError(f"max_rejected must be a whole number >= 1, not {self.max_rejected!r}")
         if self.base not in BASES:
             raise ValueError(f"base must be one of {', '.join(BASES)}, not {self.base!r}")
         if self.restore not in RESTORE_MODES:
@@ -92,7 +107,10 @@ class AdaptiveSettings:
 
     @property
     def min_step_or_default(self) -> float:
-        return self.min_step if self.min_step is not None else 1e-9 * self.span
+        if self.min_step is not None:
+            return self.min_step
+        low, high = RTOL_RANGE
+        return min(MIN_STEP_SCALE * min(max(self.rtol, low), high) * self.initial_step, self.max_step_or_default)
 
     @property
     def max_step_or_default(self) -> float:
@@ -137,6 +155,7 @@ class StepStatistics:
     smallest: float = math.inf
     largest: float = 0.0
     base_steps: int = 0  # steps of the base algorithm, repeated ones and half steps included (the work done)
+    missed: int = 0  # tries in a row that missed the tolerance (rejected or exceeded), up to now
 
     def as_dict(self) -> dict[str, Any]:
         return {"estimate": self.estimate, "base": self.base, "accepted": self.accepted, "rejected": self.rejected,
@@ -165,10 +184,12 @@ class ExchangedSignals:
                 if types.get(ref.variable) == "Real":
                     per_unit.setdefault(link.source.unit, {})[ref] = None
         self._reads = []
+        self.names: list[str] = []  # "unit.variable" (with "[i]", 1-based, for an array's element) per element
         n = 0
         for name, refs in per_unit.items():
             unit = units[name]
             self._reads.append((unit.reader(unit.select(list(refs))), slice(n, n + len(refs))))
+            self.names += [f"{name}.{ref.variable}" + (f"[{ref.offset + 1}]" if ref.offset else "") for ref in refs]
             n += len(refs)
         self.size = n
 
@@ -252,11 +273,15 @@ class Adaptive(MasterAlgorithm):
             if ratio <= 1.0 or at_floor:
                 if ratio > 1.0:
                     stats.exceeded += 1
+                    self._missed(t, h, np.abs(y2 - y1), allowance, y2)
+                else:
+                    stats.missed = 0
                 self._accept(t_next - t, ratio, DOUBLING_ORDER)
                 self._y = y2
                 np.maximum(self._size, np.abs(y2), out=self._size)
                 return t_next
             stats.rejected += 1
+            self._missed(t, h, np.abs(y2 - y1), allowance, y2)
             for unit, state in zip(self._units, self._saved):
                 unit.restore_state(state)
             self._h = max(h * _factor(ratio, DOUBLING_ORDER), s.min_step_or_default)
@@ -271,10 +296,36 @@ class Adaptive(MasterAlgorithm):
         ratio = _largest_ratio(np.abs(y - self._y), allowance)
         if ratio > 1.0:
             stats.exceeded += 1  # cannot be repeated: the next step is shorter instead
+            self._missed(t, h, np.abs(y - self._y), allowance, y)
+        else:
+            stats.missed = 0
         self._accept(t_next - t, ratio, CHANGE_ORDER)
         self._y = y
         np.maximum(self._size, np.abs(y), out=self._size)
         return t_next
+
+    def _missed(self, t: float, h: float, estimate: np.ndarray, allowance: np.ndarray, y: np.ndarray) -> None:
+        """Count a try that missed the tolerance; past ``max_rejected`` in a row, end the run (StepControlError)."""
+        stats, s = self.stats, self.settings
+        stats.missed += 1
+        if stats.missed <= s.max_rejected:
+            return
+        from cosim.errors import StepControlError
+
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratios = np.where(np.isnan(estimate), np.inf, estimate / np.where(allowance > 0, allowance, np.nan))
+        worst = int(np.argmax(np.nan_to_num(ratios, nan=np.inf))) if estimate.size else 0
+        name = self._signals.names[worst] if estimate.size else "?"
+        if not math.isfinite(float(y[worst])):
+            off = f"the exchanged signal {name} is {float(y[worst])}"
+        else:
+            off = (f"the exchanged signal farthest off is {name}: its error estimate {float(estimate[worst]):.3g} "
+                   f"where {float(allowance[worst]):.3g} is allowed")
+        raise StepControlError(name.split(".")[0], f"{stats.missed} tries in a row missed the tolerance (rtol "
+                               f"{s.rtol:g}, atol {s.atol:g}; max_rejected {s.max_rejected}), the last with a step of "
+                               f"{h:.3g} s (min_step {s.min_step_or_default:.3g} s); {off}. Loosen rtol or atol, "
+                               "lower min_step or raise max_rejected in experiment.adaptive, or check that unit's "
+                               "outputs", t)
 
     def _step_to(self, t: float) -> tuple[float, float]:
         """(the step the controller wants, the end time of this step): cut to end exactly at ``stop``, and
@@ -309,5 +360,7 @@ def _largest_ratio(estimate: np.ndarray, allowance: np.ndarray) -> float:
         return 0.0
     with np.errstate(divide="ignore", invalid="ignore"):
         ratios = np.where(allowance > 0, estimate / allowance, np.where(estimate > 0, np.inf, 0.0))
+    # a NaN signal makes its allowance NaN too (rtol * |y|), which the comparisons above read as "no error"
+    ratios = np.where(np.isnan(estimate), np.inf, ratios)
     ratio = float(np.max(ratios))
     return math.inf if math.isnan(ratio) else ratio

@@ -151,10 +151,16 @@ class Expression:
             for comparator in node.comparators:
                 self._check(comparator)
         elif isinstance(node, ast.Call):
-            if not isinstance(node.func, ast.Name) or node.func.id not in FUNCTIONS or node.keywords:
+            if not isinstance(node.func, ast.Name) or node.func.id not in FUNCTIONS:
                 name = getattr(node.func, "id", ast.unparse(node.func))
                 raise ExpressionError(f"'{self._shown}': unknown function '{name}'; allowed: "
                                       + ", ".join(sorted(FUNCTIONS)))
+            if node.keywords:  # max(x, initial=0): a known function, called with a keyword it does not take
+                given = ", ".join(f"{k.arg}=" if k.arg else "**" for k in node.keywords)
+                example = (f", e.g. {node.func.id}({', '.join(ast.unparse(a) for a in node.args) or 'x'}, 0)"
+                           if node.func.id in ("max", "min") else "")
+                raise ExpressionError(f"'{self._shown}': {node.func.id}() takes no keyword arguments (got "
+                                      f"{given}); give its arguments by position{example}")
             fewest, most = _ARITY[node.func.id]
             if len(node.args) < fewest or (most is not None and len(node.args) > most):
                 wanted = f"{fewest}" if fewest == most else f"at least {fewest}"

@@ -58,6 +58,7 @@ import math
 import random
 import re
 import time
+from contextlib import ExitStack
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence, TextIO
@@ -74,6 +75,8 @@ from cosim.studies.progress import StatusLine
 from cosim.studies.pruning import PRUNED, FrontKeeper, prune_settings, pruned_columns
 from cosim.studies.runner import Study, metadata_of
 from cosim.studies.sampler_names import SAMPLERS
+from cosim.studies.storage_lock import locked_storage
+from cosim.util import limits
 
 DEFAULT_BUDGET = 200
 DEFAULT_BATCH = {"nsga2": 20}  # a generation of NSGA-II is one batch; the others ask 8 at a time
@@ -122,6 +125,10 @@ class OptimizeSettings:
             if key in section and (not isinstance(section[key], int) or section[key] < 1):
                 problems.append(Problem(spec.path, f"$.optimize.{key}", f"{key} must be a whole number >= 1",
                                         f"write e.g. \"{key}\": 8"))
+            elif key in section and section[key] > limits.limit("points"):  # 10^12 evaluations never end
+                problems.append(Problem(spec.path, f"$.optimize.{key}", f"{key} {section[key]:,} is more than the "
+                                        f"limit of {limits.limit('points'):,} design points",
+                                        f"use a smaller {key}; {limits.raise_hint('points')}"))
         if problems:
             raise SpecError(problems)
         batch = section.get("batch", DEFAULT_BATCH.get(sampler, 8))
@@ -403,12 +410,22 @@ class Optimiser:
         self.dists = distributions(self.space)
         self.sampler = sampler = make_sampler(s.sampler, s.seed, s.batch, self.dists)
         if self.storage:
+            # the study is this run's while it writes (cosim.studies.storage_lock): released by release_storage
+            self._storage_lock = ExitStack()
+            storage = self._storage_lock.enter_context(
+                locked_storage(self.storage, self.study_name, self.out, study.show.words))
             self.optuna_study = open_storage_study(self.storage, self.study_name, list(s.objectives.values()),
                                                    list(s.objectives), sampler, study.where.resume, self.out,
-                                                   words=study.show.words)
+                                                   words=study.show.words, storage=storage)
         else:
             self.optuna_study = optuna.create_study(directions=list(s.objectives.values()), sampler=sampler)
         return s.budget, len(self.stored)
+
+    def release_storage(self) -> None:
+        """Release the storage study's lock taken by :meth:`start` (nothing when none)."""
+        lock, self._storage_lock = getattr(self, "_storage_lock", None), None
+        if lock is not None:
+            lock.close()
 
     def nothing_to_do(self, study: Any) -> str | None:
         return None  # the loop itself finds the budget spent (and a resume of a finished run tells its trials)
@@ -732,10 +749,20 @@ class Optimization(Study):
         if evaluator is None:
             return self.run_to_disk()
         with self.folder.locked():
-            self.optimiser.start(self)
-            self.folder.write_metadata(self.optimiser.metadata(self, self._run_info(now_utc(), "", 0)))
-            self.optimiser.evaluate_with(evaluator)
-            return self.finish()
+            try:
+                self.optimiser.start(self)
+                self.folder.write_metadata(self.optimiser.metadata(self, self._run_info(now_utc(), "", 0)))
+                self.optimiser.evaluate_with(evaluator)
+                return self.finish()
+            finally:
+                self.optimiser.release_storage()
+
+    def run_to_disk(self) -> dict[str, int]:
+        """As the runner's, and the storage study's lock (taken when the optimiser starts) released after it."""
+        try:
+            return super().run_to_disk()
+        finally:
+            self.optimiser.release_storage()
 
 
 def optimize(spec_path: str | Path, out: str | Path, **options: Any) -> "Any":

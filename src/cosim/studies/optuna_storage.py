@@ -5,11 +5,13 @@ Optuna's own form, for Optuna's tools: ``optuna-dashboard sqlite:///study.db``, 
 ``optuna.visualization``.  Each trial carries the objective values (named as in the spec), the constraint
 violations, and as user attributes the row's ``point_id`` and ``status``; the study carries the results
 folder.  A resume replays the stored run into a new study of the same name, so the storage then holds the
-whole run once, as the folder does.
+whole run once, as the folder does.  While a run writes a study, the study is locked to it
+(:mod:`cosim.studies.storage_lock`).
 """
 
 from __future__ import annotations
 
+import time
 import warnings
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -36,9 +38,48 @@ def shown_url(url: str) -> str:
         return url
 
 
+def open_storage(url: str, words: Mapping[str, str] = PYTHON_WORDS) -> Any:
+    """Optuna's RDBStorage at ``url``, its tables created when the database is new.
+
+    Two runs opening one new database at the same moment both create its tables, and the second's creation
+    fails (a UNIQUE constraint, "table ... already exists", "database is locked"): that is not a bad URL, so
+    the opening is tried again, when the first creator has finished.  Raises OptimizeError (exit 2) when the
+    storage cannot be opened; a database still busy after the tries is named as such.
+    """
+    import optuna
+
+    optuna.logging.set_verbosity(optuna.logging.WARNING)  # Optuna's INFO notes are not cosim's terminal's
+    word = {**PYTHON_WORDS, **words}
+    last: Exception | None = None
+    for attempt in range(5):
+        try:
+            return optuna.storages.RDBStorage(url)
+        except Exception as exc:  # noqa: BLE001 - sqlalchemy's and optuna's errors: a bad URL, a missing folder
+            last = exc
+            if not _concurrent(exc):
+                break
+            time.sleep(0.2 * (attempt + 1))
+    assert last is not None
+    first = str(last).splitlines()[0] if str(last) else type(last).__name__
+    if _concurrent(last):
+        raise OptimizeError(f"{word['storage']} {shown_url(url)}: the database stayed busy while another process created or "
+                            f"wrote it ({first}); run again when that process is done (a SQLite file serves one "
+                            "writer at a time: for many writers at once use a database server, e.g. "
+                            "postgresql://user@host/db)") from None
+    raise OptimizeError(f"{word['storage']} {shown_url(url)}: cannot open it ({first}); {STORAGE_FIX}") from None
+
+
+def _concurrent(exc: Exception) -> bool:
+    """Whether opening failed because another process created or wrote the database at the same moment."""
+    text = str(exc)
+    return type(exc).__name__ in ("IntegrityError", "OperationalError") and any(
+        sign in text for sign in ("UNIQUE constraint failed", "already exists", "database is locked"))
+
+
 def open_storage_study(url: str, name: str, directions: Sequence[str], metric_names: Sequence[str],
-                       sampler: Any, resume: bool, out: str | Path, words: Mapping[str, str] = PYTHON_WORDS) -> Any:
-    """A new Optuna study ``name`` in the storage at ``url``, with ``sampler``.
+                       sampler: Any, resume: bool, out: str | Path, words: Mapping[str, str] = PYTHON_WORDS,
+                       storage: Any = None) -> Any:
+    """A new Optuna study ``name`` in the storage at ``url`` (``storage``: that storage, already open), with ``sampler``.
 
     On ``resume`` a study of that name is replaced: the run is replayed into it from the results folder.
     Raises OptimizeError (exit 2) when the storage cannot be opened, or when a fresh run finds a study of
@@ -48,11 +89,7 @@ def open_storage_study(url: str, name: str, directions: Sequence[str], metric_na
     word = {**PYTHON_WORDS, **words}
     import optuna
 
-    try:
-        storage = optuna.storages.RDBStorage(url)
-    except Exception as exc:  # noqa: BLE001 - sqlalchemy's and optuna's errors: a bad URL, a missing folder
-        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise OptimizeError(f"{word['storage']} {shown_url(url)}: cannot open it ({first}); {STORAGE_FIX}") from None
+    storage = storage if storage is not None else open_storage(url, words)
     existing = {s.study_name for s in storage.get_all_studies()}
     if name in existing:
         if not resume:

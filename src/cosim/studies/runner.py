@@ -150,7 +150,8 @@ class Study:
     def _make_payload(self) -> dict[str, Any]:
         from cosim.parallel.isolation.payload import make_payload
 
-        return make_payload(self.system)  # FMU bytes read now: workers never open these paths
+        # FMU bytes read now: workers never open these paths; a warm-up within the study's timeout (issue 38)
+        return make_payload(self.system, self.how.timeout)
 
     def _start_early(self) -> None:
         """The spare point children the command started load the system now, while this process starts the local

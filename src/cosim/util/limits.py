@@ -59,6 +59,8 @@ LIMITS: dict[str, Limit] = {
     "child_memory_mb": Limit("COSIM_CHILD_MEMORY_MB", 8192, "megabytes of data memory of one child process"),
     "child_rss_mb": Limit("COSIM_CHILD_RSS_MB", 2048, "resident megabytes after which a child is replaced"),
     "child_points": Limit("COSIM_CHILD_POINTS", 5000, "points one child runs before it is replaced"),
+    "child_message_mb": Limit("COSIM_CHILD_MESSAGE_MB", 64, "megabytes of one message from a child process to "
+                              "its parent: a row, or a study's warm state (experiment.warm_start)", integer=False),
     # lock-step groups in a sweep's child (cosim.execution.lockstep)
     "lockstep_seconds": Limit("COSIM_LOCKSTEP_SECONDS", 0.25, "seconds a lock-step group of points is sized to "
                               "last (a tiny value turns lock-step off)", integer=False),

@@ -72,14 +72,17 @@ class Room:
     def __init__(self, doc: Any, study: D.Study, webgl: bool | None = None, aggregate_above: int | None = None,
                  live: LiveStudy | None = None):
         self.doc, self.study, self.live = doc, study, live
+        self._options = (webgl, aggregate_above)
+        self.rebuilt_note = ""  # why this room replaced another on the page (a watched table's columns changed)
         self._build(webgl, aggregate_above)
         # attached to the document only now, with bokeh's property validation back on: a document bound to a page
         # (a live page turning from waiting into the room) sends new models at once, and bokeh 3.9 encodes a
         # field with a transform (the colour map's) as a constant while validation is off ("color is not
         # iterable" in the page, and no cloud)
         doc.add_root(self.tabs)
+        self._looking = None
         if live is not None:  # a folder watched while its study runs: new rows are drawn as they arrive
-            doc.add_periodic_callback(self._look, int(live.every * 1000))
+            self._looking = doc.add_periodic_callback(self._look, int(live.every * 1000))
 
     @without_property_validation  # the cloud's masks: bokeh would check their n booleans one by one
     def _build(self, webgl: bool | None, aggregate_above: int | None) -> None:
@@ -232,8 +235,34 @@ class Room:
     def _look(self) -> None:
         assert self.live is not None  # the callback exists only then
         study = self.live.current()
-        if study is not None and study is not self.study:
+        if study is None or study is self.study:
+            if self.live.problem:  # the table cannot be read now: the note says so (see _live_note)
+                self.refresh()
+            return
+        if list(study.table.df.columns) != list(self.study.table.df.columns):
+            self._rebuild(study)  # another study's table: filters and objectives of the old one mean nothing
+            return
+        try:
             self.reload(study)
+        except AnalysisError:  # a column the tab's state needs is gone after all: start afresh from the table
+            self._rebuild(study)
+
+    def _rebuild(self, study: D.Study) -> None:
+        """Replace this room on its page by a new one of ``study`` (a watched table whose columns changed: before,
+        every refresh raised, the server printed a traceback per look and a new page got HTTP 500)."""
+        old = list(self.study.table.df.columns)
+        new = list(study.table.df.columns)
+        gone, added = [c for c in old if c not in new], [c for c in new if c not in old]
+        if self._looking is not None:
+            self.doc.remove_periodic_callback(self._looking)
+            self._looking = None
+        self.doc.remove_root(self.tabs)
+        room = Room(self.doc, study, *self._options, live=self.live)
+        room.rebuilt_note = ("the table's columns changed (" + "; ".join(
+            part for part in (f"gone: {', '.join(gone[:8])}" if gone else "",
+                              f"new: {', '.join(added[:8])}" if added else "") if part)
+            + "): the room shows the new table, filters, objectives and selection reset")
+        room.refresh()
 
     @without_property_validation
     def reload(self, study: D.Study) -> None:
@@ -446,7 +475,13 @@ class Room:
             return ""
         counts = ", ".join(f"{v} {html.escape(k)}" for k, v in self.decision.status_counts().items())
         state = "running (or interrupted): new rows appear as they are written" if self.live.running else "complete"
-        return f"<br><span class='live'>live: {len(self.study.ids)} rows ({counts}); the study is {state}</span>"
+        note = f"live: {len(self.study.ids)} rows ({counts}); the study is {state}"
+        if self.live.problem and not self.live.running:  # a garbled or deleted table is not a complete study
+            note = (f"live: the table cannot be read now ({html.escape(self.live.problem)}); shown: the "
+                    f"{len(self.study.ids)} rows ({counts}) read before")
+        if self.rebuilt_note:
+            note += f"; {html.escape(self.rebuilt_note)}"
+        return f"<br><span class='live'>{note}</span>"
 
     def _refresh_narrowed(self) -> None:
         f, label = self.decision.filters, self.study.table.label

@@ -28,6 +28,9 @@ class LiveStudy:
         self._looked = 0.0
         self._study: Study | None = None
         self.version = 0  # +1 for each new table read
+        # why the folder's table could not be read at the last look (garbled, deleted), None when it could: the
+        # room showed such a folder's last rows as a "complete" study
+        self.problem: str | None = None
         self.current()
 
     def signature(self) -> tuple:
@@ -55,8 +58,13 @@ class LiveStudy:
             return self._study
         try:
             table = load_results(self.folder, self.spec_path)
-        except AnalysisError:  # no rows yet, or a part being written: the next look reads it
+        except AnalysisError as exc:  # no rows yet, or a part being written: the next look reads it
+            self.problem = _first_line(exc) if signature else "the table is gone: deleted or moved"
             return self._study
+        except Exception as exc:  # noqa: BLE001 - a garbled file: pyarrow's and pandas' errors, one line kept
+            self.problem = f"{type(exc).__name__}: {_first_line(exc)}"
+            return self._study
+        self.problem = None
         if not len(table.df):
             return self._study
         self._signature = signature
@@ -73,3 +81,8 @@ class LiveStudy:
     def running(self) -> bool:
         """Whether the folder holds rows not yet compacted (a study running, or interrupted)."""
         return any((self.folder / "parts").glob("part-*.parquet"))
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return (text.splitlines()[0] if text else type(exc).__name__)[:300]

@@ -61,14 +61,17 @@ def stop_cleanly_on_signals() -> dict[int, Any]:
     """
     def stop(signum: int, frame: Any) -> None:
         _STOPS.append(signum)  # first: the KeyboardInterrupt below may be swallowed (see _STOPS)
-        import logging
-
-        for name in ("distributed", "asyncio"):  # asyncio reports tasks of workers that never started
-            logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+        # Nothing is imported here: the stop may come while a module is half imported (cosim's main() sets this
+        # handler before its imports), and importing a module that needs it raised ImportError ("partially
+        # initialized module") instead of the stop.  What is not imported yet has nothing to quiet or kill.
+        logging = sys.modules.get("logging")
+        if logging is not None and hasattr(logging, "getLogger"):
+            for name in ("distributed", "asyncio"):  # asyncio reports tasks of workers that never started
+                logging.getLogger(name).setLevel(logging.CRITICAL + 1)
         sys.unraisablehook = lambda unraisable: None
-        from cosim.parallel.isolation.children import kill_point_children_now
-
-        kill_point_children_now()  # their points are unfinished: waiting for them could take minutes
+        children = sys.modules.get("cosim.parallel.isolation.children")
+        if children is not None and hasattr(children, "kill_point_children_now"):
+            children.kill_point_children_now()  # their points are unfinished: waiting for them could take minutes
         raise KeyboardInterrupt
 
     if threading.current_thread() is not threading.main_thread():

@@ -8,7 +8,20 @@ import threading
 from multiprocessing.connection import Connection
 from typing import Any
 
-MAX_MESSAGE = 64 << 20  # bytes of one message from a child (a row is a few kB)
+from cosim.util.limits import limit, raise_hint
+
+
+def max_message() -> int:
+    """Bytes of one message from a child (a row is a few kB): the ``child_message_mb`` limit."""
+    return int(limit("child_message_mb") * (1 << 20))
+
+
+def too_long_message() -> str:
+    """What a message over :func:`max_message` is called, with the limit, its unit and the way to raise it."""
+    return (f"a message larger than the limit of {limit('child_message_mb'):g} MB for one message from a child "
+            f"process; {raise_hint('child_message_mb')}")
+
+
 # "row": (PointRow, why the child ends itself after it or None); "group": n rows of one lock-step run follow
 # (cosim.execution.lockstep); "warm": (the warm state or None, why not) for a study's warm-up
 KINDS = ("ready", "error", "row", "group", "warm")
@@ -43,12 +56,13 @@ class Channel:
     def _read_until_the_end(self, conn: Connection) -> None:
         while True:
             try:
-                data = conn.recv_bytes(MAX_MESSAGE)
+                data = conn.recv_bytes(max_message())
             except EOFError:
                 self._queue.put(("eof", None))
                 return
-            except OSError as exc:  # a length over MAX_MESSAGE, or the pipe closed under us
-                self._queue.put(("junk", f"{exc}"))
+            except OSError as exc:  # a length over max_message(), or the pipe closed under us
+                # multiprocessing says only "bad message length" for one too long: name the limit instead
+                self._queue.put(("junk", too_long_message() if "bad message length" in str(exc) else f"{exc}"))
                 return
             except Exception as exc:  # a malformed length header
                 self._queue.put(("junk", f"{type(exc).__name__}: {exc}"))

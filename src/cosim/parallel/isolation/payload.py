@@ -18,19 +18,20 @@ from cosim.execution.point_row import PointRow
 from cosim.util.limits import limit
 
 
-def make_payload(system: Any) -> dict[str, Any]:
+def make_payload(system: Any, timeout: float | None = None) -> dict[str, Any]:
     """Everything a child needs to run points of ``system``, with no file shared with this process.
 
     Keys: ``key`` (a digest of the whole payload), ``system`` (pickled System),
     ``files`` (unit name -> [(file name, bytes), ...]): the files each unit
     type reads (:meth:`~cosim.units.protocol.UnitType.files`: FMUs, ``file.py``
     units, played tables, a plug-in kind's files).  A spec with ``experiment.warm_start`` is warmed up here,
-    once, in a child process (:func:`warm_up_isolated`): the pickled System carries the units' serialized states.
+    once, in a child process (:func:`warm_up_isolated`), within ``timeout`` seconds (a study's ``--timeout``; None:
+    the ``timeout_first_seconds`` limit): the pickled System carries the units' serialized states.
     Raises OSError when a unit's file cannot be read, UserError when the warm-up cannot be made.
     """
     if system.spec.experiment.warm_start is not None and system.warm_start is None:
         # the warm-up runs once, in a child process like any point (it may crash or hang); its states travel
-        system = replace(system, warm_start=warm_up_isolated(_plain_payload(system, "-warm-up"), system))
+        system = replace(system, warm_start=warm_up_isolated(_plain_payload(system, "-warm-up"), system, timeout))
     return _plain_payload(system)
 
 
@@ -56,9 +57,10 @@ def _plain_payload(system: Any, key_suffix: str = "") -> dict[str, Any]:
             "origins": origins}
 
 
-def warm_up_isolated(payload: dict[str, Any], system: Any) -> Any:
+def warm_up_isolated(payload: dict[str, Any], system: Any, timeout: float | None = None) -> Any:
     """The warm state of ``system`` (:mod:`cosim.execution.warm_start`), made in a child process loaded with
-    ``payload`` (its system without a warm state), within the ``timeout_first_seconds`` limit.
+    ``payload`` (its system without a warm state), within ``timeout`` seconds (None: the ``timeout_first_seconds``
+    limit; a hanging warm-up obeyed only that limit, 600 s, whatever a study's ``--timeout`` said).
 
     Raises UserError naming the spec's ``experiment.warm_start`` when the warm-up cannot be made: a unit fails,
     cannot save its state, the child crashes or hangs.
@@ -68,7 +70,8 @@ def warm_up_isolated(payload: dict[str, Any], system: Any) -> Any:
 
     runner = IsolatedRunner(payload)
     try:
-        state, why = runner.warm_up(float(limit("timeout_first_seconds")))
+        state, why = runner.warm_up(float(limit("timeout_first_seconds")) if timeout is None else timeout,
+                                    "--timeout" if timeout is not None else "COSIM_TIMEOUT_FIRST")
     finally:
         runner.close()
     if state is None:

@@ -44,7 +44,7 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from cosim.execution.point_row import PointRow
-from cosim.parallel.isolation.channel import Channel
+from cosim.parallel.isolation.channel import Channel, too_long_message
 from cosim.parallel.isolation.children import LIVE, SPARES, SPARES_LOCK, STOPPING, register_exit_hook
 from cosim.parallel.isolation.leftovers import mark, remove_leftovers
 from cosim.parallel.isolation.point_runner import row_without_result
@@ -123,8 +123,12 @@ class IsolatedRunner:
         self._proc = subprocess.Popen(
             # gc.freeze once child_main is done: the interpreter's final collections over the units' modules
             # would only delay the exit the worker waits for
-            # SIGINT ignored first: the terminal's Ctrl-C reaches this child too, and the client decides
-            [sys.executable, "-c", "import signal; signal.signal(signal.SIGINT, signal.SIG_IGN); "
+            # SIGINT ignored first: the terminal's Ctrl-C reaches this child too, and the client decides.  Ignored
+            # from the exec on (sh's `trap "" INT`, inherited by the interpreter, which then keeps it ignored): a
+            # Ctrl-C during the interpreter's own start-up (site, ~0.1 s) printed "Fatal Python error:
+            # init_import_site" with a traceback on the user's terminal (issue 38)
+            ["/bin/sh", "-c", 'trap "" INT; exec "$0" "$@"',
+             sys.executable, "-c", "import signal; signal.signal(signal.SIGINT, signal.SIG_IGN); "
              "import sys; from cosim.parallel.isolation.child import child_main; "
              "child_main(*map(int, sys.argv[1:])); import gc; gc.freeze()",
              str(to_child_r), str(from_child_w), str(os.getpid())],
@@ -256,9 +260,10 @@ class IsolatedRunner:
                     mode = "prune" if prune is not None else "run_each"
                     if grouped:  # written by some point of the group: found when they run one by one
                         break
-                    keep(row_without_result(point_id, "crashed", "the process running this point wrote something "
-                                                   f"other than a result on its channel ({why}); it was "
-                                                   "replaced", started), made_here=True)
+                    told = (f"its row is {why}" if why == too_long_message() else "the process running this point "
+                            f"wrote something other than a result on its channel ({why})")
+                    keep(row_without_result(point_id, "crashed", f"{told}; it was replaced", started),
+                         made_here=True)
                     done += 1
                     break
                 row, recycle = body
@@ -271,9 +276,10 @@ class IsolatedRunner:
             remaining = remaining[done:]
         return rows
 
-    def warm_up(self, timeout: float) -> tuple[Any, Any]:
+    def warm_up(self, timeout: float, timeout_from: str = "COSIM_TIMEOUT_FIRST") -> tuple[Any, Any]:
         """(the warm state, None) made by the child, or (None, why not): a UserError of the warm-up, or a
-        message when the child cannot load the system, dies, hangs beyond ``timeout`` seconds or writes junk."""
+        message when the child cannot load the system, dies, hangs beyond ``timeout`` seconds (given by
+        ``timeout_from``, named in the message) or writes junk."""
         if self._proc is None or self._proc.poll() is not None:
             self.close()
             problem = self._start()
@@ -287,12 +293,15 @@ class IsolatedRunner:
         received = self._channel.get(timeout)
         if received is None:
             self.close(force=True)
-            return None, f"it did not finish within {timeout:g} s (COSIM_TIMEOUT_FIRST); it was stopped"
+            return None, f"it did not finish within {timeout:g} s ({timeout_from}); it was stopped"
         kind, body = received
         if kind == "eof":
             why = f"the process running it died ({self._exit_text()})"
             self.close()
             return None, why
+        if kind == "junk" and body == too_long_message():
+            self.close(force=True)
+            return None, f"its state is {body}"
         if kind != "warm" or not (isinstance(body, tuple) and len(body) == 2):
             self.close(force=True)
             return None, f"the process running it wrote something other than a result on its channel ({body})"
