@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import importlib.resources
 import json
+import logging
 import math
 import re
 from dataclasses import dataclass, field
@@ -28,6 +29,19 @@ from cosim.master.registry import DEFAULT_ALGORITHM
 from cosim.units.kind import UnitSpec
 from cosim.util import limits
 from cosim.util.strict_json import read_spec_json  # strict JSON: no NaN, no key twice, bounded nesting
+
+log = logging.getLogger("cosim.spec")
+_NOTED_INITIALIZATION_ONLY: set[tuple[str, float]] = set()  # (file, start): a spec is often read twice
+
+
+def _note_initialization_only(file: str, start: float) -> None:
+    """Log once per spec and process that ``stop == start`` makes an initialization-only run (docs/spec.md)."""
+    if (file, start) in _NOTED_INITIALIZATION_ONLY:
+        return
+    _NOTED_INITIALIZATION_ONLY.add((file, start))
+    log.warning("%s: $.experiment: stop = start = %g s: an initialization-only run (the units are initialized, "
+                "their outputs recorded once at t = %g s and the objectives reduced from that one sample; no step "
+                "is taken); give a later 'stop' to simulate", file, start, start)
 
 if TYPE_CHECKING:
     import jsonschema
@@ -320,9 +334,11 @@ def _value_problems(raw: dict[str, Any], file: str, seen: set[tuple[str, str]]) 
                 problems.append(Problem(file, f"$.experiment.{key}", f"{value} is not a finite number",
                                         "write a finite number"))
         if len(numbers) == 3 and all(math.isfinite(v) for v in numbers.values()):
-            if stop <= start:
-                problems.append(Problem(file, "$.experiment.stop", f"stop ({stop}) must be after start ({start})",
-                                        "make 'stop' larger than 'start'"))
+            if stop < start:
+                problems.append(Problem(file, "$.experiment.stop", f"stop ({stop}) must not be before start ({start})",
+                                        "make 'stop' at least 'start' (equal: an initialization-only run)"))
+            elif stop == start:
+                _note_initialization_only(file, start)
             elif step > 0 and (stop - start) / step > limits.limit("steps"):
                 problems.append(Problem(file, "$.experiment.step", f"(stop - start) / step is "
                                         f"{(stop - start) / step:.3g} steps, more than the limit of "
