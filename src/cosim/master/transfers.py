@@ -75,7 +75,7 @@ class Transfer:
         self.write(self.read())
 
 
-def _converting(read: Callable[[], Sequence[Any]], connections: Sequence[Link],
+def _converting(read: Callable[[], Sequence[Any] | np.ndarray], connections: Sequence[Link],
                 as_list: bool = True) -> Callable[[], Any]:
     """``read`` followed by each element's unit conversion ``factor * x + offset`` (one multiply-add, no drift);
     a list, or with ``as_list=False`` a numpy array."""

@@ -262,10 +262,11 @@ class PlayerUnit(Unit):
         return _IndexSelection(refs, columns, [kinds[c] for c in columns])
 
     def get(self, selection: Selection) -> list[Any]:
-        values = self.current[selection.columns].tolist()  # type: ignore[attr-defined]
-        if selection.kinds is None:  # type: ignore[attr-defined]
+        # attr-defined: the protocol hands back the Selection this unit's select() made, an _IndexSelection
+        values: list[Any] = self.current[selection.columns].tolist()  # type: ignore[attr-defined]
+        if selection.kinds is None:  # type: ignore[attr-defined]  # (as above)
             return values
-        return [_typed(v, k) for v, k in zip(values, selection.kinds)]  # type: ignore[attr-defined]
+        return [_typed(v, k) for v, k in zip(values, selection.kinds)]  # type: ignore[attr-defined]  # (as above)
 
     def set(self, selection: Selection, values: Sequence[Any]) -> None:
         raise UnitError(self.name, "a signal player has only outputs; nothing can be set", self.t)
@@ -297,22 +298,23 @@ class PlayerUnit(Unit):
     def _at(self, t: float) -> np.ndarray:
         times, values = self.time_points, self.values
         mode = self.unit_type.interpolation
+        # rows are taken as values[i, :]: numpy's stubs type values[i] as Any, values[i, :] as the array it is
         if len(times) == 1 or t <= times[0]:
-            return values[0].copy()
+            return values[0, :].copy()
         if t >= times[-1]:
-            return values[-1].copy()
+            return values[-1, :].copy()
         # searchsorted 'right' so that at a sample time with repeated times
         # (an event) we take the value after the event.
         i = int(np.searchsorted(times, t, side="right")) - 1
         if mode == "hold":
-            return values[i].copy()
+            return values[i, :].copy()
         t0, t1 = times[i], times[i + 1]
         if mode == "nearest":
-            nearest = values[i if t - t0 <= t1 - t else i + 1].copy()
+            nearest = values[i if t - t0 <= t1 - t else i + 1, :].copy()
             nearest[self.discrete] = values[i][self.discrete]
             return nearest
         w = (t - t0) / (t1 - t0)
-        blended = (1.0 - w) * values[i] + w * values[i + 1]
+        blended: np.ndarray = (1.0 - w) * values[i, :] + w * values[i + 1, :]
         if self.discrete.any():
             blended[self.discrete] = values[i][self.discrete]
         return blended

@@ -24,9 +24,12 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping, Sequence
 
 from cosim.errors import UnitError as UnitError  # re-exported: units raise it from here
+
+if TYPE_CHECKING:  # numpy only names a type here: importing the protocol stays cheap
+    from numpy.typing import NDArray
 
 _ELEMENT_RE = re.compile(r"^(?P<base>.+?)\[(?P<index>\d+)\]$")
 
@@ -266,7 +269,7 @@ class Unit(abc.ABC):
     def set(self, selection: Selection, values: Sequence[Any]) -> None:
         """Set the selected elements to ``values`` (same order and length)."""
 
-    def reader(self, selection: Selection) -> Callable[[], Sequence[Any]]:
+    def reader(self, selection: Selection) -> Callable[[], Sequence[Any] | NDArray[Any]]:
         """A function returning the selected values, for reading them every step.
 
         Units may return something faster than ``get`` (e.g. a numpy view of a

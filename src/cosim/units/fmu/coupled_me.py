@@ -159,7 +159,7 @@ class CoupledModelExchange(EventLoop, Unit):
         return _GroupSelection(refs, parts)
 
     def get(self, selection: Selection) -> list[Any]:
-        sel: _GroupSelection = selection  # type: ignore[assignment]
+        sel: _GroupSelection = selection  # type: ignore[assignment]  # the one this unit's select() made
         if self._carry_pending:  # inputs set from outside since the last step: outputs fed through members follow
             self._carry_pending = False
             self._propagate()
@@ -171,7 +171,7 @@ class CoupledModelExchange(EventLoop, Unit):
 
     def set(self, selection: Selection, values: Sequence[Any]) -> None:
         """Set members' inputs from outside (the master): the members note the change, as single units do."""
-        sel: _GroupSelection = selection  # type: ignore[assignment]
+        sel: _GroupSelection = selection  # type: ignore[assignment]  # the one this unit's select() made
         for member, own, where in sel.parts:
             member.set(own, [values[i] for i in where])
         self._carry_pending = self._propagations is not None
@@ -250,6 +250,8 @@ class CoupledModelExchange(EventLoop, Unit):
             """A callback over one vector of all members' values: each member's call on its slice."""
             def over_members(pointer: Any, _n: int) -> None:
                 address, offset = ctypes.cast(pointer, ctypes.c_void_p).value, 0
+                if address is None:  # kept by _caught, as any callback failure: the run fails naming the call
+                    raise ValueError(f"{label}: the solver passed a NULL vector")
                 for member, n in pairs:
                     part = ctypes.cast(address + offset * _DOUBLE_SIZE, _DOUBLE_POINTER)
                     member._guard(label, partial(call(member), part, n))  # a failure names the member
@@ -317,7 +319,7 @@ class CoupledModelExchange(EventLoop, Unit):
                 member._read_indicators_into(ctypes.cast(address + offset * _DOUBLE_SIZE, _DOUBLE_POINTER))
                 offset += member._nz
 
-    def _callback_failure(self, exc: BaseException | None) -> UnitError:
+    def _callback_failure(self, exc: BaseException) -> UnitError:
         if isinstance(exc, UnitError):  # a member's FMI call failed (its _guard names it)
             return exc
         return UnitError(self.name, f"a call during integration failed: {type(exc).__name__}: {exc}", self._now)

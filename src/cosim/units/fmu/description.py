@@ -317,6 +317,7 @@ def _number(text: Any, kind: str) -> Any:
     if isinstance(text, (int, float, bool)):
         return text
     text = str(text).strip()
+    values: list[Any]
     if kind == "Real":
         values = [float(t) for t in text.split()]
     elif kind == "Integer":
@@ -340,7 +341,7 @@ def _relative(v: Any) -> bool:
 
 def _unit_of(v: Any) -> str | None:
     if v.unit:
-        return v.unit
+        return str(v.unit)
     declared = getattr(v, "declaredType", None)
     return getattr(declared, "unit", None) if declared is not None else None
 
@@ -440,7 +441,7 @@ def _describe(md: Any, reference: str, structural: dict[str, int] | None = None
         _check_array_sizes(reference, shapes, tuple(structural or ()))
     for v in md.modelVariables:
         kind = _FMI3_TYPE.get(v.type, "Real")
-        shape: tuple[int, ...] = shapes[v.name][0] if v.name in shapes else ()
+        shape = shapes[v.name][0] if v.name in shapes else ()
         size = math.prod(shape)
         start = _number(v.start, kind)
         if shape and isinstance(start, tuple) and len(start) != size:
@@ -475,7 +476,8 @@ def _describe(md: Any, reference: str, structural: dict[str, int] | None = None
     return description, elements
 
 
-def _group_indexed(variables: list[Variable], elements: dict[str, list[FmiElement]]):
+def _group_indexed(variables: list[Variable], elements: dict[str, list[FmiElement]]
+                   ) -> tuple[list[Variable], dict[str, list[FmiElement]]]:
     """Offer runs ``x[1]..x[n]`` of FMI 2.0 scalars (same causality and type) also as an array ``x``."""
     by_name = {v.name: v for v in variables}
     extra = []
@@ -496,7 +498,8 @@ def _group_indexed(variables: list[Variable], elements: dict[str, list[FmiElemen
     return variables + extra, elements
 
 
-def _group_feedthrough(feedthrough: dict[str, tuple[str, ...]], variables: list[Variable]):
+def _group_feedthrough(feedthrough: dict[str, tuple[str, ...]], variables: list[Variable]
+                       ) -> dict[str, tuple[str, ...]]:
     """Add feed-through entries for grouped arrays (union over their elements)."""
     arrays = {v.name for v in variables if v.is_array}
     result = dict(feedthrough)

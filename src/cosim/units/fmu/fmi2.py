@@ -18,7 +18,7 @@ from fmpy.fmi2 import (
 )
 
 from cosim.units.fmu.fmpy_internals import fmi2_allocator, instance_handle, library, with_cached_signatures
-from cosim.units.fmu.instance import FmiInstance, TypeGroup, load_library
+from cosim.units.fmu.instance import FmiInstance, TypeGroup, absent_function, load_library
 from cosim.units.protocol import SimulationEnded
 
 
@@ -68,7 +68,8 @@ class Fmi2Unit(FmiInstance):
             "Boolean": (dll.fmi2GetBoolean, dll.fmi2SetBoolean),
             "String": (dll.fmi2GetString, dll.fmi2SetString),
         }
-        self._do_step = getattr(dll, "fmi2DoStep", None)  # absent from a Model-Exchange-only FMU
+        # absent from a Model-Exchange-only FMU (its unit class integrates instead)
+        self._do_step: Callable[..., int] = getattr(dll, "fmi2DoStep", absent_function("fmi2DoStep"))
 
     def _bind(self, group: TypeGroup) -> tuple[Callable[[], int], Callable[[], int]]:
         get, put = self._calls[group.fmi_type]

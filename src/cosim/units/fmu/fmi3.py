@@ -9,7 +9,7 @@ from typing import Any, Callable, Sequence
 from fmpy.fmi3 import FMU3Slave
 
 from cosim.units.fmu.fmpy_internals import instance_handle, library, with_cached_signatures
-from cosim.units.fmu.instance import FmiInstance, FmiSelection, TypeGroup, load_library
+from cosim.units.fmu.instance import FmiInstance, FmiSelection, TypeGroup, absent_function, load_library
 from cosim.units.protocol import Selection, SimulationEnded
 
 
@@ -52,7 +52,8 @@ class Fmi3Unit(FmiInstance):
         self._calls = {t: (getattr(dll, f"fmi3Get{t if t != 'Enumeration' else 'Int64'}"),
                            getattr(dll, f"fmi3Set{t if t != 'Enumeration' else 'Int64'}"))
                        for t in self._c_types}
-        self._do_step = getattr(dll, "fmi3DoStep", None)  # absent from a Model-Exchange-only FMU
+        # absent from a Model-Exchange-only FMU (its unit class integrates instead)
+        self._do_step: Callable[..., int] = getattr(dll, "fmi3DoStep", absent_function("fmi3DoStep"))
         self._event = ctypes.c_bool()
         self._terminate = ctypes.c_bool()
         self._early = ctypes.c_bool()
@@ -66,7 +67,8 @@ class Fmi3Unit(FmiInstance):
     def _bind(self, group: TypeGroup) -> tuple[Callable[[], int], Callable[[], int]]:
         get, put = self._calls[group.fmi_type]
         if group.fmi_type == "Binary":  # (..., valueSizes, values, nValues): sizes come before the values
-            args = (self._component, group.vrs, group.n_vrs, group.sizes, group.values, group.n_values)
+            args: tuple[Any, ...] = (self._component, group.vrs, group.n_vrs, group.sizes, group.values,
+                                     group.n_values)
         else:
             args = (self._component, group.vrs, group.n_vrs, group.values, group.n_values)
         return partial(get, *args), partial(put, *args)

@@ -37,7 +37,7 @@ FMPY_REQUIREMENT = "fmpy>=0.3.32,<0.4"  # as in pyproject.toml (the test keeps t
 _SIGNATURES: dict[type, list[tuple[str, str, list[str], list[Any], Any]]] = {}
 
 
-def with_cached_signatures(slave_class: type) -> type:
+def with_cached_signatures(slave_class: type[Any]) -> type[Any]:
     """``slave_class`` (an fmpy FMU2/FMU3 Slave or Model class) whose instances declare the FMI functions' ctypes
     signatures from a table made once per class, not by inspecting its methods again (module docstring).
 

@@ -7,6 +7,7 @@ pre-builds the ctypes arrays of value references and values once, so that a
 
 from __future__ import annotations
 
+import abc
 import ctypes
 import operator
 from collections import deque
@@ -14,6 +15,7 @@ from functools import partial
 from typing import Any, Callable, Sequence
 
 import numpy as np
+from numpy.typing import NDArray
 
 from cosim.errors import FmuProblems, Problem
 from cosim.units.protocol import ElementRef, Selection, Unit, UnitError
@@ -43,6 +45,14 @@ def load_library(unit_type: Any, make_slave: Callable[[], Any]) -> Any:
     raise FmuProblems(unit_type.path, [problem]) from None
 
 
+def absent_function(name: str) -> Callable[..., int]:
+    """Stands in for an FMI function the FMU's library lacks (``fmi2DoStep`` of a Model-Exchange-only FMU,
+    whose unit class never calls it): calling it raises AttributeError naming the function."""
+    def absent(*args: Any) -> int:
+        raise AttributeError(f"the FMU's library has no {name}")
+    return absent
+
+
 class TypeGroup:
     """All requested elements of one FMI type: one get/set call reads them all."""
 
@@ -51,14 +61,21 @@ class TypeGroup:
         self.vrs = (vr_c_type * len(vrs))(*vrs)
         self.n_vrs = len(vrs)
         self.n_values = sum(sizes)
-        self.values = (c_type * self.n_values)()
-        # FMI 3.0 Binary: each value is a pointer and a size; the buffers set are kept alive here
-        self.sizes = (ctypes.c_size_t * self.n_values)() if fmi_type == "Binary" else None
+        self.values: ctypes.Array[Any] = (c_type * self.n_values)()
+        # FMI 3.0 Binary: each value is a pointer and a size; the buffers set are kept alive here (an empty
+        # array for the other types, which never read it)
+        self.sizes = (ctypes.c_size_t * (self.n_values if fmi_type == "Binary" else 0))()
         self.keep: list[Any] = [None] * self.n_values if fmi_type == "Binary" else []
         # Zero-argument FMI calls bound by the instance (functools.partial over
         # the library function): the stepping loop's cheapest possible call.
         self.read: Callable[[], int] = lambda: 0
         self.write: Callable[[], int] = lambda: 0
+
+    def view(self) -> NDArray[Any]:
+        """A numpy array over the values buffer itself (no copy: it sees every call's values, and writing
+        it fills the buffer the set call reads)."""
+        # memoryview: numpy's stubs take a buffer by its Python type, and a ctypes array is none of those named
+        return np.frombuffer(memoryview(self.values), dtype=self.values._type_)
 
 
 class FmiSelection(Selection):
@@ -74,6 +91,7 @@ class FmiSelection(Selection):
         self.partial_arrays = partial_arrays
         self.plain = False
         self.pick: Callable[[Any], tuple[Any, ...]] | None = None  # fast reader for one numeric group
+        self.structural = False  # FMI 3.0: a structural parameter among the elements (Fmi3Unit.select decides)
 
 
 class FmuState:
@@ -98,6 +116,7 @@ class FmiInstance(Unit):
     _vr_type: Any = ctypes.c_uint
     _prefix = "fmi"  # "fmi2" or "fmi3": names the calls in error messages
     _slave: Any = None
+    _component: Any  # the FMI instance handle (fmi2Component / fmi3Instance), set by Fmi2Unit / Fmi3Unit
 
     def __init__(self, name: str, unit_type: Any):
         self.name = name
@@ -112,7 +131,7 @@ class FmiInstance(Unit):
         # the FMU, since FMI values change only through such calls.  So an output read by a transfer and
         # again by the probe after the same step costs one get call.
         self.generation = 0
-        self._readers: dict[tuple[Any, ...], Callable[[], Sequence[Any]]] = {}
+        self._readers: dict[tuple[Any, ...], Callable[[], Sequence[Any] | NDArray[Any]]] = {}
 
     # Logging and errors ---------------------------------------------------
 
@@ -195,7 +214,7 @@ class FmiInstance(Unit):
         return selection
 
     def get(self, selection: Selection) -> list[Any]:
-        sel: FmiSelection = selection  # type: ignore[assignment]
+        sel: FmiSelection = selection  # type: ignore[assignment]  # the one this unit's select() made
         for group in sel.groups:
             status = group.read()
             if status > 1:  # above fmiWarning
@@ -206,15 +225,15 @@ class FmiInstance(Unit):
             return list(sel.pick(sel.groups[0].values))
         return [self._convert(sel.groups[g], sel.groups[g].values[i], i) for g, i in sel.positions]
 
-    def reader(self, selection: Selection) -> Callable[[], Sequence[Any]]:
-        sel: FmiSelection = selection  # type: ignore[assignment]
+    def reader(self, selection: Selection) -> Callable[[], Sequence[Any] | NDArray[Any]]:
+        sel: FmiSelection = selection  # type: ignore[assignment]  # the one this unit's select() made
         if not sel.plain:
             return lambda: self.get(sel)
         shared = self._readers.get(sel.refs)
         if shared is not None:  # the same elements read elsewhere too (a transfer and the probe): one reader
             return shared
         group = sel.groups[0]
-        read, view, fail = group.read, np.frombuffer(group.values, dtype=group.values._type_), self.fail_status
+        read, view, fail = group.read, group.view(), self.fail_status
         read_at = [-1]  # the generation of the last read
 
         def read_into_view() -> np.ndarray:
@@ -230,11 +249,11 @@ class FmiInstance(Unit):
         return read_into_view
 
     def writer(self, selection: Selection) -> Callable[[Any], None]:
-        sel: FmiSelection = selection  # type: ignore[assignment]
+        sel: FmiSelection = selection  # type: ignore[assignment]  # the one this unit's select() made
         if not sel.plain or getattr(sel, "structural", False) or not self._plain_calls:
             return super().writer(selection)
         group = sel.groups[0]
-        write, view, fail = group.write, np.frombuffer(group.values, dtype=group.values._type_), self.fail_status
+        write, view, fail = group.write, group.view(), self.fail_status
 
         def write_from_array(values: Any) -> None:
             view[:] = values  # into the buffer the set call reads: no list, no per-element conversion
@@ -246,10 +265,11 @@ class FmiInstance(Unit):
         return write_from_array
 
     def set(self, selection: Selection, values: Sequence[Any]) -> None:
-        sel: FmiSelection = selection  # type: ignore[assignment]
+        sel: FmiSelection = selection  # type: ignore[assignment]  # the one this unit's select() made
         self.generation += 1
         if sel.plain:
-            sel.groups[0].values[:] = values
+            # call-overload: ctypes takes any sequence of the right length here; typeshed's stub names only list
+            sel.groups[0].values[:] = values  # type: ignore[call-overload]
         else:
             if sel.partial_arrays:
                 for group in sel.groups:
@@ -360,7 +380,7 @@ class FmiInstance(Unit):
         knowns = (self._vr_type * len(inputs))(*[e.value_reference for e in elements[len(outputs):]])
         seed, sensitivity = (ctypes.c_double * len(inputs))(), (ctypes.c_double * len(outputs))()
         call = self._derivative_call(unknowns, knowns, seed, sensitivity)
-        view = np.frombuffer(sensitivity, dtype=float)
+        view = np.frombuffer(memoryview(sensitivity), dtype=float)
 
         def derivative(values: Sequence[float]) -> np.ndarray:
             seed[:] = list(values)
@@ -378,12 +398,14 @@ class FmiInstance(Unit):
     def allow_restore(self) -> None:
         # doStep's noSetFMUStatePriorToCurrentPoint is true (do_step's default) until a master may restore:
         # then this instance's do_step passes false.  The fixed-step path keeps the plain method.
-        self.do_step = partial(type(self).do_step, self, no_set_prior=0)  # type: ignore[method-assign]
+        # method-assign: an instance attribute shadows the method on purpose, for this instance only
+        self.do_step = partial(type(self).do_step, self, no_set_prior=False)  # type: ignore[method-assign]
 
     def _state_function(self, which: int) -> Callable[..., int]:
         from cosim.units.fmu.fmpy_internals import library
 
-        return getattr(library(self._slave), self._state_calls[which])
+        function: Callable[..., int] = getattr(library(self._slave), self._state_calls[which])
+        return function
 
     # Lifecycle shared by both versions ------------------------------------
 
@@ -403,6 +425,11 @@ class FmiInstance(Unit):
             self._slave.freeInstance()  # also unloads the library (fmpy), so the slave is never reused
 
     # Implemented per FMI version -------------------------------------------
+
+    @abc.abstractmethod
+    def do_step(self, t: float, h: float, no_set_prior: bool = True) -> None:
+        """Unit.do_step; ``no_set_prior`` is doStep's noSetFMUStatePriorToCurrentPoint (False once a master
+        may restore a saved state: :meth:`allow_restore`)."""
 
     def _bind(self, group: TypeGroup) -> tuple[Callable[[], int], Callable[[], int]]:
         """Calls that read / write the group's values from / into the FMU, returning the FMI status."""

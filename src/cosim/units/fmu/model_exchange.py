@@ -43,6 +43,7 @@ from fmpy.fmi3 import FMU3Model
 from cosim.units.fmu.fmi2 import Fmi2Unit
 from cosim.units.fmu.fmi3 import Fmi3Unit
 from cosim.units.fmu.fmpy_internals import with_cached_signatures
+from cosim.units.fmu.instance import FmiInstance
 from cosim.units.protocol import Selection, SimulationEnded, UnitError
 
 MAX_EVENT_ITERATIONS = 100
@@ -160,17 +161,17 @@ class EventLoop:
         while not _reached(self._now, end):
             event_time = self._next_event_time()
             # A time event inside the step, or on its end up to rounding, ends this stretch of integration.
-            time_event_due = event_time is not None and (event_time < end or _close(event_time, end))
-            target = max(min(event_time, end), self._now) if time_event_due else end
+            due = event_time if event_time is not None and (event_time < end or _close(event_time, end)) else None
+            target = max(min(due, end), self._now) if due is not None else end
             if _reached(self._now, target):
                 events_in_place += 1
                 if events_in_place > MAX_EVENT_ITERATIONS:
                     raise UnitError(self.name, f"time stands still: the FMU keeps announcing its next event at "
                                     f"t={event_time!r}, not after the current time", self._now)
             state_event = self._integrate(target) if not _reached(self._now, target) else False
-            time_event = time_event_due and not state_event
-            if time_event:
-                self._set_time(event_time)  # exactly the announced time, whatever rounding did to 'target'
+            time_event = due is not None and not state_event
+            if due is not None and not state_event:
+                self._set_time(due)  # exactly the announced time, whatever rounding did to 'target'
             step_event = self._completed_integrator_step()
             if time_event or state_event or step_event:
                 self.events["time"] += time_event
@@ -261,7 +262,9 @@ class EventLoop:
         return guarded
 
     def _fail_callback(self) -> UnitError:
+        """The UnitError for the exception a solver callback kept (called only when one did)."""
         exc, self._callback_error = self._callback_error, None
+        assert exc is not None, "_fail_callback without a failed callback"
         return self._callback_failure(exc)
 
     # -- the model (see the class docstring) -------------------------------------
@@ -290,12 +293,16 @@ class EventLoop:
     def _read_indicators_into(self, buffer: Any) -> None:
         raise NotImplementedError
 
-    def _callback_failure(self, exc: BaseException | None) -> UnitError:
+    def _callback_failure(self, exc: BaseException) -> UnitError:
         raise NotImplementedError
 
 
-class _ModelExchangeStepping(EventLoop):
+class _ModelExchangeStepping(EventLoop, FmiInstance):
     """One Model Exchange FMU as a unit, FMI 2.0 and 3.0 alike (a mixin before Fmi2Unit/Fmi3Unit).
+
+    It derives from :class:`FmiInstance` (the instance it is a model of: ``_guard``, ``fail``, ``_slave``) so
+    that the type checker knows those; the classes' order is unchanged (``Fmi2ModelExchangeUnit``: this
+    mixin, EventLoop, Fmi2Unit, FmiInstance), so ``super()`` here still reaches Fmi2Unit/Fmi3Unit.
 
     Subclasses provide ``_update_discrete_states()`` (fmpy's 6-tuple) and
     ``_get_derivatives`` (fmpy's name differs between versions).
@@ -306,12 +313,8 @@ class _ModelExchangeStepping(EventLoop):
 
     _plain_calls = False  # its set() and do_step() do more than the FMI calls (see FmiInstance._plain_calls)
 
-    name: str
-    time: float | None
-    _slave: Any
-
     def __init__(self, name: str, unit_type: Any):
-        super().__init__(name, unit_type)  # type: ignore[call-arg]  # Fmi2Unit/Fmi3Unit: the instance, as a model
+        super().__init__(name, unit_type)  # Fmi2Unit/Fmi3Unit: the instance, as a model
         md = unit_type.model_description()
         self._init_loop(unit_type.solver_settings, md.numberOfEventIndicators)
         self._nx = md.numberOfContinuousStates
@@ -323,7 +326,8 @@ class _ModelExchangeStepping(EventLoop):
     # -- lifecycle -----------------------------------------------------------
 
     def setup(self, start_time: float, stop_time: float | None) -> None:
-        super().setup(start_time, stop_time)  # type: ignore[misc]
+        # safe-super: Unit.setup is abstract, but super() is Fmi2Unit/Fmi3Unit here (both define it)
+        super().setup(start_time, stop_time)  # type: ignore[safe-super]
         self._now = start_time
 
     def join(self, group: Any) -> None:
@@ -339,14 +343,14 @@ class _ModelExchangeStepping(EventLoop):
         if self._last_set.get(id(selection)) != (selection, new):
             self._last_set[id(selection)] = (selection, new)
             self._inputs_changed = True
-        super().set(selection, values)  # type: ignore[misc]
+        super().set(selection, values)
 
     def set_within_group(self, selection: Selection, values: Sequence[Any]) -> None:
         """Set inputs as the group integrating this unit does while it evaluates the equations: no restart."""
-        super().set(selection, values)  # type: ignore[misc]
+        super().set(selection, values)
 
     def exit_initialization(self) -> None:
-        super().exit_initialization()  # type: ignore[misc]
+        super().exit_initialization()  # type: ignore[safe-super]  # as in setup: Fmi2Unit/Fmi3Unit define it
         self._event_iteration()  # FMI: the instance is in Event Mode after initialization
         self._enter_continuous_time_mode()
         if self.group is None:
@@ -357,13 +361,14 @@ class _ModelExchangeStepping(EventLoop):
         self._solver = None
         self._next_event = None
         self._last_set.clear()
-        super().reset()  # type: ignore[misc]
+        super().reset()
 
     def terminate(self) -> None:
         self._solver = None  # CVodeFree runs when fmpy's solver object is collected
-        super().terminate()  # type: ignore[misc]
+        super().terminate()
 
-    def do_step(self, t: float, h: float) -> None:
+    def do_step(self, t: float, h: float, no_set_prior: int = 1) -> None:
+        # no_set_prior: FmiInstance's signature; unused, as a Model Exchange unit's state is never restored
         if self.group is not None:
             raise UnitError(self.name, f"do_step on a unit that '{self.group.name}' integrates together with "
                             "others (step the group instead)", t)
@@ -415,8 +420,8 @@ class _ModelExchangeStepping(EventLoop):
     def _read_indicators_into(self, buffer: Any) -> None:
         self._guard("getEventIndicators", lambda: self._slave.getEventIndicators(buffer, self._nz))
 
-    def _callback_failure(self, exc: BaseException | None) -> UnitError:
-        return self.fail("a call during integration", exc)  # type: ignore[attr-defined]
+    def _callback_failure(self, exc: BaseException) -> UnitError:
+        return self.fail("a call during integration", exc)
 
     def _ended(self, call: str) -> SimulationEnded:
         """The FMU asked to end the simulation: the run ends here, cleanly (as for a co-simulation FMU)."""
@@ -455,10 +460,11 @@ class Fmi2ModelExchangeUnit(_ModelExchangeStepping, Fmi2Unit):
             tolerance=self._settings.tolerance, startTime=start_time, stopTime=stop_time))
 
     def _update_discrete_states(self) -> tuple[Any, ...]:
-        return self._slave.newDiscreteStates()
+        return tuple(self._slave.newDiscreteStates())  # fmpy's tuple itself (tuple() of a tuple is no copy)
 
     def _get_derivatives(self) -> Callable[..., Any]:
-        return self._slave.getDerivatives
+        derivatives: Callable[..., Any] = self._slave.getDerivatives
+        return derivatives
 
 
 class Fmi3ModelExchangeUnit(_ModelExchangeStepping, Fmi3Unit):
@@ -473,7 +479,8 @@ class Fmi3ModelExchangeUnit(_ModelExchangeStepping, Fmi3Unit):
             tolerance=self._settings.tolerance, startTime=self._start_time, stopTime=self._stop_time))
 
     def _update_discrete_states(self) -> tuple[Any, ...]:
-        return self._slave.updateDiscreteStates()
+        return tuple(self._slave.updateDiscreteStates())  # as for FMI 2.0: fmpy's tuple itself
 
     def _get_derivatives(self) -> Callable[..., Any]:
-        return self._slave.getContinuousStateDerivatives
+        derivatives: Callable[..., Any] = self._slave.getContinuousStateDerivatives
+        return derivatives

@@ -32,11 +32,11 @@ cannot handle some combination of rows raises :class:`NotBatchable` from
 
 from __future__ import annotations
 
-from typing import Any, ClassVar, Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
-from cosim.units.protocol import ElementRef, Selection, SimulationEnded, UnitDescription, UnitError
+from cosim.units.protocol import ElementRef, SimulationEnded, UnitDescription, UnitError
 from cosim.units.python.unit import PythonUnit, _AttributeSelection
 
 _DTYPES = {"Real": float, "Integer": np.int64, "Boolean": bool}
@@ -56,10 +56,8 @@ class PythonBatchUnit:
     other hooks raise UnitError naming the unit when they raise.
     """
 
-    single_class: ClassVar[type[PythonUnit]]
-
     def __init__(self, single_class: type[PythonUnit], name: str, rows: int):
-        self.single_class = single_class
+        self.single_class: type[PythonUnit] = single_class  # the unit whose K rows this twin runs
         self.name = name
         self.rows = rows
         self.description: UnitDescription = single_class.describe_class()
@@ -86,20 +84,20 @@ class PythonBatchUnit:
 
     # the batch protocol (cosim.execution.lockstep) ------------------------------------
 
-    def select(self, refs: Sequence[ElementRef]) -> Selection:
+    def select(self, refs: Sequence[ElementRef]) -> _AttributeSelection:
         return _AttributeSelection(refs, self._arrays)
 
-    def get(self, selection: Selection) -> np.ndarray:
+    def get(self, selection: _AttributeSelection) -> np.ndarray:
         """The selected elements of every row, (K, n) floats; the array is the selection's own buffer,
         valid until the next ``get`` with the same selection."""
         if self._outputs_stale:
             self._outputs_stale = False
             self._call("compute_outputs", None)
-        out = getattr(selection, "buffer", None)
+        out = selection.buffer
         if out is None or out.shape[0] != self.rows:
-            out = selection.buffer = np.empty((self.rows, len(selection.refs)))  # type: ignore[attr-defined]
+            out = selection.buffer = np.empty((self.rows, len(selection.refs)))
         i = 0
-        for name, part, n in selection.runs:  # type: ignore[attr-defined]
+        for name, part, n in selection.runs:
             if part is None:
                 out[:, i] = getattr(self, name)
                 i += 1
@@ -108,13 +106,13 @@ class PythonBatchUnit:
                 i += n
         return out
 
-    def get_rows(self, selection: Selection, rows: list[int]) -> np.ndarray:
+    def get_rows(self, selection: _AttributeSelection, rows: list[int]) -> np.ndarray:
         """The selected elements of ``rows`` only, (len(rows), n) floats."""
         return self.get(selection)[rows]
 
-    def set(self, selection: Selection, values: np.ndarray) -> None:
+    def set(self, selection: _AttributeSelection, values: np.ndarray) -> None:
         i = 0
-        for name, part, n in selection.runs:  # type: ignore[attr-defined]
+        for name, part, n in selection.runs:
             if part is None:
                 getattr(self, name)[:] = values[:, i]
                 i += 1
@@ -124,10 +122,10 @@ class PythonBatchUnit:
         if self._has_feedthrough:
             self._outputs_stale = True
 
-    def set_row(self, selection: Selection, row: int, values: Sequence[Any]) -> None:
+    def set_row(self, selection: _AttributeSelection, row: int, values: Sequence[Any]) -> None:
         """Set the selected elements of one row (a point's parameters and start values)."""
         i = 0
-        for name, part, n in selection.runs:  # type: ignore[attr-defined]
+        for name, part, n in selection.runs:
             if part is None:
                 getattr(self, name)[row] = values[i]
                 i += 1

@@ -32,6 +32,7 @@ import os
 import pickle
 import sys
 from pathlib import Path
+from types import ModuleType
 from typing import Any, ClassVar, Mapping, Sequence
 
 import numpy as np
@@ -68,6 +69,8 @@ class _AttributeSelection(Selection):
                 runs.append([r.variable, r.offset, r.offset + 1])
         self.runs = tuple((name, None if a is None else slice(a, b), 0 if a is None else b - a)
                           for name, a, b in runs)
+        # a vectorised twin's (K, n) result array for this selection, made at its first get (units/python/batch.py)
+        self.buffer: np.ndarray | None = None
 
 
 class PythonUnit(Unit):
@@ -149,6 +152,7 @@ class PythonUnit(Unit):
             self._outputs_stale = False
             self._call("compute_outputs", None)
         out: list[Any] = []
+        # attr-defined: the protocol hands back the Selection this unit's select() made, an _AttributeSelection
         for name, part, _ in selection.runs:  # type: ignore[attr-defined]
             value = getattr(self, name)
             if part is None:
@@ -159,7 +163,7 @@ class PythonUnit(Unit):
 
     def set(self, selection: Selection, values: Sequence[Any]) -> None:
         i = 0
-        for name, part, n in selection.runs:  # type: ignore[attr-defined]
+        for name, part, n in selection.runs:  # type: ignore[attr-defined]  # as in get: an _AttributeSelection
             if part is None:
                 setattr(self, name, values[i])
                 i += 1
@@ -368,11 +372,13 @@ class PythonUnitType(UnitType):
             if module is None:
                 import_in_child_first(str(path), self.target, self.base_dir, self._source_zip)
                 spec = importlib.util.spec_from_file_location(key, path)
-                module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+                if spec is None or spec.loader is None:  # not for a .py file: importlib finds a loader for it
+                    raise ImportError(f"no Python module loader for {path}")
+                module = importlib.util.module_from_spec(spec)
                 sys.modules[key] = module
                 try:
                     with guarded_import(str(path)):  # sys.exit() or a hang at import: an ImportError
-                        spec.loader.exec_module(module)  # type: ignore[union-attr]
+                        spec.loader.exec_module(module)
                 except BaseException:
                     sys.modules.pop(key, None)  # a half-run module must not be found next time
                     raise
@@ -390,7 +396,7 @@ class PythonUnitType(UnitType):
         self._cls = cls
         return cls
 
-    def _import_module(self, module_name: str):
+    def _import_module(self, module_name: str) -> ModuleType:
         """Import ``module_name``, also looking in its shipped source or the spec's folder (modules beside the spec).
 
         ``models.NAME`` names a built-in unit: it is imported as ``cosim.models.NAME``, the one name under
