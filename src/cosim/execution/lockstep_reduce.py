@@ -34,29 +34,45 @@ def reduce_group(reducer: ObjectiveReducer, times: np.ndarray, data: np.ndarray,
                  ends: np.ndarray) -> list[dict[str, Any]] | None:
     """``reducer.results()`` of each point i, as if loaded with ``times[:ends[i] + 1]`` and
     ``data[:ends[i] + 1, i, :]`` (``data``: samples x rows x all probe columns, ``ends``: per point the index
-    of its last sample); None when this cannot give the same values (module docstring)."""
+    of its last sample); None when this cannot give the same values (module docstring).
+
+    Each reduction reads only the columns of the objectives that use it (numpy reduces every column on its
+    own, so the others do not change its values).
+    """
     objectives = reducer.objectives
-    index = reducer._index
-    kept = len(reducer.columns)
-    if kept < 2 or any(reduce not in GROUP_REDUCTIONS for _, reduce in objectives):
+    if len(reducer.columns) < 2 or any(reduce not in GROUP_REDUCTIONS for _, reduce in objectives):
         return None
+    index = reducer._index
+    kept = np.arange(data.shape[2])[index] if isinstance(index, slice) else np.asarray(index)
     n = len(ends)
     last = int(ends.max())
-    x = data[:last + 1, :n, index]  # samples x points x kept columns
     t = times[:last + 1]
     points = np.arange(n)
     after = (np.arange(last + 1)[:, None] > ends[None, :])[:, :, None]  # samples past each point's end
+    # per reduction: the probe columns it reads, and per objective where its values are among them
+    columns: dict[str, list[int]] = {}
+    where: list[tuple[str, list[int]]] = []
+    for (name, reduce), part in zip(objectives, reducer._slices):
+        mine = columns.setdefault(reduce, [])
+        positions = []
+        for column in kept[part]:
+            if column not in mine:
+                mine.append(int(column))
+            positions.append(mine.index(column))
+        where.append((reduce, positions))
     reduced: dict[str, np.ndarray] = {}
     with np.errstate(divide="ignore", invalid="ignore"):
-        for reduce in dict.fromkeys(r for _, r in objectives):
-            reduced[reduce] = _reduce(reduce, t, x, ends, after, points)
+        for reduce, cols in columns.items():
+            if reduce in ("final", "initial"):  # one sample per point: no copy of the others
+                reduced[reduce] = data[ends if reduce == "final" else 0, points][:, cols]
+            else:
+                reduced[reduce] = _reduce(reduce, t, data[:last + 1, :n, cols], ends, after, points)
     results = []
-    slices = reducer._slices
     for i in range(n):
         out: dict[str, Any] = {}
-        for (name, reduce), part in zip(objectives, slices):
-            values = reduced[reduce][i, part]
-            out[name] = float(values[0]) if len(values) == 1 else values.copy()
+        for (name, _), (reduce, positions) in zip(objectives, where):
+            values = reduced[reduce][i, positions]
+            out[name] = float(values[0]) if len(values) == 1 else values
         results.append(out)
     return results
 
@@ -65,11 +81,7 @@ def _reduce(reduce: str, t: np.ndarray, x: np.ndarray, ends: np.ndarray, after: 
             points: np.ndarray) -> np.ndarray:
     """One reduction of every point: points x kept columns."""
     result: np.ndarray
-    if reduce == "final":
-        result = x[ends, points]
-    elif reduce == "initial":
-        result = x[0]
-    elif reduce in ("max", "time_of_max"):
+    if reduce in ("max", "time_of_max"):
         masked = np.where(after, -np.inf, x)
         result = masked.max(axis=0) if reduce == "max" else t[masked.argmax(axis=0)]
     elif reduce in ("min", "time_of_min"):
