@@ -28,8 +28,9 @@ The view (axes, colour, filters, objectives, weights, ranking method, shortlist,
 address (:mod:`.link`): a page opened with that link starts in the same state.
 
 Every change goes through the Decision, and :meth:`Room.refresh` recomputes what depends on it.  A re-run
-runs in a thread of its own so the server keeps answering; its traces are drawn from the document's next
-tick (bokeh's rule: a document is changed only while its lock is held).
+runs in a child process (:mod:`cosim.analysis.rerun_job`: a timeout and a Cancel button end it), waited for
+by a thread of its own so the server keeps answering; its traces are drawn from the document's next tick
+(bokeh's rule: a document is changed only while its lock is held).
 """
 
 from __future__ import annotations
@@ -45,7 +46,8 @@ from bokeh.models import CustomJS, MultiChoice, Select, TabPanel, Tabs, Toggle
 
 from cosim.analysis.decision import Decision
 from cosim.analysis.ranking import METHODS
-from cosim.analysis.rerun import port_groups, rerun_rows
+from cosim.analysis.rerun import port_groups
+from cosim.analysis.rerun_job import RerunJob, RerunStopped, rerun_timeout
 from cosim.analysis.room import animation as A
 from cosim.analysis.room import data as D
 from cosim.analysis.room import link as L
@@ -163,6 +165,9 @@ class Room:
         self.selected = V.text("<p>No design selected: click points of the cloud or rows of the ranking.</p>",
                                "selected")
         self.rerun_button = V.button("Re-run selected", "rerun", "primary")
+        self.cancel_button = V.button("Cancel the re-run", "rerun-cancel", "warning")
+        self.cancel_button.disabled = True
+        self.rerun_job: RerunJob | None = None  # the re-run going on (in a child process), None when none
         self.rerun_status = V.text("", "rerun-status")
         self.traces = column(name="traces")
         self.viewer = column(name="viewer")  # the 3-D view of the re-run designs (animation.LinkView)
@@ -318,7 +323,8 @@ class Room:
                     column(self.ranking, self.radar_note, self.radar["figure"])), self.shortlist.layout]
 
     def _build_selection(self) -> list:
-        return [self.selected, row(self.rerun_button, self.svg, self.rerun_status), row(self.traces, self.viewer),
+        return [self.selected, row(self.rerun_button, self.cancel_button, self.svg, self.rerun_status),
+                row(self.traces, self.viewer),
                 self.export]
 
     def _build_surrogate(self) -> list:
@@ -371,6 +377,7 @@ class Room:
         self.maximise.on_change("value", self._on_objectives)
         self.method.on_change("value", self._on_method)
         self.rerun_button.on_click(self._on_rerun)
+        self.cancel_button.on_click(self._on_cancel)
         self.svg.on_change("active", lambda attr, old, new: self._draw_runs())
 
     def _on_axis(self, which: str, attr: str, old: Any, new: Any) -> None:
@@ -571,19 +578,32 @@ class Room:
             self.rerun_status.text = "select designs first"
             return
         self.rerun_button.disabled = True
-        self.rerun_status.text = f"re-running {len(rows)} design(s) …"
-        threading.Thread(target=self._rerun, args=(rows,), daemon=True, name="cosim-room-rerun").start()
+        self.cancel_button.disabled = False
+        timeout = rerun_timeout(self.study.table, rows)
+        self.rerun_status.text = f"re-running {len(rows)} design(s) … (stopped after {timeout:.0f} s)"
+        threading.Thread(target=self._rerun, args=(rows, timeout), daemon=True, name="cosim-room-rerun").start()
 
-    def _rerun(self, rows: list[int]) -> None:
-        try:
-            runs = rerun_rows(self.study.table, rows, self.study.spec_path)
+    def _rerun(self, rows: list[int], timeout: float) -> None:
+        try:  # in a child process: a timeout and the Cancel button end it, a hung FMU too (rerun_job)
+            self.rerun_job = job = RerunJob(self.study.table, rows, self.study.spec_path, timeout)
+            runs = job.wait()
             outcome: Any = (runs, *A.motions(runs))  # the link frames here: not in the server's loop
-        except Exception as exc:  # a bad spec or value is shown in the page, never a dead server
+        except Exception as exc:  # a bad spec or value, a timeout, a cancel: shown in the page, never a dead server
             outcome = exc
         self.doc.add_next_tick_callback(partial(self._show_runs, outcome))
 
+    def _on_cancel(self) -> None:
+        if self.rerun_job is not None:
+            self.rerun_status.text = "cancelling the re-run …"
+            self.rerun_job.cancel()  # its wait() ends, and _show_runs says so
+
     def _show_runs(self, outcome: Any) -> None:
         self.rerun_button.disabled = False
+        self.cancel_button.disabled = True
+        self.rerun_job = None
+        if isinstance(outcome, RerunStopped):
+            self.rerun_status.text = f"<span style='color:#a40000'>re-run {html.escape(str(outcome))}</span>"
+            return
         if isinstance(outcome, Exception):
             first = str(outcome).splitlines()[0] if str(outcome) else repr(outcome)
             self.rerun_status.text = f"<span style='color:#a40000'>re-run failed: {html.escape(first)}</span>"

@@ -5,8 +5,8 @@
   *Clear shortlist* (``clear-shortlist``) empties it.
 - ``shortlist``: a table with a row per design parameter and per objective (named with its unit) and a column
   per pinned design (its id as the title): the designs side by side.
-- *Re-run shortlist* (``rerun-shortlist``) re-runs the pinned designs (at most :data:`MAX_RERUN`) in a thread
-  of the server, with the spec's recorded signals, and overlays their traces, one plot per port
+- *Re-run shortlist* (``rerun-shortlist``) re-runs the pinned designs (at most :data:`MAX_RERUN`) in a child
+  process of the server, stopped at its timeout (:mod:`cosim.analysis.rerun_job`), with the spec's recorded signals, and overlays their traces, one plot per port
   (``shortlist-trace:<port>``), a colour per design (its elements in that colour's family:
   :func:`.views.element_style`).
 
@@ -26,7 +26,8 @@ from bokeh.layouts import column, row
 from bokeh.models import ColumnDataSource, DataTable, NumberFormatter, TableColumn
 
 from cosim.analysis.decision import Decision
-from cosim.analysis.rerun import port_groups, rerun_rows
+from cosim.analysis.rerun import port_groups
+from cosim.analysis.rerun_job import RerunJob
 from cosim.analysis.room import data as D
 from cosim.analysis.room import views as V
 
@@ -134,8 +135,9 @@ class Shortlist:
 
     def _rerun(self, rows: list[int]) -> None:
         try:
-            outcome: Any = rerun_rows(self.study.table, rows, self.study.spec_path)
-        except Exception as exc:  # a bad spec or value is shown in the page, never a dead server
+            # in a child process, stopped at its timeout (cosim.analysis.rerun_job): a hung design never keeps it
+            outcome: Any = RerunJob(self.study.table, rows, self.study.spec_path).wait()
+        except Exception as exc:  # a bad spec or value, a timeout: shown in the page, never a dead server
             outcome = exc
         self.doc.add_next_tick_callback(partial(self._show_runs, outcome))
 
