@@ -204,7 +204,8 @@ class PointStream:
         ClusterError when the workers are gone for good, and KeyboardInterrupt on a stop, after handing
         over the rows that were on their way (module docstring).
         """
-        self._on_rows, self._handing = on_rows, []
+        self._on_rows = on_rows
+        self._handing: list[tuple[Point, PointRow]] = []
         try:
             self._loop(iter(points), sizer, total)
         except KeyboardInterrupt:
@@ -282,7 +283,8 @@ class PointStream:
     def _streamed(self, message: Any) -> tuple[_Task | None, list[tuple[Point, PointRow]]]:
         """The task in flight that sent ``message`` (``{"key": task key, "rows": pickled PointRows}``) and its
         rows not yet handed over; (None, []) for a task that has ended (its result brought the rows)."""
-        task = self._in_flight.get(message.get("key")) if isinstance(message, dict) else None
+        key = message.get("key") if isinstance(message, dict) else None
+        task = self._in_flight.get(key) if isinstance(key, str) else None  # task keys are str
         if task is None:
             return None, []
         return task, self._unhanded(task, pickle.loads(message["rows"]))

@@ -51,7 +51,7 @@ def _end_resource_tracker(timeout: float = 2.0) -> None:
 
     tracker = getattr(resource_tracker, "_resource_tracker", None)
     fd, pid = getattr(tracker, "_fd", None), getattr(tracker, "_pid", None)
-    if not isinstance(fd, int) or not isinstance(pid, int):
+    if tracker is None or not isinstance(fd, int) or not isinstance(pid, int):
         return  # never started here, or not the layout known
     try:
         os.close(fd)

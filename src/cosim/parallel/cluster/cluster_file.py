@@ -95,6 +95,7 @@ def read_cluster_file(path: str | Path) -> ClusterFile:
                                 "make minimum <= maximum"))
     if problems:
         raise ClusterFileError(problems)
+    assert isinstance(type_, str)  # anything else is one of the problems raised above
     return ClusterFile(file, type_, dict(kwargs), scale, adapt)
 
 

@@ -15,13 +15,16 @@ import threading
 import time
 from multiprocessing.connection import Connection
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Iterator
 
 from cosim.parallel.isolation.limits import limit_memory, recycle_reason
 from cosim.parallel.isolation.payload import load_payload, named_for_the_user
 from cosim.parallel.isolation.point_runner import PointRunner
 from cosim.units.python import import_guard
 from cosim.util.limits import limit
+
+if TYPE_CHECKING:  # a type only: the child imports what it runs when it runs it
+    from cosim.execution.point_row import PointRow
 
 
 def _remove_own_folder() -> None:
@@ -80,7 +83,7 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
                 return
             if kind == "prune":  # one by one, each with the front that came with the batch (cosim.studies.pruning)
                 points, order = points
-                rows = (runner.run(point_id, values, prune=order) for point_id, values in points)
+                rows: Iterator[PointRow] = (runner.run(point_id, values, prune=order) for point_id, values in points)
             elif kind == "run":  # lock-step groups where the system allows (cosim.execution.lockstep)
                 from cosim.execution.lockstep import LockstepRunner
 

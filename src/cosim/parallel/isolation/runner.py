@@ -76,18 +76,24 @@ class IsolatedRunner:
         self._loading: str | None = None  # a spare child's: the key of the payload sent to it ahead of its runner
         self.cut_by_stop: set[str] = set()  # points of the last run() ended by a stop (see run)
 
+    def _pipes(self) -> tuple[Connection, Channel]:
+        """The started child's pipe to it and channel from it (set by _spawn or a taken spare, before any use)."""
+        assert self._outbox is not None and self._channel is not None, "no child started"
+        return self._outbox, self._channel
+
     def _start(self) -> str | None:
         """Start a child (or take a spare one) and load the payload; None when ready, else why it failed."""
         limits = self.payload.get("limits", {})
         loading = self._adopt_spare(limits)  # None: no spare; else whether it is loading this payload already
         if loading is None:
             self._spawn(limits)
+        outbox, channel = self._pipes()
         if not loading:
             try:
-                self._outbox.send(("load", self.payload))
+                outbox.send(("load", self.payload))
             except OSError:
                 pass  # the child is already gone: the channel says so below
-        message = self._channel.get(LOAD_TIMEOUT)
+        message = channel.get(LOAD_TIMEOUT)
         if message is None:
             self.close(force=True)
             return f"the worker's child process did not load the system within {LOAD_TIMEOUT:g} s"
@@ -201,8 +207,9 @@ class IsolatedRunner:
             if made_here and STOPPING.is_set():  # a stop killed the child or ended the batch: not finished
                 self.cut_by_stop.update(row.point_id for row in new)
                 return
-            for row in new if on_row is not None else ():
-                on_row(row)
+            if on_row is not None:
+                for row in new:
+                    on_row(row)
 
         remaining = list(points)
         mode = "run"  # after a crash or timeout the rest runs one point at a time (no lock-step groups)
@@ -221,8 +228,9 @@ class IsolatedRunner:
                     keep(*(row_without_result(pid, "failed", problem, time.perf_counter()) for pid, _ in remaining),
                          made_here=True)
                     break
+            outbox, channel = self._pipes()
             try:
-                self._outbox.send((mode, (remaining, prune) if mode == "prune" else remaining))
+                outbox.send((mode, (remaining, prune) if mode == "prune" else remaining))
             except OSError:
                 self.close()
                 continue
@@ -230,7 +238,7 @@ class IsolatedRunner:
             while done < len(remaining):
                 point_id = remaining[done][0]
                 started = time.perf_counter()
-                received = self._channel.get(deadline)
+                received = channel.get(deadline)
                 if received is None:
                     self.close(force=True)
                     mode = "prune" if prune is not None else "run_each"
@@ -286,11 +294,12 @@ class IsolatedRunner:
             if problem is not None:
                 self.close()
                 return None, problem
+        outbox, channel = self._pipes()
         try:
-            self._outbox.send(("warm", None))
+            outbox.send(("warm", None))
         except OSError:
             pass  # gone: the channel says so below
-        received = self._channel.get(timeout)
+        received = channel.get(timeout)
         if received is None:
             self.close(force=True)
             return None, f"it did not finish within {timeout:g} s ({timeout_from}); it was stopped"
