@@ -11,10 +11,14 @@ import os
 import pickle
 import socket
 import threading
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 from cosim.execution.point_row import PointRow
 from cosim.parallel.isolation.runner import IsolatedRunner
+
+if TYPE_CHECKING:  # types only: distributed is imported on a worker, when a task runs there
+    from dask.typing import Key
+    from distributed import Worker
 
 _IDLE: dict[str, list[IsolatedRunner]] = {}
 _IDLE_LOCK = threading.Lock()
@@ -43,11 +47,12 @@ class PointBatch:
     @property
     def points(self) -> Sequence[tuple[str, dict[str, Any]]]:
         if self._points is None:
+            assert self._pickled is not None  # one of the two is always kept
             self._points, self._pickled = pickle.loads(self._pickled), None
         return self._points
 
     def __reduce__(self) -> tuple[Any, tuple[bytes]]:
-        pickled = self._pickled if self._pickled is not None else pickle.dumps(list(self._points), protocol=5)
+        pickled = self._pickled if self._pickled is not None else pickle.dumps(list(self.points), protocol=5)
         return _point_batch, (pickled,)
 
 
@@ -123,7 +128,8 @@ class RowSender:
     """
 
     def __init__(self, topic: str | None, worker_name: str):
-        self._worker = self._key = None
+        self._worker: Worker | None = None
+        self._key: Key | None = None
         if topic:
             try:
                 from distributed import get_worker
@@ -155,8 +161,11 @@ class RowSender:
             rows, self._pending = self._pending, []
             if self._closed or not rows:
                 return
+        worker, topic = self._worker, self.topic
+        if worker is None or topic is None:  # never: a worker is kept only with a topic, and row() needs one
+            return
         try:
-            self._worker.log_event(self.topic, {"key": self._key, "rows": pickle.dumps(rows, protocol=5)})
+            worker.log_event(topic, {"key": self._key, "rows": pickle.dumps(rows, protocol=5)})
         except Exception:  # a closing worker: the task's result, or its rerun, brings the rows
             pass
 

@@ -49,6 +49,9 @@ from tornado import web
 from cosim.parallel.cluster.interrupts import scheduler_gone
 
 if TYPE_CHECKING:  # only named: this module is sent to the scheduler by value, needing nothing of cosim there
+    from dask.typing import Key
+    from distributed import Worker
+
     from cosim.execution.point_row import PointRow
 
 TOPIC = "cosim-points"
@@ -80,6 +83,8 @@ class BatchProgress:
         self.done = self.failed = 0
         self._sent_at = time.monotonic()
         self._flush_pending = self._closed = False
+        self._worker: Worker | None = None
+        self._key: Key | None = None
         try:
             from distributed import get_worker
 
@@ -117,8 +122,11 @@ class BatchProgress:
 
     def _send(self) -> None:
         self._sent_at = time.monotonic()
+        worker = self._worker
+        if worker is None:  # never: row() and close() send only with a worker
+            return
         try:
-            self._worker.log_event(TOPIC, {"key": self._key, "done": self.done, "failed": self.failed})
+            worker.log_event(TOPIC, {"key": self._key, "done": self.done, "failed": self.failed})
         except Exception:  # a closing worker: the counts are the page's only, never the point's business
             pass
 
@@ -156,16 +164,17 @@ class PointsPlugin(SchedulerPlugin):
         if msg.get("op") == "start":
             self._start(msg)
         elif msg.get("op") == "end":
-            study = self.studies.get(msg.get("study"))
+            name = msg.get("study")
+            study = self.studies.get(name) if isinstance(name, str) else None  # study ids are str
             if study is not None:
                 study.update(state=str(msg.get("state", "ended")), ended=time.time())
         elif "key" in msg:
-            study = study_of(msg["key"])
-            if study in self.tasks:
-                self.tasks[study][msg["key"]] = (int(msg.get("done", 0)), int(msg.get("failed", 0)))
+            study_id = study_of(msg["key"])
+            if study_id is not None and study_id in self.tasks:
+                self.tasks[study_id][msg["key"]] = (int(msg.get("done", 0)), int(msg.get("failed", 0)))
                 if not msg.get("final"):  # final: rows the client made for a task lost with its workers
-                    self.running[study].add(msg["key"])
-                self._note_progress(study)
+                    self.running[study_id].add(msg["key"])
+                self._note_progress(study_id)
 
     def _start(self, msg: dict[str, Any]) -> None:
         study = str(msg.get("study"))
