@@ -23,6 +23,17 @@ def _subcommands() -> dict[str, argparse.ArgumentParser]:
     return dict(action.choices)
 
 
+def _written_by_examples() -> set[str]:
+    """The files the examples' ``-o`` options write (export's SSP, export-fmu's FMU)."""
+    written = set()
+    for examples in EXAMPLES.values():
+        for example, _why in examples:
+            argv = shlex.split(example)
+            if "-o" in argv:
+                written.add(argv[argv.index("-o") + 1])
+    return written
+
+
 def test_every_subcommand_has_examples():
     assert set(_subcommands()) == set(EXAMPLES)
 
@@ -49,6 +60,10 @@ def test_help_ends_with_examples_the_parser_accepts(command):
                 assert value in names, (example, value)
         for name, _sense in getattr(args, "objectives", None) or []:
             assert name in names, (example, name)
+        if command == "new":  # its spec is the file it writes; what it reads is there, or another example writes it
+            assert args.spec.startswith("results/") and not (REPO / args.spec).exists(), example
+            assert (REPO / args.source).exists() or args.source in _written_by_examples(), (example, args.source)
+            continue
         for path in (getattr(args, "spec", None), getattr(args, "target", None)):
             if path and not path.startswith("builtin:"):
                 assert (REPO / path).exists(), (example, path)

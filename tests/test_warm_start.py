@@ -229,8 +229,8 @@ def test_a_study_names_the_unit_that_cannot_save_its_state_from_the_warm_up_chil
 
 
 def test_a_hanging_warm_up_obeys_the_study_timeout(tmp_path):
-    """The `fault` FMU hangs at t >= 0.5 inside the warm-up to t = 1: the study's --timeout (here 3 s) stops it;
-    before, only COSIM_TIMEOUT_FIRST (600 s) did, whatever --timeout said."""
+    """The `fault` FMU hangs at t >= 0.5 inside the warm-up to t = 1: the study's timeout (--timeout; here 3 s)
+    stops it; before, only COSIM_TIMEOUT_FIRST (600 s) did. The library names no command-line option."""
     import time
 
     from cosim.parallel.isolation.payload import make_payload
@@ -243,7 +243,7 @@ def test_a_hanging_warm_up_obeys_the_study_timeout(tmp_path):
         make_payload(system, timeout=3.0)
     [problem] = info.value.problems
     assert problem.path == "$.experiment.warm_start", problem
-    assert "the warm-up run to t=1 failed: it did not finish within 3 s (--timeout); it was stopped" in problem.message
+    assert "the warm-up run to t=1 failed: it did not finish within 3 s (the study's timeout); it was stopped" in problem.message
     assert time.monotonic() - began < 120  # the child load and the 3 s, not 600 s
 
 

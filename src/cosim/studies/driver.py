@@ -21,6 +21,7 @@ import json
 import platform
 import socket
 import sys
+import time
 from contextlib import contextmanager
 from datetime import datetime, timezone
 from importlib import metadata as importlib_metadata
@@ -132,7 +133,7 @@ def results_writes(out: Path, words: Mapping[str, str] = PYTHON_WORDS) -> Iterat
             except OSError:
                 pass
         reason = exc.strerror or str(exc) or type(exc).__name__
-        if exc.errno == errno.ENOENT and not out.is_dir():  # removed (rm -rf) while the study wrote into it
+        if exc.errno == errno.ENOENT and _removed(out):  # removed (rm -rf) while the study wrote into it
             raise OutputError(f"cannot write the results into {out}: the folder was removed while cosim wrote "
                               f"into it ({reason}); the rows it held are gone", file=str(out),
                               fix=f"run it again without {words['resume']}, into a folder nothing else "
@@ -144,6 +145,21 @@ def results_writes(out: Path, words: Mapping[str, str] = PYTHON_WORDS) -> Iterat
             fix = ("free space on that filesystem or make the folder writable, or choose another "
                    f"{words['out']}; then run {words['again']} again")
         raise OutputError(f"cannot write the results into {out}: {reason}", file=str(out), fix=fix) from None
+
+
+def _removed(out: Path, settle: float = 1.0) -> bool:
+    """Whether the results folder was removed (or emptied) under the study, after a write in it found no file.
+
+    ``rm -rf`` removes a folder's files before the folder itself, so a write can fail while the folder is still
+    there: it is watched for up to ``settle`` seconds. A folder left without both its parts and its metadata
+    was emptied by someone: its rows are gone as well."""
+    deadline = time.monotonic() + settle
+    while True:
+        if not out.is_dir() or not ((out / "parts").exists() or (out / "metadata.json").exists()):
+            return True
+        if time.monotonic() >= deadline:
+            return False
+        time.sleep(0.05)
 
 
 def _holds_rows(out: Path) -> bool:

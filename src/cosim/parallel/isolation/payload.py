@@ -71,7 +71,7 @@ def warm_up_isolated(payload: dict[str, Any], system: Any, timeout: float | None
     runner = IsolatedRunner(payload)
     try:
         state, why = runner.warm_up(float(limit("timeout_first_seconds")) if timeout is None else timeout,
-                                    "--timeout" if timeout is not None else "COSIM_TIMEOUT_FIRST")
+                                    "the study's timeout" if timeout is not None else "COSIM_TIMEOUT_FIRST")
     finally:
         runner.close()
     if state is None:
