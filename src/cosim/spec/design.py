@@ -428,8 +428,6 @@ class DesignSpace:
         if self._samples is not None or not self._dims:
             return self.spread(n)
         sizes = [len(d) for d in self._dims]
-        # a centred Latin hypercube of value indices: the k-th stratum of an axis of m values is the value at
-        # (k + 1/2) m / n, so every value is taken when m <= n; the strata are paired across axes at random
         cells = self._latin_cells(n, sizes, seed)
         if self.constraint is not None:
             return self._nearest_accepted(cells, sizes)
