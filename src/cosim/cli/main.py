@@ -74,6 +74,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             if argv is None:  # cosim is the program, and it ends now
                 _end_at_once_on_signals()
                 _skip_final_collections()
+                _forget_caught_keyboard_interrupts()
             else:
                 restore_signals(previous)  # main() may be called from a program with handlers of its own
     except KeyboardInterrupt:
@@ -83,6 +84,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         _say_interrupted()
         if argv is None:
             _end_at_once_on_signals()
+            _forget_caught_keyboard_interrupts()
         return _exit_interrupted()
 
 
@@ -160,6 +162,25 @@ def _end_at_once_on_signals() -> None:
     for name in ("SIGINT", "SIGTERM", "SIGHUP"):
         if hasattr(signal, name):
             signal.signal(getattr(signal, name), end)
+
+
+def _forget_caught_keyboard_interrupts() -> None:
+    """The command is done and its process ends: the exit code is the one main() returns, also after a stop.
+
+    CPython marks a KeyboardInterrupt "unhandled" when it ends code run by ``eval`` or ``exec`` of a string
+    (``run_eval_code_obj``), even when a caller catches it later; at exit a process run as ``python -m`` (as
+    ``python -m cosim.cli.main`` is) then ends itself by SIGINT (bpo-1054041), whatever exit code it gave.  A stop that came while a module built a
+    namedtuple or a dataclass (both ``eval``/``exec`` strings) ended as exit -2 after "cosim: interrupted"
+    (6 of 80 SIGTERMs 0.1-0.7 s after the start, 2026-12-07; tests/test_stop_races.py in CI).  cosim handles
+    every KeyboardInterrupt itself, so the mark is cleared.  The mark is CPython 3.11's exported
+    ``_Py_UnhandledKeyboardInterrupt``; where the interpreter has no such symbol this does nothing.
+    """
+    import ctypes
+
+    try:
+        ctypes.c_int.in_dll(ctypes.pythonapi, "_Py_UnhandledKeyboardInterrupt").value = 0
+    except (AttributeError, ValueError, OSError):  # another interpreter, or another CPython's layout
+        pass
 
 
 def _skip_final_collections() -> None:
