@@ -49,6 +49,14 @@ def assignment(unit: SystemUnit, port: str, value: Any, field_name: str | None, 
         problems.append(Problem(file, path, f"'{port}' of unit '{unit.name}' is a {var.causality}",
                                 "set it under 'parameters' instead of 'start'"))
         return None
+    if field_name == "start" and var.causality in ("output", "local") and var.initial == "calculated":
+        # FMI: a variable the unit calculates (initial="calculated") has no start value an environment may set;
+        # the FMU refused it only at run time, after the spec had passed validate
+        problems.append(Problem(file, path, f"'{port}' of unit '{unit.name}' is {article(var.causality)}"
+                                            f"{_calculated(var)}: FMI initial=\"calculated\"",
+                                "remove it from 'start'; set the parameter, input or state it is calculated "
+                                "from instead ('cosim inspect' lists them)"))
+        return None
     if field_name is None and var.causality not in SETTABLE_AS_PARAMETER + ("input",) and not has_start(var):
         problems.append(Problem(file, path, f"'{port}' of unit '{unit.name}' is {article(var.causality)}"
                                             f"{_calculated(var)}; only parameters, inputs and start values the "
