@@ -61,7 +61,7 @@ import time
 from contextlib import ExitStack
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence, TextIO
+from typing import TYPE_CHECKING, Any, Mapping, Sequence, TextIO
 
 import numpy as np
 
@@ -70,7 +70,7 @@ from cosim.errors import OptimizeError, Problem, SpecError
 from cosim.execution.point_row import PointRow
 from cosim.studies.driver import now_utc, package_versions, results_writes
 from cosim.studies.options import How, Show, Stop, Where, split_options
-from cosim.studies.optuna_storage import default_study_name, open_storage_study, shown_url
+from cosim.studies.optuna_storage import Direction, default_study_name, open_storage_study, shown_url
 from cosim.studies.progress import StatusLine
 from cosim.studies.pruning import PRUNED, FrontKeeper, prune_settings, pruned_columns
 from cosim.studies.runner import Study, metadata_of
@@ -78,8 +78,13 @@ from cosim.studies.sampler_names import SAMPLERS
 from cosim.studies.storage_lock import locked_storage
 from cosim.util import limits
 
+if TYPE_CHECKING:  # optuna is imported where it is used: `import cosim.studies.optimize` stays cheap
+    from optuna.distributions import BaseDistribution
+
 DEFAULT_BUDGET = 200
 DEFAULT_BATCH = {"nsga2": 20}  # a generation of NSGA-II is one batch; the others ask 8 at a time
+# a told evaluation: (its objective values, its constraint violations, <= 0 where met)
+Outcome = tuple[list[float], list[float]]
 MAX_ENUMERATED = 200_000  # a discrete space up to this size is listed to find the designs not yet evaluated
 _ELEMENT = re.compile(r"^(.*)\[(\d+)\]$")
 
@@ -91,7 +96,7 @@ _ELEMENT = re.compile(r"^(.*)\[(\d+)\]$")
 class OptimizeSettings:
     """What to optimise and how: from the spec's ``optimize`` section, overridden by the command line."""
 
-    objectives: dict[str, str]  # column -> 'minimize' | 'maximize'
+    objectives: dict[str, Direction]  # column -> its sense
     constraints: list[str] = field(default_factory=list)
     sampler: str = "tpe"
     budget: int = DEFAULT_BUDGET
@@ -235,11 +240,11 @@ def scope_of(columns: Mapping[str, Any]) -> dict[str, Any]:
 # -- Optuna -------------------------------------------------------------------------
 
 
-def distributions(space: Any) -> dict[str, Any]:
+def distributions(space: Any) -> dict[str, BaseDistribution]:
     """One Optuna distribution per dimension of ``space`` (a DesignSpace), keyed by flat name."""
     from optuna.distributions import CategoricalDistribution, FloatDistribution, IntDistribution
 
-    out = {}
+    out: dict[str, BaseDistribution] = {}
     for name, dim in space.dimensions:
         if dim.lo is None:  # a value list or a boolean
             scalar = all(v is None or isinstance(v, (bool, int, float, str)) for v in dim.values)
@@ -361,11 +366,12 @@ class Optimiser:
                  study_name: str | None = None):
         self.given = {"sampler": sampler, "batch": batch, "seed": seed, "objectives": objectives}
         self.storage, self._study_name = storage, study_name
-        self._outcomes: dict[tuple, tuple] = {}  # (point id, status) -> _outcome: each row is read once
+        self._outcomes: dict[tuple[Any, Any], Outcome | None] = {}  # (point id, status) -> _outcome: each row read once
         self.stop_reason: str | None = None  # why the run ended before its budget (None: the budget was spent)
         self.sampler: Any = None  # the Optuna sampler, once the run started
         self.sampler_seconds = 0.0  # time spent in the sampler's ask, over the whole run
         self.trials_asked = 0
+        self._storage_lock: ExitStack | None = None  # held from start to release_storage when there is a storage
 
     def system(self, spec_path: str | Path) -> Any:
         from cosim.system.validate import check_spec
@@ -391,6 +397,7 @@ class Optimiser:
         self.settings = OptimizeSettings.from_spec(self.spec, **given)
         if self.settings.seed is None:  # a resume must replay the same proposals: the seed is chosen and kept
             self.settings.seed = random.SystemRandom().randrange(2**31)
+        self.seed: int = self.settings.seed
         self.constraints = output_constraints(self.spec, self.space, self.settings.constraints)
         self.prune = prune_settings(study.system, list(self.settings.objectives.items()),
                                     self.settings.constraints) if study.how.prune else None
@@ -408,7 +415,7 @@ class Optimiser:
         self.stored = {r["point_id"]: r for r in self.store.read().to_dict("records")} if study.where.resume else {}
         s = self.settings
         self.dists = distributions(self.space)
-        self.sampler = sampler = make_sampler(s.sampler, s.seed, s.batch, self.dists)
+        self.sampler = sampler = make_sampler(s.sampler, self.seed, s.batch, self.dists)
         if self.storage:
             # the study is this run's while it writes (cosim.studies.storage_lock): released by release_storage
             self._storage_lock = ExitStack()
@@ -423,7 +430,7 @@ class Optimiser:
 
     def release_storage(self) -> None:
         """Release the storage study's lock taken by :meth:`start` (nothing when none)."""
-        lock, self._storage_lock = getattr(self, "_storage_lock", None), None
+        lock, self._storage_lock = self._storage_lock, None
         if lock is not None:
             lock.close()
 
@@ -456,49 +463,56 @@ class Optimiser:
     def _table_row(self, values: dict[str, Any], row: PointRow, trial: int, batch: int) -> dict[str, Any]:
         out: dict[str, Any] = {"point_id": row.point_id, **self.space.columns(values), **row.objectives,
                                "trial": trial, "batch": batch, "sampler": self._sampler_label}
-        values, violations = self._outcome({**out, "status": row.status})  # as before the tail is added
-        out["feasible"] = values is not None and all(v <= 0 for v in violations)
+        outcome = self._outcome({**out, "status": row.status})  # as before the tail is added
+        out["feasible"] = outcome is not None and all(v <= 0 for v in outcome[1])
         if self.prune is not None:
             out.update(pruned_columns(row))
         out.update(row.tail())
         return out
 
-    def _outcome(self, row: Mapping[str, Any]) -> tuple[list[float] | None, list[float] | None]:
-        """(objective values, constraint violations) of a table row; (None, None) when it cannot be told."""
+    def _outcome(self, row: Mapping[str, Any]) -> Outcome | None:
+        """(objective values, constraint violations) of a table row; None when it cannot be told."""
         key = (row.get("point_id"), row.get("status"))
         if key not in self._outcomes:
             self._outcomes[key] = self._compute_outcome(row)
         return self._outcomes[key]
 
-    def _compute_outcome(self, row: Mapping[str, Any]) -> tuple[list[float] | None, list[float] | None]:
+    def _compute_outcome(self, row: Mapping[str, Any]) -> Outcome | None:
         if row.get("status") != "ok":
-            return None, None
-        values = [row.get(name) for name in self.settings.objectives]
-        if any(v is None or not np.isfinite(float(v)) for v in values):
-            return None, None
+            return None
+        values: list[float] = []
+        for name in self.settings.objectives:
+            value = row.get(name)
+            if value is None or not np.isfinite(float(value)):
+                return None
+            values.append(float(value))
         scope = scope_of(row)
         violations = [c.violation(scope) for c in self.constraints]
         violations = [v if np.isfinite(v) else 1.0 for v in violations]  # cannot be evaluated: infeasible
-        return [float(v) for v in values], violations
+        return values, violations
 
     def _tell(self, study: Any, trial: Any, row: Mapping[str, Any] | None) -> None:
         from optuna.trial import TrialState
 
-        values, violations = self._outcome(row) if row is not None else (None, None)
-        if row is not None:  # which row of the table the trial is, in an Optuna storage's tools
-            trial.set_user_attr("point_id", row.get("point_id"))
-            trial.set_user_attr("status", row.get("status"))
-        if row is not None and row.get("status") == PRUNED:
+        if row is None:  # no row: the evaluation failed
+            study.tell(trial, state=TrialState.FAIL)
+            return
+        outcome = self._outcome(row)
+        # which row of the table the trial is, in an Optuna storage's tools
+        trial.set_user_attr("point_id", row.get("point_id"))
+        trial.set_user_attr("status", row.get("status"))
+        if row.get("status") == PRUNED:
             # Proven dominated, with no final values: Optuna's multi-objective samplers take a PRUNED trial without
             # values (NSGA-II and GP leave it out of their populations like a failed one; TPE ranks it below every
             # complete trial). Its bounds are optimistic, so telling them as values would mislead the sampler.
             study.tell(trial, state=TrialState.PRUNED)
             return
-        if self.keeper is not None and values is not None:
-            self.keeper.add(str(row.get("point_id")), row)  # type: ignore[union-attr]
-        if values is None:
+        if self.keeper is not None and outcome is not None:
+            self.keeper.add(str(row.get("point_id")), row)
+        if outcome is None:
             study.tell(trial, state=TrialState.FAIL)
             return
+        values, violations = outcome
         for constraint, violation in zip(self.constraints, violations):
             trial.set_constraint(constraint.text, violation)
         study.tell(trial, values)
@@ -519,7 +533,7 @@ class Optimiser:
                 break
             wanted = min(s.batch, s.budget - len(rows))
             if queue is not None:
-                picked = []
+                picked: list[dict[str, Any]] = []
                 while queue and len(picked) < wanted:
                     params = queue.pop()  # stored rows added meanwhile (see _absorb) are not asked again
                     if self.space.point_id(design_values(self.space, params)) not in rows:
@@ -602,8 +616,7 @@ class Optimiser:
         study.sampler = optuna.samplers.RandomSampler(seed=s.seed)
         self._sampler_label = "random"
         choices = finite_choices(dists)
-        size = math.prod(len(c) for c in choices.values()) if choices is not None else None
-        if size is None or size > MAX_ENUMERATED:
+        if choices is None or math.prod(len(c) for c in choices.values()) > MAX_ENUMERATED:
             self._say(f"batch {batch_index} brought no design not yet evaluated ({s.sampler} proposes designs "
                       f"already evaluated): going on with random designs")
             return None
@@ -633,7 +646,8 @@ class Optimiser:
                   "evaluations are added as they are (the rest differs from an uninterrupted run)")
         for pid in sorted(unreplayed, key=lambda p: stored[p].get("trial", 0)):
             row = stored[pid]
-            values, violations = self._outcome(row)
+            outcome = self._outcome(row)
+            values, violations = outcome if outcome is not None else (None, [])
             params = {name: row[name] for name in dists if name in row}
             if len(params) != len(dists):
                 continue  # a row without all dimensions (another design space): nothing to tell
@@ -641,7 +655,7 @@ class Optimiser:
             if row.get("status") == PRUNED:
                 state = optuna.trial.TrialState.PRUNED
             trial = optuna.trial.create_trial(params=params, distributions=dists, values=values, state=state)
-            for constraint, violation in zip(self.constraints, violations or []):
+            for constraint, violation in zip(self.constraints, violations):
                 trial.set_constraint(constraint.text, violation)
             study.add_trial(trial)
             rows[pid] = row
@@ -655,7 +669,7 @@ class Optimiser:
         not_ok = sum(r.get("status") != "ok" for r in rows.values())
         ordered = sorted(rows.values(), key=lambda r: r.get("trial", 0))
         good = [self._outcome(r) for r in ordered]
-        kept = [(v, r.get("batch", 0)) for (v, c), r in zip(good, ordered) if v is not None and all(x <= 0 for x in c)]
+        kept = [(o[0], r.get("batch", 0)) for o, r in zip(good, ordered) if o is not None and all(x <= 0 for x in o[1])]
         if not kept:
             return not_ok, 0, 0.0
         values = np.array([v for v, _ in kept], dtype=float)

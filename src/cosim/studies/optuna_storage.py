@@ -14,10 +14,12 @@ from __future__ import annotations
 import time
 import warnings
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Literal, Mapping, Sequence
 
 from cosim.errors import OptimizeError
 from cosim.studies.options import PYTHON_WORDS
+
+Direction = Literal["minimize", "maximize"]  # an objective's sense, as the spec's schema allows it and Optuna takes it
 
 STORAGE_FIX = ("give a database URL Optuna can open, e.g. sqlite:///study.db (a file beside you) or "
                "postgresql://user@host/db, and check that its folder exists")
@@ -76,7 +78,7 @@ def _concurrent(exc: Exception) -> bool:
         sign in text for sign in ("UNIQUE constraint failed", "already exists", "database is locked"))
 
 
-def open_storage_study(url: str, name: str, directions: Sequence[str], metric_names: Sequence[str],
+def open_storage_study(url: str, name: str, directions: Sequence[Direction], metric_names: Sequence[str],
                        sampler: Any, resume: bool, out: str | Path, words: Mapping[str, str] = PYTHON_WORDS,
                        storage: Any = None) -> Any:
     """A new Optuna study ``name`` in the storage at ``url`` (``storage``: that storage, already open), with ``sampler``.

@@ -62,10 +62,13 @@ class PointSource(Protocol):
 
     kind: str
     command: str
-    error: type[StudyError]
     to_resume: str
     go_on: str
     can_recompute: bool
+
+    @property
+    def error(self) -> type[StudyError]:
+        """The source's StudyError subclass (read-only here, so a source may name a subclass of it)."""
 
     def system(self, spec_path: str | Path) -> Any:
         """The checked System of the spec (raises SpecError)."""
@@ -127,9 +130,9 @@ class Study:
             raise self.error(f"resume needs the results folder of the interrupted {source.command} "
                              f"({self.show.word('out_dir')})")
         self._early: Any = None
-        self.payload: dict[str, Any] | None = None
+        early_payload: dict[str, Any] | None = None  # made at once when the spare children load it meanwhile
         if self.how.start_early and self.cluster.local:
-            self._start_early()
+            early_payload = self._start_early()
         else:
             stop_spare_children()  # none of them will be used
         self._temporary = out is None
@@ -141,8 +144,7 @@ class Study:
                                       words=self.show.words)
             self.store = self.folder.store
             source.bind(self)
-            if self.payload is None:
-                self.payload = self._make_payload()
+            self.payload = early_payload if early_payload is not None else self._make_payload()
         except BaseException:
             self.close()
             raise
@@ -153,15 +155,17 @@ class Study:
         # FMU bytes read now: workers never open these paths; a warm-up within the study's timeout (issue 38)
         return make_payload(self.system, self.how.timeout)
 
-    def _start_early(self) -> None:
+    def _start_early(self) -> dict[str, Any]:
         """The spare point children the command started load the system now, while this process starts the local
-        cluster (importing Dask) in the background and prepares the results folder (importing pandas)."""
+        cluster (importing Dask) in the background and prepares the results folder (importing pandas); returns
+        the payload they load."""
         from cosim.parallel.cluster.early import EarlyCluster
         from cosim.parallel.isolation.children import preload_spare_children
 
-        self.payload = self._make_payload()
-        preload_spare_children(self.payload)
+        payload = self._make_payload()
+        preload_spare_children(payload)
         self._early = EarlyCluster(self.how.workers or 1)
+        return payload
 
     # the options most read from outside, under the names they had as flat arguments
     @property

@@ -216,7 +216,7 @@ class SensitivityStudy:
             raise SensitivityError(f"n must be at least 2, got {self.n}")
         self.out = Path(out)
         self.seed = DEFAULT_SEED if seed is None else seed  # fixed by default: a resume draws the same sample
-        self.sample_space: SampleSpace | None = None
+        self.sample_space: SampleSpace  # drawn by space_of, which the Sweep below calls as it plans its points
 
         def space_of(spec: Any) -> SampleSpace:
             space = sensitivity_space(spec)
@@ -247,7 +247,7 @@ class SensitivityStudy:
         meta = self.sweep.store.metadata() or {}
         meta.update(sensitivity={
             "method": self.method, "n": self.n, "seed": self.seed, "samples": len(self.sample),
-            "designs": len(self.sample_space or []), "objectives": self.objectives,
+            "designs": len(self.sample_space), "objectives": self.objectives,
             "parameters": self.problem["names"], "bounds": self.problem["bounds"],
             "table": TABLE_NAME, "figure": FIGURE_NAME})
         self.sweep.store.write_metadata(meta)

@@ -21,7 +21,7 @@ run's replay relies on (see :mod:`cosim.studies.optimize`).
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping, Sequence
+from typing import Any, Iterable, Mapping
 
 import numpy as np
 from optuna.distributions import BaseDistribution, CategoricalDistribution, FloatDistribution, IntDistribution
@@ -61,20 +61,21 @@ class SurrogateSampler(BaseSampler):
 
     def sample_relative(self, study: Study, trial: FrozenTrial,
                         search_space: dict[str, BaseDistribution]) -> dict[str, Any]:
-        if not search_space or not self._d:
+        if not search_space or self._lhs is None:  # no dimensions (the hypercube is made for d > 0)
             return {}
         if trial.number < self.initial:
             return self._params(self._lhs[trial.number])
         history, finished = self._history(study, trial)
         if len(history.u) < self._d + 2:  # too few results to fit on (failures): go on filling the space
             return self._params(self._rng(trial.number).random(self._d))
+        if self._proposer is None:
+            self._proposer = BatchProposer(self._d, len(study.directions))
+        proposer = self._proposer
         if finished != self._fitted_on:
-            if self._proposer is None:
-                self._proposer = BatchProposer(self._d, len(study.directions))
-            self._proposer.fit(history, self._seed)
+            proposer.fit(history, self._seed)
             self._fitted_on, self._queue, self.fits = finished, [], self.fits + 1
         if not self._queue:
-            self._queue = list(self._proposer.propose(history, self._batch, self._rng(trial.number)))  # type: ignore[union-attr]
+            self._queue = list(proposer.propose(history, self._batch, self._rng(trial.number)))
         return self._params(self._queue.pop(0))
 
     def sample_independent(self, study: Study, trial: FrozenTrial, param_name: str,
@@ -116,7 +117,7 @@ class SurrogateSampler(BaseSampler):
         """A trial's params as a point of the unit box."""
         return np.array([_to_unit(self._dists[n], params[n]) for n in self._names], float)
 
-    def _params(self, u: Sequence[float]) -> dict[str, Any]:
+    def _params(self, u: Iterable[float]) -> dict[str, Any]:
         return {n: _from_unit(self._dists[n], float(x)) for n, x in zip(self._names, u)}
 
 
