@@ -185,3 +185,20 @@ def test_the_readme_kubernetes_file_is_accepted_and_fails_cleanly_without_kubern
 
     inspect.signature(import_cluster_class(config)).bind(**config.kwargs)  # every keyword is one KubeCluster takes
     assert "cannot start dask_kubernetes.operator.KubeCluster" in done.stderr
+
+
+def test_closing_hushes_only_the_batched_send_that_closing_cut_off(caplog):
+    # Dask logs a batched message its own teardown cut off at INFO with a CommClosedError traceback, from its
+    # event loop's thread, also after the close returned: it reached the terminal above cosim's message
+    import logging
+
+    from cosim.parallel.cluster.closing import _hush_batched_sends_cut_off_by_closing
+
+    batched = logging.getLogger("distributed.batched")
+    _hush_batched_sends_cut_off_by_closing()
+    _hush_batched_sends_cut_off_by_closing()  # once per process, however many studies close
+    assert sum(type(f).__name__ == "_CutOffBatchedSend" for f in batched.filters) == 1
+    with caplog.at_level(logging.INFO, logger="distributed.batched"):
+        batched.info("Batched Comm Closed %r", "<InProc local=inproc://x>", exc_info=False)
+        batched.error("Error in batched write")
+    assert [r.getMessage() for r in caplog.records if r.name == "distributed.batched"] == ["Error in batched write"]
