@@ -246,7 +246,9 @@ def run_shell_block(lines: list[str], root: Path, venv_dir: Path) -> None:
             cwd = (cwd / argv[1]).resolve()
             continue
         if argv[:3] == ["pip", "install", "-e"]:
-            python = str(venv_seeing_this_interpreter(venv_dir))
+            # the venv's pip is this interpreter's (seen through the venv's .pth, as tests/test_packaging.py
+            # does): ensurepip's own copy cost ~3 s of CPU and is not what the README's command is about
+            python = str(venv_seeing_this_interpreter(venv_dir, with_pip=False))
             # no build isolation: the build backend (setuptools) comes from this interpreter, not the network
             done = subprocess.run([python, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation",
                                    "-e", str(cwd / argv[3])], capture_output=True, text=True)

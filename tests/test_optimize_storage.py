@@ -105,8 +105,10 @@ def test_a_password_in_the_url_is_never_written():
     assert shown_url("sqlite:///study.db") == "sqlite:///study.db"
 
 
+# The points pause while the study folder's file "pause" exists: the runs must still be running while the
+# others are refused; once that is checked the test removes it and the rest of the budget runs without sleeping
 SLOW_UNIT = """
-import time
+import os, time
 from cosim import PythonUnit, Variable
 
 class SlowSquare(PythonUnit):
@@ -114,13 +116,15 @@ class SlowSquare(PythonUnit):
                  Variable("y", "output", start=0.0))
 
     def do_step(self, t, h):
-        time.sleep(self.pause)
+        if os.path.exists(GATE):
+            time.sleep(self.pause)
         self.y = self.x ** 2
 """
 
 
 def _slow_spec(folder, budget: int, pause: float):
-    (folder / "slow.py").write_text(SLOW_UNIT)
+    (folder / "slow.py").write_text(SLOW_UNIT.replace("GATE", repr(str(folder / "pause"))))
+    (folder / "pause").touch()
     spec = {"name": "slow", "units": {"s": {"python": "slow.py:SlowSquare", "parameters": {"pause": pause}}},
             "experiment": {"stop": 1.0, "step": 1.0},
             "objectives": {"y": {"signal": "s.y", "reduce": "final", "sense": "minimize"}},
@@ -209,6 +213,7 @@ def test_two_optimisers_on_one_storage_study_the_second_is_refused(tmp_path):
         assert same.returncode == 2 and "is in use by another cosim optimize (pid" in same.stderr, same.stderr
         assert "Traceback" not in same.stderr
         assert resumed.poll() is None, "the resumed run ended before the others were refused"
+        (tmp_path / "pause").unlink()  # refused while it ran: the rest of its budget needs no pause
     finally:
         _, err = resumed.communicate(timeout=300)
     assert resumed.returncode == 0, err
@@ -232,6 +237,7 @@ def test_a_killed_optimiser_leaves_its_study_to_the_next_run(tmp_path):
     first.communicate(timeout=60)
     assert first.returncode == -signal.SIGKILL
     assert "cosim-lock:shared" in optuna.get_all_study_names(url)  # left behind
+    (tmp_path / "pause").unlink()  # the next run only has to take the lock and finish the budget
     done = _optimize(spec, tmp_path / "a", url, "--resume")
     assert done.returncode == 0, done.stderr
     assert optuna.get_all_study_names(url) == ["shared"]
