@@ -21,13 +21,19 @@ in another thread.
 
 from __future__ import annotations
 
+import functools
 from contextlib import contextmanager
-from typing import Any, Iterator
+from typing import TYPE_CHECKING, Any, Iterator
 
 import numpy as np
 
 from cosim.analysis.filters import Range, RangeFilters
 from cosim.analysis.table import AnalysisError, ResultsTable
+
+if TYPE_CHECKING:  # tkinter and matplotlib are imported when a window opens
+    from matplotlib.axes import Axes
+
+    from cosim.analysis.trace_window import TraceWindow
 
 SLIDER_STEPS = 1000  # sliders move over 0..1000; 0 and 1000 are exactly the column's min and max
 
@@ -155,10 +161,10 @@ class ExplorerWindow:
 
         self.root, self.state, self.spec_path = root, state, spec_path
         self.tk = tk
-        self.ax = None
+        self.ax: Axes | None = None  # the cloud's axes, once drawn (redraw, at the end of __init__)
         self._drawn_rows = np.zeros(0, dtype=int)
         self._pending: Any = None
-        self.trace_windows: list[Any] = []
+        self.trace_windows: list[TraceWindow] = []
         root.title(f"cosim explore: {state.table.path}")
         top = ttk.Frame(root)
         top.pack(side="top", fill="both", expand=True)
@@ -170,7 +176,7 @@ class ExplorerWindow:
             options = state.columns if which in ("x", "y") else [""] + state.columns
             box = ttk.Combobox(bar, values=options, state="readonly", width=18)
             box.set(getattr(state, which) or "")
-            box.bind("<<ComboboxSelected>>", lambda e, w=which: self.on_axis(w, self.choosers[w].get()))
+            box.bind("<<ComboboxSelected>>", functools.partial(self._on_chooser, which))
             box.pack(side="left")
             self.choosers[which] = box
         ttk.Button(bar, text="Save figure…", command=self.on_save).pack(side="right", padx=4)
@@ -226,6 +232,9 @@ class ExplorerWindow:
             self._show_range(c)
 
     # -- handlers (what the widgets call) ---------------------------------------------
+    def _on_chooser(self, which: str, event: object) -> None:
+        self.on_axis(which, self.choosers[which].get())
+
     def on_axis(self, which: str, column: str) -> None:
         try:
             self.state.set_axis(which, column)
@@ -309,15 +318,17 @@ class ExplorerWindow:
                                    + (f", {counts.missing} without a value" if counts.missing else ""))
 
     def _screen_positions(self, rows: np.ndarray) -> np.ndarray:
-        s = self.state
-        xs, ys = s.table.values(s.x)[rows], s.table.values(s.y)[rows]
-        if s.z:
-            from mpl_toolkits.mplot3d import proj3d
+        from mpl_toolkits.mplot3d import Axes3D, proj3d
 
+        s, ax = self.state, self.ax
+        if ax is None:
+            raise RuntimeError("the cloud is not drawn yet")  # __init__ draws it before any event
+        xs, ys = s.table.values(s.x)[rows], s.table.values(s.y)[rows]
+        if s.z and isinstance(ax, Axes3D):  # a cloud with z is drawn in 3-D (plots.scatter_cloud)
             zs = s.table.values(s.z)[rows]
-            px, py, _ = proj3d.proj_transform(xs, ys, zs, self.ax.get_proj())
-            return self.ax.transData.transform(np.column_stack([px, py]))
-        return self.ax.transData.transform(np.column_stack([xs, ys]))
+            px, py, _ = proj3d.proj_transform(xs, ys, zs, ax.get_proj())
+            return ax.transData.transform(np.column_stack([px, py]))
+        return ax.transData.transform(np.column_stack([xs, ys]))
 
     def screen_position(self, row: int) -> tuple[float, float]:
         """Where row ``row`` is drawn, in matplotlib display pixels (origin bottom left)."""
@@ -335,14 +346,15 @@ class ExplorerWindow:
             v = values.get(c)
             label.configure(text="" if v is None else f"{v:.6g}" if isinstance(v, (float, np.floating)) else str(v))
 
-    def show_traces(self, row: int, result) -> Any:
+    def show_traces(self, row: int, result: Any) -> TraceWindow:
         """A window with the run's traces and, when their viewer has one, its animation; returns the Toplevel."""
         from matplotlib.backends.backend_tkagg import FigureCanvasTkAgg
         from matplotlib.figure import Figure
 
+        from cosim.analysis.trace_window import TraceWindow
         from cosim.analysis.traces import animation, traces_figure
 
-        win = self.tk.Toplevel(self.root)
+        win = TraceWindow(self.root)
         pid = self.state.table.df["point_id"].iloc[row] if "point_id" in self.state.table.df.columns else row
         win.title(f"run of {pid}: {result.status}")
         fig = Figure(figsize=(7, 6), dpi=100)

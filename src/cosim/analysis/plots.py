@@ -11,9 +11,11 @@ so callers and tests can find them.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.collections import PathCollection
 from matplotlib.figure import Figure
 
 from cosim.analysis.table import ResultsTable
@@ -34,7 +36,7 @@ class CloudCounts:
 def scatter_cloud(fig: Figure, table: ResultsTable, x: str, y: str, z: str | None = None,
                   color: str | None = None, active: np.ndarray | None = None,
                   rows: np.ndarray | None = None, selected: int | None = None,
-                  title: str | None = None) -> tuple[object, CloudCounts]:
+                  title: str | None = None) -> tuple[Axes, CloudCounts]:
     """Draw the cloud of ``rows`` (default all) into ``fig`` (cleared first); returns (axes, counts).
 
     ``active`` marks rows drawn in colour; the others are greyed.  The colour
@@ -46,39 +48,47 @@ def scatter_cloud(fig: Figure, table: ResultsTable, x: str, y: str, z: str | Non
     active = np.ones(n, dtype=bool) if active is None else np.asarray(active, dtype=bool)
     names = [c for c in (x, y, z) if c]
     coords = [table.values(c) for c in names]
-    cvals = table.values(color) if color else None
+    cvals = table.values(color) if color else None  # read first: an unknown column raises before drawing
     drawable = rows & np.all([np.isfinite(c) for c in coords], axis=0)
     coloured = drawable & active
     greyed = drawable & ~active
 
     fig.clear()
-    ax = fig.add_subplot(111, projection="3d") if z else fig.add_subplot(111)
+    # mpl_toolkits (the 3-D axes) has no types: axes3d is Any to mypy, ax the Axes both kinds are
+    axes3d = fig.add_subplot(111, projection="3d") if z else None
+    ax: Axes = axes3d if axes3d is not None else fig.add_subplot(111)
     pts = lambda m: [c[m] for c in coords]  # noqa: E731 - tiny local selector
     size = _marker_size(int(drawable.sum()))
     kwargs: dict = {"s": size, "linewidths": 0, **({"depthshade": False} if z else {})}
     if greyed.any():
-        ax.scatter(*pts(greyed), color=GREY, gid="greyed", **kwargs)
+        _scatter(ax, pts(greyed), color=GREY, gid="greyed", **kwargs)
     kwargs["gid"] = "points"
-    if cvals is not None:
+    if color and cvals is not None:
         cv = cvals[coloured]
         finite = cv[np.isfinite(cv)]
         vmin, vmax = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
-        sc = ax.scatter(*pts(coloured), c=cv, cmap=CMAP, vmin=vmin, vmax=vmax, plotnonfinite=True, **kwargs)
+        sc = _scatter(ax, pts(coloured), c=cv, cmap=CMAP, vmin=vmin, vmax=vmax, plotnonfinite=True, **kwargs)
         bar = fig.colorbar(sc, ax=ax, pad=0.1 if z else 0.02)
         bar.set_label(table.label(color))
     else:
-        ax.scatter(*pts(coloured), color="tab:blue", **kwargs)
+        _scatter(ax, pts(coloured), color="tab:blue", **kwargs)
     ax.set_xlabel(table.label(x))
     ax.set_ylabel(table.label(y))
-    if z:
-        ax.set_zlabel(table.label(z))
+    if z and axes3d is not None:
+        axes3d.set_zlabel(table.label(z))
     if selected is not None and 0 <= selected < n and drawable[selected]:
         sel = [np.array([c[selected]]) for c in coords]
-        ax.scatter(*sel, s=max(4 * size, 80), facecolors="none", edgecolors="black", linewidths=1.5, gid="selected")
+        _scatter(ax, sel, s=max(4 * size, 80), facecolors="none", edgecolors="black", linewidths=1.5, gid="selected")
     if title:
         ax.set_title(title)
     counts = CloudCounts(int(coloured.sum()), int(greyed.sum()), int((rows & ~drawable).sum()))
     return ax, counts
+
+
+def _scatter(ax: Axes, points: Sequence[np.ndarray], **style: Any) -> PathCollection:
+    """``ax.scatter`` of ``points``: x and y, and z on a 3-D axes (Axes3D.scatter takes xs, ys, zs in that
+    place); ``style``: scatter's keywords, as matplotlib takes them."""
+    return ax.scatter(*points, **style)
 
 
 def _marker_size(n: int) -> float:

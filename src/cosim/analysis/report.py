@@ -78,8 +78,8 @@ def roles(table: ResultsTable) -> tuple[list[str], list[str]]:
 
 def _kind_title(table: ResultsTable) -> str:
     """What the page reports on, by the folder's kind (metadata ``kind``): a sweep unless said otherwise."""
-    kind = (table.metadata or {}).get("kind")
-    return {"optimization": "Optimisation report", "sensitivity": "Sensitivity report"}.get(kind, "Sweep report")
+    titles: dict[object, str] = {"optimization": "Optimisation report", "sensitivity": "Sensitivity report"}
+    return titles.get((table.metadata or {}).get("kind"), "Sweep report")
 
 
 def _setting_text(value: Any) -> str:
@@ -175,7 +175,8 @@ def _status_section(table: ResultsTable) -> str:
 
 def _objective_section(table: ResultsTable, parameters: list[str], objectives: list[str], ok: np.ndarray) -> str:
     show = [c for c in ["point_id", *parameters] if c in table.df.columns]
-    rows, constant = [], []
+    rows: list[tuple[object, ...]] = []  # a cell: text, a number (fmt writes it) or Raw html
+    constant: list[str] = []
     for o in objectives:
         v = np.where(ok, table.values(o), np.nan)
         if not np.isfinite(v).any():

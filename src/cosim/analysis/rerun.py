@@ -96,9 +96,11 @@ def rerun(table: ResultsTable | None, row: int | None = None, spec_path: str | P
     from cosim.execution.point import run_point
     from cosim.system.builder import build_system
 
+    if values is None and (table is None or row is None):
+        raise TypeError("rerun needs a table and a row, or the values")
     spec = load_rerun_spec(table, spec_path)
-    if values is None:
-        values = point_values(table, row, [p.target for p in spec.design.parameters])  # type: ignore[arg-type]
+    if values is None and table is not None and row is not None:
+        values = point_values(table, row, [p.target for p in spec.design.parameters])
     system = build_system(spec)
     if full_record:
         system = system.recording_all_outputs()

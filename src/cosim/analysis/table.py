@@ -255,7 +255,7 @@ def load_results(path: str | Path, spec: str | Path | None = None) -> ResultsTab
         raise AnalysisError(f"{path}: no such results table (give a results.parquet, a .csv or a sweep folder)")
     note = ""
     try:
-        if parts:  # an interrupted (or running) study: its rows so far, as --resume would find them
+        if folder is not None and parts:  # an interrupted (or running) study: its rows so far, as --resume would find them
             from cosim.results.store import ResultsStore
 
             df = ResultsStore(folder).read()

@@ -26,6 +26,7 @@ Everything is a function of the data and the seed given: the same history gives 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 
@@ -177,7 +178,7 @@ class BatchProposer:
         n = len(history.u)
         refit = not self.outputs or n >= REFIT_GROWTH * self.fitted_at
         self.fitted_at = n if refit else self.fitted_at
-        previous = self.outputs or [None] * self.m
+        previous: Sequence[Output | None] = self.outputs or [None] * self.m
         self.outputs = [fit_output(history.u, history.losses[:, i], bool(history.positive[i]), previous[i], seed,
                                    refit) for i in range(self.m)]
         self.constraint = None if history.violation is None else \
