@@ -108,6 +108,7 @@ class Room:
         self._pending = False
         self._weight_sliders: dict[str, Any] = {}
         self.ranking = self.radar = None  # the Decide tab's, built when it is first shown
+        self._highlighting = False  # the server sets the ranking's highlighted rows (_show_ranking_selection)
         self.dimensions: Dimensions | None = None  # the Dimensions tab's
         self.surrogate: Any = None  # the Surrogate tab's (surrogate_view.SurrogateView), when the folder has one
         columns = self.decision.filters.columns
@@ -315,6 +316,7 @@ class Room:
     def _build_decide(self) -> list:
         self.ranking = V.ranking_table(D.ranking_columns(self.study, self.decision),
                                        D.ranking_rows(self.study, self.decision, TOP))
+        self._show_ranking_selection()
         self.ranking.source.selected.on_change("indices", self._on_ranking_selection)
         self.radar = V.radar(D.radar(self.decision, []), [])
         self.radar_note = V.text("", "radar-note", width=460)
@@ -425,10 +427,30 @@ class Room:
 
     def _on_ranking_selection(self, attr: str, old: Any, new: Any) -> None:
         assert self.ranking is not None  # its own callback
+        if self._highlighting:  # the highlight set by the server, not a click
+            return
         rows = self.ranking.source.data["row"]
-        chosen = [int(rows[i]) for i in new]
+        chosen = [int(rows[i]) for i in new if 0 <= i < len(rows)]
         if chosen:
             self.cloud.select(chosen)
+
+    def _show_ranking_selection(self) -> None:
+        """The ranking's highlighted rows: the selected designs it lists (a selected design ranked below its
+        TOP is not in it)."""
+        if self.ranking is None:
+            return
+        selected = set(self.decision.selection)
+        self._highlight([k for k, r in enumerate(self.ranking.source.data["row"]) if int(r) in selected])
+
+    def _highlight(self, positions: list[int]) -> None:
+        assert self.ranking is not None  # called only once it exists
+        if list(self.ranking.source.selected.indices) == positions:
+            return
+        self._highlighting = True
+        try:
+            self.ranking.source.selected.indices = positions
+        finally:
+            self._highlighting = False
 
     def _on_objectives(self, attr: str, old: Any, new: Any) -> None:
         objectives = [(c, "min") for c in self.minimise.value] + \
@@ -509,10 +531,17 @@ class Room:
         wanted = [(field, html.escape(title)) for field, title in D.ranking_columns(self.study, self.decision)]
         if [(c.field, c.title) for c in self.ranking.columns[3:]] != wanted:  # objectives changed
             self.ranking.columns = V.ranking_columns(D.ranking_columns(self.study, self.decision))
+        # the table's selected rows are positions in its old rows: let go of before the rows change, then set to
+        # where the selected designs are now.  bokeh 3.4's DataTable throws "Out of bounds: 0 <= 0 < 0" in the
+        # page for a selected position past the end of its new rows (the emptied table below has none:
+        # bokeh/bokeh#13931); bokeh 3.9 does not throw (its BitSet.get answers false there, bokeh/bokeh#14566)
+        # but kept the old positions, which then highlighted other designs
+        self._highlight([])
         # emptied first: bokeh 3.9 does not redraw a DataTable whose source's data is replaced by as many rows
         # as before (bokeh/bokeh#15328); a new source would make bokeh walk the whole document again
         self.ranking.source.data = {k: [] for k in data}
         self.ranking.source.data = data
+        self._show_ranking_selection()
         self._refresh_radar()
         self._publish()
 
@@ -531,6 +560,7 @@ class Room:
     def _refresh_selection(self) -> None:
         rows = self.decision.selection
         self.cloud.show_selection(rows)
+        self._show_ranking_selection()
         if self.surrogate is not None:
             self.surrogate.hold(self._held_row())
         if self.dimensions is not None:

@@ -115,6 +115,9 @@ class Shortlist:
                     for k, i in enumerate(self.ids)]
         if [(c.field, c.title) for c in self.table.columns] != [(c.field, c.title) for c in columns]:
             self.table.columns = columns
+        # a row clicked in the table: let go of before its rows change (bokeh 3.4 throws in the page for a selected
+        # row past the end of the emptied table, bokeh/bokeh#13931; see app.Room._refresh_ranking)
+        self.table.source.selected.indices = []
         self.table.source.data = {k: [] for k in data}  # bokeh/bokeh#15328, see app.Room._refresh_ranking
         self.table.source.data = data
         self.table.height = min(30 + 26 * len(data["quantity"]), 420)
