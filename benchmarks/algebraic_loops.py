@@ -7,7 +7,7 @@ Systems of `algebraic` FMUs (FMI 2.0, built from src/cosim/fmus/algebraic) drive
 - linear:     the chain and uy.y -> ux.u, x = 2 + y/2 + w, y = -1 + 3x (Newton; fixed-point diverges here);
 - nonlinear:  the chain and uy.y -> ux.u, x = cos(y) + w, y = x^3;
 
-and the sensor -> controller -> limiter chain of tests/test_algebraic_loops.py under jacobi and jacobi-delayed.
+and the sensor -> controller -> limiter chain of tests/master/test_algebraic_loops.py under jacobi and jacobi-delayed.
 Prints CPU microseconds per communication point (best of the rounds), the loop's evaluations of G per point
 (each: set the tearing variable, run the loop's links, read) and the largest residual of the loop's equations
 seen at any communication point.  Usage: python benchmarks/algebraic_loops.py [--steps N] [--repeat R]
@@ -28,7 +28,7 @@ import numpy as np
 from cosim import Execution, build_system, load_spec
 from cosim.master import loops
 
-TESTS = Path(__file__).resolve().parent.parent / "tests"
+TESTS = Path(__file__).resolve().parent.parent / "tests" / "helpers"
 
 
 def loop_spec(kind: str, steps: int, h: float) -> dict:

@@ -6,7 +6,7 @@
 t = 2, for several communication steps, with CVode's internal step capped at the communication step (the
 default) and uncapped (``max_step`` 1e9): the largest error at the communication points against e^-t.
 
-``coupled`` (issue 26, item 2): the two-mass oscillator of tests/test_coupled_model_exchange.py split into two
+``coupled`` (issue 26, item 2): the two-mass oscillator of tests/master/test_coupled_model_exchange.py split into two
 ``mass_spring`` Model Exchange FMUs (FMI 2.0, tolerance 1e-8), 1 s, at several communication steps, integrated
 together (the default) and one by one (``"coupled_model_exchange": false``): the largest position error against
 the matrix exponential relative to the largest displacement, and the wall and CPU time of the run (median of
@@ -62,7 +62,7 @@ def cap_table() -> str:
     return "\n".join(rows)
 
 
-M1, M2, K1, K2, KC, DC = 1.0, 2.0, 10.0, 20.0, 1000.0, 0.5  # as in tests/test_coupled_model_exchange.py
+M1, M2, K1, K2, KC, DC = 1.0, 2.0, 10.0, 20.0, 1000.0, 0.5  # as in tests/master/test_coupled_model_exchange.py
 A = np.array([[0.0, 1.0, 0.0, 0.0], [-(K1 + KC) / M1, -DC / M1, KC / M1, DC / M1],
               [0.0, 0.0, 0.0, 1.0], [KC / M2, DC / M2, -(K2 + KC) / M2, -DC / M2]])
 

@@ -17,7 +17,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from tests.conftest import python_unit  # noqa: E402
+from tests.helpers.tools import python_unit  # noqa: E402
 
 from cosim.studies.optimize import Optimization  # noqa: E402
 

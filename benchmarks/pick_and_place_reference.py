@@ -16,7 +16,7 @@ sampling and with the same outputs (every objective of the spec):
   communication points, finals, extremes, the overshoot correction).
 
 ``evaluate_point(q22, q24)`` returns the objectives by the names of the sweep's
-table; ``tests/test_pick_and_place_reference.py`` checks they agree with cosim's.
+table; ``tests/execution/test_pick_and_place_reference.py`` checks they agree with cosim's.
 
 Run ``python benchmarks/pick_and_place_reference.py`` to time it against cosim's
 point, interleaved (see pick_and_place_reference.md).

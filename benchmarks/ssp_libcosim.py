@@ -3,7 +3,7 @@
     python benchmarks/ssp_libcosim.py [--stop 100] [--step 0.01] [--repeat 5]
 
 The system is the ring of three FMI 2.0 ``linear_ode`` FMUs of
-tests/test_ssp_libcosim.py (one connection with a LinearTransformation; here
+tests/export/test_ssp_libcosim.py (one connection with a LinearTransformation; here
 with c.a = -0.3 and b.b = -0.2 so that long runs stay bounded),
 exported by ``cosim export`` and run
 

@@ -5,7 +5,7 @@
 
 Each size runs in a fresh process, the way ``cosim sweep`` runs (``Sweep.run_to_disk``: the table stays
 on disk; default local cluster of 2 workers, which with its Dask scheduler lives in the client process).
-The unit is a gain (tests/units_for_tests.py:Gain) with one step a point, so a point's time is nearly all
+The unit is a gain (tests/helpers/units_for_tests.py:Gain) with one step a point, so a point's time is nearly all
 overhead: design point, Dask task share, child process, row, part file, merge. A thread samples the
 client's resident memory (RSS) every 20 ms, separately while the points run and during the final merge
 into results.parquet.

@@ -99,7 +99,7 @@ def trivial_spec(folder: Path, n: int) -> Path:
     """A spec of n points (g.k = 0 .. n-1) of the tests' Gain unit, one step each, written into ``folder``; its path."""
     spec = {
         "name": f"trivial_{n}",
-        "units": {"g": {"python": f"{ROOT / 'tests' / 'units_for_tests.py'}:Gain"}},
+        "units": {"g": {"python": f"{ROOT / 'tests' / 'helpers' / 'units_for_tests.py'}:Gain"}},
         "experiment": {"stop": 1.0, "step": 1.0},
         "objectives": {"y": {"signal": "g.y", "reduce": "final"}},
         "design": {"parameters": {"g.k": {"min": 0, "max": n - 1, "step": 1}}},

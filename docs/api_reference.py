@@ -5,7 +5,7 @@
 
 Every name of ``cosim.__all__`` gets its signature and its whole docstring; a class also gets its public
 methods and properties defined in cosim (those of object, Exception or typing are left out).  Names are listed
-in the order of ``cosim.__all__`` within three groups (functions, classes, errors).  tests/test_api_reference.py
+in the order of ``cosim.__all__`` within three groups (functions, classes, errors).  tests/project/test_api_reference.py
 checks that every public name and method has a docstring and that docs/api.md is up to date, so the reference
 cannot drift from the code.
 """

@@ -1,55 +1,18 @@
-"""Shared fixtures: real FMUs built from the project's C sources, spec writers."""
+"""Shared fixtures: real FMUs built from the project's C sources, spec writers, Dask clusters and processes.
+
+Plain helper functions and paths are in tests/helpers/ (imported by name)."""
 
 from __future__ import annotations
 
 import json
-import os
-import shutil
-import site
 import subprocess
 import sys
-import venv
 from pathlib import Path
 
 import pytest
 
-from .sweep_fixtures import free_port, kill_group, wait_for_workers, worker_process_cluster
-
-TESTS = Path(__file__).resolve().parent
-
-
-def require_tool(program: str, package: str) -> str:
-    """The path of ``program``; without it the test is skipped, or FAILS under ``CI=true`` (.ci/run sets it).
-
-    A skip would let CI pass without ever running the test, so CI must install ``package``.
-    """
-    path = shutil.which(program)
-    if path is None:
-        why = f"{program} is not installed (Debian package '{package}'; .ci/run installs it)"
-        if os.environ.get("CI", "").lower() in ("1", "true", "yes"):
-            pytest.fail(f"{why}; CI=true, so this test must run")
-        pytest.skip(why)
-    return path
-
-
-def venv_seeing_this_interpreter(venv_dir: Path, *, with_pip: bool = True) -> Path:
-    """A new venv at ``venv_dir`` that sees this interpreter's packages behind its own; its ``python``.
-
-    ``--system-site-packages`` links a venv to the *base* interpreter (venv builds from ``sys._base_executable``;
-    venvs do not chain), so a venv made from the venv pytest runs in saw the base interpreter's site-packages and
-    none of this one's (issue 28: after ``pip install -e ".[test]"`` into a fresh venv, ``No module named
-    'lxml'``). When this interpreter is a venv, a ``.pth`` file in the new one adds this one's site-packages with
-    ``site.addsitedir`` (so their own ``.pth`` files run too: cmeel's for pin, the editable install's finder),
-    after the new venv's own and before the base's. Outside a venv this is ``venv --system-site-packages``.
-    """
-    venv.create(venv_dir, system_site_packages=True, with_pip=with_pip, symlinks=os.name != "nt")
-    python = venv_dir / "bin" / "python"
-    if sys.prefix != sys.base_prefix:
-        purelib = subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
-                                 capture_output=True, text=True, check=True).stdout.strip()
-        line = "; ".join(["import site"] + [f"site.addsitedir({d!r})" for d in dict.fromkeys(site.getsitepackages())])
-        (Path(purelib) / "_cosim_tests_parent_site.pth").write_text(line + "\n")
-    return python
+from tests.helpers.paths import REPO
+from tests.helpers.sweep_fixtures import free_port, kill_group, wait_for_workers, worker_process_cluster
 
 
 @pytest.fixture(scope="session")
@@ -72,11 +35,6 @@ def write_spec(tmp_path):
     return write
 
 
-def python_unit(cls: str) -> str:
-    """The spec reference of a test unit in tests/units_for_tests.py."""
-    return f"{TESTS / 'units_for_tests.py'}:{cls}"
-
-
 @pytest.fixture
 def panda_viewer():
     """The Panda trace viewer, registered as its entry point in pyproject.toml names it (as an install does)."""
@@ -85,7 +43,7 @@ def panda_viewer():
 
     from cosim.analysis.viewers import register_viewer, unregister_viewer
 
-    text = (Path(__file__).resolve().parent.parent / "pyproject.toml").read_text()
+    text = (REPO / "pyproject.toml").read_text()
     module, _, name = re.search(r'^panda = "([^"]+)"', text, re.M).group(1).partition(":")
     viewer = register_viewer(getattr(importlib.import_module(module), name))
     yield viewer
@@ -143,7 +101,7 @@ def dask_processes(tmp_path_factory):
 def _native_runs_twinned_on_the_python_master(request, monkeypatch):
     """In the modules of kernel_twins.TWIN_MODULES every run on the native kernel is repeated on the Python
     master and must give the same bits (kernel_twins.py)."""
-    from . import kernel_twins
+    from tests.helpers import kernel_twins
 
     if request.module.__name__.rsplit(".", 1)[-1] in kernel_twins.TWIN_MODULES:
         from cosim.execution.run import Execution
@@ -152,9 +110,8 @@ def _native_runs_twinned_on_the_python_master(request, monkeypatch):
     yield
 
 
-
 def pytest_terminal_summary(terminalreporter):
-    from . import kernel_twins
+    from tests.helpers import kernel_twins
 
     if kernel_twins.compared:
         terminalreporter.write_line(f"native kernel: {len(kernel_twins.compared)} runs of "

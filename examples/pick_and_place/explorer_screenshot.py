@@ -58,7 +58,7 @@ def main() -> None:
 
             from cosim.analysis.explorer import ExplorerState, ExplorerWindow
             sys.path.insert(0, str(HERE.parent.parent))  # the repository: the frame-buffer decoder is a test tool
-            from tests.xwd import xwd_to_rgb
+            from tests.helpers.xwd import xwd_to_rgb
 
             from cosim.analysis.table import load_results
 

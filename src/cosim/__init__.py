@@ -48,7 +48,7 @@ _LAZY = {
     "Variable": "cosim.units.protocol", "PythonUnit": "cosim.units.python.unit",
     "UnitKind": "cosim.units.kind", "register_unit_kind": "cosim.units.registry",
 }
-# the public names, written out for readers and linters (tests/test_public_api.py checks they match _LAZY)
+# the public names, written out for readers and linters (tests/project/test_public_api.py checks they match _LAZY)
 __all__ = ["CosimError", "Execution", "Problem", "PythonUnit", "RunResult", "Spec", "SpecError", "System",
     "UnitError", "UnitKind", "UserError", "Variable", "__version__", "build_system", "load_spec", "optimize",
     "pareto", "read_results", "register_unit_kind", "run", "run_point", "sensitivity", "sweep"]

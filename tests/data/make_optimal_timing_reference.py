@@ -1,6 +1,6 @@
 """Write tests/data/optimal_timing_reference.json: outputs of the energy-optimal timing planner
 (models/optimal_timing.py) for a few designs and modes, kept from the revision before its speed work
-(session 2) so that tests/test_optimal_timing_reference.py can check that the faster planner returns
+(session 2) so that tests/models/test_optimal_timing_reference.py can check that the faster planner returns
 the same timings.
 
     python tests/data/make_optimal_timing_reference.py    # only to re-baseline, on purpose

@@ -1,7 +1,7 @@
 """Write panda_exudyn_reference.json: outputs of ``PandaExudyn`` to check faster versions against.
 
 The committed JSON was written with the unit as it was at commit 0ca756b (before the
-speed work of issue 16), so ``tests/test_panda_exudyn_reference.py`` asserts that later
+speed work of issue 16), so ``tests/models/test_panda_exudyn_reference.py`` asserts that later
 versions still give the same results.  Re-running this script overwrites the reference
 with the *current* unit's results: do it only for a deliberate change of the model, and
 say so in the commit.

@@ -1,7 +1,7 @@
 """Examples at the end of each subcommand's ``--help`` (argparse epilogs), written against
 examples/drive_energy/spec.json so that they can be tried from a source checkout as they are.
 
-tests/test_cli_examples.py parses every line with cosim's own parser: an example that names an option the
+tests/cli/test_cli_examples.py parses every line with cosim's own parser: an example that names an option the
 command no longer has fails there.
 """
 

@@ -80,7 +80,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         # the stop's KeyboardInterrupt raised once more while main() ended (in the block above's handler or
         # finally), after the command had been stopped: seen once in CI's suite as exit -2, Python ending an
-        # uncaught KeyboardInterrupt by SIGINT (tests/test_stop_races.py). A stop all the same.
+        # uncaught KeyboardInterrupt by SIGINT (tests/studies/test_stop_races.py). A stop all the same.
         _say_interrupted()
         if argv is None:
             _end_at_once_on_signals()
@@ -171,7 +171,7 @@ def _forget_caught_keyboard_interrupts() -> None:
     (``run_eval_code_obj``), even when a caller catches it later; at exit a process run as ``python -m`` (as
     ``python -m cosim.cli.main`` is) then ends itself by SIGINT (bpo-1054041), whatever exit code it gave.  A stop that came while a module built a
     namedtuple or a dataclass (both ``eval``/``exec`` strings) ended as exit -2 after "cosim: interrupted"
-    (6 of 80 SIGTERMs 0.1-0.7 s after the start, 2026-12-07; tests/test_stop_races.py in CI).  cosim handles
+    (6 of 80 SIGTERMs 0.1-0.7 s after the start, 2026-12-07; tests/studies/test_stop_races.py in CI).  cosim handles
     every KeyboardInterrupt itself, so the mark is cleared.  The mark is CPython 3.11's exported
     ``_Py_UnhandledKeyboardInterrupt``; where the interpreter has no such symbol this does nothing.
     """

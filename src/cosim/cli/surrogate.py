@@ -14,7 +14,7 @@ from typing import Any
 from cosim.cli.exit_codes import EXIT_OK
 
 # cosim.analysis.surrogate.fit.METHODS and study.MAX_ROWS, written here because importing cosim.analysis imports
-# pandas, which `cosim --help` must not (tests/test_single_sources.py checks the two stay equal)
+# pandas, which `cosim --help` must not (tests/project/test_single_sources.py checks the two stay equal)
 METHODS = ("auto", "gp", "poly")
 MAX_ROWS = 500
 TRUST_BELOW = 0.8  # a Q² under this is said aloud: the surrogate explains too little to decide on

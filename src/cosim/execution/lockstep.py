@@ -17,11 +17,11 @@ unit) and given transfers that move all K rows at once; a point that reaches its
 ``stop_when`` is no longer stepped (its FMU instances) or read (its rows of a
 twin); its objectives are reduced from its own samples with the same
 reducer.  The results are those of the single runs bit for bit
-(``tests/test_lockstep.py``), except where a twin states a tolerance: the
+(``tests/execution/test_lockstep.py``), except where a twin states a tolerance: the
 Exudyn arm's twin (``models.panda_exudyn.PandaExudynBatch``) integrates its K
 arms in one Exudyn system whose Newton iteration sees all K residuals, so its
 rows agree with single runs to the solver's Newton tolerance (bounds and test:
-``tests/test_panda_exudyn_lockstep.py``), and a row may move within that
+``tests/models/test_panda_exudyn_lockstep.py``), and a row may move within that
 tolerance with its group's other points.
 
 Anything unusual makes the points run one by one instead, so a point's row

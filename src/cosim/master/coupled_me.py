@@ -139,7 +139,7 @@ class _SolveInGroup:
 # A loop inside a group is solved at every evaluation of the group's equations, which CVode differentiates with
 # increments of about 1e-8 of the states: solved only to the default 1e-10, the loop's solution looks like noise
 # on that scale (a guess within the tolerance is kept while the states moved), and the integration drifted 1.8e-3
-# off the exact solution where 1e-12 keeps it at the solver's accuracy (3.6e-7; tests/test_coupled_model_exchange)
+# off the exact solution where 1e-12 keeps it at the solver's accuracy (3.6e-7; tests/master/test_coupled_model_exchange)
 GROUP_LOOP_TOLERANCE = 1e-12
 
 

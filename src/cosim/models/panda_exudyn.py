@@ -4,7 +4,7 @@ Plant
     An Exudyn ``ObjectKinematicTree`` (minimal coordinates, 7 revolute joints)
     built from the pinocchio model's joint placements and link inertias (see
     :mod:`cosim.models.panda_model`), so its forward dynamics equal pinocchio's ABA
-    to round-off (checked in ``tests/test_panda_units.py``).  The
+    to round-off (checked in ``tests/models/test_panda_units.py``).  The
     ``exudyn.robotics`` Panda model is not used: it does not match the URDF.
     A rigid payload (parameters ``payload_*``) is part of link 7's inertia
     (the servo's feed-forward knows it).  A freely swinging pendulum
@@ -60,7 +60,7 @@ Newton Jacobian
     contraction).  The Jacobian only steers the Newton iteration: the converged
     step satisfies the same equations to the same tolerance, so results agree with
     a fresh Jacobian per step to that tolerance (checked against the outputs before
-    this change in ``tests/test_panda_exudyn_reference.py``).
+    this change in ``tests/models/test_panda_exudyn_reference.py``).
 
 Lock-step
     :class:`PandaExudynBatch`, the unit's vectorised twin, runs K design points
@@ -469,7 +469,7 @@ class PandaExudynBatch(PythonBatchUnit):
     control see all K residuals together, and the feed-forward and TCP come
     from CasADi's generated C instead of pinocchio (equal to round-off): a
     row's results equal a single run's to the Newton tolerance, not bit for
-    bit (checked within the stated bounds of ``tests/test_panda_exudyn_reference.py``).
+    bit (checked within the stated bounds of ``tests/models/test_panda_exudyn_reference.py``).
 
     Only the study's configuration runs here: ``ref_timing = "step_end"``,
     ``ref_phase = 1``, one solver step per communication step, no pendulum;

@@ -10,7 +10,7 @@ the URDF); run this after the URDF, the arm model or CasADi changes::
     python -m cosim.models.panda_inverse_dynamics_codegen          # rewrite the two files
     python -m cosim.models.panda_inverse_dynamics_codegen --check  # exit 1 if they are out of date
 
-``tests/test_panda_inverse_dynamics_fmu.py`` runs the check, so a stale
+``tests/models/test_panda_inverse_dynamics_fmu.py`` runs the check, so a stale
 generated file fails the suite.
 """
 

@@ -77,7 +77,7 @@ def thesis_to_urdf(q_deg) -> np.ndarray:
     horizontally with the hand pointing down; in the URDF that pose is
     ``(0, 90, 0, 0, 0, 90, 0)`` degrees, and the thesis's elbow angle q4 bends
     the forearm *downwards* for positive values, which is URDF's negative q4.
-    ``tests/test_trajectory.py`` checks this against the poses the thesis
+    ``tests/models/test_trajectory.py`` checks this against the poses the thesis
     describes with pinocchio forward kinematics.
 
     Accepts an array of shape (..., 7); raises ValueError for another last axis.

@@ -34,7 +34,7 @@ the sources, the flags and the compiler, so an edit rebuilds and nothing else
 does (the same scheme as :func:`cosim.fmus.build.ensure_built`; no binary is
 committed).  :class:`PandaRowKernels` binds the library to a twin's arrays.
 
-Promised (``tests/test_panda_rows.py``): RNEA equal to pinocchio's with the
+Promised (``tests/models/test_panda_rows.py``): RNEA equal to pinocchio's with the
 same payload to 1e-10 N.m, the TCP to pinocchio's forward kinematics to
 1e-12 m, the outputs to the twin's numpy formulas they replace; the
 inverse-dynamics kernels equal to the numpy twins bit for bit.

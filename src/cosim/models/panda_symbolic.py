@@ -19,7 +19,7 @@ A rigid body's inertia is kept as ``(m, h, I_o)`` -- mass, first moment
 ``h = m c`` and rotational inertia about the frame origin -- because these add
 up when the payload is fixed to link 7 (no division by the total mass).
 
-Promised (``tests/test_panda_symbolic.py``): the torques equal
+Promised (``tests/models/test_panda_inverse_dynamics_fmu.py``): the torques equal
 ``pinocchio.rnea`` of :func:`models.panda_model.panda_model` with the same
 payload to 1e-10 N.m, the TCP position equals pinocchio's forward kinematics.
 """

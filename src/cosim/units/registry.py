@@ -204,7 +204,7 @@ def one_kind_hint() -> tuple[str, str]:
 # -- the built-in kinds ---------------------------------------------------------------------
 
 # Each built-in kind sits beside its units and is declared as a plug-in's is, by the object's "module:attribute"
-# (pyproject.toml's "cosim.unit_kinds" entry points name the same objects; tests/test_unit_kinds.py checks both
+# (pyproject.toml's "cosim.unit_kinds" entry points name the same objects; tests/units/test_unit_kinds.py checks both
 # lists agree). They are loaded by that name when first looked up, so the registry imports none of them.
 BUILTIN_KINDS = {
     "fmu": "cosim.units.fmu.kind:KIND",

@@ -1,6 +1,6 @@
 """Driving the decision room in a real browser: Debian's chromium through selenium and chromium-driver.
 
-Used by the browser tests (tests/test_room_browser.py), the load benchmark (benchmarks/room_load.py) and the
+Used by the browser tests (tests/analysis/room/test_room_browser.py), the load benchmark (benchmarks/room_load.py) and the
 screenshots of docs/decision-room.md (docs/decision_room_screenshots.py).  The page is read and changed
 through its Bokeh document (``Bokeh.documents[0]``, models found by the names :mod:`.views` gives them);
 clicks are real mouse clicks at the viewport position of a point or widget.  selenium is imported when a

@@ -7,7 +7,7 @@ box of the training designs; they describe the surrogate (as good as its Q² say
 Will, "Metamodel of Optimal Prognosis", 2008/2011): ``CoP(x_i) = Q² * ST_i``, the share of the objective's
 variance the surrogate predicts (Q², cross-validated) times the share of the surrogate's variance due to the
 parameter with all its interactions (ST_i).  For an additive objective it is the drop of Q² when the parameter is
-left out (checked in tests/test_surrogate.py); with interactions the shares add up to more than Q², as total
+left out (checked in tests/analysis/test_surrogate.py); with interactions the shares add up to more than Q², as total
 indices do.  It costs nothing beyond Q² and the indices, where refitting without each parameter would cost d more
 cross-validations.
 """

@@ -19,7 +19,7 @@ signatures depend only on the fmpy class, so :func:`with_cached_signatures`
 reads them once per class and declares them on each new instance's library
 (``_loadFunctions``, ``_functions``).
 
-They are read only here.  ``tests/test_fmpy_internals.py`` checks them, on real
+They are read only here.  ``tests/units/test_fmpy_internals.py`` checks them, on real
 FMUs, against the fmpy version range pyproject.toml declares; a new fmpy that
 moves them fails that test, not a user's run.
 """

@@ -52,7 +52,7 @@ MAX_EVENT_ITERATIONS = 100
 # last ones), and a two-mass oscillator whose internal step is capped at a 1 ms communication step stays at BDF
 # order 2 (its local error estimate passes at 1e-6), 4e-5 of its amplitude off after 10 periods; OMSimulator's
 # testsuite compares such results with rel 1e-4 + abs 1e-4.  At 1e-8 both are 30-300x inside that, for about 10 %
-# more right-hand-side evaluations (tests/test_vendor_numerics.py; docs/fmi-support.md, "Model exchange defaults").
+# more right-hand-side evaluations (tests/units/test_vendor_numerics.py; docs/fmi-support.md, "Model exchange defaults").
 DEFAULT_TOLERANCE = 1e-8
 # CVode's limit of internal steps per communication step (fmpy's default of 500
 # is too small for long communication steps with a small max_step).
@@ -87,7 +87,7 @@ def internal_step_cap(settings: SolverSettings, h: float) -> float:
     communication point and interpolates back, and its step size grows from one
     communication step to the next, so without a cap a loose tolerance gives
     errors far above it (a Dahlquist equation at tolerance 1e-4 was 1.2e-3 off;
-    ``tests/test_model_exchange_units.py``).
+    ``tests/units/test_model_exchange_units.py``).
     """
     return settings.max_step if settings.max_step is not None else h
 
