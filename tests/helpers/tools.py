@@ -51,5 +51,5 @@ def venv_seeing_this_interpreter(venv_dir: Path, *, with_pip: bool = True) -> Pa
 
 
 def python_unit(cls: str) -> str:
-    """The spec reference of a test unit in tests/units_for_tests.py."""
+    """The spec reference of a test unit in tests/helpers/units_for_tests.py."""
     return f"{HELPERS / 'units_for_tests.py'}:{cls}"

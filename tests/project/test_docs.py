@@ -245,7 +245,7 @@ def run_shell_block(lines: list[str], root: Path, venv_dir: Path) -> None:
             cwd = (cwd / argv[1]).resolve()
             continue
         if argv[:3] == ["pip", "install", "-e"]:
-            # the venv's pip is this interpreter's (seen through the venv's .pth, as tests/test_packaging.py
+            # the venv's pip is this interpreter's (seen through the venv's .pth, as tests/project/test_packaging.py
             # does): ensurepip's own copy cost ~3 s of CPU and is not what the README's command is about
             python = str(venv_seeing_this_interpreter(venv_dir, with_pip=False))
             # no build isolation: the build backend (setuptools) comes from this interpreter, not the network
