@@ -96,6 +96,44 @@ def test_a_stop_inside_an_eval_string_still_ends_with_exit_130(tmp_path):
     assert "Traceback" not in done.stderr, done.stderr
     assert _metadata(out).get("ended") is None
 
+SIGNALLED_WHILE_EXITING = """
+import atexit, os, signal, sys, time
+from cosim.cli.main import main
+from cosim.studies import sweep as S
+
+if sys.argv[3] == "stopped":
+    evaluate = S.Sweep._evaluate
+    def evaluate_then_stop(self, *args, **kwargs):
+        os.kill(os.getpid(), signal.SIGTERM)
+        return evaluate(self, *args, **kwargs)
+    S.Sweep._evaluate = evaluate_then_stop
+
+def signalled_while_exiting():  # after main() returned: the process is ending
+    os.kill(os.getpid(), signal.SIGTERM)
+    time.sleep(5)
+atexit.register(signalled_while_exiting)
+sys.argv = ["cosim", "sweep", sys.argv[1], "--out", sys.argv[2], "--workers", "1"]
+sys.exit(main())
+"""
+
+
+def test_a_signal_while_the_process_exits_keeps_how_the_command_ended(tmp_path):
+    # after a stop, a second signal while the process exits keeps exit 130 (it was 143 once in the suite); after a
+    # study that ended, it is 128 + the signal, as a shell reports it, and the study stays complete
+    spec = _spec(tmp_path, 4, pause=0.05)
+    for case, code in (("stopped", 130), ("complete", 128 + signal.SIGTERM)):
+        out = tmp_path / case
+        done = subprocess.run([sys.executable, "-c", SIGNALLED_WHILE_EXITING, str(spec), str(out), case],
+                              capture_output=True, text=True, env=_env(), timeout=300)
+        assert done.returncode == code, (case, done.returncode, done.stderr[-2000:])
+        assert "Traceback" not in done.stderr, done.stderr
+        if case == "stopped":
+            assert done.stderr.strip().splitlines()[-1] == "cosim: interrupted", done.stderr
+            assert _metadata(out).get("ended") is None
+        else:
+            assert _metadata(out).get("ended"), done.stderr
+            _exact(pd.read_parquet(out / "results.parquet"), 4)
+
 # (signal, seconds after the start): before Dask is imported, while the cluster starts, while points run
 OFFSETS = [(signal.SIGTERM, 0.3), (signal.SIGHUP, 0.8), (signal.SIGTERM, 1.5), (signal.SIGHUP, 2.5),
            (signal.SIGINT, 1.0), (signal.SIGTERM, 4.0)]
@@ -134,6 +172,12 @@ def test_signals_at_several_offsets_never_end_as_a_complete_study(tmp_path):
         meta = _metadata(out)
         outcomes.append((signal.Signals(signum).name, after, handled, proc.returncode))
         if proc.returncode == 0:  # it finished before the signal: then every point is there
+            assert meta.get("ended"), (outcomes, err)
+            _exact(pd.read_parquet(out / "results.parquet"), points)
+        elif handled and proc.returncode == 128 + signum:
+            # the command had ended when the signal came, and the process was exiting: main() then ends it at
+            # once, 128 + the signal as a shell reports it (cli/main.py's _end_at_once_on_signals); so the study
+            # is complete, every point there (seen at 4.0 s on an idle machine)
             assert meta.get("ended"), (outcomes, err)
             _exact(pd.read_parquet(out / "results.parquet"), points)
         elif not handled:

@@ -89,6 +89,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 _SAID_INTERRUPTED: list[bool] = []  # whether "cosim: interrupted" was printed by this process
+_INTERRUPTED_EXIT = 130  # cosim.cli.exit_codes.EXIT_INTERRUPTED, which a signal handler may not import (see the imports)
 
 
 def _say_interrupted() -> None:
@@ -147,9 +148,15 @@ def _end_at_once_on_signals() -> None:
     Python's own handlers raised KeyboardInterrupt wherever the interpreter was while it shut down (a weakref
     callback, a module's exit hook), which printed "Exception ignored ... KeyboardInterrupt" with a traceback
     after ``cosim: interrupted`` when an impatient user pressed Ctrl-C again.  What the command wrote is
-    flushed first; the exit code is 128 + the signal's number, as a shell reports a process a signal ended.
+    flushed first.  The exit code is the stop's 130 when the command was stopped (a second signal does not
+    change how it ended: seen once in the suite as 143 after "cosim: interrupted"), otherwise 128 + the
+    signal's number, as a shell reports a process a signal ended.
     """
     import signal
+
+    from cosim.parallel.cluster.interrupts import stop_requested
+
+    code_if_signalled = _INTERRUPTED_EXIT if stop_requested() is not None or _SAID_INTERRUPTED else None
 
     def end(signum: int, frame: Any) -> None:
         for stream in (sys.stdout, sys.stderr):
@@ -157,7 +164,7 @@ def _end_at_once_on_signals() -> None:
                 stream.flush()
             except Exception:  # noqa: BLE001 - a closed pipe, or a write this signal interrupted
                 pass
-        os._exit(128 + signum)
+        os._exit(code_if_signalled or 128 + signum)
 
     for name in ("SIGINT", "SIGTERM", "SIGHUP"):
         if hasattr(signal, name):
