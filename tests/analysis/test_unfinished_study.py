@@ -17,7 +17,7 @@ import pandas as pd
 
 from cosim.analysis.table import load_results
 from tests.helpers.paths import REPO
-from tests.studies.test_hostile_files import _spec
+from tests.helpers.triple_study import triple_spec
 
 ENV = dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO / "src"), os.environ.get("PYTHONPATH", "")]))
 
@@ -29,7 +29,7 @@ def _cosim(*args: str) -> subprocess.CompletedProcess:
 
 def _interrupted_sweep(tmp_path: Path) -> Path:
     """A 40-point sweep stopped by Ctrl-C (SIGINT to its process group) once some rows are in parts/."""
-    spec, out = _spec(tmp_path, 40, pause=0.05), tmp_path / "out"
+    spec, out = triple_spec(tmp_path, 40, pause=0.05), tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-m", "cosim.cli.main", "sweep", str(spec), "--out", str(out),
                              "--batch-size", "2", "--workers", "1"], stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, env=ENV, start_new_session=True)

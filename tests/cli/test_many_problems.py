@@ -17,7 +17,7 @@ from pathlib import Path
 from cosim.cli.problems import _share, print_problems
 from cosim.errors import Problem
 from tests.helpers.paths import REPO
-from tests.studies.test_hostile_files import UNIT
+from tests.helpers.triple_study import TRIPLE_UNIT
 
 FIX = "run 'cosim inspect' on the spec to list the variables of '{}'"
 MORE = "(add --all-problems to the command to list every one)"
@@ -30,7 +30,7 @@ def _cosim(*args: str, cwd: Path) -> subprocess.CompletedProcess:
 
 def _spec(folder: Path, wrong_from: int, wrong_to: int, wrong_design: bool = False) -> Path:
     """Units s and t; ``wrong_from`` connections from outputs s lacks, then ``wrong_to`` into inputs t lacks."""
-    (folder / "triple.py").write_text(UNIT)
+    (folder / "triple.py").write_text(TRIPLE_UNIT)
     spec = {"units": {"s": {"python": "triple.py:Triple"}, "t": {"python": "triple.py:Triple"}},
             "connections": [{"from": f"s.out{i}", "to": "t.k"} for i in range(wrong_from)]
             + [{"from": "s.y", "to": f"t.in{i}"} for i in range(wrong_to)],

@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import cosim
 from cosim.cli.main import main
-from tests.studies.test_hostile_files import _spec
+from tests.helpers.triple_study import triple_spec
 
 
 def test_run_point_refuses_to_guess_between_sweeps_holding_the_point(tmp_path, monkeypatch, capsys,
                                                                     local_cluster):  # noqa: F811
     monkeypatch.chdir(tmp_path)
-    spec = _spec(tmp_path, 3)
+    spec = triple_spec(tmp_path, 3)
     first = cosim.sweep(str(spec), out="results/first", scheduler=local_cluster, quiet=True)
     cosim.sweep(str(spec), out="results/second", scheduler=local_cluster, quiet=True)
     point = first.loc[first["s.k"] == 2, "point_id"].item()
@@ -37,7 +37,7 @@ def test_metadata_records_the_versions_that_change_results(tmp_path, local_clust
     import numpy
     import pinocchio
 
-    cosim.sweep(str(_spec(tmp_path, 2)), out=str(tmp_path / "out"), scheduler=local_cluster, quiet=True)
+    cosim.sweep(str(triple_spec(tmp_path, 2)), out=str(tmp_path / "out"), scheduler=local_cluster, quiet=True)
     packages = json.loads((tmp_path / "out" / "metadata.json").read_text())["packages"]
     assert packages["fmi-cosim"] == cosim.__version__
     assert packages["casadi"] == casadi.__version__ and packages["pin"] == pinocchio.__version__

@@ -24,7 +24,7 @@ import psutil
 import pytest
 
 from tests.helpers.paths import REPO
-from tests.studies.test_hostile_files import _exact, _spec
+from tests.helpers.triple_study import assert_triples_exact, triple_spec
 
 CLUSTERS = {
     "LocalCluster file": {"type": "distributed.LocalCluster",
@@ -91,7 +91,7 @@ def _last_line(err: str) -> str:
 
 @pytest.mark.parametrize("cluster", sorted(CLUSTERS))
 def test_ctrl_c_on_a_cluster_file_sweep(tmp_path, cluster):
-    spec, out = _spec(tmp_path, 40, pause=0.05), tmp_path / "out"
+    spec, out = triple_spec(tmp_path, 40, pause=0.05), tmp_path / "out"
     (tmp_path / "cluster.json").write_text(json.dumps(CLUSTERS[cluster]))
     code, err = _interrupted_sweep(spec, out, ["--cluster", str(tmp_path / "cluster.json")])
     assert code == 130, err
@@ -103,12 +103,12 @@ def test_ctrl_c_on_a_cluster_file_sweep(tmp_path, cluster):
                               "--cluster", str(tmp_path / "cluster.json"), "--resume"], capture_output=True,
                              text=True, env=dict(os.environ, PYTHONPATH=str(REPO / "src")), timeout=300)
     assert resumed.returncode == 0, resumed.stderr
-    _exact(pd.read_parquet(out / "results.parquet"), 40)
+    assert_triples_exact(pd.read_parquet(out / "results.parquet"), 40)
 
 
 def test_ctrl_c_on_a_scheduler_sweep_leaves_the_cluster_running(tmp_path, dask_processes):
     address, _ = dask_processes
-    spec, out = _spec(tmp_path, 40, pause=0.05), tmp_path / "out"
+    spec, out = triple_spec(tmp_path, 40, pause=0.05), tmp_path / "out"
     code, err = _interrupted_sweep(spec, out, ["--scheduler", address])
     assert code == 130, err
     assert "cosim: interrupted" in err and "Traceback" not in err and "Error" not in err, err
@@ -117,4 +117,4 @@ def test_ctrl_c_on_a_scheduler_sweep_leaves_the_cluster_running(tmp_path, dask_p
                               "--scheduler", address, "--resume"], capture_output=True, text=True,
                              env=dict(os.environ, PYTHONPATH=str(REPO / "src")), timeout=300)
     assert resumed.returncode == 0, resumed.stderr  # the same scheduler and workers, still there
-    _exact(pd.read_parquet(out / "results.parquet"), 40)
+    assert_triples_exact(pd.read_parquet(out / "results.parquet"), 40)

@@ -22,7 +22,7 @@ import pytest
 from cosim.parallel.dashboard.web_server import tab_closed_while_loading, web_server_tracebacks_as_lines
 from tests.analysis.room.test_room_browser import browser  # noqa: F401  (fixture)
 from tests.helpers.paths import REPO
-from tests.studies.test_hostile_files import _spec
+from tests.helpers.triple_study import triple_spec
 
 SRC = REPO / "src"
 
@@ -58,7 +58,7 @@ def test_the_errors_of_a_tab_gone_are_dropped_and_other_errors_kept_as_one_line(
 
 
 def test_closing_dashboard_tabs_during_a_sweep_prints_no_error(tmp_path, browser):  # noqa: F811
-    spec = _spec(tmp_path, 60, pause=1.0)  # 30 s on 2 workers: time for a dozen tabs
+    spec = triple_spec(tmp_path, 60, pause=1.0)  # 30 s on 2 workers: time for a dozen tabs
     # ... and once the tabs are done, the rest of the points without their pause (the sweep went on sleeping
     # for up to 30 s after the last tab): each point pauses only while the file `tabs_open` exists
     tabs_open = tmp_path / "tabs_open"
@@ -112,7 +112,7 @@ def test_the_end_of_a_study_says_its_dashboard_is_gone_and_where_the_results_are
     import urllib.error
     import urllib.request
 
-    spec = _spec(tmp_path, 4)
+    spec = triple_spec(tmp_path, 4)
     done = _sweep(str(spec), "--out", str(tmp_path / "o"), "--workers", "1")
     assert done.returncode == 0, done.stderr
     link = re.search(r"dashboard: (http://\S+/status)", done.stderr).group(1)

@@ -14,7 +14,7 @@ import sys
 
 from cosim.parallel.isolation.leftovers import MARKER, mark, remove_leftovers, start_time
 from tests.helpers.paths import REPO
-from tests.studies.test_hostile_files import _exact, _spec
+from tests.helpers.triple_study import assert_triples_exact, triple_spec
 
 
 def _dead_pid() -> int:
@@ -64,14 +64,14 @@ def test_only_folders_of_owners_that_are_gone_are_removed(tmp_path):
 def test_a_sweep_removes_the_leftovers_of_a_killed_one_when_it_starts(tmp_path):
     sleeper, expected = _folders(tmp_path)
     try:
-        spec = _spec(tmp_path, 4)
+        spec = triple_spec(tmp_path, 4)
         done = subprocess.run([sys.executable, "-m", "cosim.cli.main", "sweep", str(spec), "--out",
                                str(tmp_path / "out"), "--workers", "1"], capture_output=True, text=True, timeout=300,
                               env=dict(os.environ, TMPDIR=str(tmp_path), PYTHONPATH=str(REPO / "src")))
         assert done.returncode == 0, done.stderr
         import pandas as pd
 
-        _exact(pd.read_parquet(tmp_path / "out" / "results.parquet"), 4)
+        assert_triples_exact(pd.read_parquet(tmp_path / "out" / "results.parquet"), 4)
         assert {f: not f.exists() for f in expected} == expected
         assert not [p for p in tmp_path.glob("cosim_worker_*") if p not in expected]  # its own removed too
     finally:

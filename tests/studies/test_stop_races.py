@@ -22,7 +22,7 @@ from pathlib import Path
 import pandas as pd
 
 from tests.helpers.paths import REPO
-from tests.studies.test_hostile_files import _cosim, _exact, _spec
+from tests.helpers.triple_study import assert_triples_exact, run_cosim, triple_spec
 
 SWALLOWED = """
 import os, signal, sys
@@ -55,16 +55,16 @@ def _metadata(out: Path) -> dict:
 
 
 def test_a_stop_swallowed_by_a_finaliser_still_ends_the_sweep_as_interrupted(tmp_path):
-    spec = _spec(tmp_path, 12, pause=0.2)
+    spec = triple_spec(tmp_path, 12, pause=0.2)
     out = tmp_path / "out"
     done = subprocess.run([sys.executable, "-c", SWALLOWED, str(spec), str(out)], capture_output=True, text=True,
                           env=_env(), timeout=300)
     assert done.returncode == 130, (done.returncode, done.stdout[-2000:], done.stderr[-2000:])
     assert done.stderr.strip().splitlines()[-1] == "cosim: interrupted", done.stderr
     assert _metadata(out).get("ended") is None and _metadata(out).get("counts") is None  # not complete
-    resumed = _cosim("sweep", str(spec), "--out", str(out), "--resume", "--workers", "1", timeout=300)
+    resumed = run_cosim("sweep", str(spec), "--out", str(out), "--resume", "--workers", "1", timeout=300)
     assert resumed.returncode == 0, resumed.stderr
-    _exact(pd.read_parquet(out / "results.parquet"), 12)
+    assert_triples_exact(pd.read_parquet(out / "results.parquet"), 12)
 
 
 STOPPED_INSIDE_EVAL = """
@@ -85,7 +85,7 @@ def test_a_stop_inside_an_eval_string_still_ends_with_exit_130(tmp_path):
     # CPython marked such a KeyboardInterrupt "unhandled" though main() caught it, and a process run as
     # `python -m` (as `python -m cosim.cli.main` is) ended by SIGINT (exit -2) after "cosim: interrupted": 6 of
     # 80 early SIGTERMs, and once in CI. (A script or `-c` exits at SystemExit, before that mark is read.)
-    spec = _spec(tmp_path, 4, pause=0.1)
+    spec = triple_spec(tmp_path, 4, pause=0.1)
     out = tmp_path / "out"
     (tmp_path / "stopped_inside_eval.py").write_text(STOPPED_INSIDE_EVAL)
     env = dict(_env(), PYTHONPATH=f"{REPO / 'src'}{os.pathsep}{tmp_path}")
@@ -120,7 +120,7 @@ sys.exit(main())
 def test_a_signal_while_the_process_exits_keeps_how_the_command_ended(tmp_path):
     # after a stop, a second signal while the process exits keeps exit 130 (it was 143 once in the suite); after a
     # study that ended, it is 128 + the signal, as a shell reports it, and the study stays complete
-    spec = _spec(tmp_path, 4, pause=0.05)
+    spec = triple_spec(tmp_path, 4, pause=0.05)
     for case, code in (("stopped", 130), ("complete", 128 + signal.SIGTERM)):
         out = tmp_path / case
         done = subprocess.run([sys.executable, "-c", SIGNALLED_WHILE_EXITING, str(spec), str(out), case],
@@ -132,7 +132,7 @@ def test_a_signal_while_the_process_exits_keeps_how_the_command_ended(tmp_path):
             assert _metadata(out).get("ended") is None
         else:
             assert _metadata(out).get("ended"), done.stderr
-            _exact(pd.read_parquet(out / "results.parquet"), 4)
+            assert_triples_exact(pd.read_parquet(out / "results.parquet"), 4)
 
 # (signal, seconds after the start): before Dask is imported, while the cluster starts, while points run
 OFFSETS = [(signal.SIGTERM, 0.3), (signal.SIGHUP, 0.8), (signal.SIGTERM, 1.5), (signal.SIGHUP, 2.5),
@@ -151,7 +151,7 @@ def _handles(pid: int, signum: int) -> bool:
 
 def test_signals_at_several_offsets_never_end_as_a_complete_study(tmp_path):
     points = 16
-    spec = _spec(tmp_path, points, pause=0.3)
+    spec = triple_spec(tmp_path, points, pause=0.3)
     outcomes = []
     for k, (signum, after) in enumerate(OFFSETS):
         out = tmp_path / f"out{k}"
@@ -173,13 +173,13 @@ def test_signals_at_several_offsets_never_end_as_a_complete_study(tmp_path):
         outcomes.append((signal.Signals(signum).name, after, handled, proc.returncode))
         if proc.returncode == 0:  # it finished before the signal: then every point is there
             assert meta.get("ended"), (outcomes, err)
-            _exact(pd.read_parquet(out / "results.parquet"), points)
+            assert_triples_exact(pd.read_parquet(out / "results.parquet"), points)
         elif handled and proc.returncode == 128 + signum:
             # the command had ended when the signal came, and the process was exiting: main() then ends it at
             # once, 128 + the signal as a shell reports it (cli/main.py's _end_at_once_on_signals); so the study
             # is complete, every point there (seen at 4.0 s on an idle machine)
             assert meta.get("ended"), (outcomes, err)
-            _exact(pd.read_parquet(out / "results.parquet"), points)
+            assert_triples_exact(pd.read_parquet(out / "results.parquet"), points)
         elif not handled:
             # the interpreter still starting (the signal's default action; Python ends an uncaught
             # KeyboardInterrupt by SIGINT): never success either
@@ -200,7 +200,7 @@ WHILE_IMPORTING = [(signal.SIGTERM, "cosim.cli.exit_codes"), (signal.SIGHUP, "co
 
 
 def test_a_stop_while_cosim_still_imports_ends_as_a_stop(tmp_path):
-    spec = _spec(tmp_path, 4)
+    spec = triple_spec(tmp_path, 4)
     for k, (signum, module) in enumerate(WHILE_IMPORTING):
         out = tmp_path / f"out{k}"
         # Python reports each import on stderr as it completes (PYTHONPROFILEIMPORTTIME): the signal goes when
@@ -242,7 +242,7 @@ sys.exit(main())
 
 
 def test_a_sweep_stopped_before_any_row_does_not_say_its_rows_are_in_the_folder(tmp_path):
-    spec = _spec(tmp_path, 4)
+    spec = triple_spec(tmp_path, 4)
     out = tmp_path / "out"
     done = subprocess.run([sys.executable, "-c", STOPPED_BEFORE_ANY_ROW, str(spec), str(out)], capture_output=True,
                           text=True, env=_env(), timeout=300)

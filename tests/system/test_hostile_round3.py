@@ -300,10 +300,10 @@ def test_two_optimisations_into_one_folder_the_second_is_refused(tmp_path, local
 
 
 def test_an_optimisation_into_a_read_only_folder_is_a_clear_message(tmp_path):
-    from tests.studies.test_hostile_files import _read_only_folder
+    from tests.helpers.triple_study import read_only_folder
 
     spec = _triple_study(tmp_path / "project", 4, optimize=True)
-    with _read_only_folder(tmp_path / "ro") as folder:
+    with read_only_folder(tmp_path / "ro") as folder:
         done = _cosim("optimize", str(spec), "--out", str(folder / "results"), "--workers", "1")
     assert done.returncode == 2, done.stderr
     assert f"cannot write the results into {folder / 'results'}" in done.stderr
