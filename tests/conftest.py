@@ -5,6 +5,7 @@ Plain helper functions and paths are in tests/helpers/ (imported by name)."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -13,6 +14,7 @@ import pytest
 
 from tests.helpers.paths import REPO
 from tests.helpers.sweep_fixtures import free_port, kill_group, wait_for_workers, worker_process_cluster
+from tests.helpers.tools import require_tool
 
 
 @pytest.fixture(scope="session")
@@ -116,3 +118,41 @@ def pytest_terminal_summary(terminalreporter):
     if kernel_twins.compared:
         terminalreporter.write_line(f"native kernel: {len(kernel_twins.compared)} runs of "
                                     f"{len(set(kernel_twins.compared))} tests repeated on the Python master, equal")
+
+
+# -- the browser of the decision room and dashboard tests ----------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def browser():
+    """Debian's chromium driven by selenium (chromium-driver), one a module; a missing one fails under CI=true."""
+    from cosim.analysis.room import browser as B
+
+    require_tool("chromium", "chromium")
+    require_tool("chromedriver", "chromium-driver")
+    try:
+        import selenium  # noqa: F401
+    except ImportError:
+        if os.environ.get("CI", "").lower() in ("1", "true", "yes"):
+            pytest.fail("selenium is not installed (the test extra of pyproject.toml); CI=true, so this test "
+                        "must run")
+        pytest.skip("selenium is not installed (pip install -e .[test])")
+    driver = B.chromium()
+    yield driver
+    driver.quit()
+
+
+@pytest.fixture
+def no_console_errors(request):
+    """Every test that drives the browser ends with no error in chromium's console (an uncaught exception in
+    bokeh's scripts, a failed request): the page may look right and still have failed to draw a view.
+    A module asks for it with ``pytestmark = pytest.mark.usefixtures("no_console_errors")``."""
+    from cosim.analysis.room import browser as B
+
+    if "browser" not in request.fixturenames:
+        yield
+        return
+    driver = request.getfixturevalue("browser")
+    B.console_errors(driver)  # a previous test's, reported there
+    yield
+    assert B.console_errors(driver) == []

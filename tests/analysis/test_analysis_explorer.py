@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import os
-import select
 import shutil
 import subprocess
 import sys
@@ -24,7 +23,7 @@ import pytest
 from cosim.analysis.explorer import SLIDER_STEPS, ExplorerState
 from cosim.analysis.table import AnalysisError, load_results
 from tests.analysis.test_analysis_table import make_sweep_table
-from tests.helpers.tools import python_unit, require_tool
+from tests.helpers.tools import python_unit
 from tests.helpers.xwd import xwd_to_rgb
 
 # -- state, no window --------------------------------------------------------------------------------------
@@ -74,36 +73,7 @@ def test_state_works_for_a_foreign_table(tmp_path):
 # -- the real window under Xvfb ---------------------------------------------------------------------------
 
 
-@pytest.fixture(scope="module")
-def xvfb(tmp_path_factory):
-    """A private Xvfb display; yields (display, framebuffer XWD file).
 
-    Xvfb picks the display number itself (``-displayfd``: it takes the first free one, claiming it with its lock
-    file, and writes the number to the pipe once it accepts connections): a number chosen here by looking for a
-    free one could be taken by another Xvfb started at the same moment (another pytest worker or test run).
-    """
-    require_tool("Xvfb", "xvfb")
-    fbdir = tmp_path_factory.mktemp("xvfb")
-    ready, ready_w = os.pipe()
-    proc = subprocess.Popen(["Xvfb", "-displayfd", str(ready_w), "-screen", "0", "1280x1024x24", "-nolisten", "tcp",
-                             "-fbdir", str(fbdir)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            pass_fds=(ready_w,))
-    os.close(ready_w)
-    with os.fdopen(ready) as pipe:
-        waited, _, _ = select.select([pipe], [], [], 15)
-        number = pipe.readline().strip() if waited else ""
-    if not number.isdigit():
-        proc.kill()
-        pytest.fail(f"Xvfb did not start: {proc.stderr.read().decode()[-500:]}")
-    old = os.environ.get("DISPLAY")
-    os.environ["DISPLAY"] = f":{number}"
-    yield f":{number}", fbdir / "Xvfb_screen0"
-    if old is None:
-        os.environ.pop("DISPLAY", None)
-    else:
-        os.environ["DISPLAY"] = old
-    proc.terminate()
-    proc.wait(timeout=10)
 
 
 def pump(root, until=lambda: True, timeout=10.0):

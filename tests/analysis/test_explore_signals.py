@@ -17,8 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.analysis.room.test_room_browser import browser  # noqa: F401  (fixture)
-from tests.analysis.test_analysis_explorer import linear_ode_sweep, xvfb  # noqa: F401  (fixture)
+from tests.analysis.test_analysis_explorer import linear_ode_sweep
 from tests.analysis.test_analysis_traces import PICK_AND_PLACE, robot_table
 from tests.helpers.paths import HELPERS, REPO
 

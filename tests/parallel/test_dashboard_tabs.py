@@ -20,7 +20,6 @@ import time
 import pytest
 
 from cosim.parallel.dashboard.web_server import tab_closed_while_loading, web_server_tracebacks_as_lines
-from tests.analysis.room.test_room_browser import browser  # noqa: F401  (fixture)
 from tests.helpers.paths import REPO
 from tests.helpers.triple_study import triple_spec
 

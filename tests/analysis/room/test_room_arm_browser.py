@@ -20,7 +20,6 @@ import pytest
 
 from cosim.analysis.room import browser as B
 from cosim.analysis.table import load_results
-from tests.analysis.room.test_room_browser import browser, room  # noqa: F401  (fixtures)
 from tests.helpers.paths import REPO
 from tests.helpers.tools import python_unit
 

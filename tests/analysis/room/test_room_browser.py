@@ -25,25 +25,11 @@ import pytest
 from cosim.analysis.room import browser as B
 from cosim.analysis.room.server import cookie_name
 from cosim.analysis.table import load_results
-from tests.helpers.tools import python_unit, require_tool
+from tests.helpers.tools import python_unit
 
-# -- the browser ------------------------------------------------------------------------------------------------
-
-
-@pytest.fixture(scope="module")
-def browser():
-    require_tool("chromium", "chromium")
-    require_tool("chromedriver", "chromium-driver")
-    try:
-        import selenium  # noqa: F401
-    except ImportError:
-        if os.environ.get("CI", "").lower() in ("1", "true", "yes"):
-            pytest.fail("selenium is not installed (the test extra of pyproject.toml); CI=true, so this test "
-                        "must run")
-        pytest.skip("selenium is not installed (pip install -e .[test])")
-    driver = B.chromium()
-    yield driver
-    driver.quit()
+# the browser (fixture `browser`) and the check of its console (`no_console_errors`) are in tests/conftest.py,
+# the room servers (`room`) in tests/analysis/room/conftest.py
+pytestmark = pytest.mark.usefixtures("no_console_errors")
 
 
 def screenshot(driver, name: str) -> None:
@@ -51,19 +37,6 @@ def screenshot(driver, name: str) -> None:
     if folder:
         Path(folder).mkdir(parents=True, exist_ok=True)
         driver.save_screenshot(str(Path(folder) / f"room-{name}.png"))
-
-
-@pytest.fixture(autouse=True)
-def no_console_errors(request):
-    """Every test that drives the browser ends with no error in chromium's console (an uncaught exception in
-    bokeh's scripts, a failed request): the page may look right and still have failed to draw a view."""
-    if "browser" not in request.fixturenames:
-        yield
-        return
-    driver = request.getfixturevalue("browser")
-    B.console_errors(driver)  # a previous test's, reported there
-    yield
-    assert B.console_errors(driver) == []
 
 
 # -- the studies --------------------------------------------------------------------------------------------------
@@ -121,24 +94,6 @@ def studies(tmp_path_factory, local_cluster):
     SensitivityStudy(write(root / "sensitivity", ishigami_spec()), root / "sensitivity" / "out", method="sobol",
                      n=16, seed=2, objectives=["y"], scheduler=local_cluster, quiet=True).run()
     return {kind: root / kind / "out" for kind in ("sweep", "optimize", "sensitivity")}
-
-
-@pytest.fixture
-def room(request):
-    """A function (folder) -> the link of the room serving it; the servers stop after the test."""
-    from cosim.analysis.room.data import Study
-    from cosim.analysis.room.server import RoomServer
-
-    servers = []
-
-    def serve(folder: Path, **options) -> tuple[str, object]:
-        server = RoomServer(Study(load_results(folder)), **options)
-        servers.append(server)
-        return server.link, server
-
-    yield serve
-    for server in servers:
-        server.stop()
 
 
 # -- the tests ----------------------------------------------------------------------------------------------------

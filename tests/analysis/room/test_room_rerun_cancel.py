@@ -18,7 +18,6 @@ import pytest
 
 from cosim.analysis.room import browser as B
 from cosim.analysis.table import load_results
-from tests.analysis.room.test_room_browser import browser  # noqa: F401 - the module's chromium, its skip rule and CI=true's failure
 
 HANGS = """
 import os, time

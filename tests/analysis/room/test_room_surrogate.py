@@ -14,8 +14,10 @@ from cosim.analysis.room import browser as B
 from cosim.analysis.surrogate import read
 from cosim.analysis.table import load_results
 from cosim.cli.main import main
-from tests.analysis.room.test_room_browser import browser, no_console_errors  # noqa: F401  (the fixtures)
 from tests.helpers.tools import python_unit
+
+# no error in chromium's console at the end of a test that drives it (the fixture is in tests/conftest.py)
+pytestmark = pytest.mark.usefixtures("no_console_errors")
 
 
 def bowls_sweep_spec() -> dict:
