@@ -45,9 +45,11 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 import numpy as np
 
 from cosim.errors import KernelUnavailable
+from cosim.execution.lockstep_prune import GroupBound
 from cosim.execution.lockstep_reduce import reduce_group
 from cosim.execution.observers import reduction_of
 from cosim.execution.point_row import PointRow
+from cosim.execution.prune import PRUNED, PruneOrder, prune_columns
 from cosim.execution.result import FAILED, OK, UNIT_FAILURE, RunResult
 from cosim.master.contract import MasterAlgorithm, SystemView
 from cosim.master.native.rows import NativeRows
@@ -114,9 +116,13 @@ class InstanceBatch:
         return selections, readers, setters, plan
 
     def get(self, selection: tuple[list[Selection], list[Any], list[Any], Any]) -> np.ndarray:
+        plan = selection[3]
+        out = np.zeros((self.rows, len(selection[0][0])))
+        if plan is not None and self.native is not None and plan.n_values == out.shape[1]:
+            self.native.get(plan, len(self._active_c), self._active_at, out)  # the same FMI gets, a C loop
+            return out
         self._sync()
         readers = selection[1]
-        out = np.zeros((self.rows, len(selection[0][0])))
         for k in self._active_list:
             out[k] = readers[k]()
         return out
@@ -316,7 +322,8 @@ class _BatchProbe:
             values[np.ix_(rows, where)] = batch.get_rows(selection, rows.tolist())
 
 
-def _probe_plan(system: System, batches: Mapping[str, Any], columns: Sequence[str]) -> tuple[set[str], set[str]]:
+def _probe_plan(system: System, batches: Mapping[str, Any], columns: Sequence[str],
+                every_too: frozenset[str] = frozenset()) -> tuple[set[str], set[str]]:
     """The columns read at every communication point and those read at each point's end only.
 
     Every sample is kept for a column that ``stop_when`` or an objective other than ``final`` (or
@@ -328,6 +335,7 @@ def _probe_plan(system: System, batches: Mapping[str, Any], columns: Sequence[st
     columns are read at a point's end (``final``) or never (unused).
     """
     every = {system.spec.experiment.stop_when} if system.spec.experiment.stop_when else set()
+    every |= every_too  # e.g. what a pruned group's bounds reduce while it runs (cosim.execution.lockstep_prune)
     final: set[str] = set()
     for o in system.spec.objectives:
         if o.signal:
@@ -348,9 +356,14 @@ def _is_fmu(batch: Any) -> bool:
     return isinstance(batch, InstanceBatch) and isinstance(batch.units[0], FmiInstance)
 
 
-def run_lockstep(system: System, points: Sequence[Sequence[Assignment]], batches: Mapping[str, Any]) -> list[RunResult]:
+def run_lockstep(system: System, points: Sequence[Sequence[Assignment]], batches: Mapping[str, Any],
+                 prune: PruneOrder | None = None) -> list[RunResult]:
     """Run ``points`` (each its override assignments) in lock-step on ``batches`` (from :func:`instantiate`,
     fresh or reset, with at least as many rows as points); one RunResult per point, in order.
+
+    ``prune`` (a :class:`~cosim.execution.prune.PruneOrder`): rows proven off its front leave the group
+    (:mod:`cosim.execution.lockstep_prune`) with status ``pruned``, their bound vector as objectives and
+    the single run's message; the other rows are what they are without it, bit for bit.
 
     Raises NotBatchable, UnitError, SimulationEnded or any other exception of
     a unit: the caller then runs the points one by one (:class:`LockstepRunner`),
@@ -362,13 +375,15 @@ def run_lockstep(system: System, points: Sequence[Sequence[Assignment]], batches
     if not 0 < n <= rows:
         raise ValueError(f"{n} points for batches of {rows} rows")
     wiring = batches.wiring if isinstance(batches, Batches) else None
-    if wiring is None or wiring.system is not system:
-        wiring = _Wiring(system, batches)
+    every_too = frozenset(prune_columns(system, prune.settings)) if prune is not None else frozenset()
+    if wiring is None or wiring.system is not system or wiring.every_too != every_too:
+        wiring = _Wiring(system, batches, every_too)
         if isinstance(batches, Batches):
             batches.wiring = wiring
     padded = list(points) + [points[0]] * (rows - n)  # spare rows copy the first point; never read
     wiring.initialize(padded)
-    times, samples, ends = _advance_together(system, wiring, batches, n)
+    bound = GroupBound(system, prune, wiring.columns, n) if prune is not None else None
+    times, samples, ends = _advance_together(system, wiring, batches, n, bound)
     data = np.stack(samples)  # (samples, rows, columns)
     t_all = np.array(times)
     elapsed = (time.perf_counter() - started) / n
@@ -382,7 +397,11 @@ def run_lockstep(system: System, points: Sequence[Sequence[Assignment]], batches
         flat = flatten_objectives(evaluate_expressions(system.spec.objectives, values))
         nan = [name for name, v in flat.items() if not math.isfinite(v)]
         end_time = float(t_all[ends[i]])
-        if nan:
+        verdict = bound.verdicts.get(i) if bound is not None else None
+        if verdict is not None:  # as a single run's stop condition gives it (cosim.execution.run)
+            results.append(RunResult(PRUNED, verdict.reason or "", verdict.objectives_at_stop(flat), None, elapsed,
+                                     int(ends[i]), end_time))
+        elif nan:
             results.append(RunResult(FAILED, f"objective(s) not finite: {', '.join(nan)}", flat, None, elapsed,
                                      int(ends[i]), end_time, failure=UNIT_FAILURE))
         else:
@@ -390,11 +409,11 @@ def run_lockstep(system: System, points: Sequence[Sequence[Assignment]], batches
     return results
 
 
-def _advance_together(system: System, wiring: "_Wiring", batches: Mapping[str, Any],
-                      n: int) -> tuple[list[float], list[np.ndarray], np.ndarray]:
+def _advance_together(system: System, wiring: "_Wiring", batches: Mapping[str, Any], n: int,
+                      bound: GroupBound | None = None) -> tuple[list[float], list[np.ndarray], np.ndarray]:
     """Advance the batches' first ``n`` rows to the stop time with the bound algorithm, each row until its
-    ``stop_when`` holds; returns the sample times, the samples (rows, columns) at each, and per row the index
-    of its last sample."""
+    ``stop_when`` holds (or ``bound`` prunes it); returns the sample times, the samples (rows, columns) at
+    each, and per row the index of its last sample."""
     exp = system.spec.experiment
     rows = next(iter(batches.values())).rows
     columns, probe, end_probe = wiring.columns, wiring.probe, wiring.end_probe
@@ -403,6 +422,8 @@ def _advance_together(system: System, wiring: "_Wiring", batches: Mapping[str, A
     advance = wiring.algorithm.advance
     samples = [probe.read(rows)]
     end_probe.fill(samples[0], np.arange(rows))
+    if bound is not None:
+        bound.start(exp.start, samples[0])
     times = [exp.start]
     active = np.arange(n)
     ends = np.full(n, -1)  # per point: the index of its last sample
@@ -413,15 +434,18 @@ def _advance_together(system: System, wiring: "_Wiring", batches: Mapping[str, A
         values = probe.read(rows)
         samples.append(values)
         times.append(t)
-        if stop_column is not None:
-            done = values[active, stop_column] != 0
-            if done.any():
-                ends[active[done]] = len(samples) - 1
-                end_probe.fill(values, active[done])  # their last sample: now the end-only columns too
-                active = active[~done]
-                if not len(active):
-                    break
-                _set_active(batches, active)
+        done = values[active, stop_column] != 0 if stop_column is not None else np.zeros(len(active), bool)
+        if bound is not None:  # rows proven off the front end here too (a stop_when at this sample wins)
+            pruned = bound.step(t, values, active[~done])
+            if len(pruned):
+                done |= np.isin(active, pruned)
+        if done.any():
+            ends[active[done]] = len(samples) - 1
+            end_probe.fill(values, active[done])  # their last sample: now the end-only columns too
+            active = active[~done]
+            if not len(active):
+                break
+            _set_active(batches, active)
     if len(active) and ends[active[0]] < 0:  # still running at the stop time: the last sample is theirs
         end_probe.fill(samples[-1], active)
     ends[ends < 0] = len(samples) - 1
@@ -453,15 +477,16 @@ class _Wiring:
     """What connects the batches of one system, built once: transfers, the probe, selections, the master
     algorithm bound to the batches."""
 
-    def __init__(self, system: System, batches: Mapping[str, Any]):
-        self.system, self.batches = system, batches
+    def __init__(self, system: System, batches: Mapping[str, Any], every_too: frozenset[str] = frozenset()):
+        """``every_too``: probe columns read at every communication point whatever the objectives need."""
+        self.system, self.batches, self.every_too = system, batches, every_too
         into: dict[str, list[Any]] = {}
         for connection in system.init_order:
             into.setdefault(connection.target.unit, []).append(connection)
         self.into = [(batches[name], _transfers(batches, into.get(name, []))) for name in system.order]
         self.after_init = _transfers(batches, system.init_order)
         self.columns = probe_columns(system)
-        every, end_only = _probe_plan(system, batches, self.columns)
+        every, end_only = _probe_plan(system, batches, self.columns, every_too)
         self.probe = _BatchProbe(system, batches, self.columns, every)
         self.end_probe = _BatchProbe(system, batches, self.columns, end_only)
         self.algorithm = _bind_algorithm(system, batches)
@@ -540,18 +565,20 @@ class LockstepRunner:
         self._announce: Callable[[int], None] | None = None
 
     def rows(self, points: Sequence[tuple[str, dict[str, Any]]],
-             announce: Callable[[int], None] | None = None) -> Iterator[PointRow]:
+             announce: Callable[[int], None] | None = None, prune: PruneOrder | None = None) -> Iterator[PointRow]:
         """One row per point, in order (a generator: a group's rows come when the group is done).
 
         ``announce(n)`` is called before a lock-step group of n points starts: the sweep's parent
         then knows that a crash or hang in the next n rows is not the first point's own (it runs
-        those points again one by one, cosim.parallel.isolation).
+        those points again one by one, cosim.parallel.isolation).  ``prune`` (a
+        :class:`~cosim.execution.prune.PruneOrder`): every point compares its bound with that front, a
+        point alone as in :meth:`PointRunner.run`, a group's rows inside the group (:func:`run_lockstep`).
         """
         self._announce = announce
         points = list(points)
         while points and self.enabled and self.group_size is None:  # first measure a point run alone
-            row = self.single.run(*points.pop(0))
-            if row.ok:
+            row = self._alone(*points.pop(0), prune)
+            if row.ok or row.status == PRUNED:  # a pruned run is shorter: a larger group, at most GROUP_SIZE
                 self._single_times.append(row.run_time)
             if len(self._single_times) == 2:  # the first run also instantiated the units: take the faster
                 seconds = limit("lockstep_seconds")
@@ -560,16 +587,16 @@ class LockstepRunner:
         size = self.group_size or 1
         if size < 2:
             for point_id, values in points:
-                yield self.single.run(point_id, values)
+                yield self._alone(point_id, values, prune)
             return
         for first in range(0, len(points), size):
             group = points[first:first + size]
             if len(group) < 2:
-                yield self.single.run(*group[0])
+                yield self._alone(*group[0], prune)
             else:
-                yield from self._group(group)
+                yield from self._group(group, prune)
 
-    def _group(self, group: Sequence[tuple[str, dict[str, Any]]]) -> Iterator[PointRow]:
+    def _group(self, group: Sequence[tuple[str, dict[str, Any]]], prune: PruneOrder | None) -> Iterator[PointRow]:
         from cosim.execution.point import assignments_for
 
         results = None
@@ -583,8 +610,8 @@ class LockstepRunner:
             try:
                 if self._announce is not None:
                     self._announce(len(group))
-                results = run_lockstep(self.system, overrides, batches)
-                if all(r.ok for r in results):
+                results = run_lockstep(self.system, overrides, batches, prune)
+                if all(r.ok or r.status == PRUNED for r in results):  # clean stops: the batches are reused
                     for batch in batches.values():
                         batch.reset()
                     self._keep(len(group), batches)
@@ -595,10 +622,16 @@ class LockstepRunner:
                 results = None
         if results is None:
             for point_id, values in group:
-                yield self.single.run(point_id, values)
+                yield self._alone(point_id, values, prune)
             return
         for (point_id, _), result in zip(group, results):
             yield PointRow.of(point_id, result, result.elapsed)
+
+    def _alone(self, point_id: str, values: dict[str, Any], prune: PruneOrder | None) -> PointRow:
+        """The point run alone by the PointRunner (with the front it prunes against, if any)."""
+        row: PointRow = self.single.run(point_id, values) if prune is None else \
+            self.single.run(point_id, values, prune=prune)
+        return row
 
     def _keep(self, rows: int, batches: dict[str, Any]) -> None:
         self._batches[rows] = batches

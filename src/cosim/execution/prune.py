@@ -365,6 +365,13 @@ class PruneBound(StopCondition):
         return {name: self.bound.get(name, math.nan) for name in flat}
 
 
+def prune_columns(system: Any, settings: PruneSettings) -> set[str]:
+    """The probe columns whose samples the bounds of ``settings`` reduce while a design runs."""
+    wanted = {_base(n) for n, _ in settings.objectives} | {_base(n) for n, _, _ in settings.constraints}
+    needed = _closure(system.spec.objectives, wanted)
+    return {c for o in system.spec.objectives if o.signal and o.name in needed for c in columns_of(system, o.signal)}
+
+
 def _base(name: str) -> str:
     """The objective of a flat column name: 'e_el[3]' -> 'e_el'."""
     return name.split("[", 1)[0]

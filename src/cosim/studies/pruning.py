@@ -108,15 +108,36 @@ class FrontKeeper:
 class FreshFronts(BatchSizer):
     """Batches for a pruned study: the front travels with each batch, so a batch's points all compare with the
     front as it was when the batch left.  The first tasks hold one point each (otherwise a quarter of the study
-    would leave with an empty front), and a task lasts about PRUNE_TASK_SECONDS at most."""
+    would leave with an empty front), and a task lasts about PRUNE_TASK_SECONDS at most.
+
+    ``group`` > 1: the points run in lock-step groups of up to that many (cosim.execution.lockstep; pruned
+    rows leave a group, cosim.execution.lockstep_prune).  Once the first rows are back a task then holds at
+    least ``group`` points and lasts about the unpruned sweep's TASK_SECONDS: the time of an ok point run
+    alone (the first ones) would otherwise make tasks too small to form groups, and every point would run
+    alone at several times a grouped point's cost."""
 
     PRUNE_TASK_SECONDS = 0.1
 
-    def __init__(self, todo: int, n_workers: int, size: int | None = None):
+    def __init__(self, todo: int, n_workers: int, size: int | None = None, group: int = 1):
         super().__init__(todo, n_workers, size)
+        self.group = 1 if size is not None else group
         if size is None:
             self.first = 1
-            self.TASK_SECONDS = self.PRUNE_TASK_SECONDS
+            if group < 2:
+                self.TASK_SECONDS = self.PRUNE_TASK_SECONDS
+
+    def next(self) -> int:
+        size = super().next()
+        if self.group > 1 and self.point_seconds is not None:
+            size = max(size, min(self.group, self.remaining))
+        return size
+
+
+def lockstep_group(system: Any) -> int:
+    """The largest lock-step group the points of ``system`` run in (1: they run one by one)."""
+    from cosim.execution.lockstep import GROUP_SIZE, can_run_in_lockstep  # deferred: the stepping machinery
+
+    return GROUP_SIZE if can_run_in_lockstep(system) else 1
 
 
 def first_count(total: int) -> int:

@@ -48,7 +48,15 @@ from cosim.spec.design import DesignSpace, Point
 from cosim.studies.driver import results_writes
 from cosim.studies.options import How, Show, Stop, Where, split_options
 from cosim.studies.progress import StatusLine, duration
-from cosim.studies.pruning import PRUNED, FreshFronts, FrontKeeper, prune_settings, pruned_columns, pruning_order
+from cosim.studies.pruning import (
+    PRUNED,
+    FreshFronts,
+    FrontKeeper,
+    lockstep_group,
+    prune_settings,
+    pruned_columns,
+    pruning_order,
+)
 from cosim.studies.runner import Run, Study, metadata_of
 
 if TYPE_CHECKING:
@@ -199,8 +207,10 @@ class DesignGrid:
             with PointStream(run.client, study.payload, run.n_workers, self.kind, study.spec.name,
                              timeout=study.how.timeout, adaptive_timeout=True, board=run.board,
                              prune=keeper.order if keeper else None) as stream:
-                sizer = (FreshFronts if keeper is not None else BatchSizer)(todo, run.n_workers,
-                                                                             study.how.batch_size)
+                if keeper is not None:  # lock-step groups where the system allows: tasks big enough for them
+                    sizer: Any = FreshFronts(todo, run.n_workers, study.how.batch_size, lockstep_group(study.system))
+                else:
+                    sizer = BatchSizer(todo, run.n_workers, study.how.batch_size)
                 stream.run(points, sizer, store, total=total)
             if progress is not None:
                 progress.close()

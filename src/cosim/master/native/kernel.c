@@ -429,6 +429,26 @@ int cosim_rows_set_reals(const KUnit *units, long n, const int64_t *rows, const 
     return RUN_DONE;
 }
 
+typedef int (*fmi2_get_real_rows_t)(void *, const unsigned *, size_t, double *);
+typedef int (*fmi3_get_real_rows_t)(void *, const unsigned *, size_t, double *, size_t);
+
+/* Get the same Real/Float64 variables of each listed row: row r's values go to out + r * stride. */
+int cosim_rows_get_reals(const KUnit *units, long n, const int64_t *rows, const unsigned *vrs, size_t n_vrs,
+                         size_t n_values, double *out, long stride, KFail *fail) {
+    for (long i = 0; i < n; i++) {
+        const int64_t r = rows[i];
+        const KUnit *u = &units[r];
+        double *v = out + (size_t)r * (size_t)stride;
+        int st = u->version == 2 ? ((fmi2_get_real_rows_t)u->get[0])(u->component, vrs, n_vrs, v)
+                                 : ((fmi3_get_real_rows_t)u->get[0])(u->component, vrs, n_vrs, v, n_values);
+        if (st > 1) {
+            fail->unit = (int)r; fail->call = CALL_GET; fail->type = T_REAL; fail->status = st;
+            return RUN_FAILED;
+        }
+    }
+    return RUN_DONE;
+}
+
 /* doStep(t, h) of each listed row, as the units' do_step calls it (noSetFMUStatePriorToCurrentPoint true). */
 int cosim_rows_do_step(const KUnit *units, long n, const int64_t *rows, double t, double h, KFail *fail) {
     fail->t = t;

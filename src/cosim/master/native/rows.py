@@ -28,17 +28,18 @@ _REAL_TYPES = ("Real", "Float64")  # FMI 2.0 / FMI 3.0 names of a double
 
 
 @lru_cache(maxsize=1)
-def _functions() -> tuple[Callable[..., int], Callable[..., int]]:
-    """``cosim_rows_set_reals`` and ``cosim_rows_do_step`` with their ctypes signatures (raises
-    KernelUnavailable when the library cannot be built, OSError when it cannot be loaded)."""
+def _functions() -> tuple[Callable[..., int], Callable[..., int], Callable[..., int]]:
+    """``cosim_rows_set_reals``, ``cosim_rows_do_step`` and ``cosim_rows_get_reals`` with their ctypes
+    signatures (raises KernelUnavailable when the library cannot be built, OSError when it cannot be loaded)."""
     dll = ctypes.CDLL(str(lib.library_path()))
-    set_reals, do_step = dll.cosim_rows_set_reals, dll.cosim_rows_do_step
-    set_reals.argtypes = [ctypes.c_void_p, ctypes.c_long, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t,
-                          ctypes.c_size_t, ctypes.c_void_p, ctypes.c_long, ctypes.POINTER(lib.KFail)]
+    set_reals, do_step, get_reals = dll.cosim_rows_set_reals, dll.cosim_rows_do_step, dll.cosim_rows_get_reals
+    set_reals.argtypes = get_reals.argtypes = [
+        ctypes.c_void_p, ctypes.c_long, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_size_t,
+        ctypes.c_void_p, ctypes.c_long, ctypes.POINTER(lib.KFail)]
     do_step.argtypes = [ctypes.c_void_p, ctypes.c_long, ctypes.c_void_p, ctypes.c_double, ctypes.c_double,
                         ctypes.POINTER(lib.KFail)]
-    set_reals.restype = do_step.restype = ctypes.c_int
-    return set_reals, do_step
+    set_reals.restype = do_step.restype = get_reals.restype = ctypes.c_int
+    return set_reals, do_step, get_reals
 
 
 @dataclass(frozen=True)
@@ -63,7 +64,7 @@ class NativeRows:
         if versions - {2, 3} or len(versions) != 1 or not all(getattr(u, "_plain_calls", False) for u in units):
             raise ValueError("the instances' FMI calls are not plain or their FMI versions differ")
         self.units = list(units)
-        self._set_reals, self._do_step = _functions()
+        self._set_reals, self._do_step, self._get_reals = _functions()
         self._table = (lib.KUnit * len(self.units))()
         for i, unit in enumerate(self.units):
             describe_fmu(self._table[i], unit)
@@ -101,6 +102,14 @@ class NativeRows:
                            values.shape[1], self._fail_ref) != lib.RUN_DONE:
             self._raise()
 
+    def get(self, plan: RealInputs, count: int, rows: int, out: np.ndarray) -> None:
+        """Read ``plan``'s variables of the ``count`` rows listed (int64) at address ``rows`` into their rows of
+        ``out`` (K x n float64, C-ordered): the FMI get each unit's reader makes, in a C loop; raises the unit's
+        UnitError for a status above Warning."""
+        if self._get_reals(self._address, count, rows, plan.vrs, plan.n_vrs, plan.n_values, out.ctypes.data,
+                           out.shape[1], self._fail_ref) != lib.RUN_DONE:
+            self._raise()
+
     def do_step(self, count: int, rows: int, t: float, h: float) -> None:
         """``doStep(t, h)`` of the ``count`` rows listed (int64) at address ``rows``, in order; raises as the
         unit's do_step raises (UnitError, SimulationEnded) for the first row that fails or ends the simulation."""
@@ -130,4 +139,5 @@ class NativeRows:
             if self.version == 2:
                 unit.step_outcome(fail.status)
             raise unit.fail_status(f"fmi{self.version}DoStep", fail.status)
-        raise unit.fail_status(f"fmi{self.version}Set{_CALL_TYPES[self.version][0]}", fail.status)
+        verb = "Get" if fail.call == lib.CALL_GET else "Set"
+        raise unit.fail_status(f"fmi{self.version}{verb}{_CALL_TYPES[self.version][0]}", fail.status)

@@ -79,18 +79,19 @@ def child_main(read_fd: int, write_fd: int, parent: int) -> None:
             if kind == "warm":  # the study's warm-up (cosim.execution.warm_start), once, before any point
                 outbox.send(("warm", _warm_up_here(runner.system)))
                 continue
-            if kind not in ("run", "run_each", "prune"):
+            if kind not in ("run", "run_each", "prune", "prune_each"):
                 return
-            if kind == "prune":  # one by one, each with the front that came with the batch (cosim.studies.pruning)
-                points, order = points
-                rows: Iterator[PointRow] = (runner.run(point_id, values, prune=order) for point_id, values in points)
-            elif kind == "run":  # lock-step groups where the system allows (cosim.execution.lockstep)
+            order = None
+            if kind in ("prune", "prune_each"):  # each point with the front that came with the batch
+                points, order = points  # (cosim.studies.pruning)
+            if kind in ("run", "prune"):  # lock-step groups where the system allows (cosim.execution.lockstep)
                 from cosim.execution.lockstep import LockstepRunner
 
                 grouped = grouped or LockstepRunner(runner)
-                rows = grouped.rows(points, announce=lambda n: outbox.send(("group", n)))
+                rows: Iterator[PointRow] = grouped.rows(points, announce=lambda n: outbox.send(("group", n)),
+                                                        prune=order)
             else:  # after a crash or timeout: one by one, so the row names the point that caused it
-                rows = (runner.run(point_id, values) for point_id, values in points)
+                rows = (runner.run(point_id, values, prune=order) for point_id, values in points)
             for row in rows:
                 row = named_for_the_user(row, origins)
                 served += 1

@@ -188,7 +188,8 @@ class IsolatedRunner:
     def run(self, points: Sequence[tuple[str, dict[str, Any]]], timeout: float | None = None,
             on_row: Callable[[PointRow], None] | None = None, prune: Any = None) -> list[PointRow]:
         """One row per point, in order; statuses ok, failed, timeout or crashed (and pruned with ``prune``, a
-        :class:`~cosim.execution.prune.PruneOrder`: each point then runs alone, never in a lock-step group).
+        :class:`~cosim.execution.prune.PruneOrder`: a point alone or a row of a lock-step group stops once
+        proven off its front).
 
         Without ``timeout`` a point may run for the ``timeout_first_seconds``
         limit (COSIM_TIMEOUT_FIRST): no read of a child waits forever.
@@ -212,9 +213,7 @@ class IsolatedRunner:
                     on_row(row)
 
         remaining = list(points)
-        mode = "run"  # after a crash or timeout the rest runs one point at a time (no lock-step groups)
-        if prune is not None:
-            mode = "prune"
+        mode = "run" if prune is None else "prune"  # after a crash or timeout: *_each, one point at a time
         while remaining:
             if STOPPING.is_set():  # the study is being stopped: the rest of the batch does not run
                 keep(*(row_without_result(pid, "failed", "not run: the study was stopped", time.perf_counter())
@@ -230,7 +229,7 @@ class IsolatedRunner:
                     break
             outbox, channel = self._pipes()
             try:
-                outbox.send((mode, (remaining, prune) if mode == "prune" else remaining))
+                outbox.send((mode, (remaining, prune) if prune is not None else remaining))
             except OSError:
                 self.close()
                 continue
@@ -241,7 +240,7 @@ class IsolatedRunner:
                 received = channel.get(deadline)
                 if received is None:
                     self.close(force=True)
-                    mode = "prune" if prune is not None else "run_each"
+                    mode = "prune_each" if prune is not None else "run_each"
                     if grouped:  # not this point's fault for sure: the group's points run again one by one
                         break
                     keep(row_without_result(point_id, "timeout", f"no result within the timeout of {deadline:g} s; "
@@ -250,7 +249,7 @@ class IsolatedRunner:
                     break
                 kind, body = received
                 if kind == "eof":
-                    mode = "prune" if prune is not None else "run_each"
+                    mode = "prune_each" if prune is not None else "run_each"
                     if grouped:  # as for a timeout: which point of the group killed the child is found alone
                         self.close()
                         break
@@ -265,7 +264,7 @@ class IsolatedRunner:
                 if kind != "row" or not _is_row_of(body, point_id):
                     why = body if kind == "junk" else "a message that is not this point's row"
                     self.close(force=True)  # its channel is out of step: trust nothing more from it
-                    mode = "prune" if prune is not None else "run_each"
+                    mode = "prune_each" if prune is not None else "run_each"
                     if grouped:  # written by some point of the group: found when they run one by one
                         break
                     told = (f"its row is {why}" if why == too_long_message() else "the process running this point "
