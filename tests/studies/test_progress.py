@@ -56,3 +56,20 @@ def test_sweep_and_optimisation_lines_use_it():
 
 def test_durations():
     assert (duration(59.4), duration(61), duration(3600 + 62), duration(float("inf"))) == ("0:59", "1:01", "1:01:02", "?")
+
+
+def test_the_sweep_line_counts_each_point_once_and_pruned_points_apart():
+    """A point's row handed twice (a stop hands the rows it interrupted again, cosim.parallel.point_stream) is
+    one point: done never passes the total (a pruned sweep once showed '14/12 points'); a pruned point is a
+    result, not 'not ok'."""
+    from cosim.execution.point_row import PointRow
+
+    log = io.StringIO()
+    sweep = SweepProgress(3, log)
+    first = [PointRow("a", "ok"), PointRow("b", "pruned", "pruned at t=0.5: design a strictly dominates")]
+    sweep.rows(first)
+    sweep.rows(first + [PointRow("c", "failed", "boom")])  # a and b again, with c
+    sweep.rows([PointRow("c", "failed", "boom")])
+    assert (sweep.done, sweep.failed, sweep.pruned) == (3, 1, 1)
+    last = log.getvalue().splitlines()[-1]
+    assert last.startswith("[########################] 3/3 points, 1 not ok, 1 pruned, ")

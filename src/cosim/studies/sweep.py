@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TextIO
+from typing import TYPE_CHECKING, Any, Sequence, TextIO
 
 from cosim.errors import SweepError
 from cosim.execution.point_row import PointRow
@@ -67,17 +67,27 @@ if TYPE_CHECKING:
 
 
 class Progress:
-    """The sweep's status line: points done, not ok, rate, time left
+    """The sweep's status line: points done, not ok, pruned, rate, time left
     (see :class:`cosim.studies.progress.StatusLine`)."""
 
     def __init__(self, total: int, stream: TextIO | None = None):
-        self.total, self.done, self.failed = total, 0, 0
+        self.total, self.done, self.failed, self.pruned = total, 0, 0, 0
         self._line = StatusLine(total, stream)
+        self._seen: set[str] = set()
 
     def update(self, done: int, failed: int) -> None:
         self.done += done
         self.failed += failed
         self._line.show(self.done, self.line())
+
+    def rows(self, rows: Sequence[PointRow]) -> None:
+        """Count finished points by their rows: each point once, however often its row comes (a stop hands the
+        rows it interrupted again, a resume of a pruned study may store a point anew: done never passes the
+        total); a pruned point is counted apart, not as 'not ok' (a result, not a failure)."""
+        fresh = [r for r in rows if r.point_id not in self._seen]
+        self._seen.update(r.point_id for r in fresh)
+        self.pruned += sum(r.status == PRUNED for r in fresh)
+        self.update(len(fresh), sum(not r.ok and r.status != PRUNED for r in fresh))
 
     def line(self) -> str:
         elapsed = self._line.elapsed()
@@ -86,7 +96,8 @@ class Progress:
         width = 24
         filled = int(width * self.done / max(self.total, 1))
         bar = "#" * filled + "." * (width - filled)
-        return (f"[{bar}] {self.done}/{self.total} points, {self.failed} not ok, {rate:.1f}/s, "
+        pruned = f", {self.pruned} pruned" if self.pruned else ""
+        return (f"[{bar}] {self.done}/{self.total} points, {self.failed} not ok{pruned}, {rate:.1f}/s, "
                 f"{duration(left)} left")
 
     def close(self) -> None:
@@ -201,7 +212,7 @@ class DesignGrid:
             with results_writes(study.out, study.show.words):
                 study.store.append([self._row(study, p, r) for p, r in pairs])
             if progress is not None:
-                progress.update(len(pairs), sum(not r.ok for _, r in pairs))
+                progress.rows([r for _, r in pairs])
 
         with run.board.running():
             with PointStream(run.client, study.payload, run.n_workers, self.kind, study.spec.name,
