@@ -11,6 +11,8 @@ written into the output folder).  Checks and prints:
   for bit;
 - every pruned row's bound is strictly dominated by a member of the unpruned front (or breaks the constraint),
   and never exceeds that design's final value in the unpruned study;
+- every row the pruned study ran to its end equals the unpruned study's row in every objective, bit for bit
+  (the script exits non-zero when the front, a bound or such a row is not as promised);
 - the CPU time of all points together, two ways: the sum of the rows' ``run_time`` (a lock-step group's time is
   divided among its points) and the CPU of the whole ``cosim sweep`` process with every process it starts
   (client, scheduler, workers, point children: ``getrusage(RUSAGE_CHILDREN)`` as a subreaper,
@@ -147,6 +149,15 @@ def main() -> None:
         if not (dominated or (broken and infeasible)) or (np.nan_to_num(bound, nan=-np.inf) > final).any():
             bad.append(row["point_id"])
     figures["pruned_rows_not_proven"] = bad
+    # every row the pruned study ran to its end equals the unpruned study's row, every objective bit for bit
+    objective_columns = [c for c in full.columns if c not in ("status", "message", "run_time", "worker")
+                         and c in pruned.columns and pd.api.types.is_float_dtype(full[c])]
+    ok = pruned[pruned["status"] == "ok"].set_index("point_id")[objective_columns]
+    same = finals.loc[ok.index, objective_columns]
+    differ = [pid for pid in ok.index if not all(
+        (a == b) or (a != a and b != b) for a, b in zip(ok.loc[pid].to_numpy(), same.loc[pid].to_numpy()))]
+    figures["ok_rows_differing"] = differ
+    figures["ok_rows_compared"] = len(ok)
     figures["cpu_ratio"] = round(figures["pruned"]["cpu_points_s"] / figures["unpruned"]["cpu_points_s"], 3)
     figures["process_cpu_ratio"] = round(figures["pruned"]["process_cpu_s"] / figures["unpruned"]["process_cpu_s"], 3)
     stopped = pruned[pruned["status"] == "pruned"]
@@ -165,6 +176,9 @@ def main() -> None:
     figures["front_message"] = {"members": len(keeper.ids), "bytes": len(blob),
                                 "pickle_us": round((time.perf_counter() - started) * 1e3, 1)}
     print(json.dumps(figures, indent=1, default=str))
+    if not figures["front_identical"] or bad or differ:  # the benchmark's promise: the same answer, proven
+        raise SystemExit(f"pruning changed the answer: front identical {figures['front_identical']}, "
+                         f"{len(bad)} pruned rows not proven, {len(differ)} ok rows differ")
 
 
 if __name__ == "__main__":
