@@ -5,7 +5,6 @@ so, when, and holds a bound that the front member it names strictly dominates an
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,8 +16,9 @@ from cosim.execution.point import assignments_for
 from cosim.execution.prune import PruneOrder
 from cosim.parallel.isolation.point_runner import PointRunner
 from cosim.studies.pruning import prune_settings
+from tests.helpers.paths import REPO
 
-FOLDER = Path(__file__).resolve().parents[1] / "examples" / "pick_and_place"
+FOLDER = REPO / "examples" / "pick_and_place"
 Q22, Q24 = "traj.waypoints[9]", "traj.waypoints[11]"
 OBJECTIVES = ("e_total_no_recuperation", "duration")
 POINTS = [{Q22: float(a), Q24: float(b)} for a in np.linspace(-100, 20, 6) for b in (0.0, 35.0, 70.0, 140.0)]
