@@ -1,10 +1,12 @@
 /*
  * fault: a test FMU that misbehaves at the first doStep with t >= trigger_time.
- * mode 0: none; 1: segfault (write through a null pointer); 2: hang forever;
+ * mode 0: none; 1: segfault (write through a null pointer); 2: hang forever (asleep: a hung point is
+ * stopped by its timeout either way, and a busy loop took a core from everything else for the whole timeout);
  * 3: doStep returns fmi*Error; 4: y becomes NaN from then on.
  * Otherwise y = the current time.
  */
 #include <math.h>
+#include <unistd.h>
 
 #include "framework.h"
 
@@ -36,6 +38,7 @@ Status model_do_step(ModelInstance *comp, double t, double h) {
             case 2:
                 logError(comp, "fault mode 2: hanging forever at t=%g", t);
                 for (;;) {
+                    sleep(1000);
                 }
             case 3:
                 logError(comp, "fault mode 3: doStep fails at t=%g", t);
