@@ -34,11 +34,13 @@ from typing import Any
 import numpy as np
 from bokeh.events import Pan
 from bokeh.layouts import column, row
-from bokeh.models import ColumnDataSource, CustomJS, Div, HoverTool, Slider, Toggle
+from bokeh.models import ColumnDataSource, CustomJS, HoverTool, Range1d
+from bokeh.models.widgets import Div, Slider, Toggle
 from bokeh.palettes import Category10_10
 from bokeh.plotting import figure
 
 from cosim.analysis.room import projection as P
+from cosim.analysis.room.views import Backend
 from cosim.analysis.viewers import (
     LinkFrames,
     rows_evenly_in_time,
@@ -171,7 +173,7 @@ class LinkView:
 
     Raises ValueError without motions."""
 
-    def __init__(self, motions: Sequence[Motion], backend: str = "canvas", at: float | None = None,
+    def __init__(self, motions: Sequence[Motion], backend: Backend = "canvas", at: float | None = None,
                  azimuth: float = AZIMUTH, elevation: float = ELEVATION):
         if not motions:
             raise ValueError("a 3-D view needs the link frames of at least one design")
@@ -196,7 +198,8 @@ class LinkView:
         self.elevation = Slider(title="elevation [rad]", start=-np.pi / 2, end=np.pi / 2, step=0.01,
                                 value=self.angles[1], name="arm-elevation", width=270)
         reach = self.reach()
-        self.figure = figure(name="arm-view", width=SIZE, height=SIZE, x_range=(-reach, reach), y_range=(-reach, reach),
+        self.figure = figure(name="arm-view", width=SIZE, height=SIZE, x_range=Range1d(start=-reach, end=reach),
+                             y_range=Range1d(start=-reach, end=reach),
                              tools="save", match_aspect=True, output_backend=backend,
                              title="re-run designs in 3-D (drag to turn)",
                              tags=[{"centre": [float(c) for c in self.centre], "scale": self.scale}])

@@ -42,7 +42,8 @@ from typing import Any
 
 from bokeh.core.property.validation import without_property_validation
 from bokeh.layouts import column, row
-from bokeh.models import CustomJS, MultiChoice, Select, TabPanel, Tabs, Toggle
+from bokeh.models import CustomJS, TabPanel, Tabs
+from bokeh.models.widgets import MultiChoice, Select, Toggle
 
 from cosim.analysis.decision import Decision
 from cosim.analysis.ranking import METHODS

@@ -31,12 +31,10 @@ from bokeh.models import (
     CDSView,
     ColumnDataSource,
     CustomJS,
-    Div,
     FixedTicker,
     LinearColorMapper,
-    MultiChoice,
-    Slider,
 )
+from bokeh.models.widgets import Div, MultiChoice, Slider
 from bokeh.palettes import Viridis256
 from bokeh.plotting import figure
 

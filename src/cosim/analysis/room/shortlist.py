@@ -23,7 +23,8 @@ from functools import partial
 from typing import Any
 
 from bokeh.layouts import column, row
-from bokeh.models import ColumnDataSource, DataTable, NumberFormatter, TableColumn
+from bokeh.models import ColumnDataSource
+from bokeh.models.widgets import DataTable, NumberFormatter, TableColumn
 
 from cosim.analysis.decision import Decision
 from cosim.analysis.rerun import port_groups
@@ -65,7 +66,8 @@ class Shortlist:
         self.rerun = V.button("Re-run shortlist", "rerun-shortlist", "primary")
         self.status = V.text("", "shortlist-status")
         self.note = V.text("", "shortlist-note")
-        self.table = DataTable(source=ColumnDataSource({"quantity": [], "role": []}), columns=[], name="shortlist",
+        self.source = ColumnDataSource({"quantity": [], "role": []})  # the table's rows
+        self.table = DataTable(source=self.source, columns=[], name="shortlist",
                                width=V.WIDTH, height=260, index_position=None, autosize_mode="none")
         self.traces = column(name="shortlist-traces")
         self.pin.on_click(self._on_pin)
@@ -117,9 +119,9 @@ class Shortlist:
             self.table.columns = columns
         # a row clicked in the table: let go of before its rows change (bokeh 3.4 throws in the page for a selected
         # row past the end of the emptied table, bokeh/bokeh#13931; see app.Room._refresh_ranking)
-        self.table.source.selected.indices = []
-        self.table.source.data = {k: [] for k in data}  # bokeh/bokeh#15328, see app.Room._refresh_ranking
-        self.table.source.data = data
+        self.source.selected.indices = []
+        self.source.data = {k: [] for k in data}  # bokeh/bokeh#15328, see app.Room._refresh_ranking
+        self.source.data = data
         self.table.height = min(30 + 26 * len(data["quantity"]), 420)
         full = f" (at most {MAX_PINNED})" if len(self.ids) >= MAX_PINNED else ""
         self.note.text = (f"<i>{len(self.ids)} design(s) pinned{full}</i>" if self.ids else

@@ -29,7 +29,9 @@ from typing import Any, Callable
 import numpy as np
 from bokeh.events import Tap
 from bokeh.layouts import column, row
-from bokeh.models import ColorBar, ColumnDataSource, LinearColorMapper, Select
+from bokeh.models import ColumnDataSource, LinearColorMapper
+from bokeh.models.annotations import ColorBar
+from bokeh.models.widgets import Select
 from bokeh.plotting import figure
 
 from cosim.analysis.room import views as V

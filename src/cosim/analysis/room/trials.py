@@ -29,7 +29,9 @@ from typing import Any
 
 import numpy as np
 from bokeh.layouts import column, gridplot, row
-from bokeh.models import ColorBar, ColumnDataSource, FactorRange, HoverTool, LinearColorMapper, Select
+from bokeh.models import ColumnDataSource, FactorRange, HoverTool, LinearColorMapper
+from bokeh.models.annotations import ColorBar
+from bokeh.models.widgets import Select
 from bokeh.palettes import Viridis256
 from bokeh.plotting import figure
 

@@ -13,32 +13,23 @@ from __future__ import annotations
 
 import html
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, Literal, cast
 
 import numpy as np
 from bokeh.models import (
     BooleanFilter,
-    Button,
     CategoricalColorMapper,
     CDSView,
-    ColorBar,
     ColumnDataSource,
     CustomJSHover,
-    DataTable,
-    Div,
     HoverTool,
-    Legend,
-    LegendItem,
     LinearColorMapper,
-    NumberFormatter,
     Range1d,
-    RangeSlider,
     SaveTool,
-    Select,
-    Slider,
-    TableColumn,
-    Whisker,
 )
+from bokeh.models.annotations import ColorBar, Legend, LegendItem, Whisker
+from bokeh.models.renderers import DataRenderer
+from bokeh.models.widgets import Button, DataTable, Div, NumberFormatter, RangeSlider, Select, Slider, TableColumn
 from bokeh.palettes import Category10_10, Viridis256
 from bokeh.plotting import figure
 
@@ -49,6 +40,8 @@ PLAIN = "#1f77b4"  # ok points when no column gives the colour
 FRONT = "#000000"
 SELECTED = "#e31a1c"
 NONE = "(none)"
+Backend = Literal["canvas", "svg", "webgl"]  # how bokeh draws a plot (its output_backend)
+ButtonKind = Literal["default", "primary", "success", "warning", "danger", "light"]  # bokeh's button_type
 WIDTH = 760
 
 
@@ -62,38 +55,48 @@ def cloud(data: dict[str, Any], ids: str, not_ok: dict[str, Any], statuses: tupl
     crosses = ColumnDataSource(not_ok, name="cloud-not-ok-source")
     design = hover_ids(ids)
     n = len(data["x"])
-    filters = {layer: BooleanFilter(booleans=np.zeros(len(not_ok["x"]) if layer == "not_ok" else n, dtype=bool),
+    filters = {layer: BooleanFilter(booleans=booleans(np.zeros(len(not_ok["x"]) if layer == "not_ok" else n,
+                                                                dtype=bool)),
                                     name=f"show-{layer}") for layer in ("greyed", "ok", "not_ok", "front", "selected")}
     fig = figure(name="cloud", width=WIDTH, height=520, x_axis_label=x_label, y_axis_label=y_label,
                  tools="pan,wheel_zoom,box_zoom,tap,box_select,lasso_select,reset,save",
                  output_backend="webgl" if webgl else "canvas", active_scroll="wheel_zoom")
     mapper = LinearColorMapper(palette=Viridis256, nan_color=PLAIN)
-    same = {"selection_alpha": 1.0, "nonselection_alpha": 1.0}  # the selection has its own red ring
+    same = 1.0  # selection_alpha and nonselection_alpha: the selection has its own red ring
     fig.scatter("x", "y", source=source, view=CDSView(filter=filters["greyed"]), size="s", color=GREY,
-                line_color=None, legend_label="filtered out", name="cloud-greyed", **same)
+                line_color=None, legend_label="filtered out", name="cloud-greyed",
+                selection_alpha=same, nonselection_alpha=same)
     ok = fig.scatter("x", "y", source=source, view=CDSView(filter=filters["ok"]), size="s", line_color=None,
-                     fill_color={"field": "c", "transform": mapper}, name="cloud-ok", **same)
+                     fill_color={"field": "c", "transform": mapper}, name="cloud-ok",
+                     selection_alpha=same, nonselection_alpha=same)
     factors, colours = statuses
     by_status = CategoricalColorMapper(factors=factors or ["failed"], palette=colours or [GREY])
     fig.scatter("x", "y", source=crosses, view=CDSView(filter=filters["not_ok"]), size="s", marker="x",
                 line_color={"field": "status", "transform": by_status}, line_width=2, legend_field="status",
-                name="cloud-not-ok", **same)
+                name="cloud-not-ok", selection_alpha=same, nonselection_alpha=same)
     fig.scatter("x", "y", source=source, view=CDSView(filter=filters["front"]), size=PLAIN_SIZE + 6,
                 fill_color=None, line_color=FRONT, line_width=1.5, legend_label="Pareto front", name="cloud-front",
-                **same)
+                selection_alpha=same, nonselection_alpha=same)
     fig.scatter("x", "y", source=source, view=CDSView(filter=filters["selected"]), size=PLAIN_SIZE + 12,
                 fill_color=None, line_color=SELECTED, line_width=3, legend_label="selected", name="cloud-selected",
-                **same)
+                selection_alpha=same, nonselection_alpha=same)
     fig.legend.location = "top_right"
     fig.legend.click_policy = "hide"
     fig.add_tools(HoverTool(renderers=[ok], tooltips=[("design", "$index{id}"), ("x", "@x"), ("y", "@y"),
                                                         ("colour", "@c")], formatters={"$index": design}))
-    fig.add_tools(HoverTool(renderers=[r for r in fig.renderers if r.name == "cloud-not-ok"],
+    crossed = [r for r in fig.renderers if isinstance(r, DataRenderer) and r.name == "cloud-not-ok"]
+    fig.add_tools(HoverTool(renderers=crossed,
                             tooltips=[("design", "@point_id"), ("status", "@status")]))
     bar = ColorBar(color_mapper=mapper, title=colour_label or "", width=10)
     fig.add_layout(bar, "right")
     return {"figure": fig, "source": source, "not_ok_source": crosses, "filters": filters, "mapper": mapper,
             "colour_bar": bar, "status_mapper": by_status, "ids": design}
+
+
+def booleans(mask: np.ndarray) -> Sequence[bool]:
+    """``mask`` as a BooleanFilter's ``booleans``: bokeh takes (and sends) a NumPy bool array as it is, its stub
+    says Sequence[bool] only; the cast keeps the array, which a list of 10^5 Python bools would not be."""
+    return cast(Sequence[bool], mask)
 
 
 def hover_ids(ids: str) -> CustomJSHover:
@@ -111,7 +114,8 @@ def cloud_image(x_range: tuple[float, float], y_range: tuple[float, float], x_la
     front = ColumnDataSource({"x": [], "y": [], "point_id": []}, name="cloud-front-points")
     selected = ColumnDataSource({"x": [], "y": [], "point_id": []}, name="cloud-selected-points")
     fig = figure(name="cloud", width=WIDTH, height=520, x_axis_label=x_label, y_axis_label=y_label,
-                 x_range=Range1d(*x_range, name="cloud-x"), y_range=Range1d(*y_range, name="cloud-y"),
+                 x_range=Range1d(start=x_range[0], end=x_range[1], name="cloud-x"),
+                 y_range=Range1d(start=y_range[0], end=y_range[1], name="cloud-y"),
                  tools="pan,wheel_zoom,box_zoom,tap,reset,save", active_scroll="wheel_zoom")
     fig.image_rgba(image="image", x="x", y="y", dw="dw", dh="dh", source=image, name="cloud-bins")
     fig.scatter("x", "y", source=front, size=PLAIN_SIZE + 6, fill_color=None, line_color=FRONT, line_width=1.5,
@@ -120,7 +124,8 @@ def cloud_image(x_range: tuple[float, float], y_range: tuple[float, float], x_la
                 line_width=3, legend_label="selected", name="cloud-selected")
     fig.legend.location = "top_right"
     fig.legend.click_policy = "hide"
-    fig.add_tools(HoverTool(renderers=[r for r in fig.renderers if r.name == "cloud-front"],
+    ringed = [r for r in fig.renderers if isinstance(r, DataRenderer) and r.name == "cloud-front"]
+    fig.add_tools(HoverTool(renderers=ringed,
                             tooltips=[("design", "@point_id"), ("x", "@x"), ("y", "@y")]))
     mapper = LinearColorMapper(palette=Viridis256, nan_color=PLAIN)
     bar = ColorBar(color_mapper=mapper, title=colour_label or "", width=10)
@@ -143,7 +148,7 @@ def colour_by(mapper: LinearColorMapper, bar: ColorBar, values: np.ndarray, labe
 
 def axis_choosers(columns: Sequence[str], x: str, y: str, colour: str | None) -> dict[str, Select]:
     """Selects of x, y, colour and size (the last two may be '(none)')."""
-    options = list(columns)
+    options: list[str | tuple[Any, str]] = list(columns)  # bokeh's type of a Select's options
     return {"x": Select(title="x", value=x, options=options, name="choose-x", width=180),
             "y": Select(title="y", value=y, options=options, name="choose-y", width=180),
             "colour": Select(title="colour", value=colour or NONE, options=[NONE, *options], name="choose-colour",
@@ -198,7 +203,8 @@ def weight_sliders(weights: dict[str, float]) -> list[Slider]:
 
 def radar(data: dict[str, Any], ids: Sequence[str]) -> dict[str, Any]:
     """Spokes (one per objective, 1 = best at the rim), a ring per 0.25, one polygon per selected design."""
-    fig = figure(name="radar", width=460, height=460, x_range=(-1.45, 1.45), y_range=(-1.3, 1.3),
+    fig = figure(name="radar", width=460, height=460, x_range=Range1d(start=-1.45, end=1.45),
+                 y_range=Range1d(start=-1.3, end=1.3),
                  tools="save", match_aspect=True, title="score profile of the selected designs (rim: best)")
     fig.axis.visible = False
     fig.grid.visible = False
@@ -236,7 +242,7 @@ def element_style(design: int, element: int, elements: int) -> dict[str, Any]:
     return {"color": mixed, "line_dash": ELEMENT_DASHES[element % len(ELEMENT_DASHES)]}
 
 
-def trace_figures(groups: list[tuple[str, list[str]]], runs: Sequence[Any], backend: str = "canvas",
+def trace_figures(groups: list[tuple[str, list[str]]], runs: Sequence[Any], backend: Backend = "canvas",
                   prefix: str = "trace") -> list:
     """One figure per port (``<prefix>:<port>``, ``trace:robot.q``), a line per design and element, x ranges
     linked; drawn through ``backend`` ("canvas", or "svg" for a save button that writes SVG).
@@ -277,7 +283,8 @@ def trace_figures(groups: list[tuple[str, list[str]]], runs: Sequence[Any], back
             if len(by_element) > 1:
                 items += [LegendItem(label=column, renderers=lines) for column, lines in by_element.items()]
             # compact rows: two designs and seven elements fit beside a 240 px plot without a cut
-            legend = Legend(items=items, label_text_font_size="8pt", click_policy="hide", spacing=0, padding=4,
+            legend = Legend(items=items, label_text_font_size="8pt", click_policy="hide", spacing=0,
+                            padding=cast(Any, 4),  # bokeh's stub types padding as a Property, not the int it takes
                             label_height=12, glyph_height=12, label_standoff=4, margin=2)
             fig.add_layout(legend, "right")
             figures.append(fig)
@@ -336,7 +343,7 @@ def failures_table(rows: dict[str, list]) -> DataTable:
                               TableColumn(field="message", title="message", width=550)])
 
 
-def button(label: str, name: str, kind: str = "default") -> Button:
+def button(label: str, name: str, kind: ButtonKind = "default") -> Button:
     return Button(label=label, name=name, button_type=kind, width=180)
 
 
