@@ -175,11 +175,15 @@ def test_signals_at_several_offsets_never_end_as_a_complete_study(tmp_path):
             assert meta.get("ended"), (outcomes, err)
             assert_triples_exact(pd.read_parquet(out / "results.parquet"), points)
         elif handled and proc.returncode == 128 + signum:
-            # the command had ended when the signal came, and the process was exiting: main() then ends it at
-            # once, 128 + the signal as a shell reports it (cli/main.py's _end_at_once_on_signals); so the study
-            # is complete, every point there (seen at 4.0 s on an idle machine)
-            assert meta.get("ended"), (outcomes, err)
-            assert_triples_exact(pd.read_parquet(out / "results.parquet"), points)
+            # the signal came while the process was exiting: main() then ends it at once, 128 + the signal as a
+            # shell reports it (cli/main.py's _end_at_once_on_signals). Seen at 4.0 s both after a finished sweep
+            # and, under load, after "cosim: interrupted" (cause not found, 2026-12-08). Never success: a study
+            # that says it ended has every point; one that does not has no counts
+            assert "Traceback" not in err, err
+            if meta.get("ended"):
+                assert_triples_exact(pd.read_parquet(out / "results.parquet"), points)
+            else:
+                assert meta.get("counts") is None, (outcomes, meta)
         elif not handled:
             # the interpreter still starting (the signal's default action; Python ends an uncaught
             # KeyboardInterrupt by SIGINT): never success either
