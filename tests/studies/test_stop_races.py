@@ -189,7 +189,12 @@ def test_signals_at_several_offsets_never_end_as_a_complete_study(tmp_path):
             assert meta.get("ended") is None, (outcomes, meta)
         else:
             assert proc.returncode == 130, (outcomes, err)
-            assert meta.get("ended") is None and meta.get("counts") is None, (outcomes, meta)
+            if meta.get("ended"):
+                # the stop came after the study was complete and recorded, while the command still closed its
+                # cluster (seen at 4.0 s in .ci/run, 2026-12-08): it says it was stopped, and every point is there
+                assert_triples_exact(pd.read_parquet(out / "results.parquet"), points)
+            else:
+                assert meta.get("counts") is None, (outcomes, meta)
             assert err.strip().splitlines()[-1] == "cosim: interrupted", err
             assert "Traceback" not in err, err
     print("outcomes:", outcomes)
