@@ -89,7 +89,6 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 _SAID_INTERRUPTED: list[bool] = []  # whether "cosim: interrupted" was printed by this process
-_INTERRUPTED_EXIT = 130  # cosim.cli.exit_codes.EXIT_INTERRUPTED, which a signal handler may not import (see the imports)
 
 
 def _say_interrupted() -> None:
@@ -154,9 +153,10 @@ def _end_at_once_on_signals() -> None:
     """
     import signal
 
+    from cosim.cli.exit_codes import EXIT_INTERRUPTED
     from cosim.parallel.cluster.interrupts import stop_requested
 
-    code_if_signalled = _INTERRUPTED_EXIT if stop_requested() is not None or _SAID_INTERRUPTED else None
+    code_if_signalled = EXIT_INTERRUPTED if stop_requested() is not None or _SAID_INTERRUPTED else None
 
     def end(signum: int, frame: Any) -> None:
         for stream in (sys.stdout, sys.stderr):
